@@ -1,0 +1,1 @@
+"""Domain-independent EA framework: facts, timed monitors, VOA, the manager loop."""

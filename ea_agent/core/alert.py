@@ -1,0 +1,47 @@
+"""Alert candidates (before VOA), priorities and the Fig. 1 alert ontology."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Hashable
+
+PRIORITIES = ("flash", "immediate", "priority", "routine")  # highest first
+
+# Fig. 1: top-level alert categories.
+CATEGORIES = (
+    "plan-constraint-violated", "constraint-violation-projected", "policy-constraint-violated",
+    "new-opportunity", "adversarial-activity", "contingency-plan-suggested",
+    "system-problem", "reporting-requirement",
+)
+
+
+def rank(priority: str) -> int:
+    return PRIORITIES.index(priority)
+
+
+def lower(priority: str, steps: int = 1) -> str:
+    return PRIORITIES[min(len(PRIORITIES) - 1, rank(priority) + steps)]
+
+
+def highest(priorities) -> str:
+    return min(priorities, key=rank)
+
+
+@dataclass(slots=True)
+class Candidate:
+    """A possible alert produced by a detector or a mission method.
+
+    `key` names the alert history it is judged against (e.g. ("unit", "A2")), and
+    `measure` how bad it is (bigger is worse); VOA decides whether it is issued.
+    """
+    t: float
+    type: str
+    priority: str
+    subjects: tuple[str, ...]
+    message: str
+    key: Hashable
+    measure: float | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+    merge_group: Hashable | None = None  # candidates sharing it may be merged for a common parent
+    friendly: bool = True               # friendly (120 s) or hostile (90 s) suppression
+    repeat: bool = False                 # set by VOA when this is a progressive repeat
+    also: tuple = ()                     # ((key, measure), ...) histories this alert also updates

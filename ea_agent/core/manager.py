@@ -1,0 +1,156 @@
+"""The EA manager: a reactive loop over facts on scenario time.
+
+reports -> watchman (domain.watch) -> facts in batches (domain.apply)
+        -> at each epoch end: timed monitors + detectors (domain.detect)
+        -> alert candidates -> VOA (judge, merge) -> sinks
+
+Facts are applied as they come; detection runs once per scenario-time epoch on
+what changed in it. Results therefore depend only on the facts and their
+timestamps, never on how they were chunked into batches or on wall-clock time.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from typing import Callable, Iterable, Protocol
+
+from saim_mesh.messages import Alert
+
+from .alert import Candidate
+from .timed import TimedMonitors
+from .voa import Voa
+
+log = logging.getLogger(__name__)
+Sink = Callable[[Alert], None]
+
+
+class Domain(Protocol):
+    """What a domain module plugs into the manager."""
+
+    def bind(self, ea: "ExecutionAssistant") -> None: ...
+    def start(self, t: float) -> None: ...                      # initialize the plan (global monitors)
+    def watch(self, msg) -> object | None: ...                  # watchman: filter, update the picture
+    def apply(self, facts: list) -> None: ...                   # post a batch of facts
+    def detect(self, t: float) -> list[Candidate]: ...          # detectors at epoch end
+    def busy(self) -> bool: ...                                 # anything changed since last detect?
+    def next_wakeup(self) -> float: ...                         # next time detect must run anyway
+    def merge(self, key, cands: list[Candidate]) -> Candidate: ...
+    def to_alert(self, c: Candidate) -> Alert: ...
+
+
+class ExecutionAssistant:
+    def __init__(self, owner: str, domain: Domain, cfg: dict, sinks: Iterable[Sink] = (), voa: bool = True):
+        self.owner = owner
+        self.cfg = cfg
+        self.domain = domain
+        self.sinks = list(sinks)
+        self.timers = TimedMonitors()
+        self.voa = Voa(cfg, domain.merge, enabled=voa)
+        self.batch = max(1, int(cfg["manager"]["fact_batch"]))
+        self.epoch_s = float(cfg["manager"]["epoch_s"])
+        self.epoch_end = self.epoch_s
+        self.pending: list = []
+        self.posted: list[Candidate] = []   # candidates posted by timers and mission methods
+        self.alerts: list[Alert] = []
+        self.stats: Counter = Counter()
+        self.errors: list[str] = []
+        domain.bind(self)
+
+    # -- input -----------------------------------------------------------------------
+    def start(self, t: float = 0.0) -> None:
+        self.epoch_end = (math.floor(t / self.epoch_s) + 1) * self.epoch_s
+        self.domain.start(t)
+
+    def submit(self, msg) -> None:
+        """One incoming message; never raises for bad input (counted and logged instead)."""
+        self.stats["in"] += 1
+        try:
+            fact = self.domain.watch(msg)
+        except (KeyError, ValueError, TypeError) as e:
+            self.error(f"{type(msg).__name__} at t={getattr(msg, 't', '?')}: {e}")
+            return
+        if fact is not None:
+            self.pending.append(fact)
+            if len(self.pending) >= self.batch:
+                self.process()
+
+    def error(self, text: str) -> None:
+        self.stats["errors"] += 1
+        self.errors = (self.errors + [text])[-50:]
+        log.warning("EA %s: %s", self.owner, text)
+
+    def post(self, c: Candidate) -> None:
+        """Mission methods and timed monitors post candidates here."""
+        self.posted.append(c)
+
+    # -- the loop --------------------------------------------------------------------
+    def process(self) -> None:
+        """Hand pending facts to the domain, closing epochs as scenario time passes."""
+        facts, self.pending = self.pending, []
+        self.stats["facts"] += len(facts)
+        start = 0
+        for i, f in enumerate(facts):
+            if f.t >= self.epoch_end:
+                if i > start:
+                    self._apply(facts[start:i])
+                    start = i
+                self._close_until(f.t)
+        if start < len(facts):
+            self._apply(facts[start:])
+
+    def _apply(self, facts: list) -> None:
+        self.stats["batches"] += 1
+        try:
+            self.domain.apply(facts)
+        except (KeyError, ValueError, TypeError) as e:  # one bad fact must not lose the rest
+            self.error(f"batch of {len(facts)} facts: {e}; retrying one by one")
+            for f in facts:
+                try:
+                    self.domain.apply([f])
+                except (KeyError, ValueError, TypeError) as e2:
+                    self.error(f"{type(f).__name__} at t={f.t}: {e2}")
+
+    def advance(self, t: float) -> None:
+        """Scenario time reached t: process what is pending and close finished epochs."""
+        self.process()
+        self._close_until(t)
+
+    def _close_until(self, t: float) -> None:
+        ep = self.epoch_s
+        while self.epoch_end <= t:
+            if not self.posted and not self.domain.busy():
+                nxt = min(self.timers.next_deadline(), self.domain.next_wakeup())
+                target = max(self.epoch_end, math.ceil(nxt / ep) * ep) if math.isfinite(nxt) else math.inf
+                if target > t:  # idle until after t: skip the empty epochs
+                    self.epoch_end = (math.floor(t / ep) + 1) * ep
+                    break
+                self.epoch_end = target
+            self._close_epoch(self.epoch_end)
+            self.epoch_end = round(self.epoch_end / ep + 1) * ep
+
+    def _close_epoch(self, end: float) -> None:
+        self.stats["epochs"] += 1
+        self.timers.advance(end)
+        found = self.domain.detect(end)   # may post more (mission responses)
+        cands, self.posted = self.posted + found, []
+        if not cands:
+            return
+        cands.sort(key=lambda c: (c.t, c.type, c.subjects))
+        issued = self.voa.merge(self.voa.judge(cands))
+        for c in issued:
+            self.emit(self.domain.to_alert(c))
+
+    def emit(self, alert: Alert) -> None:
+        self.alerts.append(alert)
+        self.stats["alerts"] += 1
+        self.voa.remember(alert.t, alert.type, alert.subjects, alert.details.get("places", ()))
+        for s in self.sinks:
+            s(alert)
+
+    def finish(self, t: float) -> list[Alert]:
+        """End of input at scenario time t: flush everything."""
+        self.advance(t)
+        if self.posted or self.domain.busy():
+            self._close_epoch(self.epoch_end)
+        return self.alerts

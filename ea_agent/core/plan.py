@@ -1,0 +1,147 @@
+"""Plans: task organization (a mutable command hierarchy), missions in a partial
+order with start/end temporal constraints, and the traversal state of a plan."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+START_TYPES = ("ASAP", "ON-ORDER", "START-AT", "START-NLT", "START-NET")
+END_TYPES = ("ASAP", "ON-ORDER", "END-AT", "END-NLT", "END-NET")
+ECHELONS = ("battalion", "company", "platoon", "squad")
+
+
+@dataclass(slots=True, frozen=True)
+class TimeConstraint:
+    """One of the Fig. 6 constraint types with its absolute scenario time."""
+    type: str = "ASAP"
+    t: float | None = None
+
+
+@dataclass(slots=True)
+class Unit:
+    id: str
+    name: str
+    echelon: str
+    parent: str | None
+    entities: tuple[str, ...] = ()
+    weapons_range_m: float | None = None
+    boundary: str | None = None   # id of the overlay boundary this unit owns
+
+
+class TaskOrg:
+    """The command hierarchy; changes at run time through reorganizations."""
+
+    def __init__(self, units: Iterable[Unit]):
+        self.units: dict[str, Unit] = {u.id: u for u in units}
+        self.parent: dict[str, str | None] = {u.id: u.parent for u in self.units.values()}
+        self.entity_unit: dict[str, str] = {e: u.id for u in self.units.values() for e in u.entities}
+        self.version = 0
+        self._cache: dict[str, tuple[str, ...]] = {}
+
+    def copy(self) -> "TaskOrg":
+        t = TaskOrg(Unit(u.id, u.name, u.echelon, u.parent, u.entities, u.weapons_range_m, u.boundary)
+                    for u in self.units.values())
+        t.parent = dict(self.parent)
+        return t
+
+    @property
+    def root(self) -> str:
+        return next(u for u, p in self.parent.items() if p is None)
+
+    def children(self, unit: str) -> list[str]:
+        return sorted(u for u, p in self.parent.items() if p == unit)
+
+    def ancestors(self, unit: str) -> list[str]:
+        out, p = [], self.parent.get(unit)
+        while p is not None:
+            out.append(p)
+            p = self.parent.get(p)
+        return out
+
+    def subtree(self, unit: str) -> tuple[str, ...]:
+        """`unit` and everything under it, sorted (cached per hierarchy version)."""
+        hit = self._cache.get(unit)
+        if hit is None:
+            out, todo = [], [unit]
+            while todo:
+                u = todo.pop()
+                out.append(u)
+                todo.extend(self.children(u))
+            hit = self._cache[unit] = tuple(sorted(out))
+        return hit
+
+    def is_under(self, unit: str, owner: str) -> bool:
+        return unit == owner or owner in self.ancestors(unit)
+
+    def members(self, unit: str) -> list[str]:
+        """All entities of the unit and its subordinates."""
+        return [e for u in self.subtree(unit) for e in self.units[u].entities]
+
+    def resubordinate(self, unit: str, new_parent: str) -> None:
+        if unit not in self.units or new_parent not in self.units:
+            raise KeyError(f"reorganization names unknown unit {unit if unit not in self.units else new_parent!r}")
+        if new_parent in self.subtree(unit):
+            raise ValueError(f"cannot put {unit} under its own subordinate {new_parent}")
+        self.parent[unit] = new_parent
+        self.version += 1
+        self._cache.clear()
+
+    def boundary_owner(self, unit: str) -> str | None:
+        """The nearest unit at or above `unit` that owns a boundary."""
+        for u in [unit, *self.ancestors(unit)]:
+            if self.units[u].boundary:
+                return u
+        return None
+
+    def name(self, unit: str) -> str:
+        u = self.units.get(unit)
+        return u.name if u else unit
+
+
+@dataclass(slots=True)
+class MissionSpec:
+    """A mission as written in the plan (validated against the mission model on load)."""
+    id: str
+    unit: str
+    type: str
+    start: TimeConstraint = TimeConstraint()
+    end: TimeConstraint = TimeConstraint()
+    after: tuple[str, ...] = ()
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class PlanSpec:
+    name: str
+    missions: list[MissionSpec]
+
+
+class PlanState:
+    """Traversal of a plan's partial order: pending -> ready -> active -> done."""
+
+    def __init__(self, plan: PlanSpec):
+        self.plan = plan
+        self.by_id = {m.id: m for m in plan.missions}
+        self.state: dict[str, str] = {m.id: "pending" for m in plan.missions}
+        self.started: dict[str, float] = {}
+        self.ended: dict[str, float] = {}
+
+    def newly_ready(self) -> list[MissionSpec]:
+        """Pending missions whose predecessors are all done, now marked ready."""
+        out = []
+        for m in self.plan.missions:
+            if self.state[m.id] == "pending" and all(self.state.get(a) == "done" for a in m.after):
+                self.state[m.id] = "ready"
+                out.append(m)
+        return out
+
+    def start(self, mid: str, t: float) -> None:
+        self.state[mid] = "active"
+        self.started.setdefault(mid, t)
+
+    def end(self, mid: str, t: float) -> None:
+        self.state[mid] = "done"
+        self.ended.setdefault(mid, t)
+
+    def active(self) -> list[MissionSpec]:
+        return [m for m in self.plan.missions if self.state[m.id] == "active"]

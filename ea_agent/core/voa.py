@@ -1,0 +1,131 @@
+"""Value of an alert (paper 5, 6.7): histories, expiry, suppression, repeats, merging.
+
+Like Alertmanager's inhibit/silence stages, VOA only decides; detectors only
+propose. A candidate is judged against the last alert given on its `key`:
+ - no unexpired alert on that key: give it;
+ - a similar alert inside the suppression interval (90 s hostile, 120 s friendly): drop;
+ - otherwise give it only if its measure crossed the repeat ratio (progressive
+   repeat), at one priority lower: the user already knows the gist.
+"""
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+from typing import Callable, Hashable, Iterable
+
+from .alert import Candidate, lower
+
+
+@dataclass(slots=True)
+class Record:
+    t: float
+    measure: float | None
+    priority: str
+
+
+MergeFn = Callable[[Hashable, list[Candidate]], Candidate]
+
+
+class Voa:
+    def __init__(self, cfg: dict, merge_fn: MergeFn | None = None, enabled: bool = True):
+        v = cfg["voa"]
+        self.enabled = enabled
+        self.expiry = float(v["expiry_s"])
+        self.suppress_friendly = float(v["suppress_friendly_s"])
+        self.suppress_hostile = float(v["suppress_hostile_s"])
+        self.repeat: dict[str, float] = {k: float(x) for k, x in v["repeat"].items()}
+        self.merge_enabled = bool(v["merge"]) and merge_fn is not None
+        self.merge_fn = merge_fn
+        self.history: dict[Hashable, Record] = {}
+        # Histories per friendly unit, named place and map cell, for drill-down and heuristics.
+        self.by_scope: dict[tuple[str, str], list[tuple[float, str]]] = defaultdict(list)
+        self.stats: Counter = Counter()
+
+    def last(self, key: Hashable, now: float) -> Record | None:
+        """The unexpired alert on `key`, if any (expired alerts no longer count)."""
+        rec = self.history.get(key)
+        if rec is not None and now - rec.t >= self.expiry:
+            return None
+        return rec
+
+    def judge(self, cands: Iterable[Candidate]) -> list[Candidate]:
+        """Issue or suppress each candidate; returns the issued ones (in input order)."""
+        out: list[Candidate] = []
+        for c in cands:
+            self.stats["candidates"] += 1
+            if not self.enabled:
+                out.append(c)
+                continue
+            verdict = self._verdict(c)
+            if verdict is not None:
+                self.stats["suppressed-" + verdict] += 1
+                continue
+            self.history[c.key] = Record(c.t, c.measure, c.priority)
+            for k, measure in c.also:  # e.g. a contact sets the baseline for later distance alerts
+                self.history[k] = Record(c.t, measure, c.priority)
+            out.append(c)
+        return out
+
+    def _verdict(self, c: Candidate) -> str | None:
+        rec = self.last(c.key, c.t)
+        if rec is None:
+            return None
+        if c.t - rec.t < (self.suppress_friendly if c.friendly else self.suppress_hostile):
+            return "time"
+        ratio = self.repeat.get(c.type, 0.0)
+        if ratio <= 0.0:
+            return "once"
+        if c.measure is None or rec.measure is None or c.measure < rec.measure * ratio:
+            return "not-worse"
+        c.repeat = True
+        c.priority = lower(c.priority)
+        c.details["repeat_of_t"] = rec.t
+        c.details["last_alerted_measure"] = rec.measure
+        return None
+
+    def merge(self, issued: list[Candidate]) -> list[Candidate]:
+        """Merge issued alerts that share a merge group into one for the common parent."""
+        if not self.enabled or not self.merge_enabled:
+            return issued
+        groups: dict[Hashable, list[Candidate]] = {}
+        order: list[Hashable | int] = []
+        for i, c in enumerate(issued):
+            if c.merge_group is None:
+                order.append(i)
+            else:
+                if c.merge_group not in groups:
+                    order.append(("g", c.merge_group))
+                groups.setdefault(c.merge_group, []).append(c)
+        out = []
+        for o in order:
+            if isinstance(o, int):
+                out.append(issued[o])
+                continue
+            g = groups[o[1]]
+            if len(g) == 1:
+                out.append(g[0])
+            else:
+                self.stats["merged"] += len(g) - 1
+                out.append(self.merge_fn(o[1], g))  # type: ignore[misc]
+        return out
+
+    def remember(self, alert_t: float, alert_type: str, subjects: Iterable[str],
+                 places: Iterable[str] = (), cells: Iterable[str] = ()) -> None:
+        for s in subjects:
+            self.by_scope[("unit", s)].append((alert_t, alert_type))
+        for p in places:
+            self.by_scope[("place", p)].append((alert_t, alert_type))
+        for c in cells:
+            self.by_scope[("cell", c)].append((alert_t, alert_type))
+
+    def forget_before(self, now: float) -> None:
+        """Drop expired history so memory stays bounded on long runs."""
+        cutoff = now - self.expiry
+        for k in [k for k, r in self.history.items() if r.t < cutoff]:
+            del self.history[k]
+        for k in list(self.by_scope):
+            v = [e for e in self.by_scope[k] if e[0] >= cutoff]
+            if v:
+                self.by_scope[k] = v
+            else:
+                del self.by_scope[k]

@@ -1,0 +1,1 @@
+"""Domain modules plug their missions, detectors and VOA heuristics into the core."""

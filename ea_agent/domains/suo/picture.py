@@ -1,0 +1,144 @@
+"""The EA's picture of the situation: friendly entity positions and hostile tracks,
+and the watchman that keeps it current and filters what reaches the manager."""
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+
+from ea_agent.core.plan import TaskOrg
+from saim_mesh.geo import Projection
+from saim_mesh.messages import LocationReport, SensorTrack
+
+
+@dataclass(slots=True)
+class Track:
+    id: str
+    x: float
+    y: float
+    strength: int
+    t: float
+    lon: float
+    lat: float
+
+
+class Picture:
+    """Positions in metres. Entities are rows of numpy arrays; units are index sets."""
+
+    def __init__(self, taskorg: TaskOrg, proj: Projection):
+        self.proj = proj
+        self.ents = sorted(taskorg.entity_unit)
+        self.eidx = {e: i for i, e in enumerate(self.ents)}
+        n = len(self.ents)
+        self.lon = [math.nan] * n          # last raw report (python lists: fast scalar access)
+        self.lat = [math.nan] * n
+        self.seen = np.zeros(n)            # scenario time of the last report, changed or not
+        self.xy = np.full((n, 2), np.nan)
+        self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
+        self.tracks: dict[str, Track] = {}
+        self.rebuild(taskorg)
+
+    def rebuild(self, taskorg: TaskOrg) -> None:
+        """Member index arrays per unit (after load or a reorganization)."""
+        by_leaf: dict[str, list[int]] = defaultdict(list)
+        for i, u in enumerate(self.ent_leaf):
+            by_leaf[u].append(i)
+        self.leaves = sorted(by_leaf)
+        self.leaf_members = {u: np.array(v, dtype=np.intp) for u, v in by_leaf.items()}
+        self.members = {u: np.array(sorted(i for leaf in taskorg.subtree(u) for i in by_leaf.get(leaf, ())),
+                                    dtype=np.intp) for u in taskorg.units}
+
+    def member_xy(self, unit: str) -> np.ndarray:
+        pts = self.xy[self.members[unit]]
+        return pts[~np.isnan(pts[:, 0])]
+
+    def centroid(self, unit: str) -> tuple[float, float] | None:
+        pts = self.member_xy(unit)
+        if len(pts) == 0:
+            return None
+        c = pts.mean(axis=0)
+        return float(c[0]), float(c[1])
+
+    def apply_locations(self, reports: list[LocationReport]) -> set[str]:
+        """Project a batch of reports in one pyproj call; returns the leaf units touched."""
+        if not reports:
+            return set()
+        idx = np.fromiter((self.eidx[r.entity] for r in reports), dtype=np.intp, count=len(reports))
+        x, y = self.proj.to_xy(np.fromiter((r.lon for r in reports), float, len(reports)),
+                               np.fromiter((r.lat for r in reports), float, len(reports)))
+        self.xy[idx, 0] = x
+        self.xy[idx, 1] = y
+        return {self.ent_leaf[i] for i in idx.tolist()}
+
+    def apply_tracks(self, tracks: list[SensorTrack]) -> set[str]:
+        if not tracks:
+            return set()
+        x, y = self.proj.to_xy(np.array([t.lon for t in tracks]), np.array([t.lat for t in tracks]))
+        for t, tx, ty in zip(tracks, np.atleast_1d(x), np.atleast_1d(y)):
+            if t.strength <= 0:
+                self.tracks.pop(t.track, None)   # strength 0: the track was dropped
+            else:
+                self.tracks[t.track] = Track(t.track, float(tx), float(ty), t.strength, t.t, t.lon, t.lat)
+        return {t.track for t in tracks}
+
+
+class Watchman:
+    """Filters reports not worth the manager's attention and keeps the picture current.
+
+    A location report that did not move is dropped (its time still counts: the unit
+    is not silent). Reports of other units far from ours update the picture but are
+    not passed on. Unknown entities raise KeyError, which the manager counts.
+    """
+
+    def __init__(self, picture: Picture, cfg: dict):
+        self.p = picture
+        self.eps = float(cfg["watchman"]["unchanged_m"]) / 111_000.0
+        self.interest = float(cfg["watchman"]["interest_m"])
+        self.own = [False] * len(picture.ents)
+        self.bbox = (-math.inf, -math.inf, math.inf, math.inf)
+        self.quiet: list[LocationReport] = []
+        self.stats: Counter = Counter()
+
+    def set_own(self, own_leaves: set[str]) -> None:
+        self.own = [u in own_leaves for u in self.p.ent_leaf]
+
+    def set_bbox(self, pts: np.ndarray) -> None:
+        """Bounding box of our own units, grown by the interest radius."""
+        if len(pts):
+            lo, hi = pts.min(axis=0) - self.interest, pts.max(axis=0) + self.interest
+            self.bbox = (lo[0], lo[1], hi[0], hi[1])
+
+    def watch(self, msg):
+        if type(msg) is LocationReport:
+            p = self.p
+            i = p.eidx.get(msg.entity)
+            if i is None:
+                raise KeyError(f"location report for unknown entity {msg.entity!r}")
+            if msg.t > p.seen[i]:
+                p.seen[i] = msg.t
+            if abs(p.lon[i] - msg.lon) < self.eps and abs(p.lat[i] - msg.lat) < self.eps:
+                self.stats["unchanged"] += 1
+                return None
+            p.lon[i] = msg.lon
+            p.lat[i] = msg.lat
+            if not self.own[i]:
+                x, y = p.xy[i]
+                b = self.bbox
+                if not (x != x or (b[0] <= x <= b[2] and b[1] <= y <= b[3])):
+                    self.quiet.append(msg)
+                    self.stats["irrelevant"] += 1
+                    return None
+            self.stats["passed"] += 1
+            return msg
+        if type(msg) is SensorTrack:
+            tr = self.p.tracks.get(msg.track)
+            if tr is not None and tr.strength == msg.strength and abs(tr.lon - msg.lon) < self.eps \
+                    and abs(tr.lat - msg.lat) < self.eps:
+                self.stats["unchanged"] += 1
+                return None
+            self.stats["passed"] += 1
+            return msg
+        self.stats["passed"] += 1
+        return msg

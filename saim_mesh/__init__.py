@@ -1,0 +1,1 @@
+"""saim-mesh: execution monitoring of agent teams on an Eclipse Zenoh mesh."""

@@ -1,0 +1,154 @@
+"""`saim-mesh` command line: run, evaluate, missions, generate, validate."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+from . import scenario as S
+from .sinks import JsonlSink, TerminalSink
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SCENARIO = ROOT / "scenarios" / "battalion"
+
+
+def _speed(v: str) -> float | None:
+    if v == "max":
+        return None
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed takes a factor or 'max', not {v!r}") from None
+    if f <= 0:
+        raise argparse.ArgumentTypeError("--speed factor must be > 0")
+    return f
+
+
+def _progress(frac: float) -> None:
+    if sys.stderr.isatty():
+        n = int(frac * 40)
+        sys.stderr.write(f"\r[{'#' * n}{'.' * (40 - n)}] {frac * 100:5.1f}%")
+        if frac >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def table(eas) -> str:
+    """Alerts by type per echelon (like the paper's Fig. 7)."""
+    from ea_agent.domains.suo import ALERT_TYPES
+    cols = [ea.owner for ea in eas]
+    counts = {ea.owner: Counter(a.type for a in ea.alerts) for ea in eas}
+    types = [t for t in (*ALERT_TYPES, "call-for-fire") if any(counts[c][t] for c in cols)]
+    w = max([len(t) for t in types] + [16])
+    lines = [f"{'alert type':{w}} " + " ".join(f"{c:>6}" for c in cols),
+             f"{'missions in plan':{w}} " + " ".join(
+                 f"{sum(1 for m in ea.domain.missions.values() if ea.domain.in_plan(m)):>6}" for ea in eas)]
+    for t in types:
+        lines.append(f"{t:{w}} " + " ".join(f"{counts[c][t]:>6}" for c in cols))
+    lines.append(f"{'total':{w}} " + " ".join(f"{len(ea.alerts):>6}" for ea in eas))
+    lines.append(f"{'  of which flash':{w}} " + " ".join(
+        f"{sum(1 for a in ea.alerts if a.priority == 'flash'):>6}" for ea in eas))
+    return "\n".join(lines)
+
+
+def cmd_run(a) -> int:
+    from .runner import default_eas, run
+    sc = S.load(a.scenario)
+    owners = a.ea or default_eas(sc)
+    sinks = [] if a.quiet else [TerminalSink()]
+    out = open(a.out, "w") if a.out else None
+    if out:
+        sinks.append(JsonlSink(out))
+    try:
+        eas = run(sc, owners, sinks, voa=not a.no_voa, config_path=a.config, speed=a.speed, progress=_progress)
+    finally:
+        if out:
+            out.close()
+    print()
+    print(table(eas))
+    errs = sum(ea.stats["errors"] for ea in eas)
+    if errs:
+        print(f"\n{errs} bad inputs were counted and dropped; last: {eas[0].errors[-1:] or '-'}")
+    return 0
+
+
+def cmd_evaluate(a) -> int:
+    from .evaluate import evaluate
+    res = evaluate(S.load(a.scenario), config_path=a.config)
+    if a.json:
+        print(json.dumps(res, sort_keys=True))
+    else:
+        for k in ("events", "incidents", "recall", "alerts", "naive_alerts", "reduction", "unwanted",
+                  "unwanted_share", "unwanted_flash", "by_type"):
+            print(f"{k:15} {res[k]}")
+        for m in res["missed"]:
+            print("MISSED ", m)
+        for u in res["unwanted_alerts"]:
+            print("UNWANTED", u)
+    return 0
+
+
+def cmd_missions(a) -> int:
+    from ea_agent.domains.suo.missions import REGISTRY
+    for name, cls in sorted(REGISTRY.items()):
+        parents = " < ".join(k.__name__ for k in cls.__mro__[1:-1])
+        req = set(cls.required())
+        params = ", ".join(f"{p}{'' if p in req else '?'}" for p in cls.all_params())
+        print(f"{name:22} [{parents}] location={cls.LOCATION_RULE}\n{'':22} params: {params}")
+    return 0
+
+
+def cmd_generate(a) -> int:
+    from .generator import write
+    print(json.dumps(write(Path(a.out), small=a.small, seed=a.seed)))
+    return 0
+
+
+def cmd_validate(a) -> int:
+    sc = S.load(a.scenario)
+    print(f"{sc.name}: {len(sc.taskorg.units)} units, {len(sc.taskorg.entity_unit)} entities, "
+          f"{sum(len(p.missions) for p in sc.plans.values())} missions, {len(sc.overlay)} control measures, "
+          f"{len(sc.events)} events: OK")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="saim-mesh", description=__doc__)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="run EAs in one process over a scenario")
+    r.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    r.add_argument("--ea", nargs="+", metavar="UNIT", help="owners (default: BN, every company, one platoon)")
+    r.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    r.add_argument("--out", metavar="FILE", help="write alerts as JSON lines")
+    r.add_argument("--config", metavar="TOML", help="EA parameters (default configs/ea.toml)")
+    r.add_argument("--no-voa", action="store_true", help="naive baseline: every candidate is an alert")
+    r.add_argument("--quiet", action="store_true", help="do not print alerts as they come")
+    r.set_defaults(fn=cmd_run)
+    e = sub.add_parser("evaluate", help="score alerts against the scenario's ground truth")
+    e.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    e.add_argument("--json", action="store_true")
+    e.add_argument("--config", metavar="TOML")
+    e.set_defaults(fn=cmd_evaluate)
+    sub.add_parser("missions", help="list the mission model").set_defaults(fn=cmd_missions)
+    g = sub.add_parser("generate", help="generate the battalion scenario (seeded, deterministic)")
+    g.add_argument("out")
+    g.add_argument("--small", action="store_true", help="small fast variant for tests")
+    g.add_argument("--seed", type=int, default=7)
+    g.set_defaults(fn=cmd_generate)
+    v = sub.add_parser("validate", help="load a scenario and report what is wrong")
+    v.add_argument("scenario")
+    v.set_defaults(fn=cmd_validate)
+    a = p.parse_args(argv)
+    try:
+        return a.fn(a)
+    except (S.ScenarioError, KeyError) as err:
+        print(f"saim-mesh: {err}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

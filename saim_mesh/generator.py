@@ -1,0 +1,397 @@
+"""Seeded, deterministic battalion scenario generator.
+
+A battalion (three line companies of three platoons of four squads, company and
+battalion HQs, a recon and a mortar platoon) moves north over Fort Irwin (UTM 11N):
+road march to PL BLUE, attack to the objectives, then defend. Hostile groups come
+down avenues of approach. Labelled incidents are injected so that every alert type
+occurs; `oracle.py` derives the ground truth from the simulated true state.
+"""
+from __future__ import annotations
+
+import gzip
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .geo import Projection
+
+EPSG = 32611
+ORIGIN_LONLAT = (-116.62, 35.22)   # south-west corner of the battalion sector
+DURATION = 5400.0
+COMPANIES = ("A", "B", "C")
+LANE_X = {"A1": 700, "A2": 2000, "A3": 3300, "B1": 4700, "B2": 6000, "B3": 7300,
+          "C1": 8700, "C2": 10000, "C3": 11300}
+SQUAD_DX = (-150.0, -50.0, 50.0, 150.0)
+SQUAD_DY = (30.0, 0.0, -30.0, -60.0)
+MOVE_PLT = {"A1": "move", "A2": "move", "A3": "move", "B1": "tactical-road-march", "B2": "move", "B3": "move",
+            "C1": "movement-to-contact", "C2": "move", "C3": "follow-and-support"}
+ATTACK_PLT = {"A1": "attack", "A2": "seize", "A3": "follow-and-assume", "B1": "attack", "B2": "clear",
+              "B3": "secure", "C1": "attack", "C2": "destroy", "C3": "isolate"}
+DEFEND_PLT = {"A1": "defend", "A2": "defend", "A3": "retain", "B1": "block", "B2": "defend", "B3": "occupy",
+              "C1": "overwatch", "C2": "defend", "C3": "contain"}
+
+# Labelled incidents (what the scenario is built to show), for the record in truth.json.
+INCIDENTS = [
+    {"label": "A2 strays east into B CO's sector next to B1", "t": 900, "types": ["out-of-position", "fratricide"]},
+    {"label": "B3 starts its move 180 s late", "t": 330, "types": ["schedule"]},
+    {"label": "C3 ends its move 240 s late", "t": 2190, "types": ["schedule"]},
+    {"label": "C1 starts its attack 150 s early", "t": 2250, "types": ["schedule"]},
+    {"label": "A1 squad 3 radios out 1500-1800", "t": 1620, "types": ["unknown-position"]},
+    {"label": "A3 misses the link-up with B1 at CP-LINK", "t": 3030, "types": ["coordination"]},
+    {"label": "H3 at DP2 triggers the BN attack-by-fire branch", "t": 3500, "types": ["contingency", "ave-of-approach"]},
+    {"label": "A1 on OBJ-A triggers A CO's sequel", "t": 3600, "types": ["contingency"]},
+    {"label": "H2 through NAI-1 and the recon screen; contact with R", "t": 1567, "types": ["monitored", "contact", "distance"]},
+    {"label": "B2 defends EA-B: the expected enemy never comes", "t": 4800, "types": ["hostile-expected"]},
+    {"label": "H4 attacks A CO, reinforced by H4B", "t": 4990, "types": ["contact", "strength", "distance", "monitored"]},
+    {"label": "H5 comes within range of C2 and C3 at once", "t": 4481, "types": ["proximity", "ave-of-approach"]},
+    {"label": "A2 calls for fire near A3", "t": 3900, "types": ["call-for-fire"]},
+]
+
+
+def _interp(t: float, ts, vs) -> float:
+    return float(np.interp(t, ts, vs))
+
+
+@dataclass
+class Hostile:
+    id: str
+    ts: list[float]
+    xs: list[float]
+    ys: list[float]
+    strength: int
+    appear: float
+    vanish: float = DURATION + 1
+
+    def pos(self, t: float):
+        if not self.appear <= t < self.vanish:
+            return None
+        return _interp(t, self.ts, self.xs), _interp(t, self.ts, self.ys)
+
+
+@dataclass
+class Sim:
+    """The true state of the world over time (what really happened)."""
+    small: bool = False
+    seed: int = 7
+    units: list[dict] = field(default_factory=list)
+    entity_leaf: dict[str, str] = field(default_factory=dict)
+    entity_off: dict[str, tuple[float, float]] = field(default_factory=dict)
+    hostiles: dict[str, Hostile] = field(default_factory=dict)
+    outages: dict[str, tuple[float, float]] = field(default_factory=dict)
+    confirmations: list[tuple[float, str, str, str]] = field(default_factory=list)
+    cffs: list[dict] = field(default_factory=list)
+    report_s: float = 30.0
+    report_phase: dict[str, float] = field(default_factory=dict)
+
+    # -- friendly movement ---------------------------------------------------------
+    def platoon_y_path(self, p: str):
+        if p == "B3":
+            return [0, 480, 2100, 2400, 3600], [0, 0, 7000, 7000, 11000]
+        if p == "C3":
+            return [0, 300, 2400, 3600], [0, 0, 7000, 11000]
+        if p == "C1":
+            return [0, 300, 2100, 2250, 3450], [0, 0, 7000, 7000, 11000]
+        return [0, 300, 2100, 2400, 3600], [0, 0, 7000, 7000, 11000]
+
+    def platoon_center(self, p: str, t: float):
+        ts, ys = self.platoon_y_path(p)
+        x = LANE_X[p]
+        if p == "A2":
+            x += _interp(t, [900, 1200, 1400, 1700], [0, 2300, 2300, 0])
+        return x, _interp(t, ts, ys)
+
+    def leaf_center(self, leaf: str, t: float):
+        if leaf in ("R1", "R2", "R3"):
+            return (1200.0, 2000.0, 2800.0)[int(leaf[1]) - 1], 15000.0
+        if leaf in ("M1", "M2"):
+            return 5850.0 if leaf == "M1" else 6150.0, _interp(t, [0, 2200, 2800], [2000, 2000, 8000])
+        if leaf == "BNHQ":
+            return 6000.0, -1000.0
+        if leaf.endswith("HQ"):
+            co = leaf[0]
+            ys = [self.platoon_center(f"{co}{i}", t)[1] for i in (1, 2, 3)]
+            return LANE_X[f"{co}2"], sum(ys) / 3 - 500.0
+        p, s = leaf[:2], int(leaf[3]) - 1
+        x, y = self.platoon_center(p, t)
+        x, y = x + SQUAD_DX[s], y + SQUAD_DY[s]
+        if leaf == "B1S4":
+            x += _interp(t, [2800, 2980, 3100, 3300], [0, 4060 - x, 4060 - x, 0]) if 2800 < t < 3300 else 0
+        if leaf == "C2S4":
+            x += _interp(t, [3800, 3980, 4100, 4300], [0, 440, 440, 0])
+        if leaf == "C3S4":
+            x += _interp(t, [3800, 3980, 4100, 4300], [0, -740, -740, 0])
+        return x, y
+
+    def entity_pos(self, e: str, t: float):
+        cx, cy = self.leaf_center(self.entity_leaf[e], t)
+        ox, oy = self.entity_off[e]
+        return cx + ox, cy + oy
+
+    def reports_at(self, e: str, t: float) -> bool:
+        o = self.outages.get(self.entity_leaf[e])
+        return not (o and o[0] <= t < o[1])
+
+
+def _units(small: bool) -> list[dict]:
+    per_squad = 2 if small else 10
+    u = [{"id": "BN", "name": "1st BN", "echelon": "battalion", "parent": None, "boundary": "BND-BN",
+          "weapons_range_m": 1000.0},
+         {"id": "BNHQ", "name": "BN HQ", "echelon": "squad", "parent": "BN", "n": 2 if small else 8}]
+    for co in COMPANIES:
+        u.append({"id": co, "name": f"{co} CO", "echelon": "company", "parent": "BN", "boundary": f"BND-{co}"})
+        u.append({"id": f"{co}HQ", "name": f"HQ, {co} CO", "echelon": "squad", "parent": co, "n": 2 if small else 6})
+        for i in (1, 2, 3):
+            p = f"{co}{i}"
+            u.append({"id": p, "name": f"{i} PLT, {co} CO", "echelon": "platoon", "parent": co})
+            for s in (1, 2, 3, 4):
+                u.append({"id": f"{p}S{s}", "name": f"{s} SQD, {i} PLT, {co} CO", "echelon": "squad",
+                          "parent": p, "n": per_squad})
+    u.append({"id": "R", "name": "Recon PLT", "echelon": "platoon", "parent": "A"})
+    for s in (1, 2, 3):
+        u.append({"id": f"R{s}", "name": f"{s} SQD, Recon PLT", "echelon": "squad", "parent": "R", "n": 2 if small else 6})
+    u.append({"id": "M", "name": "Mortar PLT", "echelon": "platoon", "parent": "BN"})
+    for s in (1, 2):
+        u.append({"id": f"M{s}", "name": f"{s} SEC, Mortar PLT", "echelon": "squad", "parent": "M", "n": 2 if small else 8})
+    return u
+
+
+def build_sim(small: bool = False, seed: int = 7) -> Sim:
+    rng = np.random.default_rng(seed)
+    sim = Sim(small=small, seed=seed, report_s=60.0 if small else 30.0)
+    sim.units = _units(small)
+    for u in sim.units:
+        for k in range(u.get("n", 0)):
+            e = f"{u['id']}E{k + 1:02d}"
+            sim.entity_leaf[e] = u["id"]
+            sim.entity_off[e] = (float(rng.uniform(-25, 25)), float(rng.uniform(-25, 25)))
+    for e in sorted(sim.entity_leaf):
+        sim.report_phase[e] = float(rng.uniform(0, sim.report_s))
+    H = Hostile
+    sim.hostiles = {
+        "H1": H("H1", [600, 5400], [-3000, -2500], [25000, 24000], 4, 600),
+        "H2": H("H2", [1400, 2500, 3500, 4600], [2000] * 4, [19500, 16200, 16200, 19500], 5, 1400, 4600),
+        "H3": H("H3", [2500, 4333], [6000, 6000], [20000, 14500], 8, 2500),
+        "H4": H("H4", [3800, 5233], [1500, 1500], [16500, 12200], 6, 3800),
+        "H4B": H("H4B", [3800, 5233], [1600, 1600], [16600, 12300], 6, 5100),
+        "H5": H("H5", [3000, 4563], [10650, 10650], [20000, 12500], 7, 3000),
+    }
+    sim.outages = {"A1S3": (1500.0, 1800.0)}
+    c = sim.confirmations
+    for p in LANE_X:
+        ts, ys = sim.platoon_y_path(p)
+        move_start = ts[1]
+        move_end = ts[ys.index(7000)]
+        atk_start = ts[len(ys) - 2] if p != "C3" else move_end
+        atk_end = ts[-1]
+        c += [(move_start, f"{p}-move", p, "start"), (move_end, f"{p}-move", p, "end"),
+              (atk_start, f"{p}-attack", p, "start"), (atk_end, f"{p}-attack", p, "end"),
+              (3700.0, f"{p}-defend", p, "start")]
+    for co in COMPANIES:
+        c += [(300.0, f"{co}-mtc", co, "start"), (2400.0 if co == "C" else 2100.0, f"{co}-mtc", co, "end"),
+              (2400.0, f"{co}-attack", co, "start"), (3600.0, f"{co}-attack", co, "end"), (3700.0, f"{co}-defend", co, "start")]
+    c += [(0.0, "R-screen", "R", "start"), (0.0, "M-occupy", "M", "start"), (2200.0, "M-occupy", "M", "end"),
+          (2200.0, "M-march", "M", "start"), (2800.0, "M-march", "M", "end"), (2800.0, "M-sbf", "M", "start"),
+          (0.0, "BNHQ-occupy", "BNHQ", "start"), (2800.0, "A3-linkup", "A3", "start"),
+          (3800.0, "C2-passage", "C2", "start")]
+    c.sort()
+    sim.cffs = [
+        {"t": 3900.0, "kind": "cff", "cff": "CFF-1", "requester": "A2", "x": 3000.0, "y": 11500.0, "radius_m": 600.0},
+        {"t": 3960.0, "kind": "cff-confirm", "cff": "CFF-1", "requester": "A2", "x": 3000.0, "y": 11500.0, "radius_m": 600.0},
+        {"t": 5000.0, "kind": "cff", "cff": "CFF-2", "requester": "A2", "x": 2000.0, "y": 16000.0, "radius_m": 600.0},
+    ]
+    return sim
+
+
+# ------------------------------------------------------------------ overlay and plan
+def _rect(x0, y0, x1, y1):
+    return [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]
+
+
+def overlay_features() -> list[dict]:
+    """Control measures in local metres (converted to lon/lat when written)."""
+    F = []
+
+    def add(fid, kind, gtype, coords, owner=None, **props):
+        F.append({"type": "Feature", "geometry": {"type": gtype, "coordinates": coords},
+                  "properties": {"id": fid, "kind": kind, **({"owner": owner} if owner else {}), **props}})
+    add("BND-BN", "boundary", "Polygon", _rect(-500, -2500, 12500, 22000), "BN")
+    for k, co in enumerate(COMPANIES):
+        add(f"BND-{co}", "boundary", "Polygon", _rect(4000 * k, -2500 if k else -2500, 4000 * (k + 1), 22000), co)
+        add(f"PL-BLUE-{co}", "phase-line", "LineString", [[4000 * k, 7000], [4000 * (k + 1), 7000]], co)
+        add(f"OBJ-{co}", "objective", "Polygon", _rect(4000 * k + 200, 10400, 4000 * (k + 1) - 200, 11600), co)
+    for p, x in LANE_X.items():
+        add(f"RTE-{p}", "route", "LineString", [[x, 0], [x, 3500], [x, 7000]], p[0])
+        add(f"BP-{p}-BLUE", "battle-position", "Polygon", _rect(x - 300, 6700, x + 300, 7300), p[0])
+        add(f"BP-{p}", "battle-position", "Polygon", _rect(x - 300, 10700, x + 300, 11300), p[0])
+    add("RTE-A3-ATK", "route", "LineString", [[3300, 7000], [3300, 11000]], "A")
+    add("AA-BN", "assembly-area", "Polygon", _rect(5700, -1300, 6300, -700), "BN")
+    add("BP-M1", "battle-position", "Polygon", _rect(5600, 1700, 6400, 2300), "BN")
+    add("BP-M2", "battle-position", "Polygon", _rect(5600, 7700, 6400, 8300), "BN")
+    add("RTE-M", "route", "LineString", [[6000, 2000], [6000, 8000]], "BN")
+    add("SCREEN-R", "area", "Polygon", _rect(800, 14700, 3200, 15300), "BN")
+    add("NAI-SCREEN", "nai", "Polygon", _rect(0, 15500, 4000, 19000), "R")
+    add("NAI-1", "nai", "Point", [2000, 17500], "BN", radius_m=700)
+    add("NAI-A", "nai", "Point", [1500, 15000], "A", radius_m=500)
+    add("DP1", "decision-point", "Point", [9000, 17000], "BN", radius_m=500)
+    add("DP2", "decision-point", "Point", [6000, 16500], "BN", radius_m=500)
+    add("AA-DIAMOND", "avenue-of-approach", "LineString", [[6000, 21000], [6000, 12000]], "BN", width_m=1000)
+    add("AA-RUBY", "avenue-of-approach", "LineString", [[10650, 21000], [10650, 12000]], "C", width_m=1000)
+    add("EA-A", "engagement-area", "Polygon", _rect(1000, 12500, 3000, 14000), "A")
+    add("EA-B", "engagement-area", "Polygon", _rect(5000, 12000, 7000, 14000), "B")
+    add("CP-LINK", "checkpoint", "Point", [4000, 9000], "BN", radius_m=300)
+    add("CP-C", "checkpoint", "Point", [10650, 11000], "C", radius_m=300)
+    return F
+
+
+def plan_doc(sim: Sim) -> dict:
+    to = []
+    for u in sim.units:
+        d = {k: u[k] for k in ("id", "name", "echelon", "parent") if k in u}
+        for k in ("boundary", "weapons_range_m"):
+            if k in u:
+                d[k] = u[k]
+        d["entities"] = sorted(e for e, leaf in sim.entity_leaf.items() if leaf == u["id"])
+        to.append(d)
+    M = []
+
+    def m(mid, unit, typ, start=None, end=None, after=(), **params):
+        d = {"id": mid, "unit": unit, "type": typ}
+        if start:
+            d["start"] = {"type": start[0], "t": start[1]}
+        if end:
+            d["end"] = {"type": end[0], "t": end[1]}
+        if after:
+            d["after"] = list(after)
+        d["params"] = params
+        M.append(d)
+    for p in LANE_X:
+        co = p[0]
+        extra = {"supported": "C2"} if p == "C3" else {}
+        m(f"{p}-move", p, MOVE_PLT[p], ("START-NLT", 300), ("END-NLT", 2160),
+          route=f"RTE-{p}", destination=f"BP-{p}-BLUE", **extra)
+        atk = ({"route": "RTE-A3-ATK", "destination": "BP-A3", "supported": "A2"} if p == "A3"
+               else {"objective": f"OBJ-{co}"})
+        start = ("START-NET", 2400) if p == "C1" else ("START-NLT", 2400)
+        m(f"{p}-attack", p, ATTACK_PLT[p], start, ("END-NLT", 3660), after=[f"{p}-move"], **atk)
+        dfd = {"position": f"BP-{p}"}
+        if p == "A2":
+            dfd.update(engagement_area="EA-A", expect_hostile_by=4800)
+        if p == "B2":
+            dfd.update(engagement_area="EA-B", expect_hostile_by=4800)
+        m(f"{p}-defend", p, DEFEND_PLT[p], ("START-NLT", 3760), None, after=[f"{p}-attack"], **dfd)
+    for co in COMPANIES:
+        m(f"{co}-mtc", co, "movement-to-contact", ("START-NLT", 300), ("END-NLT", 2460), destination=f"PL-BLUE-{co}")
+        m(f"{co}-attack", co, "hasty-attack", ("START-NLT", 2460), ("END-NLT", 3660), after=[f"{co}-mtc"],
+          objective=f"OBJ-{co}")
+        m(f"{co}-defend", co, "defend", ("START-NLT", 3760), None, after=[f"{co}-attack"], position=f"OBJ-{co}")
+    m("R-screen", "R", "screen", ("START-AT", 0), None, position="SCREEN-R", area="NAI-SCREEN")
+    m("M-occupy", "M", "occupy", ("START-AT", 0), ("END-AT", 2200), position="BP-M1")
+    m("M-march", "M", "tactical-road-march", ("START-AT", 2200), ("END-NLT", 2900), after=["M-occupy"],
+      route="RTE-M", destination="BP-M2")
+    m("M-sbf", "M", "support-by-fire", ("START-NLT", 2900), None, after=["M-march"], position="BP-M2")
+    m("BNHQ-occupy", "BNHQ", "occupy", ("START-AT", 0), None, position="AA-BN")
+    m("BN-reorg-R", "BN", "reorganize", ("START-AT", 600), None, subject="R", new_parent="BN")
+    m("A3-linkup", "A3", "link-up", None, None, partner="B1", point="CP-LINK", at=3000)
+    m("C2-passage", "C2", "passage-of-lines", None, None, partner="C3", point="CP-C", at=4000)
+    m("BN-branch-ABF", "M", "branch", None, None, owner="BN", task="attack-by-fire",
+      trigger={"kind": "hostile-in-area", "area": "DP2", "min_strength": 1}, task_params={"position": "BP-M2"})
+    m("A-sequel-occupy", "A1", "sequel", None, None, owner="A", task="occupy",
+      trigger={"kind": "unit-at", "unit": "A1", "area": "OBJ-A", "within_m": 0.0})
+    alt = [{"id": f"{p}-withdraw", "unit": p, "type": "withdraw", "start": {"type": "ASAP"},
+            "params": {"destination": f"BP-{p}-BLUE"}} for p in LANE_X]
+    return {"task_organization": to, "plans": {"main": M, "withdrawal": alt}, "initial_plan": "main"}
+
+
+# ------------------------------------------------------------------ events
+def events(sim: Sim, proj: Projection, ox: float, oy: float) -> list[dict]:
+    rng = np.random.default_rng(sim.seed + 1)
+    ev: list[tuple[float, int, dict]] = []
+    seq = 0
+
+    def ll(x, y):
+        lon, lat = proj.to_lonlat(x + ox, y + oy)
+        return round(float(lon), 7), round(float(lat), 7)
+    ents = sorted(sim.entity_leaf)
+    phase = {e: round(sim.report_phase[e], 2) for e in ents}
+    for e in ents:
+        last_true = None
+        last_rep = None
+        t = phase[e]
+        while t < DURATION:
+            x, y = sim.entity_pos(e, t)
+            if sim.reports_at(e, t):
+                moved = last_true is None or np.hypot(x - last_true[0], y - last_true[1]) > 0.5
+                if moved:
+                    nx, ny = rng.normal(0, 2.0, 2)
+                    last_rep = ll(x + nx, y + ny)
+                last_true = (x, y)
+                seq += 1
+                ev.append((round(t, 2), seq, {"kind": "location", "t": round(t, 2), "entity": e,
+                                               "lon": last_rep[0], "lat": last_rep[1]}))
+            t += sim.report_s
+    for h in sim.hostiles.values():
+        t = h.appear + 3.0
+        while t < min(h.vanish, DURATION):
+            x, y = h.pos(t)
+            lon, lat = ll(x, y)
+            seq += 1
+            ev.append((round(t, 2), seq, {"kind": "track", "t": round(t, 2), "track": h.id, "lon": lon, "lat": lat,
+                                           "strength": h.strength, "source": "fusion"}))
+            t += 10.0
+        if h.vanish < DURATION:
+            x, y = h.pos(h.vanish - 1e-6)
+            lon, lat = ll(x, y)
+            seq += 1
+            ev.append((h.vanish, seq, {"kind": "track", "t": h.vanish, "track": h.id, "lon": lon, "lat": lat,
+                                        "strength": 0, "source": "fusion"}))
+    for t, mid, unit, phase_ in sim.confirmations:
+        seq += 1
+        ev.append((t, seq, {"kind": "mission", "t": t, "mission": mid, "unit": unit, "phase": phase_}))
+    for c in sim.cffs:
+        lon, lat = ll(c["x"], c["y"])
+        seq += 1
+        ev.append((c["t"], seq, {"kind": c["kind"], "t": c["t"], "cff": c["cff"], "requester": c["requester"],
+                                 "lon": lon, "lat": lat, "radius_m": c["radius_m"]}))
+    ev.sort(key=lambda e: (e[0], e[1]))
+    return [e[2] for e in ev]
+
+
+def write(out: Path, small: bool = False, seed: int = 7) -> dict:
+    """Generate the scenario folder `out`; returns a summary."""
+    from . import oracle
+    out.mkdir(parents=True, exist_ok=True)
+    proj = Projection(EPSG)
+    ox, oy = proj.to_xy(*ORIGIN_LONLAT)
+    sim = build_sim(small, seed)
+
+    def to_ll(coords):
+        if isinstance(coords[0], (int, float)):
+            lon, lat = proj.to_lonlat(coords[0] + ox, coords[1] + oy)
+            return [round(float(lon), 7), round(float(lat), 7)]
+        return [to_ll(c) for c in coords]
+    feats = overlay_features()
+    ll_feats = [{**f, "geometry": {"type": f["geometry"]["type"], "coordinates": to_ll(f["geometry"]["coordinates"])}}
+                for f in feats]
+    meta = {"name": "battalion-small" if small else "battalion", "epsg": EPSG, "duration_s": DURATION,
+            "generator": {"seed": seed, "small": small}, "default_eas": ["BN", "A", "B", "C", "A2"],
+            "description": "1st BN moves to PL BLUE, attacks OBJ A/B/C and defends (Fort Irwin, UTM 11N)"}
+    (out / "scenario.json").write_text(json.dumps(meta, indent=1) + "\n")
+    (out / "overlay.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": ll_feats}) + "\n")
+    plan = plan_doc(sim)
+    (out / "plan.json").write_text(json.dumps(plan, indent=1) + "\n")
+    evs = events(sim, proj, ox, oy)
+    buf = io.BytesIO()
+    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz:
+        for e in evs:
+            gz.write((json.dumps(e, separators=(",", ":")) + "\n").encode())
+    for stale in ("events.jsonl", "events.jsonl.gz"):
+        (out / stale).unlink(missing_ok=True)
+    (out / "events.jsonl.gz").write_bytes(buf.getvalue())
+    truth = oracle.ground_truth(sim, feats, plan, meta["default_eas"])
+    truth["incidents_injected"] = INCIDENTS
+    (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
+    return {"events": len(evs), "entities": len(sim.entity_leaf), "incidents": len(truth["incidents"]),
+            "situations": len(truth["situations"])}

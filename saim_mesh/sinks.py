@@ -1,0 +1,47 @@
+"""Where alerts go: terminal (coloured by priority), JSON lines, a list in memory."""
+from __future__ import annotations
+
+import json
+import sys
+from typing import IO
+
+from .messages import Alert
+
+COLOURS = {"flash": "\033[1;97;41m", "immediate": "\033[1;31m", "priority": "\033[33m", "routine": "\033[36m"}
+RESET = "\033[0m"
+
+
+def hms(t: float) -> str:
+    t = int(round(t))
+    return f"H+{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}"
+
+
+def alert_line(a: Alert) -> str:
+    return json.dumps(a.to_json_dict(), sort_keys=True, separators=(",", ":"))
+
+
+class TerminalSink:
+    def __init__(self, stream: IO[str] | None = None, colour: bool | None = None):
+        self.stream = stream or sys.stdout
+        self.colour = self.stream.isatty() if colour is None else colour
+
+    def __call__(self, a: Alert) -> None:
+        tag = f"{a.priority.upper():9}"
+        if self.colour:
+            tag = f"{COLOURS[a.priority]}{tag}{RESET}"
+        self.stream.write(f"{hms(a.t)} {a.owner:>5} {tag} {a.type:16} {a.message}\n")
+
+
+class JsonlSink:
+    """One JSON object per alert per line; keys sorted so that replays are byte-identical."""
+
+    def __init__(self, stream: IO[str]):
+        self.stream = stream
+
+    def __call__(self, a: Alert) -> None:
+        self.stream.write(alert_line(a) + "\n")
+
+
+class ListSink(list):
+    def __call__(self, a: Alert) -> None:
+        self.append(a)
