@@ -46,7 +46,8 @@ INCIDENTS = [
     {"label": "H2 through NAI-1 and the recon screen; contact with R", "t": 1567, "types": ["monitored", "contact", "distance"]},
     {"label": "B2 defends EA-B: the expected enemy never comes", "t": 4800, "types": ["hostile-expected"]},
     {"label": "H4 attacks A CO, reinforced by H4B", "t": 4990, "types": ["contact", "strength", "distance", "monitored"]},
-    {"label": "H5 comes within range of C2 and C3 at once", "t": 4481, "types": ["proximity", "ave-of-approach"]},
+    {"label": "H5 comes within range of C2 and C3; H5B reinforces it in front of both", "t": 4481,
+     "types": ["contact", "proximity", "ave-of-approach"]},
     {"label": "A2 calls for fire near A3", "t": 3900, "types": ["call-for-fire"]},
 ]
 
@@ -177,6 +178,7 @@ def build_sim(small: bool = False, seed: int = 7) -> Sim:
         "H4": H("H4", [3800, 5233], [1500, 1500], [16500, 12200], 6, 3800),
         "H4B": H("H4B", [3800, 5233], [1600, 1600], [16600, 12300], 6, 5100),
         "H5": H("H5", [3000, 4563], [10650, 10650], [20000, 12500], 7, 3000),
+        "H5B": H("H5B", [3000, 4563], [10700, 10700], [20050, 12550], 7, 4700),
     }
     sim.outages = {"A1S3": (1500.0, 1800.0)}
     c = sim.confirmations

@@ -380,8 +380,8 @@ class Truth:
                     nearest = min(v[0] for v in near.values())
                     strength = sum(v[1] for v in near.values())
                     new = set(near) - state["prev"]
-                    if new and t - state["contact_t"] >= expiry:
-                        self.must(o, "contact", PROX, [u, *new], t - 15, t + 40, f"{sorted(new)} near {u}")
+                    if t - state["contact_t"] >= expiry:   # first contact, or the last one forgotten
+                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 40, f"{sorted(near)} near {u}")
                         state.update(contact_t=t, dist_t=t, dist=nearest, str_t=t, str=strength)
                     elif nearest * rd * 1.03 <= state["dist"] and t - state["dist_t"] >= gap + TICK:
                         self.must(o, "distance", PROX, [u], t - 30, t + 60, f"threat closer to {u}")

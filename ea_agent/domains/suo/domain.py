@@ -543,24 +543,31 @@ class SuoDomain:
             group = ("prox", self.taskorg.parent.get(u) or u)
             rec = [(("threat", u, "distance"), 1000.0 / max(nearest, 1.0)), (("threat", u, "strength"), float(strength))]
             new = ids - prev[0]
-            if new:
+            voa = self.ea.voa
+            # A contact the user no longer remembers (expired) is told again as a contact;
+            # "closer" and "stronger" only make sense against an alert the user remembers.
+            remembered = voa.enabled and voa.last(("threat", u, "contact"), t) is not None
+            if new or not remembered:
                 p = m.red_alert_priority("contact", fs, strength, nearest, danger)
-                cands.append(Candidate(t, "contact", p, subj, f"Contact: {strength} hostile entities {where}",
+                again = not new
+                cands.append(Candidate(t, "contact", "immediate" if again else p, subj,
+                                       f"{'Contact continues' if again else 'Contact'}: {strength} hostile entities {where}",
                                        key=("threat", u, "contact"), friendly=False, merge_group=group, also=tuple(rec),
-                                       details={**base, "new_tracks": sorted(new)}))
-            # Propose on every re-evaluation; VOA compares with what the user was last told.
-            if not new:
-                p = m.red_alert_priority("distance", fs, strength, nearest, danger)
-                cands.append(Candidate(t, "distance", p, subj, f"Closest threat is now closer: {where}",
-                                       key=("threat", u, "distance"), measure=1000.0 / max(nearest, 1.0),
-                                       friendly=False, merge_group=group, details=dict(base)))
-            p = m.red_alert_priority("strength", fs, strength, nearest, danger)
-            if p is not None:
-                cands.append(Candidate(t, "strength", p, subj,
-                                       f"Threat near {self.name(u)} stronger: {strength} hostile entities, "
-                                       f"nearest {where}",
-                                       key=("threat", u, "strength"), measure=float(strength), friendly=False,
-                                       merge_group=group, details={**base, "previous_strength": prev[2]}))
+                                       details={**base, "new_tracks": sorted(new), "reminder": again}))
+            if remembered or not voa.enabled:
+                # Propose on every re-evaluation; VOA compares with what the user was last told.
+                if not new:
+                    p = m.red_alert_priority("distance", fs, strength, nearest, danger)
+                    cands.append(Candidate(t, "distance", p, subj, f"Closest threat is now closer: {where}",
+                                           key=("threat", u, "distance"), measure=1000.0 / max(nearest, 1.0),
+                                           friendly=False, merge_group=group, details=dict(base)))
+                p = m.red_alert_priority("strength", fs, strength, nearest, danger)
+                if p is not None:
+                    cands.append(Candidate(t, "strength", p, subj,
+                                           f"Threat near {self.name(u)} stronger: {strength} hostile entities, "
+                                           f"nearest {where}",
+                                           key=("threat", u, "strength"), measure=float(strength), friendly=False,
+                                           merge_group=group, details=dict(base)))
 
     def _areas(self, t: float, cands: list) -> None:
         tids = sorted(self.pic.tracks)

@@ -1,0 +1,28 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from saim_mesh import scenario as S
+from saim_mesh.runner import run
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = ROOT / "scenarios" / "small"
+BATTALION = ROOT / "scenarios" / "battalion"
+
+
+@pytest.fixture(scope="session")
+def small():
+    return S.load(SMALL)
+
+
+@pytest.fixture(scope="session")
+def small_run(small):
+    """The default EAs over the small scenario, once for the whole session."""
+    eas = run(small, ["BN", "A", "B", "C", "A2"])
+    return {ea.owner: ea for ea in eas}
+
+
+def alerts_of(run_, owner, typ=None):
+    return [a for a in run_[owner].alerts if typ is None or a.type == typ]
