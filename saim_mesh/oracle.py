@@ -384,7 +384,7 @@ class Truth:
                         self.must(o, "contact", PROX, [u, *near], t - 15, t + 40, f"{sorted(near)} near {u}")
                         state.update(contact_t=t, dist_t=t, dist=nearest, str_t=t, str=strength)
                     elif nearest * rd * 1.03 <= state["dist"] and t - state["dist_t"] >= gap + TICK:
-                        self.must(o, "distance", PROX, [u], t - 30, t + 60, f"threat closer to {u}")
+                        self.must(o, "distance", PROX, [u], t - 45, t + 60, f"threat closer to {u}")
                         state.update(dist_t=t, dist=nearest)
                     if strength >= rs * state["str"] and state["str"] > 0 and t - state["str_t"] >= gap + TICK:
                         self.must(o, "strength", PROX, [u], t - 15, t + 40, f"threat near {u} stronger")

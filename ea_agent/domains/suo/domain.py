@@ -345,19 +345,25 @@ class SuoDomain:
         if len(locs) + len(tracks) == len(facts):
             return
         for f in facts:
-            k = type(f)
-            if k is MissionConfirm:
-                self.on_confirm(f)
-            elif k is Order:
-                if f.action == "execute-plan":
-                    self.execute_plan(f.plan, f.t)
-                else:
-                    self.abort_plan(f.t)
-            elif k is Reorganization:
-                self.resubordinate(f.unit, f.new_parent, f.t)
-            elif k is CallForFire or k is CallForFireConfirm:
-                self._flush_quiet()
-                self.on_cff(f)
+            try:
+                self._apply_one(f)
+            except (KeyError, ValueError) as e:   # bad order/confirmation: counted, the rest goes on
+                self.ea.error(f"{type(f).__name__} at t={f.t}: {e}")
+
+    def _apply_one(self, f) -> None:
+        k = type(f)
+        if k is MissionConfirm:
+            self.on_confirm(f)
+        elif k is Order:
+            if f.action == "execute-plan":
+                self.execute_plan(f.plan, f.t)
+            else:
+                self.abort_plan(f.t)
+        elif k is Reorganization:
+            self.resubordinate(f.unit, f.new_parent, f.t)
+        elif k is CallForFire or k is CallForFireConfirm:
+            self._flush_quiet()
+            self.on_cff(f)
 
     def _flush_quiet(self) -> None:
         if self.watchman.quiet:

@@ -116,6 +116,9 @@ class Watchman:
             i = p.eidx.get(msg.entity)
             if i is None:
                 raise KeyError(f"location report for unknown entity {msg.entity!r}")
+            if not (-180.0 <= msg.lon <= 180.0 and -90.0 <= msg.lat <= 90.0):   # also catches NaN
+                raise ValueError(f"location report for {msg.entity}: field 'lat'/'lon' not a valid coordinate "
+                                 f"({msg.lat}, {msg.lon})")
             if msg.t > p.seen[i]:
                 p.seen[i] = msg.t
             if abs(p.lon[i] - msg.lon) < self.eps and abs(p.lat[i] - msg.lat) < self.eps:
