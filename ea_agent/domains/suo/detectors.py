@@ -60,6 +60,13 @@ def judged_distance(geom, pts: np.ndarray, rule: str, centroid: tuple[float, flo
         return float(shapely.distance(geom, shapely.Point(centroid)))
     if len(pts) == 0:
         return None
+    if geom.geom_type == "Point":
+        ds = np.hypot(pts[:, 0] - geom.x, pts[:, 1] - geom.y)
+        return float(ds.min() if rule == "any" else ds.max())
+    if geom.geom_type == "Polygon":   # fast path: members inside are at distance 0
+        inside = shapely.contains_xy(geom, pts[:, 0], pts[:, 1])
+        if inside.all() or (rule == "any" and inside.any()):
+            return 0.0
     ds = shapely.distance(geom, shapely.points(pts))
     return float(ds.min() if rule == "any" else ds.max())
 

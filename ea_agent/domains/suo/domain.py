@@ -109,6 +109,11 @@ class SuoDomain:
         env = [u for u in sorted(self.own_units) if to.units[u].echelon == "platoon"]
         self.env_units = env or [self.owner]
         self.unit_pos = {u: self.pic.centroid(u) for u in to.units}
+        self._up = {leaf: (leaf, *to.ancestors(leaf)) for leaf in self.leaves}
+        self.own_rows = np.array([u in self.own_units for u in self.pic.units])
+        self.leaf_xy = np.full((len(self.leaves), 2), np.nan)
+        self.outside = np.zeros(len(self.leaves), dtype=bool)
+        self.leaf_own_poly = [self.bnd_polys[b] if b >= 0 else None for b in self.leaf_bnd]
         self.dirty_leaves |= set(self.leaves)
 
     def _weapons_range(self, unit: str, dflt: float) -> float:
@@ -409,12 +414,14 @@ class SuoDomain:
         dirty_units: set[str] = set()
         if self.dirty_leaves:
             for leaf in self.dirty_leaves:
-                dirty_units.add(leaf)
-                dirty_units.update(self.taskorg.ancestors(leaf))
-            for u in dirty_units:
-                self.unit_pos[u] = self.pic.centroid(u)
-            own = [self.unit_pos[u] for u in self.own_units if self.unit_pos.get(u)]
-            self.watchman.set_bbox(np.array(own) if own else np.zeros((0, 2)))
+                dirty_units.update(self._up[leaf])
+            leaf_c, unit_c = self.pic.centroids()
+            self.leaf_xy = leaf_c
+            self.unit_pos = {u: (None if x != x else (float(x), float(y)))
+                             for u, (x, y) in zip(self.pic.units, unit_c.tolist())}
+            own = unit_c[self.own_rows]
+            own = own[~np.isnan(own[:, 0])]
+            self.watchman.set_bbox(own)
             self._location_monitors(t, dirty_units, cands)
             self._coordination(t, dirty_units)
             self._fratricide(t, cands)
@@ -440,10 +447,15 @@ class SuoDomain:
         self.dirty_tracks = set()
         return cands
 
-    def _oop(self, m: Mission, geom_id: str, rule: str, what: str, t: float) -> Candidate | None:
-        geom = self.overlay[geom_id].geom if what in ("route", "axis") else self.overlay[geom_id].area
+    def _geom(self, geom_id: str, what: str):
+        """Routes and axes are judged by distance to the line; everything else to its area."""
+        return self.overlay[geom_id].geom if what in ("route", "axis") else self.overlay[geom_id].area
+
+    def _oop(self, m: Mission, geom_id: str, rule: str, what: str, t: float, d: float | None = None) -> Candidate | None:
         pos = self.unit_pos.get(m.unit)
-        d = D.judged_distance(geom, self.pic.member_xy(m.unit), rule, pos)
+        geom = self._geom(geom_id, what)
+        if d is None:
+            d = D.judged_distance(geom, self.pic.member_xy(m.unit), rule, pos)
         thr = self.voi(m, "out_of_position_m")
         if d is None or d <= thr:
             return None
@@ -460,14 +472,21 @@ class SuoDomain:
     def _location_monitors(self, t: float, dirty_units: set[str], cands: list) -> None:
         if self.plan is None:
             return
-        for mid, mons in self.loc_monitors.items():
-            if self.plan.state.get(mid) != "active" or not mons or mons[0][0].unit not in dirty_units:
-                continue
-            for m, geom, rule, what in mons:
-                if self.in_plan(m):
-                    c = self._oop(m, geom, rule, what, t)
-                    if c is not None:
-                        cands.append(c)
+        todo = [mon for mid, mons in self.loc_monitors.items()
+                if mons and mons[0][0].unit in dirty_units and self.plan.state.get(mid) == "active"
+                for mon in mons if self.in_plan(mon[0])]
+        cent = [mon for mon in todo if mon[2] == "centroid" and self.unit_pos.get(mon[0].unit)]
+        if cent:   # one vectorised distance call for every centroid-judged monitor
+            ds = shapely.distance(np.array([self._geom(g, w) for _, g, _, w in cent], dtype=object),
+                                  shapely.points(np.array([self.unit_pos[m.unit] for m, _, _, _ in cent])))
+            for (m, g, rule, what), d in zip(cent, ds.tolist()):
+                if d > self.voi(m, "out_of_position_m"):
+                    cands.append(self._oop(m, g, rule, what, t, d))
+        for m, g, rule, what in todo:
+            if rule != "centroid":
+                c = self._oop(m, g, rule, what, t)
+                if c is not None:
+                    cands.append(c)
 
     def _coordination(self, t: float, dirty_units: set[str]) -> None:
         for mid, (m, partner, point, radius) in list(self.coord.items()):
@@ -483,11 +502,22 @@ class SuoDomain:
                 del self.coord[mid]
 
     def _fratricide(self, t: float, cands: list) -> None:
-        n = len(self.leaves)
-        pos = np.array([self.unit_pos.get(u) or (math.nan, math.nan) for u in self.leaves])
-        dirty = np.array([u in self.dirty_leaves for u in self.leaves]) & self.frat_ok
-        if not dirty.any():
+        """Only units outside their own boundary can be at risk (6.7.2), so the pair
+        check runs only while some unit is outside; the inside test runs for movers."""
+        rows = [self.leaf_i[u] for u in self.dirty_leaves if self.frat_ok[self.leaf_i[u]]]
+        if not rows:
             return
+        pos = self.leaf_xy
+        r = np.array(rows)
+        ok = ~np.isnan(pos[r, 0])
+        polys = np.array([self.leaf_own_poly[i] for i in r[ok]], dtype=object)
+        self.outside[r] = False
+        if len(polys):
+            self.outside[r[ok]] = ~shapely.contains_xy(polys, pos[r[ok], 0], pos[r[ok], 1])
+        if not self.outside.any():
+            return
+        dirty = np.zeros(len(self.leaves), dtype=bool)
+        dirty[r] = True
         inside = D.inside_matrix(pos, self.bnd_polys)
         bnd = np.where(self.frat_ok, self.leaf_bnd, 0)
         pos = np.where(self.frat_ok[:, None], pos, np.nan)
@@ -524,16 +554,15 @@ class SuoDomain:
         if tids:
             tpos = np.array([(self.pic.tracks[k].x, self.pic.tracks[k].y) for k in tids])
             dist = D.distances(upos, tpos)
+        close = (dist <= radius) if tids else np.zeros((len(units), 0), dtype=bool)
         for ui, u in enumerate(units):
-            if tids:
-                inn = np.nonzero(dist[ui] <= radius)[0]
-            else:
-                inn = np.zeros(0, dtype=int)
+            if not close[ui].any():
+                if self.env_prev.get(u, (frozenset(),))[0]:
+                    self.env_prev[u] = (frozenset(), math.inf, 0)
+                continue
+            inn = np.nonzero(close[ui])[0]
             ids = frozenset(tids[k] for k in inn)
             prev = self.env_prev.get(u, (frozenset(), math.inf, 0))
-            if not ids:
-                self.env_prev[u] = (ids, math.inf, 0)
-                continue
             k_near = inn[np.argmin(dist[ui, inn])]
             nearest = float(dist[ui, k_near])
             strength = int(sum(self.pic.tracks[tids[k]].strength for k in inn))
@@ -623,16 +652,19 @@ class SuoDomain:
 
     def _unknown_positions(self, t: float, cands: list) -> None:
         thr = float(self.voi_cfg["unknown_position_s"])
-        for leaf in sorted(self.own_leaves):
-            idx = self.pic.leaf_members[leaf]
-            last = float(self.pic.seen[idx].max()) if len(idx) else 0.0
+        last_by_leaf = np.zeros(len(self.leaves))
+        np.maximum.at(last_by_leaf, self.pic.ent_leaf_i, self.pic.seen)
+        for k in np.nonzero(t - last_by_leaf > thr)[0].tolist():
+            leaf = self.leaves[k]
+            if leaf not in self.own_leaves:
+                continue
+            last = float(last_by_leaf[k])
             silent = t - last
-            if silent > thr:
-                parent = self.taskorg.parent.get(leaf) or leaf
-                cands.append(Candidate(t, "unknown-position", _BASE.compute_priority("unknown-position"), (leaf,),
-                                       f"Unknown position: {self.name(leaf)} silent for {silent:.0f} s",
-                                       key=("unknown-position", leaf), measure=silent, merge_group=("unknown", parent),
-                                       details={"unit": leaf, "last_report_t": last, "silent_s": round(silent, 1)}))
+            parent = self.taskorg.parent.get(leaf) or leaf
+            cands.append(Candidate(t, "unknown-position", _BASE.compute_priority("unknown-position"), (leaf,),
+                                   f"Unknown position: {self.name(leaf)} silent for {silent:.0f} s",
+                                   key=("unknown-position", leaf), measure=silent, merge_group=("unknown", parent),
+                                   details={"unit": leaf, "last_report_t": last, "silent_s": round(silent, 1)}))
 
     # -- VOA heuristics: merging and rendering ------------------------------------------
     def merge(self, key, cands: list[Candidate]) -> Candidate:

@@ -46,9 +46,18 @@ class Picture:
         for i, u in enumerate(self.ent_leaf):
             by_leaf[u].append(i)
         self.leaves = sorted(by_leaf)
+        li = {u: k for k, u in enumerate(self.leaves)}
+        self.ent_leaf_i = np.array([li[u] for u in self.ent_leaf], dtype=np.intp)
         self.leaf_members = {u: np.array(v, dtype=np.intp) for u, v in by_leaf.items()}
         self.members = {u: np.array(sorted(i for leaf in taskorg.subtree(u) for i in by_leaf.get(leaf, ())),
                                     dtype=np.intp) for u in taskorg.units}
+        self.units = sorted(taskorg.units)
+        # unit x leaf membership: unit centroids are sums over their leaves
+        self.unit_leaf = np.zeros((len(self.units), len(self.leaves)))
+        for r, u in enumerate(self.units):
+            for leaf in taskorg.subtree(u):
+                if leaf in li:
+                    self.unit_leaf[r, li[leaf]] = 1.0
 
     def member_xy(self, unit: str) -> np.ndarray:
         pts = self.xy[self.members[unit]]
@@ -60,6 +69,21 @@ class Picture:
             return None
         c = pts.mean(axis=0)
         return float(c[0]), float(c[1])
+
+    def centroids(self) -> tuple[np.ndarray, np.ndarray]:
+        """Centroids of every leaf and every unit (NaN where no member position is known),
+        in one vectorised pass: bincount per leaf, then a membership matrix product."""
+        ok = ~np.isnan(self.xy[:, 0])
+        n = len(self.leaves)
+        li = self.ent_leaf_i[ok]
+        cnt = np.bincount(li, minlength=n).astype(float)
+        sx = np.bincount(li, weights=self.xy[ok, 0], minlength=n)
+        sy = np.bincount(li, weights=self.xy[ok, 1], minlength=n)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            leaf = np.column_stack([sx / cnt, sy / cnt])
+            ucnt = self.unit_leaf @ cnt
+            unit = np.column_stack([self.unit_leaf @ sx / ucnt, self.unit_leaf @ sy / ucnt])
+        return leaf, unit
 
     def apply_locations(self, reports: list[LocationReport]) -> set[str]:
         """Project a batch of reports in one pyproj call; returns the leaf units touched."""
