@@ -425,8 +425,9 @@ class SuoDomain:
             self._location_monitors(t, dirty_units, cands)
             self._coordination(t, dirty_units)
             self._fratricide(t, cands)
-        if self.dirty_tracks or dirty_units.intersection(self.env_units):
-            self._threats(t, cands)
+        rescan = t >= self.next_scan   # periodic, on scenario time: expiry-driven reminders
+        if rescan or self.dirty_tracks or dirty_units.intersection(self.env_units):
+            self._threats(t, cands, dirty_units, rescan)
         if self.dirty_tracks:
             self._areas(t, cands)          # also checks contingencies
         elif self.dirty_leaves and self.contingencies:
@@ -542,8 +543,12 @@ class SuoDomain:
                                    details={"pairs": [[a, b, round(d, 1)] for a, b, d in sorted(pairs)],
                                             "outside_boundary": sorted(out_a + out_b), "min_distance_m": round(dmin, 1)}))
 
-    def _threats(self, t: float, cands: list) -> None:
-        """Threat envelopes (6.7.1): tracks close enough to threaten each platoon."""
+    def _threats(self, t: float, cands: list, dirty_units: set[str], rescan: bool = False) -> None:
+        """Threat envelopes (6.7.1): tracks close enough to threaten each platoon.
+
+        A unit is re-evaluated only when it moved or a track in or near its envelope
+        changed, so what happens far away (which a mesh peer may never receive)
+        cannot change its alerts."""
         radius = float(self.voi_cfg["threat_radius_m"])
         danger = float(self.voi_cfg["danger_close_m"])
         tids = sorted(self.pic.tracks)
@@ -555,7 +560,12 @@ class SuoDomain:
             tpos = np.array([(self.pic.tracks[k].x, self.pic.tracks[k].y) for k in tids])
             dist = D.distances(upos, tpos)
         close = (dist <= radius) if tids else np.zeros((len(units), 0), dtype=bool)
+        moved = np.array([k in self.dirty_tracks for k in tids], dtype=bool)
         for ui, u in enumerate(units):
+            prev0 = self.env_prev.get(u, (frozenset(),))[0]
+            if not (rescan and prev0) and u not in dirty_units and not (close[ui] & moved).any() \
+                    and not prev0 & self.dirty_tracks:
+                continue
             if not close[ui].any():
                 if self.env_prev.get(u, (frozenset(),))[0]:
                     self.env_prev[u] = (frozenset(), math.inf, 0)
@@ -609,6 +619,7 @@ class SuoDomain:
         xy = np.array([(self.pic.tracks[k].x, self.pic.tracks[k].y) for k in tids]) if tids else np.zeros((0, 2))
         members = self.area_index.members(xy)
         self._area_strength = {a: int(sum(self.pic.tracks[tids[k]].strength for k in idx)) for a, idx in members.items()}
+        self._area_tracks = {a: {tids[k] for k in idx} for a, idx in members.items()}
         triggered_now = self._contingencies(t, cands) if self.contingencies else set()
         for area, idx in members.items():
             ids = [tids[k] for k in idx]
@@ -624,14 +635,20 @@ class SuoDomain:
                 self.monitored_candidate(None, area, t, ids, strength, expected=False, kind=kind)
 
     _area_strength: dict[str, int] = {}
+    _area_tracks: dict[str, set[str]] = {}
 
     def _contingencies(self, t: float, cands: list) -> set[str]:
         fired: set[str] = set()
         for mid, m in list(self.contingencies.items()):
+            tr = m.params["trigger"]
+            if tr["kind"] == "unit-at":
+                if not any(self.taskorg.is_under(leaf, tr["unit"]) for leaf in self.dirty_leaves):
+                    continue
+            elif not self.dirty_tracks.intersection(self._area_tracks.get(tr["area"], ())):
+                continue
             if not m.contingency_satisfied(self):
                 continue
             del self.contingencies[mid]
-            tr = m.params["trigger"]
             fired.add(tr["area"])
             if tr["kind"] == "hostile-in-area":
                 why = f"Red activity at {tr['area']} ({self._area_strength.get(tr['area'], 0)} entities)"
