@@ -114,6 +114,37 @@ def cmd_validate(a) -> int:
     return 0
 
 
+def cmd_replay(a) -> int:
+    from .replay import main_replay
+    from .zconf import config
+    sc = S.load(a.scenario)
+    return main_replay(sc, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}", a.speed,
+                       a.wait_peers or [], a.linger)
+
+
+def cmd_peer(a) -> int:
+    from .peer import main_peer
+    from .zconf import config
+    sc = S.load(a.scenario, events=False)
+    if a.unit not in sc.taskorg.units:
+        raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
+    return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}",
+                     a.out, a.config)
+
+
+def cmd_mesh(a) -> int:
+    from .mesh import up
+    up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed))
+    return 0
+
+
+def _zenoh_args(p) -> None:
+    p.add_argument("--listen", nargs="*", metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--connect", nargs="*", metavar="ENDPOINT")
+    p.add_argument("--zenoh-config", metavar="JSON5", help="default configs/zenoh-peer.json5")
+    p.add_argument("--root", help="key-expression root (default saim/<scenario name>)")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="saim-mesh", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -140,6 +171,27 @@ def main(argv: list[str] | None = None) -> int:
     v = sub.add_parser("validate", help="load a scenario and report what is wrong")
     v.add_argument("scenario")
     v.set_defaults(fn=cmd_validate)
+    rp = sub.add_parser("replay", help="publish a scenario's events into the mesh (stands in for SAIM)")
+    rp.add_argument("scenario")
+    rp.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    rp.add_argument("--wait-peers", nargs="*", metavar="UNIT", help="start when these peers are present")
+    rp.add_argument("--linger", type=float, default=30.0, help="seconds to keep serving the store at the end")
+    _zenoh_args(rp)
+    rp.set_defaults(fn=cmd_replay)
+    pe = sub.add_parser("peer", help="run one unit's EA as a Zenoh peer")
+    pe.add_argument("--scenario", required=True)
+    pe.add_argument("--unit", required=True)
+    pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
+    pe.add_argument("--config", metavar="TOML")
+    _zenoh_args(pe)
+    pe.set_defaults(fn=cmd_peer)
+    me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit EA plus the replay")
+    me.add_argument("action", choices=["up"])
+    me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
+    me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    me.add_argument("--out-dir", default="out/mesh")
+    me.set_defaults(fn=cmd_mesh)
     a = p.parse_args(argv)
     try:
         return a.fn(a)

@@ -89,6 +89,10 @@ class SuoDomain:
             c.params["trigger"]["area"] for c in self.contingencies.values() if c.params["trigger"]["kind"] == "hostile-in-area"}
         self.area_index = D.AreaIndex({a: self.overlay[a].area for a in sorted(ids)})
 
+    def watched_areas(self) -> set[str]:
+        """Overlay areas this EA watches for hostiles (global monitors, missions, triggers)."""
+        return set(self.area_index.ids)
+
     def _org_changed(self) -> None:
         """Recompute everything that depends on the command hierarchy."""
         to = self.taskorg

@@ -1,0 +1,80 @@
+"""The Zenoh key space (docs/keyspace.md): one key per message, chosen so that a
+peer can subscribe by mission, geography (grid cells) and command (its subtree).
+
+  <root>/pos/<cell>/<command path>/<entity>    friendly positions
+  <root>/trk/<cell>/<track>                    hostile tracks
+  <root>/msn/<unit>/<mission>                  mission start/end confirmations
+  <root>/ord/<unit>                            orders to a unit (and its subordinates)
+  <root>/cff/<cell>/<requester>/<cff>          calls for fire and confirmations
+  <root>/org/<unit>                            reorganizations
+  <root>/clock                                 scenario-time ticks (ordering barrier)
+  <root>/alert/<owner>/<type>                  alerts raised by an EA
+  <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
+  <root>/store/log                             the situation store (queryable)
+"""
+from __future__ import annotations
+
+import math
+
+from saim_mesh import messages as M
+
+CELL_M = 2000.0
+
+
+def cell(x: float, y: float, size: float = CELL_M) -> str:
+    """Grid cell chunk of a projected position, e.g. 'x268y1950'."""
+    return f"x{math.floor(x / size)}y{math.floor(y / size)}"
+
+
+def cells_within(x: float, y: float, r: float, size: float = CELL_M) -> set[str]:
+    out = set()
+    for i in range(math.floor((x - r) / size), math.floor((x + r) / size) + 1):
+        for j in range(math.floor((y - r) / size), math.floor((y + r) / size) + 1):
+            out.add(f"x{i}y{j}")
+    return out
+
+
+def cells_of_bounds(b: tuple[float, float, float, float], size: float = CELL_M) -> set[str]:
+    return {f"x{i}y{j}" for i in range(math.floor(b[0] / size), math.floor(b[2] / size) + 1)
+            for j in range(math.floor(b[1] / size), math.floor(b[3] / size) + 1)}
+
+
+def command_path(taskorg, unit: str) -> str:
+    return "/".join(reversed([unit, *taskorg.ancestors(unit)]))
+
+
+class KeySpace:
+    def __init__(self, root: str):
+        if not root or any(c in root for c in "#?*$") or root.startswith("/") or "//" in root:
+            raise ValueError(f"bad key-expression root {root!r}")
+        self.root = root
+
+    def key(self, msg, taskorg, proj) -> str:
+        r = self.root
+        k = type(msg)
+        if k is M.LocationReport:
+            unit = taskorg.entity_unit.get(msg.entity, "unknown")
+            path = command_path(taskorg, unit) if unit in taskorg.units else "unknown"
+            return f"{r}/pos/{cell(*proj.to_xy(msg.lon, msg.lat))}/{path}/{msg.entity}"
+        if k is M.SensorTrack:
+            return f"{r}/trk/{cell(*proj.to_xy(msg.lon, msg.lat))}/{msg.track}"
+        if k is M.MissionConfirm:
+            return f"{r}/msn/{msg.unit}/{msg.mission}"
+        if k is M.Order:
+            return f"{r}/ord/{msg.issuer}"
+        if k is M.CallForFire or k is M.CallForFireConfirm:
+            return f"{r}/cff/{cell(*proj.to_xy(msg.lon, msg.lat))}/{msg.requester}/{msg.cff}"
+        if k is M.Reorganization:
+            return f"{r}/org/{msg.unit}"
+        if k is M.Alert:
+            return f"{r}/alert/{msg.owner}/{msg.type}"
+        raise ValueError(f"no key for {k.__name__}")
+
+    def clock(self) -> str:
+        return f"{self.root}/clock"
+
+    def alive(self, unit: str, peer: str = "*") -> str:
+        return f"{self.root}/alive/{unit}/{peer}"
+
+    def store(self) -> str:
+        return f"{self.root}/store/log"

@@ -1,0 +1,190 @@
+"""One unit's Execution Assistant as a Zenoh peer (one OS process per unit).
+
+The same EA core as `saim-mesh run`; only the source of facts (subscriptions
+computed by `dissemination`) and the sinks (JSON lines file + the mesh) differ.
+"""
+from __future__ import annotations
+
+import json
+import os
+import resource
+import signal
+import sys
+import time
+
+import msgpack
+import zenoh
+
+from dissemination.interest import Interest
+from dissemination.keyspace import KeySpace
+from ea_agent.core.config import load_config
+from ea_agent.domains.suo import make_ea
+
+from . import messages as M
+from .scenario import Scenario
+from .sinks import alert_line
+
+BLOCK = zenoh.CongestionControl.BLOCK
+DEBUG = bool(os.environ.get("SAIM_DEBUG"))
+
+
+class Peer:
+    def __init__(self, sc: Scenario, unit: str, conf: zenoh.Config, root: str, out_path: str | None = None,
+                 config_path=None, radius_m: float = 3000.0, log=print):
+        self.sc, self.unit, self.conf = sc, unit, conf
+        self.ks = KeySpace(root)
+        self.cfg = load_config(config_path, unit)
+        self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
+        self.interest = Interest(self.ks, radius_m)
+        self.out = open(out_path, "a") if out_path else None
+        self.log = log
+        self.session = None
+        self.muted = False
+        self.last_seq = 0
+        self.t = 0.0
+        self.subs: dict[str, object] = {}
+        self.peers: dict[str, str] = {}       # unit -> "up" / "down"
+        self.decoder = M.Decoder()
+        self.joined_t = 0.0
+
+    # -- sinks -------------------------------------------------------------------------
+    def _sink(self, a: M.Alert) -> None:
+        if self.muted:   # replaying the store: the commander is not told the past again
+            return
+        if self.out:
+            self.out.write(alert_line(a) + "\n")
+            self.out.flush()
+        if self.session is not None:
+            self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
+
+    # -- subscriptions ----------------------------------------------------------------------
+    def _resubscribe(self, buf: list | None = None) -> None:
+        """Re-register when the interest changed. New keys catch up from the store:
+        whatever was published on them since the last message we took is fetched, so a
+        change of subscriptions never loses data (duplicates are dropped by seq)."""
+        want = self.interest.keys(self.ea.domain) - {self.ks.clock()}
+        new = sorted(want - self.subs.keys())
+        for k in new:   # declare new ones before dropping old ones
+            self.subs[k] = self.session.declare_subscriber(k, zenoh.handlers.FifoChannel(1_000_000))
+        for k in sorted(self.subs.keys() - want):
+            self.subs.pop(k).undeclare()
+        if new and buf is not None:
+            _, entries = self._query_store(self.last_seq, new)
+            buf.extend((seq, m) for seq, p in entries if (m := self.decoder(p)) is not None)
+
+    def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
+        req = msgpack.packb({"since": since, "keys": keys})
+        for r in self.session.get(self.ks.store(), payload=req, timeout=timeout):
+            if r.ok is not None:
+                d = msgpack.unpackb(r.ok.payload.to_bytes(), raw=False)
+                return d["t"], d["entries"]
+        return 0.0, []
+
+    def _drain(self, buf: list) -> None:
+        for sub in self.subs.values():
+            while (s := sub.try_recv()) is not None:
+                seq = int.from_bytes(s.attachment.to_bytes(), "big") if s.attachment is not None else 0
+                m = self.decoder(s.payload.to_bytes())
+                if m is not None:
+                    buf.append((seq, m))
+
+    def _feed(self, items) -> None:
+        for seq, m in sorted(items, key=lambda x: x[0]):
+            if seq > self.last_seq:
+                self.last_seq = seq
+                self.ea.submit(m)
+
+    # -- presence ---------------------------------------------------------------------------
+    def _presence(self, ch) -> None:
+        to = self.ea.domain.taskorg
+        watch = set(to.children(self.unit)) | set(to.subtree(self.unit)) | set(to.ancestors(self.unit)[:1])
+        while (s := ch.try_recv()) is not None:
+            unit = str(s.key_expr).split("/")[-2]
+            if unit == self.unit or unit not in watch:
+                continue
+            up = s.kind == zenoh.SampleKind.PUT
+            before = self.peers.get(unit)
+            self.peers[unit] = "up" if up else "down"
+            if not up:
+                self._system_alert(unit, "immediate", f"EA of {to.name(unit)} left the mesh: its picture and "
+                                   f"confirmations no longer reach us", left=True)
+            elif before == "down":
+                self._system_alert(unit, "routine", f"EA of {to.name(unit)} is back on the mesh", left=False)
+
+    def _system_alert(self, unit: str, prio: str, text: str, left: bool) -> None:
+        self.ea.emit(M.Alert(round(self.t, 3), self.unit, "unknown-position", "system-problem", prio, (unit,), text,
+                             {"peer": unit, "left": left, "wall_clock_driven": True}))
+
+    # -- main loop --------------------------------------------------------------------------
+    def run(self, join_timeout: float = 10.0) -> dict:
+        def stop(*_):
+            raise SystemExit(0)
+        signal.signal(signal.SIGTERM, stop)
+        self.ea.start(0.0)
+        t_wall = time.monotonic()
+        with zenoh.open(self.conf) as s:
+            self.session = s
+            clock = s.declare_subscriber(self.ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
+            self._resubscribe()
+            pres = s.liveliness().declare_subscriber(self.ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
+                                                     history=True)
+            self._late_join(s, join_timeout)
+            token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
+            self.log(f"ready {self.unit} joined_t={self.joined_t}", flush=True)
+            buf: list = []
+            done = False
+            while not done:
+                tick = clock.try_recv()
+                if tick is None:
+                    self._presence(pres)
+                    time.sleep(0.0005)
+                    continue
+                info = msgpack.unpackb(tick.payload.to_bytes())
+                self._drain(buf)   # everything sent before this tick is already in our channels
+                ready = [x for x in buf if x[0] <= info["seq"]]
+                buf = [x for x in buf if x[0] > info["seq"]]
+                self._feed(ready)
+                if DEBUG and int(info["t"]) % 300 == 0:
+                    self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
+                             f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
+                self.t = info["t"]
+                self._presence(pres)
+                if info["end"]:
+                    self.ea.finish(info["t"])
+                    done = True
+                else:
+                    self.ea.advance(info["t"])
+                    self._resubscribe(buf)
+            token.undeclare()
+            self.session = None
+        if self.out:
+            self.out.close()
+        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        by_p: dict[str, int] = {}
+        for a in self.ea.alerts:
+            by_p[a.priority] = by_p.get(a.priority, 0) + 1
+        return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
+                "facts": self.ea.stats["facts"], "bad_messages": self.decoder.errors + self.ea.stats["errors"],
+                "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
+                "wall_s": round(time.monotonic() - t_wall, 2)}
+
+    def _late_join(self, s, timeout: float) -> None:
+        """Get the picture so far from the situation store and replay it silently."""
+        t, entries = self._query_store(0, None, timeout)
+        if not entries:
+            return
+        self.muted = True
+        try:
+            self._feed([(seq, m) for seq, p in entries if (m := self.decoder(p)) is not None])
+            self.ea.advance(t)
+        finally:
+            self.muted = False
+        self.t = self.joined_t = t
+        self._resubscribe()
+
+
+def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None) -> int:
+    p = Peer(sc, unit, conf, root, out, config_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout))
+    summary = p.run()
+    print("summary " + json.dumps(summary), flush=True)
+    return 0

@@ -1,0 +1,115 @@
+"""The event generator standing in for SAIM: publishes a scenario's scripted events
+into the mesh, and serves the situation store (the ordered log of everything
+published so far) to peers that join late.
+
+Every event carries a sequence number (Zenoh attachment). After each second of
+scenario time a clock tick says "everything up to seq N has been sent": one
+publisher session and one priority keep Zenoh's delivery in order, so a peer that
+sees the tick has every earlier message in its channels.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+import msgpack
+import zenoh
+
+from dissemination.keyspace import KeySpace
+
+from . import messages as M
+from .scenario import Scenario
+
+BLOCK = zenoh.CongestionControl.BLOCK
+
+
+def seq_bytes(seq: int) -> bytes:
+    return seq.to_bytes(8, "big")
+
+
+class Replay:
+    def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
+                 wait_peers: list[str] = (), tick_s: float = 1.0, wait_timeout: float = 60.0,
+                 linger_s: float = 30.0, log=print):
+        self.sc, self.conf, self.ks = sc, conf, KeySpace(root)
+        self.speed, self.wait_peers, self.tick_s = speed, list(wait_peers), tick_s
+        self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
+        self.entries: list[tuple[int, bytes]] = []
+        self.keys: list[zenoh.KeyExpr] = []
+        self.t = 0.0
+
+    def _serve(self, q) -> None:
+        """Answer store queries: entries after `since` whose key matches one of `keys`
+        (all when keys is None), and the scenario time the log has reached."""
+        while (query := q.try_recv()) is not None:
+            req = msgpack.unpackb(query.payload.to_bytes()) if query.payload is not None else {}
+            since, keys = int(req.get("since", 0)), req.get("keys")
+            entries = self.entries[since:]
+            if keys is not None:
+                kes = [zenoh.KeyExpr(k) for k in keys]
+                entries = [e for e, k in zip(entries, self.keys[since:]) if any(k.intersects(x) for x in kes)]
+            query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True))
+            del query   # a query kept alive makes the asker wait out its timeout
+
+    def _present(self, s) -> set[str]:
+        units = set()
+        for r in s.liveliness().get(self.ks.alive("*", "*"), timeout=2.0):
+            if r.ok is not None:
+                units.add(str(r.ok.key_expr).split("/")[-2])
+        return units
+
+    def _tick(self, s, t: float, end: bool = False) -> None:
+        self.t = t
+        s.put(self.ks.clock(), msgpack.packb({"t": t, "seq": len(self.entries), "end": end}),
+              congestion_control=BLOCK)
+
+    def run(self) -> dict:
+        sc = self.sc
+        to = sc.taskorg.copy()
+        reorgs = sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in sc.plan.missions
+                        if m.type == "reorganize" and m.start.t is not None)
+        with zenoh.open(self.conf) as s:
+            q = s.declare_queryable(self.ks.store(), zenoh.handlers.FifoChannel(64))
+            self.log(f"ready {s.info.zid()}", flush=True)
+            deadline = time.monotonic() + self.wait_timeout
+            while self.wait_peers and not set(self.wait_peers) <= self._present(s):
+                self._serve(q)
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"peers never came: {sorted(set(self.wait_peers) - self._present(s))}")
+            self.log("start", flush=True)
+            t0 = time.monotonic()
+            next_tick = self.tick_s
+            for ev in sc.events:
+                while ev.t >= next_tick:
+                    self._tick(s, next_tick)
+                    self._serve(q)
+                    if int(next_tick) % 100 == 0:
+                        self.log(f"t={next_tick:.0f}", flush=True)
+                    next_tick += self.tick_s
+                if self.speed:
+                    while (wait := t0 + ev.t / self.speed - time.monotonic()) > 0:
+                        self._serve(q)
+                        time.sleep(min(wait, 0.005))
+                while reorgs and reorgs[0][0] <= ev.t:
+                    _, unit, parent = reorgs.pop(0)
+                    to.resubordinate(unit, parent)
+                if type(ev) is M.Reorganization:
+                    to.resubordinate(ev.unit, ev.new_parent)
+                payload = M.encode(ev)
+                key = self.ks.key(ev, to, sc.projection)
+                self.entries.append((len(self.entries) + 1, payload))
+                self.keys.append(zenoh.KeyExpr(key))
+                s.put(key, payload, attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
+            self._tick(s, sc.duration_s, end=True)
+            self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
+            linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
+            while time.monotonic() < linger and self._present(s) & set(self.wait_peers or ["?"]):
+                self._serve(q)
+                time.sleep(0.01)
+            return {"events": len(self.entries), "wall_s": time.monotonic() - t0}
+
+
+def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float) -> int:
+    Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s,
+           log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
+    return 0

@@ -1,0 +1,26 @@
+"""Zenoh configuration: the JSON5 file in configs/ plus endpoints chosen at run time."""
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import zenoh
+
+DEFAULT = Path(__file__).resolve().parents[1] / "configs" / "zenoh-peer.json5"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def config(listen: list[str] | None = None, connect: list[str] | None = None,
+           path: str | Path | None = None) -> zenoh.Config:
+    conf = zenoh.Config.from_file(str(path or DEFAULT))
+    if listen is not None:
+        conf.insert_json5("listen/endpoints", json.dumps(listen))
+    if connect is not None:
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    return conf
