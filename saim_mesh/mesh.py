@@ -81,6 +81,7 @@ def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed
 
 def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Path, name: str | None = None) -> Proc:
     return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, "--connect", endpoint,
+                               "--listen", "tcp/127.0.0.1:0",
                                "--root", root, "--out", str(out)])
 
 

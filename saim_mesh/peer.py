@@ -100,6 +100,8 @@ class Peer:
         watch = set(to.children(self.unit)) | set(to.subtree(self.unit)) | set(to.ancestors(self.unit)[:1])
         while (s := ch.try_recv()) is not None:
             unit = str(s.key_expr).split("/")[-2]
+            if DEBUG:
+                self.log(f"debug presence {s.kind} {s.key_expr}", flush=True)
             if unit == self.unit or unit not in watch:
                 continue
             up = s.kind == zenoh.SampleKind.PUT

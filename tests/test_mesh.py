@@ -1,0 +1,119 @@
+"""Multi-process integration tests: real Zenoh peers on loopback, free ports, bounded time,
+every child reaped. Synchronisation is on what the processes print, never on sleeps."""
+from __future__ import annotations
+
+import json
+import uuid
+
+import pytest
+
+from saim_mesh import scenario as S
+from saim_mesh.mesh import Proc, start_peer, start_replay
+from saim_mesh.runner import run
+from saim_mesh.zconf import free_port
+
+from .conftest import SMALL
+
+pytestmark = pytest.mark.timeout(240)
+SC = str(SMALL)
+
+
+def load(path):
+    return [json.loads(line) for line in open(path)]
+
+
+def plan_alerts(alerts):
+    """Alerts from the plan and the picture (not the wall-clock-driven presence notes)."""
+    return [a for a in alerts if a["category"] != "system-problem"]
+
+
+def key(a):
+    return (a["t"], a["type"], a["subjects"], a["message"], a["priority"])
+
+
+@pytest.fixture(scope="module")
+def inproc():
+    eas = run(S.load(SMALL), ["BN", "A", "B", "C", "A2"])
+    return {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for ea_ in [ea] for a in ea_.alerts] for ea in eas}
+
+
+def launch(tmp, peers: list[tuple[str, str]], speed="max"):
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    root = f"test/{uuid.uuid4().hex[:8]}"
+    replay = start_replay(SC, ep, root, sorted({u for u, _ in peers}), speed)
+    procs: list[Proc] = [replay]
+    replay.wait_for("ready", 60)
+    for unit, name in peers:
+        procs.append(start_peer(SC, unit, ep, root, tmp / f"{name}.jsonl", name))
+    return ep, root, procs
+
+
+def reap(procs):
+    for p in procs:
+        p.stop()
+    assert all(p.p.poll() is not None for p in procs)
+
+
+@pytest.fixture(scope="module")
+def mesh_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("mesh")
+    _, _, procs = launch(tmp, [("BN", "BN"), ("A", "A"), ("C", "C"), ("A2", "A2a"), ("A2", "A2b")])
+    try:
+        summaries = {p.name: json.loads(p.wait_for("summary ", 180)[8:]) for p in procs[1:]}
+        procs[0].p.wait(60)
+    finally:
+        reap(procs)
+    return {name: load(tmp / f"{name}.jsonl") for name in summaries}, summaries
+
+
+def test_two_peers_for_one_unit_raise_identical_alerts(mesh_run):
+    alerts, _ = mesh_run
+    assert plan_alerts(alerts["A2a"]) and plan_alerts(alerts["A2a"]) == plan_alerts(alerts["A2b"])
+
+
+def test_mesh_peer_equals_in_process_run(mesh_run, inproc):
+    alerts, _ = mesh_run
+    for name, unit in (("A2a", "A2"), ("A", "A"), ("BN", "BN"), ("C", "C")):
+        assert [key(a) for a in plan_alerts(alerts[name])] == [key(a) for a in inproc[unit]], name
+
+
+def test_echelons_share_threat_alerts_and_keep_their_own_plans(mesh_run):
+    alerts, summaries = mesh_run
+    by = lambda name, typ: [key(a) for a in alerts[name] if a["type"] == typ]
+    assert by("BN", "fratricide") and by("BN", "fratricide") == by("A", "fratricide")
+    assert by("BN", "proximity") and by("BN", "proximity") == by("C", "proximity")
+    missions = lambda name: {a["details"]["mission"] for a in alerts[name] if a["type"] == "contingency"}
+    assert missions("BN") == {"BN-branch-ABF"} and missions("A") == {"A-sequel-occupy"} and not missions("C")
+    places = lambda name: {a["details"]["place"] for a in alerts[name] if a["type"] == "ave-of-approach"}
+    assert places("BN") == {"AA-DIAMOND"} and places("C") == {"AA-RUBY"} and not places("A")
+    assert summaries["A2a"]["subscriptions"] < summaries["BN"]["subscriptions"]   # nobody takes everything
+
+
+def test_killed_peer_is_noticed_and_recovers_and_late_joiner_catches_up(tmp_path, inproc):
+    ep, root, procs = launch(tmp_path, [("A", "A"), ("A2", "A2")], speed="250")
+    replay = procs[0]
+    try:
+        replay.wait_for("t=1500", 120)
+        procs[2].p.kill()                                    # the platoon's EA dies
+        procs[2].p.wait(10)
+        replay.wait_for("t=2000", 120)
+        again = start_peer(SC, "A2", ep, root, tmp_path / "A2-again.jsonl", "A2-again")
+        late = start_peer(SC, "B", ep, root, tmp_path / "B-late.jsonl", "B-late")
+        procs += [again, late]
+        s_again = json.loads(again.wait_for("summary ", 180)[8:])
+        s_late = json.loads(late.wait_for("summary ", 180)[8:])
+        procs[1].wait_for("summary ", 180)
+    finally:
+        reap(procs)
+    assert s_again["joined_t"] >= 2000 and s_late["joined_t"] >= 2000
+    a_alerts = load(tmp_path / "A.jsonl")
+    left = [a for a in a_alerts if a["category"] == "system-problem" and a["details"]["left"]]
+    back = [a for a in a_alerts if a["category"] == "system-problem" and not a["details"]["left"]]
+    assert left and left[0]["subjects"] == ["A2"] and 1500 <= left[0]["t"] <= 2000
+    assert back and back[0]["t"] >= left[0]["t"]
+    assert plan_alerts(a_alerts) == [a for a in plan_alerts(a_alerts)]   # A kept working
+    assert [key(a) for a in plan_alerts(a_alerts)] == [key(a) for a in inproc["A"]]
+    for name, unit, joined in (("A2-again", "A2", s_again["joined_t"]), ("B-late", "B", s_late["joined_t"])):
+        got = [key(a) for a in plan_alerts(load(tmp_path / f"{name}.jsonl"))]
+        want = [key(a) for a in inproc[unit] if a["t"] > joined]
+        assert got == want and want, name
