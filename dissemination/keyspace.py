@@ -10,6 +10,7 @@ peer can subscribe by mission, geography (grid cells) and command (its subtree).
   <root>/clock                                 scenario-time ticks (ordering barrier)
   <root>/alert/<owner>/<type>                  alerts raised by an EA
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
+  <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
   <root>/store/log                             the situation store (queryable)
 """
 from __future__ import annotations
@@ -75,6 +76,9 @@ class KeySpace:
 
     def alive(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/alive/{unit}/{peer}"
+
+    def bye(self, unit: str) -> str:
+        return f"{self.root}/bye/{unit}"
 
     def store(self) -> str:
         return f"{self.root}/store/log"

@@ -119,7 +119,7 @@ def cmd_replay(a) -> int:
     from .zconf import config
     sc = S.load(a.scenario)
     return main_replay(sc, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}", a.speed,
-                       a.wait_peers or [], a.linger)
+                       a.wait_peers or [], a.linger, a.until)
 
 
 def cmd_peer(a) -> int:
@@ -176,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     rp.add_argument("--wait-peers", nargs="*", metavar="UNIT", help="start when these peers are present")
     rp.add_argument("--linger", type=float, default=30.0, help="seconds to keep serving the store at the end")
+    rp.add_argument("--until", type=float, default=None, help="stop at this scenario time")
     _zenoh_args(rp)
     rp.set_defaults(fn=cmd_replay)
     pe = sub.add_parser("peer", help="run one unit's EA as a Zenoh peer")

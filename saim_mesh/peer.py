@@ -46,6 +46,10 @@ class Peer:
         self.peers: dict[str, str] = {}       # unit -> "up" / "down"
         self.decoder = M.Decoder()
         self.joined_t = 0.0
+        self.tick_lat: list[float] = []
+        self.clean: set[str] = set()
+        self.interest_s = 10.0
+        self.alert_lat: list[float] = []
 
     # -- sinks -------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
@@ -95,7 +99,9 @@ class Peer:
                 self.ea.submit(m)
 
     # -- presence ---------------------------------------------------------------------------
-    def _presence(self, ch) -> None:
+    def _presence(self, ch, bye) -> None:
+        while (b := bye.try_recv()) is not None:
+            self.clean.add(str(b.key_expr).split("/")[-1])
         to = self.ea.domain.taskorg
         watch = set(to.children(self.unit)) | set(to.subtree(self.unit)) | set(to.ancestors(self.unit)[:1])
         while (s := ch.try_recv()) is not None:
@@ -107,6 +113,10 @@ class Peer:
             up = s.kind == zenoh.SampleKind.PUT
             before = self.peers.get(unit)
             self.peers[unit] = "up" if up else "down"
+            if not up and unit in self.clean:
+                continue
+            if up:
+                self.clean.discard(unit)
             if not up:
                 self._system_alert(unit, "immediate", f"EA of {to.name(unit)} left the mesh: its picture and "
                                    f"confirmations no longer reach us", left=True)
@@ -130,19 +140,17 @@ class Peer:
             self._resubscribe()
             pres = s.liveliness().declare_subscriber(self.ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
                                                      history=True)
+            bye = s.declare_subscriber(self.ks.bye("*"), zenoh.handlers.FifoChannel(1024))
             self._late_join(s, join_timeout)
             token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
             self.log(f"ready {self.unit} joined_t={self.joined_t}", flush=True)
             buf: list = []
             done = False
+            next_interest = 0.0
             while not done:
-                tick = clock.try_recv()
-                if tick is None:
-                    self._presence(pres)
-                    time.sleep(0.0005)
-                    continue
+                tick = clock.recv()   # blocks: no polling; every message before it is already queued
                 info = msgpack.unpackb(tick.payload.to_bytes())
-                self._drain(buf)   # everything sent before this tick is already in our channels
+                self._drain(buf)
                 ready = [x for x in buf if x[0] <= info["seq"]]
                 buf = [x for x in buf if x[0] > info["seq"]]
                 self._feed(ready)
@@ -150,13 +158,21 @@ class Peer:
                     self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
                              f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
                 self.t = info["t"]
-                self._presence(pres)
+                self._presence(pres, bye)
+                n_alerts = len(self.ea.alerts)
                 if info["end"]:
                     self.ea.finish(info["t"])
                     done = True
                 else:
                     self.ea.advance(info["t"])
-                    self._resubscribe(buf)
+                    if info["t"] >= next_interest:   # re-register at most every interest_s of scenario time
+                        self._resubscribe(buf)
+                        next_interest = info["t"] + self.interest_s
+                if "w" in info:   # wall-clock latency from the tick's publication to its processing
+                    lat = time.time() - info["w"]
+                    self.tick_lat.append(lat)
+                    self.alert_lat += [lat] * (len(self.ea.alerts) - n_alerts)
+            s.put(self.ks.bye(self.unit), b"")   # a clean leave is not a lost peer
             token.undeclare()
             self.session = None
         if self.out:
@@ -168,7 +184,8 @@ class Peer:
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
                 "facts": self.ea.stats["facts"], "bad_messages": self.decoder.errors + self.ea.stats["errors"],
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
-                "wall_s": round(time.monotonic() - t_wall, 2)}
+                "wall_s": round(time.monotonic() - t_wall, 2),
+                "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat)}
 
     def _late_join(self, s, timeout: float) -> None:
         """Get the picture so far from the situation store and replay it silently."""
@@ -183,6 +200,14 @@ class Peer:
             self.muted = False
         self.t = self.joined_t = t
         self._resubscribe()
+
+
+def _pcts(xs: list[float]) -> dict:
+    if not xs:
+        return {}
+    ys = sorted(xs)
+    pick = lambda q: round(1000 * ys[min(len(ys) - 1, int(q * len(ys)))], 3)
+    return {"n": len(ys), "p50": pick(0.50), "p99": pick(0.99), "max": round(1000 * ys[-1], 3)}
 
 
 def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None) -> int:

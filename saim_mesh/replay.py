@@ -30,13 +30,14 @@ def seq_bytes(seq: int) -> bytes:
 class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
                  wait_peers: list[str] = (), tick_s: float = 1.0, wait_timeout: float = 60.0,
-                 linger_s: float = 30.0, log=print):
+                 linger_s: float = 30.0, log=print, until: float | None = None):
         self.sc, self.conf, self.ks = sc, conf, KeySpace(root)
         self.speed, self.wait_peers, self.tick_s = speed, list(wait_peers), tick_s
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
         self.entries: list[tuple[int, bytes]] = []
         self.keys: list[zenoh.KeyExpr] = []
         self.t = 0.0
+        self.until = until
 
     def _serve(self, q) -> None:
         """Answer store queries: entries after `since` whose key matches one of `keys`
@@ -60,7 +61,7 @@ class Replay:
 
     def _tick(self, s, t: float, end: bool = False) -> None:
         self.t = t
-        s.put(self.ks.clock(), msgpack.packb({"t": t, "seq": len(self.entries), "end": end}),
+        s.put(self.ks.clock(), msgpack.packb({"t": t, "seq": len(self.entries), "end": end, "w": time.time()}),
               congestion_control=BLOCK)
 
     def run(self) -> dict:
@@ -79,7 +80,10 @@ class Replay:
             self.log("start", flush=True)
             t0 = time.monotonic()
             next_tick = self.tick_s
+            end_t = sc.duration_s if self.until is None else min(self.until, sc.duration_s)
             for ev in sc.events:
+                if ev.t > end_t:
+                    break
                 while ev.t >= next_tick:
                     self._tick(s, next_tick)
                     self._serve(q)
@@ -100,7 +104,7 @@ class Replay:
                 self.entries.append((len(self.entries) + 1, payload))
                 self.keys.append(zenoh.KeyExpr(key))
                 s.put(key, payload, attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
-            self._tick(s, sc.duration_s, end=True)
+            self._tick(s, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
             while time.monotonic() < linger and self._present(s) & set(self.wait_peers or ["?"]):
@@ -109,7 +113,7 @@ class Replay:
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0}
 
 
-def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float) -> int:
-    Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s,
+def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None) -> int:
+    Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until,
            log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
     return 0
