@@ -147,8 +147,11 @@ class Peer:
             buf: list = []
             done = False
             next_interest = 0.0
+            t_first = None
             while not done:
                 tick = clock.recv()   # blocks: no polling; every message before it is already queued
+                if t_first is None:
+                    t_first = time.monotonic()
                 info = msgpack.unpackb(tick.payload.to_bytes())
                 self._drain(buf)
                 ready = [x for x in buf if x[0] <= info["seq"]]
@@ -185,6 +188,7 @@ class Peer:
                 "facts": self.ea.stats["facts"], "bad_messages": self.decoder.errors + self.ea.stats["errors"],
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
                 "wall_s": round(time.monotonic() - t_wall, 2),
+                "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat)}
 
     def _late_join(self, s, timeout: float) -> None:

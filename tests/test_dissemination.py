@@ -1,0 +1,51 @@
+"""Dissemination without processes: an EA fed only what its subscriptions match
+raises exactly the alerts of one fed everything."""
+import pytest
+import zenoh
+
+from dissemination.interest import Interest
+from dissemination.keyspace import KeySpace, cell, cells_within
+from ea_agent.domains.suo import make_ea
+from saim_mesh import messages as M
+
+
+def test_keys_and_cells():
+    ks = KeySpace("saim/x")
+    assert cell(4100.0, -1.0) == "x2y-1"
+    assert cells_within(1000.0, 1000.0, 1500.0) == {f"x{i}y{j}" for i in (-1, 0, 1) for j in (-1, 0, 1)}
+    for bad in ("", "/saim", "a//b", "a/*"):
+        with pytest.raises(ValueError):
+            KeySpace(bad)
+    assert ks.key(M.MissionConfirm(1.0, "m", "A1", "start"), None, None) == "saim/x/msn/A1/m"
+
+
+def filtered_run(sc, unit):
+    ks = KeySpace("t")
+    it = Interest(ks, 3000.0)
+    ea = make_ea(sc, unit)
+    ea.start(0.0)
+    to = sc.taskorg.copy()
+    reorgs = sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in sc.plan.missions
+                    if m.type == "reorganize")
+    kes, nxt, fed = [], 0.0, 0
+    for ev in sc.events:
+        if ev.t >= nxt:
+            ea.advance(ev.t - 1e-9)
+            kes = [zenoh.KeyExpr(k) for k in it.keys(ea.domain)]
+            nxt = ev.t + 10.0
+        while reorgs and reorgs[0][0] <= ev.t:
+            _, u, p = reorgs.pop(0)
+            to.resubordinate(u, p)
+        k = zenoh.KeyExpr(ks.key(ev, to, sc.projection))
+        if any(k.intersects(x) for x in kes):
+            ea.submit(ev)
+            fed += 1
+    ea.finish(sc.duration_s)
+    return ea.alerts, fed
+
+
+@pytest.mark.parametrize("unit", ["A2", "C"])
+def test_subscriptions_are_sufficient_and_selective(small, small_run, unit):
+    alerts, fed = filtered_run(small, unit)
+    assert [a.to_json_dict() for a in alerts] == [a.to_json_dict() for a in small_run[unit].alerts]
+    assert fed < 0.7 * len(small.events)      # a platoon or company does not take everything
