@@ -84,6 +84,7 @@ def raw_baseline(scenario: str, n: int) -> float:
 
 
 def one_peer(scenario: str, unit: str, speed: str, until: float | None, tmp: Path) -> dict:
+    tmp.mkdir(parents=True, exist_ok=True)
     ep = f"tcp/127.0.0.1:{free_port()}"
     root = f"bench/{uuid.uuid4().hex[:8]}"
     args = [sys.executable, "-m", "saim_mesh", "replay", scenario, "--listen", ep, "--root", root, "--speed", speed,

@@ -5,6 +5,7 @@ computed by `dissemination`) and the sinks (JSON lines file + the mesh) differ.
 """
 from __future__ import annotations
 
+import heapq
 import json
 import os
 import resource
@@ -48,6 +49,7 @@ class Peer:
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
         self.clean: set[str] = set()
+        self.pending: set[int] = set()
         self.interest_s = 10.0
         self.alert_lat: list[float] = []
 
@@ -74,7 +76,10 @@ class Peer:
             self.subs.pop(k).undeclare()
         if new and buf is not None:
             _, entries = self._query_store(self.last_seq, new)
-            buf.extend((seq, m) for seq, p in entries if (m := self.decoder(p)) is not None)
+            for seq, p in entries:
+                if seq > self.last_seq and seq not in self.pending and (m := self.decoder(p)) is not None:
+                    self.pending.add(seq)
+                    heapq.heappush(buf, (seq, m))
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
         req = msgpack.packb({"since": since, "keys": keys})
@@ -85,12 +90,18 @@ class Peer:
         return 0.0, []
 
     def _drain(self, buf: list) -> None:
+        """Move received samples into the seq-ordered heap; a message that came twice
+        (overlapping subscriptions) is decoded once."""
+        pending = self.pending
         for sub in self.subs.values():
             while (s := sub.try_recv()) is not None:
                 seq = int.from_bytes(s.attachment.to_bytes(), "big") if s.attachment is not None else 0
+                if seq <= self.last_seq or seq in pending:
+                    continue
                 m = self.decoder(s.payload.to_bytes())
                 if m is not None:
-                    buf.append((seq, m))
+                    pending.add(seq)
+                    heapq.heappush(buf, (seq, m))
 
     def _feed(self, items) -> None:
         for seq, m in sorted(items, key=lambda x: x[0]):
@@ -154,8 +165,10 @@ class Peer:
                     t_first = time.monotonic()
                 info = msgpack.unpackb(tick.payload.to_bytes())
                 self._drain(buf)
-                ready = [x for x in buf if x[0] <= info["seq"]]
-                buf = [x for x in buf if x[0] > info["seq"]]
+                ready = []
+                while buf and buf[0][0] <= info["seq"]:
+                    ready.append(heapq.heappop(buf))
+                self.pending.difference_update(x[0] for x in ready)
                 self._feed(ready)
                 if DEBUG and int(info["t"]) % 300 == 0:
                     self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
