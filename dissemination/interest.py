@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from ea_agent.domains.suo.missions import ContingentMission
 
-from .keyspace import KeySpace, cells_of_bounds, cells_within, command_path
+from collections import defaultdict
+
+from .keyspace import BLOCK, KeySpace, block_of, cells_of_bounds, cells_within, command_path
+
+BLOCK_SHARE = 10   # take a whole block when we need this many of its 16 cells
 
 
 class Interest:
@@ -19,10 +23,10 @@ class Interest:
         to = dom.taskorg
         out = {self.ks.clock(), f"{r}/org/*"}
         # command: our subtree's positions, orders from us and our superiors
-        out.add(f"{r}/pos/*/{command_path(to, dom.owner)}/**")
+        out.add(f"{r}/pos/*/*/{command_path(to, dom.owner)}/**")
         for u in [dom.owner, *to.ancestors(dom.owner)]:
             out.add(f"{r}/ord/{u}")
-        out.add(f"{r}/cff/*/{dom.owner}/*")
+        out.add(f"{r}/cff/*/*/{dom.owner}/*")
         # mission: confirmations of every unit our plan names
         units = set(dom.own_units)
         for m in dom.missions.values():
@@ -40,6 +44,11 @@ class Interest:
                 cells |= cells_within(p[0], p[1], self.radius)
         for a in dom.watched_areas():
             cells |= cells_of_bounds(dom.overlay[a].area.bounds)
+        blocks: dict[str, list[str]] = defaultdict(list)
         for c in cells:
-            out.update((f"{r}/pos/{c}/**", f"{r}/trk/{c}/*", f"{r}/cff/{c}/**"))
+            blocks[block_of(c)].append(c)
+        for b, cs in blocks.items():   # coarsen: fewer, wider subscriptions where we need most of a block
+            places = [f"{b}/*"] if len(cs) >= BLOCK_SHARE else [f"{b}/{c}" for c in cs]
+            for pl in places:
+                out.update((f"{r}/pos/{pl}/**", f"{r}/trk/{pl}/*", f"{r}/cff/{pl}/**"))
         return out

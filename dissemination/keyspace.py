@@ -1,11 +1,11 @@
 """The Zenoh key space (docs/keyspace.md): one key per message, chosen so that a
 peer can subscribe by mission, geography (grid cells) and command (its subtree).
 
-  <root>/pos/<cell>/<command path>/<entity>    friendly positions
-  <root>/trk/<cell>/<track>                    hostile tracks
+  <root>/pos/<block>/<cell>/<command path>/<entity>    friendly positions
+  <root>/trk/<block>/<cell>/<track>                    hostile tracks
   <root>/msn/<unit>/<mission>                  mission start/end confirmations
   <root>/ord/<unit>                            orders to a unit (and its subordinates)
-  <root>/cff/<cell>/<requester>/<cff>          calls for fire and confirmations
+  <root>/cff/<block>/<cell>/<requester>/<cff>  calls for fire and confirmations
   <root>/org/<unit>                            reorganizations
   <root>/clock                                 scenario-time ticks (ordering barrier)
   <root>/alert/<owner>/<type>                  alerts raised by an EA
@@ -20,11 +20,24 @@ import math
 from saim_mesh import messages as M
 
 CELL_M = 2000.0
+BLOCK = 4   # cells per block side: a block chunk groups 4 x 4 cells (8 km)
 
 
 def cell(x: float, y: float, size: float = CELL_M) -> str:
     """Grid cell chunk of a projected position, e.g. 'x268y1950'."""
     return f"x{math.floor(x / size)}y{math.floor(y / size)}"
+
+
+def block_of(c: str) -> str:
+    """The block chunk holding a cell chunk: 'x268y1950' -> 'X67Y487'."""
+    i, j = c[1:].split("y")
+    return f"X{int(i) // BLOCK}Y{int(j) // BLOCK}"
+
+
+def place(x: float, y: float) -> str:
+    """'<block>/<cell>': two key chunks, so that peers subscribe per cell or per block."""
+    c = cell(x, y)
+    return f"{block_of(c)}/{c}"
 
 
 def cells_within(x: float, y: float, r: float, size: float = CELL_M) -> set[str]:
@@ -56,15 +69,15 @@ class KeySpace:
         if k is M.LocationReport:
             unit = taskorg.entity_unit.get(msg.entity, "unknown")
             path = command_path(taskorg, unit) if unit in taskorg.units else "unknown"
-            return f"{r}/pos/{cell(*proj.to_xy(msg.lon, msg.lat))}/{path}/{msg.entity}"
+            return f"{r}/pos/{place(*proj.to_xy(msg.lon, msg.lat))}/{path}/{msg.entity}"
         if k is M.SensorTrack:
-            return f"{r}/trk/{cell(*proj.to_xy(msg.lon, msg.lat))}/{msg.track}"
+            return f"{r}/trk/{place(*proj.to_xy(msg.lon, msg.lat))}/{msg.track}"
         if k is M.MissionConfirm:
             return f"{r}/msn/{msg.unit}/{msg.mission}"
         if k is M.Order:
             return f"{r}/ord/{msg.issuer}"
         if k is M.CallForFire or k is M.CallForFireConfirm:
-            return f"{r}/cff/{cell(*proj.to_xy(msg.lon, msg.lat))}/{msg.requester}/{msg.cff}"
+            return f"{r}/cff/{place(*proj.to_xy(msg.lon, msg.lat))}/{msg.requester}/{msg.cff}"
         if k is M.Reorganization:
             return f"{r}/org/{msg.unit}"
         if k is M.Alert:

@@ -4,14 +4,14 @@ import pytest
 import zenoh
 
 from dissemination.interest import Interest
-from dissemination.keyspace import KeySpace, cell, cells_within
+from dissemination.keyspace import KeySpace, block_of, cell, cells_within
 from ea_agent.domains.suo import make_ea
 from saim_mesh import messages as M
 
 
 def test_keys_and_cells():
     ks = KeySpace("saim/x")
-    assert cell(4100.0, -1.0) == "x2y-1"
+    assert cell(4100.0, -1.0) == "x2y-1" and block_of("x2y-1") == "X0Y-1" and block_of("x268y1950") == "X67Y487"
     assert cells_within(1000.0, 1000.0, 1500.0) == {f"x{i}y{j}" for i in (-1, 0, 1) for j in (-1, 0, 1)}
     for bad in ("", "/saim", "a//b", "a/*"):
         with pytest.raises(ValueError):
@@ -48,4 +48,4 @@ def filtered_run(sc, unit):
 def test_subscriptions_are_sufficient_and_selective(small, small_run, unit):
     alerts, fed = filtered_run(small, unit)
     assert [a.to_json_dict() for a in alerts] == [a.to_json_dict() for a in small_run[unit].alerts]
-    assert fed < 0.7 * len(small.events)      # a platoon or company does not take everything
+    assert fed < {"A2": 0.5, "C": 0.8}[unit] * len(small.events)   # a platoon or company does not take everything
