@@ -102,7 +102,7 @@ def cmd_missions(a) -> int:
 
 def cmd_generate(a) -> int:
     from .generator import write
-    print(json.dumps(write(Path(a.out), small=a.small, seed=a.seed)))
+    print(json.dumps(write(Path(a.out), small=a.small, seed=a.seed, sensors=a.sensors)))
     return 0
 
 
@@ -167,6 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("out")
     g.add_argument("--small", action="store_true", help="small fast variant for tests")
     g.add_argument("--seed", type=int, default=7)
+    g.add_argument("--sensors", action="store_true", help="raw sensor hits instead of ready-made tracks")
     g.set_defaults(fn=cmd_generate)
     v = sub.add_parser("validate", help="load a scenario and report what is wrong")
     v.add_argument("scenario")

@@ -9,8 +9,11 @@ from .scenario import Scenario
 
 
 def _matches(a: Alert, item: dict) -> bool:
+    """Same owner, an accepted type, in the window, and about the same things: a unit,
+    a true hostile, or the named place (fused tracks have names of their own)."""
+    about = set(a.subjects) | set(a.details.get("places", ()))
     return (a.owner == item["owner"] and a.type in item["accept"] and item["t0"] <= a.t <= item["t1"]
-            and not set(item["subjects"]).isdisjoint(a.subjects))
+            and not set(item["subjects"]).isdisjoint(about))
 
 
 def score(alerts: list[Alert], truth: dict) -> dict:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -207,6 +208,63 @@ def build_sim(small: bool = False, seed: int = 7) -> Sim:
     return sim
 
 
+# ------------------------------------------------------------------ sensors (forward fusion)
+SENSORS = [  # id, fusion group, owner, kind, range m, Pd, sigma m, false alarms per scan
+    ("G1", "N", "R", "ground", 3000.0, 0.85, 25.0, 0.1),
+    ("G2", "N", "BN", "ground", 3500.0, 0.85, 25.0, 0.1),
+    ("G3", "N", "C", "ground", 3500.0, 0.85, 25.0, 0.1),
+    ("UAV1", "N", "BN", "uav", 4000.0, 0.8, 40.0, 0.1),
+    ("VA2", "F", "A2", "vehicle", 3000.0, 0.85, 30.0, 0.1),
+    ("VB2", "F", "B2", "vehicle", 3000.0, 0.85, 30.0, 0.1),
+    ("VC2", "F", "C2", "vehicle", 3000.0, 0.85, 30.0, 0.1),
+]
+SENSOR_PERIOD = 5.0
+
+
+def sensor_pos(sim: "Sim", sid: str, t: float) -> tuple[float, float]:
+    if sid == "G1":
+        return 2000.0, 16500.0
+    if sid == "G2":
+        return 6000.0, 17000.0
+    if sid == "G3":
+        return 10650.0, 17000.0
+    if sid == "UAV1":   # orbits the northern area every 15 minutes
+        a = 2 * math.pi * t / 900.0
+        return 6000.0 + 4500.0 * math.cos(a), 16000.0 + 2500.0 * math.sin(a)
+    return sim.platoon_center(sid[1:], t)
+
+
+def hits(sim: "Sim", proj: Projection, ox: float, oy: float) -> list[tuple[float, int, dict]]:
+    """Raw detections of hostile entities (and false alarms) by every sensor, from the true state."""
+    rng = np.random.default_rng(sim.seed + 2)
+    offs = {h: rng.uniform(-60, 60, (sim.hostiles[h].strength, 2)) for h in sorted(sim.hostiles)}
+    out = []
+    for sid, group, owner, kind, rng_m, pd, sigma, fa in SENSORS:
+        phase = float(rng.uniform(0, SENSOR_PERIOD))
+        t = phase
+        while t < DURATION:
+            sx, sy = sensor_pos(sim, sid, t)
+            pts = []
+            for h in sorted(sim.hostiles):
+                p = sim.hostiles[h].pos(t)
+                if p is None:
+                    continue
+                for ex, ey in offs[h]:
+                    x, y = p[0] + ex, p[1] + ey
+                    if math.hypot(x - sx, y - sy) <= rng_m and rng.random() < pd:
+                        nx, ny = rng.normal(0, sigma, 2)
+                        pts.append((x + nx, y + ny))
+            for _ in range(rng.poisson(fa)):
+                r, a = rng_m * math.sqrt(rng.random()), rng.uniform(0, 2 * math.pi)
+                pts.append((sx + r * math.cos(a), sy + r * math.sin(a)))
+            for x, y in pts:
+                lon, lat = proj.to_lonlat(x + ox, y + oy)
+                out.append((round(t, 2), {"kind": "hit", "t": round(t, 2), "sensor": sid,
+                                          "lon": round(float(lon), 7), "lat": round(float(lat), 7)}))
+            t += SENSOR_PERIOD
+    return out
+
+
 # ------------------------------------------------------------------ overlay and plan
 def _rect(x0, y0, x1, y1):
     return [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]
@@ -308,7 +366,7 @@ def plan_doc(sim: Sim) -> dict:
 
 
 # ------------------------------------------------------------------ events
-def events(sim: Sim, proj: Projection, ox: float, oy: float) -> list[dict]:
+def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = False) -> list[dict]:
     rng = np.random.default_rng(sim.seed + 1)
     ev: list[tuple[float, int, dict]] = []
     seq = 0
@@ -334,7 +392,10 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float) -> list[dict]:
                 ev.append((round(t, 2), seq, {"kind": "location", "t": round(t, 2), "entity": e,
                                                "lon": last_rep[0], "lat": last_rep[1]}))
             t += sim.report_s
-    for h in sim.hostiles.values():
+    for t, d in (hits(sim, proj, ox, oy) if sensors else []):
+        seq += 1
+        ev.append((t, seq, d))
+    for h in ([] if sensors else sim.hostiles.values()):
         t = h.appear + 3.0
         while t < min(h.vanish, DURATION):
             x, y = h.pos(t)
@@ -361,7 +422,7 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float) -> list[dict]:
     return [e[2] for e in ev]
 
 
-def write(out: Path, small: bool = False, seed: int = 7) -> dict:
+def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False) -> dict:
     """Generate the scenario folder `out`; returns a summary."""
     from . import oracle
     out.mkdir(parents=True, exist_ok=True)
@@ -377,14 +438,20 @@ def write(out: Path, small: bool = False, seed: int = 7) -> dict:
     feats = overlay_features()
     ll_feats = [{**f, "geometry": {"type": f["geometry"]["type"], "coordinates": to_ll(f["geometry"]["coordinates"])}}
                 for f in feats]
-    meta = {"name": "battalion-small" if small else "battalion", "epsg": EPSG, "duration_s": DURATION,
-            "generator": {"seed": seed, "small": small}, "default_eas": ["BN", "A", "B", "C", "A2"],
+    meta = {"name": ("battalion-small" if small else "battalion") + ("-sensors" if sensors else ""),
+            "epsg": EPSG, "duration_s": DURATION,
+            "generator": {"seed": seed, "small": small, "sensors": sensors}, "default_eas": ["BN", "A", "B", "C", "A2"],
             "description": "1st BN moves to PL BLUE, attacks OBJ A/B/C and defends (Fort Irwin, UTM 11N)"}
+    if sensors:
+        meta["fusion"] = {"groups": {g: sorted(sid for sid, grp, *_ in SENSORS if grp == g) for g in ("F", "N")},
+                          "sensors": [{"id": sid, "group": g, "owner": o, "kind": k, "range_m": r, "pd": pd,
+                                       "sigma_m": sg, "false_alarms_per_scan": fa, "period_s": SENSOR_PERIOD}
+                                      for sid, g, o, k, r, pd, sg, fa in SENSORS]}
     (out / "scenario.json").write_text(json.dumps(meta, indent=1) + "\n")
     (out / "overlay.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": ll_feats}) + "\n")
     plan = plan_doc(sim)
     (out / "plan.json").write_text(json.dumps(plan, indent=1) + "\n")
-    evs = events(sim, proj, ox, oy)
+    evs = events(sim, proj, ox, oy, sensors)
     buf = io.BytesIO()
     with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz:
         for e in evs:

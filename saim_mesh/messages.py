@@ -114,6 +114,22 @@ class SensorTrack:
 
 
 @dataclass(slots=True, frozen=True)
+class SensorHit:
+    """One raw detection by one sensor (before fusion): where something was seen."""
+    KIND: ClassVar[str] = "hit"
+    t: float
+    sensor: str
+    lon: float
+    lat: float
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SensorHit":
+        k = cls.KIND
+        lon, lat = _lonlat(d, k)
+        return cls(_time(d, k), _str(d, k, "sensor"), lon, lat)
+
+
+@dataclass(slots=True, frozen=True)
 class MissionConfirm:
     """Confirmation that a unit started or ended a mission (from its EA, or local)."""
     KIND: ClassVar[str] = "mission"
@@ -233,10 +249,10 @@ class Alert:
                 "message": self.message, "details": self.details}
 
 
-Message = LocationReport | SensorTrack | MissionConfirm | Order | CallForFire | CallForFireConfirm | Reorganization | Alert
+Message = LocationReport | SensorTrack | SensorHit | MissionConfirm | Order | CallForFire | CallForFireConfirm | Reorganization | Alert
 
 MESSAGE_TYPES: dict[str, type] = {c.KIND: c for c in (
-    LocationReport, SensorTrack, MissionConfirm, Order, CallForFire, CallForFireConfirm, Reorganization, Alert)}
+    LocationReport, SensorTrack, SensorHit, MissionConfirm, Order, CallForFire, CallForFireConfirm, Reorganization, Alert)}
 
 
 def from_dict(d: Any) -> Message:

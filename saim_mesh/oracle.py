@@ -342,9 +342,9 @@ class Truth:
                         present.append(t)
                         who.update(inside)
                 for i, (a, b) in enumerate(_runs(present)):
-                    self.may(o, [typ], sorted(who), a - 15, b + 15)
+                    self.may(o, [typ], sorted(who) + [area], a - 15, b + 30)
                     if not (i == 0 and mid is None and area in getattr(self, "triggered_areas", {}).get(o, ())):
-                        self.must(o, typ, [], sorted(who), a - 15, a + 30, f"hostiles at {area}")
+                        self.must(o, typ, [], sorted(who) + [area], a - 15, a + 45, f"hostiles at {area}")
             for mid, m in self.missions.items():
                 by = m["params"].get("expect_hostile_by")
                 if by is None:
@@ -381,7 +381,7 @@ class Truth:
                     strength = sum(v[1] for v in near.values())
                     new = set(near) - state["prev"]
                     if t - state["contact_t"] >= expiry:   # first contact, or the last one forgotten
-                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 40, f"{sorted(near)} near {u}")
+                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 50, f"{sorted(near)} near {u}")
                         state.update(contact_t=t, dist_t=t, dist=nearest, str_t=t, str=strength)
                     elif nearest * rd * 1.03 <= state["dist"] and t - state["dist_t"] >= gap + TICK:
                         self.must(o, "distance", PROX, [u], t - 45, t + 60, f"threat closer to {u}")
@@ -391,7 +391,7 @@ class Truth:
                         state.update(str_t=t, str=strength)
                     state["prev"] = set(near)
                 for a, b in _runs(present):
-                    self.may(o, PROX, [u], a - 15, b + 15)
+                    self.may(o, PROX, [u], a - 15, b + 30)
 
     def calls_for_fire(self) -> None:
         for c in self.sim.cffs:

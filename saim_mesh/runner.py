@@ -8,6 +8,8 @@ from ea_agent.core.config import load_config
 from ea_agent.core.manager import ExecutionAssistant, Sink
 from ea_agent.domains.suo import make_ea
 
+from .fusion import FusionNode
+from .messages import SensorHit
 from .scenario import Scenario
 
 DEFAULT_EAS = ("BN", "A", "B", "C", "A2")
@@ -15,6 +17,32 @@ DEFAULT_EAS = ("BN", "A", "B", "C", "A2")
 
 def default_eas(sc: Scenario) -> list[str]:
     return list(sc.meta.get("default_eas", DEFAULT_EAS))
+
+
+class Fusion:
+    """The scenario's fusion nodes (one per sensor group), run in process."""
+
+    def __init__(self, sc: Scenario, groups: dict[str, list[str]]):
+        self.nodes = {g: FusionNode(g, sc.projection) for g in sorted(groups)}
+        self.group_of = {sid: g for g, sids in groups.items() for sid in sids}
+        self.next_t = min(n.window_end for n in self.nodes.values())
+
+    @classmethod
+    def of(cls, sc: Scenario) -> "Fusion | None":
+        f = sc.meta.get("fusion")
+        return cls(sc, f["groups"]) if f else None
+
+    def feed(self, ev) -> list:
+        out = []
+        if ev.t >= self.next_t:
+            for n in self.nodes.values():
+                out += n.flush(ev.t)
+            self.next_t = min(n.window_end for n in self.nodes.values())
+        if type(ev) is SensorHit:
+            node = self.nodes.get(self.group_of.get(ev.sensor, ""))
+            if node is not None:
+                out += node.add(ev)
+        return out
 
 
 def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bool = True,
@@ -30,6 +58,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
         eas.append(make_ea(sc, o, load_config(config_path, o, overrides), sinks, voa=voa))
     for ea in eas:
         ea.start(0.0)
+    fusion = Fusion.of(sc)
     evs = sc.events
     n = len(evs)
     step = max(1, n // 200)
@@ -41,6 +70,12 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
                 for ea in eas:
                     ea.advance(ev.t - 1e-9)
                 time.sleep(wait)
+        if fusion is not None:   # hits go to the fusion nodes; the EAs get their tracks
+            for tr in fusion.feed(ev):
+                for ea in eas:
+                    ea.submit(tr)
+            if type(ev) is SensorHit:
+                continue
         for ea in eas:
             ea.submit(ev)
         if progress and i % step == 0:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ea_agent.core.plan import TaskOrg
+from saim_mesh.adjudication import Adjudicator, Report
 from saim_mesh.geo import Projection
 from saim_mesh.messages import LocationReport, SensorTrack
 
@@ -37,7 +38,8 @@ class Picture:
         self.seen = np.zeros(n)            # scenario time of the last report, changed or not
         self.xy = np.full((n, 2), np.nan)
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
-        self.tracks: dict[str, Track] = {}
+        self.tracks: dict[str, Track] = {}      # the adjudicated picture of hostile entities
+        self.adj = Adjudicator()
         self.rebuild(taskorg)
 
     def rebuild(self, taskorg: TaskOrg) -> None:
@@ -97,15 +99,19 @@ class Picture:
         return {self.ent_leaf[i] for i in idx.tolist()}
 
     def apply_tracks(self, tracks: list[SensorTrack]) -> set[str]:
+        """Track reports go through adjudication; returns the entities whose state changed."""
         if not tracks:
             return set()
         x, y = self.proj.to_xy(np.array([t.lon for t in tracks]), np.array([t.lat for t in tracks]))
+        kept = False
         for t, tx, ty in zip(tracks, np.atleast_1d(x), np.atleast_1d(y)):
-            if t.strength <= 0:
-                self.tracks.pop(t.track, None)   # strength 0: the track was dropped
-            else:
-                self.tracks[t.track] = Track(t.track, float(tx), float(ty), t.strength, t.t, t.lon, t.lat)
-        return {t.track for t in tracks}
+            kept |= self.adj.update(Report(t.t, t.source, t.track, float(tx), float(ty), t.strength, t.lon, t.lat))
+        if not kept:
+            return set()
+        new = {k: Track(e.id, e.x, e.y, e.strength, e.t, e.lon, e.lat) for k, e in self.adj.picture().items()}
+        changed = {k for k, v in new.items() if self.tracks.get(k) != v} | (self.tracks.keys() - new.keys())
+        self.tracks = new
+        return changed
 
 
 class Watchman:
@@ -160,7 +166,7 @@ class Watchman:
             self.stats["passed"] += 1
             return msg
         if type(msg) is SensorTrack:
-            tr = self.p.tracks.get(msg.track)
+            tr = self.p.adj.latest.get((msg.source, msg.track))
             if tr is not None and tr.strength == msg.strength and abs(tr.lon - msg.lon) < self.eps \
                     and abs(tr.lat - msg.lat) < self.eps:
                 self.stats["unchanged"] += 1

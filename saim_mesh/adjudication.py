@@ -1,0 +1,93 @@
+"""Adjudication: every peer turns the track reports it holds into the same picture,
+whatever order they arrived in (docs/adjudication.md).
+
+The picture is a pure function of the latest report per (source, track):
+ 1. per (source, track) keep the report with the greatest (t, strength, lon, lat);
+ 2. link live reports of *different* sources closer than `merge_m`; each connected
+    component is one hostile entity;
+ 3. its identity is the smallest "source/track" name in it (stable while that
+    report lives), its position that of its newest report (ties: smallest name),
+    its strength the largest reported.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(slots=True, frozen=True)
+class Report:
+    t: float
+    source: str
+    track: str
+    x: float
+    y: float
+    strength: int
+    lon: float
+    lat: float
+
+    @property
+    def name(self) -> str:
+        return f"{self.source}/{self.track}"
+
+    def rank(self) -> tuple:
+        return (self.t, self.strength, self.lon, self.lat)
+
+
+@dataclass(slots=True, frozen=True)
+class Entity:
+    id: str
+    x: float
+    y: float
+    strength: int
+    t: float
+    lon: float
+    lat: float
+    members: tuple[str, ...]
+
+
+class Adjudicator:
+    def __init__(self, merge_m: float = 500.0):
+        self.merge_m = merge_m
+        self.latest: dict[tuple[str, str], Report] = {}
+
+    def update(self, r: Report) -> bool:
+        """Keep r if it is newer than what we hold for its (source, track); True if kept."""
+        k = (r.source, r.track)
+        cur = self.latest.get(k)
+        if cur is not None and r.rank() <= cur.rank():
+            return False
+        self.latest[k] = r
+        return True
+
+    def picture(self) -> dict[str, Entity]:
+        live = sorted((r for r in self.latest.values() if r.strength > 0), key=lambda r: r.name)
+        n = len(live)
+        if n == 0:
+            return {}
+        xy = np.array([(r.x, r.y) for r in live])
+        d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+        src = np.array([r.source for r in live])
+        link = (d <= self.merge_m) & (src[:, None] != src[None, :])
+        comp = list(range(n))
+
+        def find(i):
+            while comp[i] != i:
+                comp[i] = comp[comp[i]]
+                i = comp[i]
+            return i
+        for i, j in zip(*np.nonzero(np.triu(link, 1))):
+            a, b = find(int(i)), find(int(j))
+            if a != b:
+                comp[max(a, b)] = min(a, b)
+        groups: dict[int, list[Report]] = {}
+        for i, r in enumerate(live):
+            groups.setdefault(find(i), []).append(r)
+        out = {}
+        for members in groups.values():
+            best = max(members, key=lambda r: (r.t, tuple(-ord(c) for c in r.name)))
+            ident = min((r.track, r.source) for r in members)[0]   # fusion nodes prefix their track ids
+            out[ident] = Entity(ident, best.x, best.y, max(r.strength for r in members), best.t, best.lon, best.lat,
+                                tuple(sorted(r.name for r in members)))
+        return out
