@@ -2,7 +2,9 @@
 peer can subscribe by mission, geography (grid cells) and command (its subtree).
 
   <root>/pos/<block>/<cell>/<command path>/<entity>    friendly positions
-  <root>/trk/<block>/<cell>/<track>                    hostile tracks
+  <root>/trk/<block>/<cell>/<track>                    hostile tracks (fused)
+  <root>/hit/<fusion group>/<sensor>           raw sensor hits, to the group's fusion node
+  <root>/fusion-done/<group>                   a fusion node's last tracks are out
   <root>/msn/<unit>/<mission>                  mission start/end confirmations
   <root>/ord/<unit>                            orders to a unit (and its subordinates)
   <root>/cff/<block>/<cell>/<requester>/<cff>  calls for fire and confirmations
@@ -58,10 +60,11 @@ def command_path(taskorg, unit: str) -> str:
 
 
 class KeySpace:
-    def __init__(self, root: str):
+    def __init__(self, root: str, sensor_group: dict[str, str] | None = None):
         if not root or any(c in root for c in "#?*$") or root.startswith("/") or "//" in root:
             raise ValueError(f"bad key-expression root {root!r}")
         self.root = root
+        self.sensor_group = sensor_group or {}   # sensor id -> fusion group
 
     def key(self, msg, taskorg, proj) -> str:
         r = self.root
@@ -72,6 +75,8 @@ class KeySpace:
             return f"{r}/pos/{place(*proj.to_xy(msg.lon, msg.lat))}/{path}/{msg.entity}"
         if k is M.SensorTrack:
             return f"{r}/trk/{place(*proj.to_xy(msg.lon, msg.lat))}/{msg.track}"
+        if k is M.SensorHit:
+            return f"{r}/hit/{self.sensor_group.get(msg.sensor, 'ungrouped')}/{msg.sensor}"
         if k is M.MissionConfirm:
             return f"{r}/msn/{msg.unit}/{msg.mission}"
         if k is M.Order:
@@ -89,6 +94,9 @@ class KeySpace:
 
     def alive(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/alive/{unit}/{peer}"
+
+    def fusion_done(self, group: str) -> str:
+        return f"{self.root}/fusion-done/{group}"
 
     def bye(self, unit: str) -> str:
         return f"{self.root}/bye/{unit}"

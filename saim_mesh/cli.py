@@ -129,7 +129,15 @@ def cmd_peer(a) -> int:
     if a.unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
     return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}",
-                     a.out, a.config)
+                     a.out, a.config, a.radius)
+
+
+def cmd_fusion(a) -> int:
+    from .fusion.peer import main_fusion
+    from .zconf import config
+    sc = S.load(a.scenario, events=False)
+    return main_fusion(sc, a.group, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}",
+                       a.shuffle)
 
 
 def cmd_mesh(a) -> int:
@@ -185,8 +193,15 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--unit", required=True)
     pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
     pe.add_argument("--config", metavar="TOML")
+    pe.add_argument("--radius", type=float, default=3000.0, help="geographic interest radius around our units (m)")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
+    fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")
+    fu.add_argument("--scenario", required=True)
+    fu.add_argument("--group", required=True)
+    fu.add_argument("--shuffle", type=int, default=None, help="publish each window's tracks in a seeded random order")
+    _zenoh_args(fu)
+    fu.set_defaults(fn=cmd_fusion)
     me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit EA plus the replay")
     me.add_argument("action", choices=["up"])
     me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))

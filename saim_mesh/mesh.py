@@ -79,10 +79,16 @@ def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed
                            "--linger", str(linger), "--wait-peers", *wait])
 
 
-def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Path, name: str | None = None) -> Proc:
+def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Path, name: str | None = None,
+               extra: list[str] = ()) -> Proc:
     return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, "--connect", endpoint,
-                               "--listen", "tcp/127.0.0.1:0",
-                               "--root", root, "--out", str(out)])
+                               "--listen", "tcp/127.0.0.1:0", "--root", root, "--out", str(out), *extra])
+
+
+def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: int | None = None) -> Proc:
+    return Proc(f"fusion-{group}", [*py(), "fusion", "--scenario", scenario, "--group", group, "--connect", endpoint,
+                                    "--listen", "tcp/127.0.0.1:0", "--root", root]
+                + (["--shuffle", str(shuffle)] if shuffle is not None else []))
 
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 600.0,
@@ -90,21 +96,24 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
+    groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
     out_dir.mkdir(parents=True, exist_ok=True)
     root = root or f"saim/{sc.name}/{os.getpid()}"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     procs: list[Proc] = []
     t0 = time.monotonic()
     try:
-        replay = start_replay(scenario, endpoint, root, units, speed)
+        replay = start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed)
         procs.append(replay)
         replay.wait_for("ready", 60)
+        fusion = [start_fusion(scenario, g, endpoint, root) for g in groups]
+        procs += fusion
         for u in units:
             (out_dir / f"{u}.jsonl").unlink(missing_ok=True)
             procs.append(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl"))
         summaries = {}
         end = time.monotonic() + timeout
-        for p in procs[1:]:
+        for p in procs[1 + len(fusion):]:
             line = p.wait_for("summary ", max(1.0, end - time.monotonic()))
             summaries[p.name] = json.loads(line[len("summary "):])
         replay.p.wait(max(1.0, end - time.monotonic()))

@@ -50,6 +50,9 @@ class Peer:
         self.tick_lat: list[float] = []
         self.clean: set[str] = set()
         self.pending: set[int] = set()
+        self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
+        self.n_direct = 0
+        self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
         self.interest_s = 10.0
         self.alert_lat: list[float] = []
 
@@ -95,7 +98,13 @@ class Peer:
         pending = self.pending
         for sub in self.subs.values():
             while (s := sub.try_recv()) is not None:
-                seq = int.from_bytes(s.attachment.to_bytes(), "big") if s.attachment is not None else 0
+                if s.attachment is None:   # not from the replay (fused tracks): held until their time comes
+                    m = self.decoder(s.payload.to_bytes())
+                    if m is not None:
+                        self.n_direct += 1
+                        heapq.heappush(self.direct, (m.t, self.n_direct, m))
+                    continue
+                seq = int.from_bytes(s.attachment.to_bytes(), "big")
                 if seq <= self.last_seq or seq in pending:
                     continue
                 m = self.decoder(s.payload.to_bytes())
@@ -152,6 +161,8 @@ class Peer:
             pres = s.liveliness().declare_subscriber(self.ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
                                                      history=True)
             bye = s.declare_subscriber(self.ks.bye("*"), zenoh.handlers.FifoChannel(1024))
+            self.done_sub = (s.declare_subscriber(self.ks.fusion_done("*"), zenoh.handlers.FifoChannel(64))
+                             if self.fusion_groups else None)
             self._late_join(s, join_timeout)
             token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
             self.log(f"ready {self.unit} joined_t={self.joined_t}", flush=True)
@@ -170,6 +181,8 @@ class Peer:
                     ready.append(heapq.heappop(buf))
                 self.pending.difference_update(x[0] for x in ready)
                 self._feed(ready)
+                while self.direct and self.direct[0][0] <= info["t"]:
+                    self.ea.submit(heapq.heappop(self.direct)[2])
                 if DEBUG and int(info["t"]) % 300 == 0:
                     self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
                              f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
@@ -188,6 +201,7 @@ class Peer:
                     lat = time.time() - info["w"]
                     self.tick_lat.append(lat)
                     self.alert_lat += [lat] * (len(self.ea.alerts) - n_alerts)
+            self._await_fusion(s, buf)
             s.put(self.ks.bye(self.unit), b"")   # a clean leave is not a lost peer
             token.undeclare()
             self.session = None
@@ -202,7 +216,29 @@ class Peer:
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
-                "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat)}
+                "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),
+                "picture": self.picture()}
+
+    def _await_fusion(self, s, buf, timeout: float = 30.0) -> None:
+        """After the end tick, take the fusion nodes' last tracks before closing the picture."""
+        if not self.fusion_groups or self.done_sub is None:
+            return
+        done: set[str] = set()
+        end = time.monotonic() + timeout
+        while done != set(self.fusion_groups) and time.monotonic() < end:
+            d = self.done_sub.try_recv()
+            if d is None:
+                time.sleep(0.005)   # shutdown only: wait (bounded) for the nodes' last words
+                continue
+            done.add(str(d.key_expr).split("/")[-1])
+        self._drain(buf)
+        while self.direct:
+            self.ea.submit(heapq.heappop(self.direct)[2])
+        self.ea.finish(self.t)
+
+    def picture(self) -> dict:
+        return {k: [round(e.x, 1), round(e.y, 1), e.strength, list(e.members)]
+                for k, e in sorted(self.ea.domain.pic.adj.picture().items())}
 
     def _late_join(self, s, timeout: float) -> None:
         """Get the picture so far from the situation store and replay it silently."""
@@ -227,8 +263,9 @@ def _pcts(xs: list[float]) -> dict:
     return {"n": len(ys), "p50": pick(0.50), "p99": pick(0.99), "max": round(1000 * ys[-1], 3)}
 
 
-def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None) -> int:
-    p = Peer(sc, unit, conf, root, out, config_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout))
+def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None,
+              radius_m: float = 3000.0) -> int:
+    p = Peer(sc, unit, conf, root, out, config_path, radius_m, log=lambda *a, **k: print(*a, **k, file=sys.stdout))
     summary = p.run()
     print("summary " + json.dumps(summary), flush=True)
     return 0

@@ -31,7 +31,9 @@ class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
                  wait_peers: list[str] = (), tick_s: float = 1.0, wait_timeout: float = 60.0,
                  linger_s: float = 30.0, log=print, until: float | None = None):
-        self.sc, self.conf, self.ks = sc, conf, KeySpace(root)
+        groups = sc.meta.get("fusion", {}).get("groups", {})
+        self.sc, self.conf = sc, conf
+        self.ks = KeySpace(root, {sid: g for g, sids in groups.items() for sid in sids})
         self.speed, self.wait_peers, self.tick_s = speed, list(wait_peers), tick_s
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
         self.entries: list[tuple[int, bytes]] = []

@@ -1,0 +1,60 @@
+"""A fusion node as a Zenoh peer: takes its sensor group's hits (in the replay's order,
+by sequence number and clock ticks) and publishes fused tracks into the mesh."""
+from __future__ import annotations
+
+import heapq
+import json
+import random
+import sys
+
+import msgpack
+import zenoh
+
+from dissemination.keyspace import KeySpace, place
+from saim_mesh import messages as M
+from saim_mesh.scenario import Scenario
+
+from .node import FusionNode
+
+BLOCK = zenoh.CongestionControl.BLOCK
+
+
+def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | None = None) -> dict:
+    ks = KeySpace(root)
+    node = FusionNode(group, sc.projection)
+    rnd = random.Random(shuffle) if shuffle is not None else None
+    dec = M.Decoder()
+    sent = 0
+    with zenoh.open(conf) as s:
+        clock = s.declare_subscriber(ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
+        hits = s.declare_subscriber(f"{root}/hit/{group}/*", zenoh.handlers.FifoChannel(1_000_000))
+        token = s.liveliness().declare_token(ks.alive(f"fusion-{group}", str(s.info.zid())))
+        print(f"ready fusion-{group}", flush=True)
+        heap: list = []
+        while True:
+            info = msgpack.unpackb(clock.recv().payload.to_bytes())
+            while (smp := hits.try_recv()) is not None:
+                seq = int.from_bytes(smp.attachment.to_bytes(), "big") if smp.attachment is not None else 0
+                m = dec(smp.payload.to_bytes())
+                if m is not None:
+                    heapq.heappush(heap, (seq, m))
+            out = []
+            while heap and heap[0][0] <= info["seq"]:
+                out += node.add(heapq.heappop(heap)[1])
+            out += node.flush(info["t"])
+            if rnd is not None:
+                rnd.shuffle(out)   # tests: arrival order must not matter
+            for tr in out:
+                x, y = sc.projection.to_xy(tr.lon, tr.lat)
+                s.put(f"{root}/trk/{place(x, y)}/{tr.track}", M.encode(tr), congestion_control=BLOCK)
+                sent += 1
+            if info["end"]:
+                break
+        s.put(ks.fusion_done(group), b"", congestion_control=BLOCK)
+        token.undeclare()
+    return {"group": group, "hits_in": node.stats["hits_in"], "tracks_out": sent}
+
+
+def main_fusion(sc: Scenario, group: str, conf, root: str, shuffle: int | None) -> int:
+    print("summary " + json.dumps(run_fusion_peer(sc, group, conf, root, shuffle)), flush=True)
+    return 0
