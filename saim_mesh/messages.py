@@ -183,22 +183,9 @@ class CallForFire:
 
 
 @dataclass(slots=True, frozen=True)
-class CallForFireConfirm:
+class CallForFireConfirm(CallForFire):
     """The requester confirmed the fire mission: everyone near the target is warned."""
     KIND: ClassVar[str] = "cff-confirm"
-    t: float
-    cff: str
-    requester: str
-    lon: float
-    lat: float
-    radius_m: float
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "CallForFireConfirm":
-        k = cls.KIND
-        lon, lat = _lonlat(d, k)
-        return cls(_time(d, k), _str(d, k, "cff"), _str(d, k, "requester"), lon, lat,
-                   _num(d, k, "radius_m", 1.0, 100_000.0))
 
 
 @dataclass(slots=True, frozen=True)

@@ -4,25 +4,13 @@ from __future__ import annotations
 
 import math
 from collections import Counter, defaultdict
-from dataclasses import dataclass
 
 import numpy as np
 
 from ea_agent.core.plan import TaskOrg
-from saim_mesh.adjudication import Adjudicator, Report
+from saim_mesh.adjudication import Adjudicator, Entity, Report
 from saim_mesh.geo import Projection
 from saim_mesh.messages import LocationReport, SensorTrack
-
-
-@dataclass(slots=True)
-class Track:
-    id: str
-    x: float
-    y: float
-    strength: int
-    t: float
-    lon: float
-    lat: float
 
 
 class Picture:
@@ -38,7 +26,7 @@ class Picture:
         self.seen = np.zeros(n)            # scenario time of the last report, changed or not
         self.xy = np.full((n, 2), np.nan)
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
-        self.tracks: dict[str, Track] = {}      # the adjudicated picture of hostile entities
+        self.tracks: dict[str, Entity] = {}      # the adjudicated picture of hostile entities
         self.adj = Adjudicator()
         self.rebuild(taskorg)
 
@@ -108,7 +96,7 @@ class Picture:
             kept |= self.adj.update(Report(t.t, t.source, t.track, float(tx), float(ty), t.strength, t.lon, t.lat))
         if not kept:
             return set()
-        new = {k: Track(e.id, e.x, e.y, e.strength, e.t, e.lon, e.lat) for k, e in self.adj.picture().items()}
+        new = self.adj.picture()
         changed = {k for k, v in new.items() if self.tracks.get(k) != v} | (self.tracks.keys() - new.keys())
         self.tracks = new
         return changed
