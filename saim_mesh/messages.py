@@ -67,6 +67,9 @@ def _str(d: dict, kind: str, name: str, choices: tuple[str, ...] | None = None, 
     return v
 
 
+_NUM = (float, int)
+
+
 def _time(d: dict, kind: str) -> float:
     return _num(d, kind, "t", 0.0)
 
@@ -86,6 +89,12 @@ class LocationReport:
 
     @classmethod
     def from_dict(cls, d: dict) -> "LocationReport":
+        # Fast path for the most frequent message; anything odd takes the validating
+        # path below, which names the bad field. NaN fails every comparison.
+        t, e, lon, lat = d.get("t"), d.get("entity"), d.get("lon"), d.get("lat")
+        if (type(t) in _NUM and type(lon) in _NUM and type(lat) in _NUM and type(e) is str and e
+                and 0.0 <= t <= 1e15 and -180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):
+            return cls(float(t), e, float(lon), float(lat))
         k = cls.KIND
         lon, lat = _lonlat(d, k)
         return cls(_time(d, k), _str(d, k, "entity"), lon, lat)

@@ -53,7 +53,7 @@ class Peer:
         self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
         self.n_direct = 0
         self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
-        self.interest_s = 10.0
+        self.interest_s = 30.0
         self.alert_lat: list[float] = []
 
     # -- sinks -------------------------------------------------------------------------
@@ -67,7 +67,7 @@ class Peer:
             self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
 
     # -- subscriptions ----------------------------------------------------------------------
-    def _resubscribe(self, buf: list | None = None) -> None:
+    def _resubscribe(self, buf: list | None = None) -> None:  # noqa: C901
         """Re-register when the interest changed. New keys catch up from the store:
         whatever was published on them since the last message we took is fetched, so a
         change of subscriptions never loses data (duplicates are dropped by seq)."""

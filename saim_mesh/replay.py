@@ -2,7 +2,7 @@
 into the mesh, and serves the situation store (the ordered log of everything
 published so far) to peers that join late.
 
-Every event carries a sequence number (Zenoh attachment). After each second of
+Every event carries a sequence number (Zenoh attachment). After every 2 s of
 scenario time a clock tick says "everything up to seq N has been sent": one
 publisher session and one priority keep Zenoh's delivery in order, so a peer that
 sees the tick has every earlier message in its channels.
@@ -29,7 +29,7 @@ def seq_bytes(seq: int) -> bytes:
 
 class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
-                 wait_peers: list[str] = (), tick_s: float = 1.0, wait_timeout: float = 60.0,
+                 wait_peers: list[str] = (), tick_s: float = 2.0, wait_timeout: float = 60.0,
                  linger_s: float = 30.0, log=print, until: float | None = None):
         groups = sc.meta.get("fusion", {}).get("groups", {})
         self.sc, self.conf = sc, conf
@@ -89,7 +89,7 @@ class Replay:
                 while ev.t >= next_tick:
                     self._tick(s, next_tick)
                     self._serve(q)
-                    if int(next_tick) % 100 == 0:
+                    if int(next_tick) % 100 == 0 and next_tick == int(next_tick):
                         self.log(f"t={next_tick:.0f}", flush=True)
                     next_tick += self.tick_s
                 if self.speed:

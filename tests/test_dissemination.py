@@ -32,7 +32,7 @@ def filtered_run(sc, unit):
         if ev.t >= nxt:
             ea.advance(ev.t - 1e-9)
             kes = [zenoh.KeyExpr(k) for k in it.keys(ea.domain)]
-            nxt = ev.t + 10.0
+            nxt = ev.t + 30.0   # as often as a peer re-registers
         while reorgs and reorgs[0][0] <= ev.t:
             _, u, p = reorgs.pop(0)
             to.resubordinate(u, p)
