@@ -32,8 +32,3 @@ def bearing_name(dx: float, dy: float) -> str:
     """Eight-point compass direction of the vector (dx east, dy north)."""
     ang = (np.degrees(np.arctan2(dx, dy)) + 360.0) % 360.0
     return ("N", "NE", "E", "SE", "S", "SW", "W", "NW")[int((ang + 22.5) // 45) % 8]
-
-
-def cell_of(x: float, y: float, size_m: float) -> tuple[int, int]:
-    """Map-grid cell (for per-location alert histories)."""
-    return int(x // size_m), int(y // size_m)

@@ -5,15 +5,12 @@ import json
 import sys
 from typing import IO
 
+from ea_agent.core.alert import hms
+
 from .messages import Alert
 
 COLOURS = {"flash": "\033[1;97;41m", "immediate": "\033[1;31m", "priority": "\033[33m", "routine": "\033[36m"}
 RESET = "\033[0m"
-
-
-def hms(t: float) -> str:
-    t = int(round(t))
-    return f"H+{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}"
 
 
 def alert_line(a: Alert) -> str:

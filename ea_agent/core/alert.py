@@ -14,6 +14,12 @@ CATEGORIES = (
 )
 
 
+def hms(t: float) -> str:
+    """Scenario time as H+hh:mm:ss, the way alerts and messages show it."""
+    t = int(round(t))
+    return f"H+{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}"
+
+
 def rank(priority: str) -> int:
     return PRIORITIES.index(priority)
 

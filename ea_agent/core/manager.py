@@ -55,6 +55,7 @@ class ExecutionAssistant:
         self.alerts: list[Alert] = []
         self.stats: Counter = Counter()
         self.errors: list[str] = []
+        self._next_forget = 60.0
         domain.bind(self)
 
     # -- input -----------------------------------------------------------------------
@@ -129,6 +130,9 @@ class ExecutionAssistant:
 
     def _close_epoch(self, end: float) -> None:
         self.stats["epochs"] += 1
+        if end >= self._next_forget:   # keep memory bounded: expired history no longer counts anyway
+            self.voa.forget_before(end - self.voa.expiry)   # a margin for late-posted timer candidates
+            self._next_forget = end + 60.0
         self.timers.advance(end)
         found = self.domain.detect(end)   # may post more (mission responses)
         cands, self.posted = self.posted + found, []

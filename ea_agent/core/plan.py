@@ -73,10 +73,6 @@ class TaskOrg:
     def is_under(self, unit: str, owner: str) -> bool:
         return unit == owner or owner in self.ancestors(unit)
 
-    def members(self, unit: str) -> list[str]:
-        """All entities of the unit and its subordinates."""
-        return [e for u in self.subtree(unit) for e in self.units[u].entities]
-
     def resubordinate(self, unit: str, new_parent: str) -> None:
         if unit not in self.units or new_parent not in self.units:
             raise KeyError(f"reorganization names unknown unit {unit if unit not in self.units else new_parent!r}")

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from ea_agent.core.alert import Candidate, highest
+from ea_agent.core.alert import Candidate, highest, hms
 from ea_agent.core.plan import MissionSpec, PlanSpec, PlanState, TaskOrg, TimeConstraint
 from saim_mesh.geo import Projection, bearing_name
 from saim_mesh.messages import (Alert, CallForFire, CallForFireConfirm, LocationReport, MissionConfirm, Order,
@@ -33,11 +33,6 @@ CATEGORY = {
 ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4
 PROXIMITY_FAMILY = ("contact", "distance", "strength")
 _BASE = Mission(MissionSpec("-", "-", "mission"))   # defaults for units without an active mission
-
-
-def hms(t: float) -> str:
-    t = int(round(t))
-    return f"H+{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}"
 
 
 def km(d: float) -> str:
