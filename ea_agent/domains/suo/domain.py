@@ -53,6 +53,7 @@ class SuoDomain:
         self.voi_cfg = cfg["voi"]
         self.pic = Picture(self.taskorg, proj)
         self.watchman = Watchman(self.pic, cfg)
+        self.watch = self.watchman.watch   # the watchman is the domain's filter, called directly
         self.scan_s = float(cfg["manager"]["unknown_scan_s"])
         self.next_scan = self.scan_s
         self.plan: PlanState | None = None
@@ -330,9 +331,6 @@ class SuoDomain:
             task(MissionSpec(m.id, m.unit, task.TYPE, m.spec.start, m.spec.end, (), tp)).post_execution_constraints(self)
 
     # -- watchman and facts ----------------------------------------------------------------
-    def watch(self, msg):
-        return self.watchman.watch(msg)
-
     def busy(self) -> bool:
         return bool(self.dirty_leaves or self.dirty_tracks or self.watchman.quiet)
 
@@ -669,7 +667,7 @@ class SuoDomain:
     def _unknown_positions(self, t: float, cands: list) -> None:
         thr = float(self.voi_cfg["unknown_position_s"])
         last_by_leaf = np.zeros(len(self.leaves))
-        np.maximum.at(last_by_leaf, self.pic.ent_leaf_i, self.pic.seen)
+        np.maximum.at(last_by_leaf, self.pic.ent_leaf_i, np.array(self.pic.seen))
         for k in np.nonzero(t - last_by_leaf > thr)[0].tolist():
             leaf = self.leaves[k]
             if leaf not in self.own_leaves:

@@ -23,7 +23,7 @@ class Picture:
         n = len(self.ents)
         self.lon = [math.nan] * n          # last raw report (python lists: fast scalar access)
         self.lat = [math.nan] * n
-        self.seen = np.zeros(n)            # scenario time of the last report, changed or not
+        self.seen = [0.0] * n              # scenario time of the last report, changed or not
         self.xy = np.full((n, 2), np.nan)
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
         self.tracks: dict[str, Entity] = {}      # the adjudicated picture of hostile entities
