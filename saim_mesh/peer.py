@@ -84,6 +84,12 @@ class Peer:
                     self.pending.add(seq)
                     heapq.heappush(buf, (seq, m))
 
+    def _plan_signature(self) -> tuple:
+        """Changes when a reorganization or a mission transition may change our interest."""
+        dom = self.ea.domain
+        states = tuple(sorted(dom.plan.state.items())) if dom.plan else ()
+        return dom.taskorg.version, hash(states)
+
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
         req = msgpack.packb({"since": since, "keys": keys})
         for r in self.session.get(self.ks.store(), payload=req, timeout=timeout):
@@ -169,6 +175,7 @@ class Peer:
             buf: list = []
             done = False
             next_interest = 0.0
+            last_sig = self._plan_signature()
             t_first = None
             while not done:
                 tick = clock.recv()   # blocks: no polling; every message before it is already queued
@@ -194,9 +201,10 @@ class Peer:
                     done = True
                 else:
                     self.ea.advance(info["t"])
-                    if info["t"] >= next_interest:   # re-register at most every interest_s of scenario time
+                    sig = self._plan_signature()
+                    if info["t"] >= next_interest or sig != last_sig:   # moved on, or the plan/org changed
                         self._resubscribe(buf)
-                        next_interest = info["t"] + self.interest_s
+                        next_interest, last_sig = info["t"] + self.interest_s, sig
                 if "w" in info:   # wall-clock latency from the tick's publication to its processing
                     lat = time.time() - info["w"]
                     self.tick_lat.append(lat)
