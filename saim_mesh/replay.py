@@ -23,6 +23,27 @@ from .scenario import Scenario
 BLOCK = zenoh.CongestionControl.BLOCK
 
 
+def _matcher(exprs: list[str]):
+    """A fast test of concrete keys against key expressions: the `prefix/**` and
+    `prefix/*` forms our subscriptions use are string checks; others go to Zenoh."""
+    deep, one, other = [], [], []
+    for e in exprs:
+        head = e[:-3] if e.endswith("/**") else e[:-2] if e.endswith("/*") else None
+        if head is not None and "*" not in head:
+            (deep if e.endswith("/**") else one).append(head + "/")
+        else:
+            other.append(zenoh.KeyExpr(e))
+    deep_t, one_t = tuple(deep), tuple(one)
+
+    def match(k: str) -> bool:
+        if deep_t and k.startswith(deep_t):
+            return True
+        if one_t and k.startswith(one_t) and any(k.startswith(h) and "/" not in k[len(h):] for h in one_t):
+            return True
+        return bool(other) and any(zenoh.KeyExpr(k).intersects(x) for x in other)
+    return match
+
+
 def seq_bytes(seq: int) -> bytes:
     return seq.to_bytes(8, "big")
 
@@ -37,7 +58,7 @@ class Replay:
         self.speed, self.wait_peers, self.tick_s = speed, list(wait_peers), tick_s
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
         self.entries: list[tuple[int, bytes]] = []
-        self.keys: list[zenoh.KeyExpr] = []
+        self.keys: list[str] = []
         self.t = 0.0
         self.until = until
 
@@ -49,8 +70,8 @@ class Replay:
             since, keys = int(req.get("since", 0)), req.get("keys")
             entries = self.entries[since:]
             if keys is not None:
-                kes = [zenoh.KeyExpr(k) for k in keys]
-                entries = [e for e, k in zip(entries, self.keys[since:]) if any(k.intersects(x) for x in kes)]
+                match = _matcher(keys)
+                entries = [e for e, k in zip(entries, self.keys[since:]) if match(k)]
             query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True))
             del query   # a query kept alive makes the asker wait out its timeout
 
@@ -104,7 +125,7 @@ class Replay:
                 payload = M.encode(ev)
                 key = self.ks.key(ev, to, sc.projection)
                 self.entries.append((len(self.entries) + 1, payload))
-                self.keys.append(zenoh.KeyExpr(key))
+                self.keys.append(key)
                 s.put(key, payload, attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
             self._tick(s, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)

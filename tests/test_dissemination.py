@@ -49,3 +49,15 @@ def test_subscriptions_are_sufficient_and_selective(small, small_run, unit):
     alerts, fed = filtered_run(small, unit)
     assert [a.to_json_dict() for a in alerts] == [a.to_json_dict() for a in small_run[unit].alerts]
     assert fed < {"A2": 0.5, "C": 0.8}[unit] * len(small.events)   # a platoon or company does not take everything
+
+
+def test_store_matcher_agrees_with_zenoh():
+    from saim_mesh.replay import _matcher
+    exprs = ["r/pos/X1Y2/x5y9/**", "r/trk/X1Y2/*", "r/msn/A1/*", "r/pos/*/*/BN/A/**", "r/cff/*/*/A2/*"]
+    keys = ["r/pos/X1Y2/x5y9/BN/B/B1/B1S1/E1", "r/pos/X1Y2/x5y8/BN/B/B1/B1S1/E1", "r/trk/X1Y2/x5y9/N-1",
+            "r/trk/X1Y2/N-1", "r/msn/A1/A1-move", "r/msn/A1/x/y", "r/pos/X0Y0/x1y1/BN/A/A1/A1S1/E2",
+            "r/cff/X1Y1/x1y1/A2/CFF-1", "r/cff/X1Y1/x1y1/A3/CFF-1", "r/ord/BN"]
+    match = _matcher(exprs)
+    kes = [zenoh.KeyExpr(e) for e in exprs]
+    for k in keys:
+        assert match(k) == any(zenoh.KeyExpr(k).intersects(x) for x in kes), k
