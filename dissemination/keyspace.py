@@ -66,15 +66,18 @@ class KeySpace:
         self.root = root
         self.sensor_group = sensor_group or {}   # sensor id -> fusion group
 
-    def key(self, msg, taskorg, proj) -> str:
+    def key(self, msg, taskorg, proj, xy: tuple[float, float] | None = None) -> str:
+        """The key of one message; `xy` (its projected position) saves a pyproj call."""
         r = self.root
         k = type(msg)
+        if xy is None and hasattr(msg, "lon") and k is not M.Alert:
+            xy = proj.to_xy(msg.lon, msg.lat)
         if k is M.LocationReport:
             unit = taskorg.entity_unit.get(msg.entity, "unknown")
             path = command_path(taskorg, unit) if unit in taskorg.units else "unknown"
-            return f"{r}/pos/{place(*proj.to_xy(msg.lon, msg.lat))}/{path}/{msg.entity}"
+            return f"{r}/pos/{place(*xy)}/{path}/{msg.entity}"
         if k is M.SensorTrack:
-            return f"{r}/trk/{place(*proj.to_xy(msg.lon, msg.lat))}/{msg.track}"
+            return f"{r}/trk/{place(*xy)}/{msg.track}"
         if k is M.SensorHit:
             return f"{r}/hit/{self.sensor_group.get(msg.sensor, 'ungrouped')}/{msg.sensor}"
         if k is M.MissionConfirm:
@@ -82,7 +85,7 @@ class KeySpace:
         if k is M.Order:
             return f"{r}/ord/{msg.issuer}"
         if k is M.CallForFire or k is M.CallForFireConfirm:
-            return f"{r}/cff/{place(*proj.to_xy(msg.lon, msg.lat))}/{msg.requester}/{msg.cff}"
+            return f"{r}/cff/{place(*xy)}/{msg.requester}/{msg.cff}"
         if k is M.Reorganization:
             return f"{r}/org/{msg.unit}"
         if k is M.Alert:

@@ -13,6 +13,7 @@ import sys
 import time
 
 import msgpack
+import numpy as np
 import zenoh
 
 from dissemination.keyspace import KeySpace
@@ -87,11 +88,31 @@ class Replay:
         s.put(self.ks.clock(), msgpack.packb({"t": t, "seq": len(self.entries), "end": end, "w": time.time()}),
               congestion_control=BLOCK)
 
-    def run(self) -> dict:
+    def _prepare(self, end_t: float) -> list[tuple[object, str, bytes]]:
+        """Keys and payloads for the whole script, before the clock starts: one bulk
+        projection, and the task organization as it will be at each event's time."""
         sc = self.sc
+        evs = [e for e in sc.events if e.t <= end_t]
+        lon = np.array([getattr(e, "lon", 0.0) for e in evs])
+        lat = np.array([getattr(e, "lat", 0.0) for e in evs])
+        xs, ys = sc.projection.to_xy(lon, lat)
         to = sc.taskorg.copy()
         reorgs = sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in sc.plan.missions
                         if m.type == "reorganize" and m.start.t is not None)
+        out = []
+        for ev, x, y in zip(evs, xs.tolist(), ys.tolist()):
+            while reorgs and reorgs[0][0] <= ev.t:
+                _, unit, parent = reorgs.pop(0)
+                to.resubordinate(unit, parent)
+            if type(ev) is M.Reorganization:
+                to.resubordinate(ev.unit, ev.new_parent)
+            out.append((ev, self.ks.key(ev, to, sc.projection, (x, y)), M.encode(ev)))
+        return out
+
+    def run(self) -> dict:
+        sc = self.sc
+        end_t = sc.duration_s if self.until is None else min(self.until, sc.duration_s)
+        script = self._prepare(end_t)
         with zenoh.open(self.conf) as s:
             q = s.declare_queryable(self.ks.store(), zenoh.handlers.FifoChannel(64))
             self.log(f"ready {s.info.zid()}", flush=True)
@@ -103,10 +124,7 @@ class Replay:
             self.log("start", flush=True)
             t0 = time.monotonic()
             next_tick = self.tick_s
-            end_t = sc.duration_s if self.until is None else min(self.until, sc.duration_s)
-            for ev in sc.events:
-                if ev.t > end_t:
-                    break
+            for ev, key, payload in script:
                 while ev.t >= next_tick:
                     self._tick(s, next_tick)
                     self._serve(q)
@@ -117,13 +135,6 @@ class Replay:
                     while (wait := t0 + ev.t / self.speed - time.monotonic()) > 0:
                         self._serve(q)
                         time.sleep(min(wait, 0.005))
-                while reorgs and reorgs[0][0] <= ev.t:
-                    _, unit, parent = reorgs.pop(0)
-                    to.resubordinate(unit, parent)
-                if type(ev) is M.Reorganization:
-                    to.resubordinate(ev.unit, ev.new_parent)
-                payload = M.encode(ev)
-                key = self.ks.key(ev, to, sc.projection)
                 self.entries.append((len(self.entries) + 1, payload))
                 self.keys.append(key)
                 s.put(key, payload, attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
