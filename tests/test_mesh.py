@@ -117,3 +117,22 @@ def test_killed_peer_is_noticed_and_recovers_and_late_joiner_catches_up(tmp_path
         got = [key(a) for a in plan_alerts(load(tmp_path / f"{name}.jsonl"))]
         want = [key(a) for a in inproc[unit] if a["t"] > joined]
         assert got == want and want, name
+
+
+def test_malformed_messages_are_counted_and_the_peer_keeps_working(tmp_path, inproc):
+    import zenoh
+
+    from saim_mesh.zconf import config
+    ep, root, procs = launch(tmp_path, [("A2", "A2")], speed="400")
+    try:
+        procs[0].wait_for("t=300", 120)
+        with zenoh.open(config([], [ep])) as s:
+            for payload, att in ((b"\x00garbage", None), (b"\xc1", (10**9).to_bytes(8, "big")),
+                                 (__import__("msgpack").packb({"v": 1, "kind": "location", "t": 1.0}), None)):
+                s.put(f"{root}/msn/A2/bogus", payload, attachment=att,
+                      congestion_control=zenoh.CongestionControl.BLOCK)
+        summary = json.loads(procs[1].wait_for("summary ", 180)[8:])
+    finally:
+        reap(procs)
+    assert summary["bad_messages"] == 3
+    assert [key(a) for a in plan_alerts(load(tmp_path / "A2.jsonl"))] == [key(a) for a in inproc["A2"]]
