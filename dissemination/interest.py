@@ -7,7 +7,7 @@ from ea_agent.domains.suo.missions import ContingentMission
 
 from collections import defaultdict
 
-from .keyspace import BLOCK, KeySpace, block_of, cells_of_bounds, cells_within, command_path
+from .keyspace import KeySpace, block_of, cells_of_bounds, cells_within, command_path
 
 BLOCK_SHARE = 10   # take a whole block when we need this many of its 16 cells
 

@@ -16,7 +16,7 @@ import zenoh
 
 from . import messages as M
 from . import scenario as S
-from .mesh import Proc, start_peer, start_replay, up
+from .mesh import Proc, start_peer, up
 from .runner import run
 from .zconf import config, free_port
 

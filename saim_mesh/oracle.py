@@ -14,7 +14,7 @@ import math
 from collections import defaultdict
 
 import numpy as np
-from shapely.geometry import LineString, Point, Polygon, shape
+from shapely.geometry import Point, Polygon, shape
 
 from ea_agent.core.config import load_config
 from ea_agent.domains.suo.missions import REGISTRY
@@ -379,7 +379,6 @@ class Truth:
                     present.append(t)
                     nearest = min(v[0] for v in near.values())
                     strength = sum(v[1] for v in near.values())
-                    new = set(near) - state["prev"]
                     if t - state["contact_t"] >= expiry:   # first contact, or the last one forgotten
                         self.must(o, "contact", PROX, [u, *near], t - 15, t + 50, f"{sorted(near)} near {u}")
                         state.update(contact_t=t, dist_t=t, dist=nearest, str_t=t, str=strength)

@@ -67,7 +67,7 @@ class Peer:
             self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
 
     # -- subscriptions ----------------------------------------------------------------------
-    def _resubscribe(self, buf: list | None = None) -> None:  # noqa: C901
+    def _resubscribe(self, buf: list | None = None) -> None:
         """Re-register when the interest changed. New keys catch up from the store:
         whatever was published on them since the last message we took is fetched, so a
         change of subscriptions never loses data (duplicates are dropped by seq)."""

@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from ea_agent.core.config import load_config
 from ea_agent.domains.suo import make_ea
 from ea_agent.domains.suo.detectors import fratricide_pairs
 from saim_mesh.messages import LocationReport, MissionConfirm, Order, Reorganization

@@ -5,7 +5,6 @@ from __future__ import annotations
 import heapq
 import json
 import random
-import sys
 
 import msgpack
 import zenoh

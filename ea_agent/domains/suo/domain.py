@@ -6,7 +6,6 @@ from __future__ import annotations
 import heapq
 import math
 from collections import defaultdict
-from typing import Any
 
 import numpy as np
 import shapely
