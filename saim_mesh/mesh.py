@@ -44,16 +44,13 @@ class Proc:
         end = time.monotonic() + timeout
         seen = 0
         while time.monotonic() < end:
+            exited = self.p.poll() is not None   # checked first: then every line it wrote is readable
             self.poll_lines()
             for line in self.lines[seen:]:
                 if line.startswith(prefix):
                     return line
             seen = len(self.lines)
-            if self.p.poll() is not None:
-                self.poll_lines()
-                for line in self.lines[seen:]:
-                    if line.startswith(prefix):
-                        return line
+            if exited:
                 raise RuntimeError(f"{self.name} exited ({self.p.returncode}) before '{prefix}': "
                                    f"{self.p.stderr.read()[-2000:]}")
             time.sleep(0.01)
