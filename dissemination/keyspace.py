@@ -14,10 +14,13 @@ peer can subscribe by mission, geography (grid cells) and command (its subtree).
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
   <root>/store/log                             the situation store (queryable)
+  <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
 """
 from __future__ import annotations
 
 import math
+
+import zenoh
 
 from saim_mesh import messages as M
 
@@ -98,6 +101,9 @@ class KeySpace:
     def alive(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/alive/{unit}/{peer}"
 
+    def fusion_store(self, group: str) -> str:
+        return f"{self.root}/store/fusion/{group}"
+
     def fusion_done(self, group: str) -> str:
         return f"{self.root}/fusion-done/{group}"
 
@@ -106,3 +112,24 @@ class KeySpace:
 
     def store(self) -> str:
         return f"{self.root}/store/log"
+
+
+def matcher(exprs: list[str]):
+    """A fast test of concrete keys against key expressions: the `prefix/**` and
+    `prefix/*` forms our subscriptions use are string checks; others go to Zenoh."""
+    deep, one, other = [], [], []
+    for e in exprs:
+        head = e[:-3] if e.endswith("/**") else e[:-2] if e.endswith("/*") else None
+        if head is not None and "*" not in head:
+            (deep if e.endswith("/**") else one).append(head + "/")
+        else:
+            other.append(zenoh.KeyExpr(e))
+    deep_t, one_t = tuple(deep), tuple(one)
+
+    def match(k: str) -> bool:
+        if deep_t and k.startswith(deep_t):
+            return True
+        if one_t and k.startswith(one_t) and any(k.startswith(h) and "/" not in k[len(h):] for h in one_t):
+            return True
+        return bool(other) and any(zenoh.KeyExpr(k).intersects(x) for x in other)
+    return match

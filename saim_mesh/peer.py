@@ -78,6 +78,13 @@ class Peer:
         for k in sorted(self.subs.keys() - want):
             self.subs.pop(k).undeclare()
         if new and buf is not None:
+            for g in self.fusion_groups:   # fused tracks are not in the replay's log: ask their nodes
+                for r in self.session.get(self.ks.fusion_store(g), payload=msgpack.packb({"keys": new}), timeout=10.0):
+                    if r.ok is not None:
+                        for p in msgpack.unpackb(r.ok.payload.to_bytes(), raw=False)["entries"]:
+                            if (m := self.decoder(p)) is not None:
+                                self.n_direct += 1
+                                heapq.heappush(self.direct, (m.t, self.n_direct, m))
             _, entries = self._query_store(self.last_seq, new)
             for seq, p in entries:
                 if seq > self.last_seq and seq not in self.pending and (m := self.decoder(p)) is not None:
@@ -169,10 +176,10 @@ class Peer:
             bye = s.declare_subscriber(self.ks.bye("*"), zenoh.handlers.FifoChannel(1024))
             self.done_sub = (s.declare_subscriber(self.ks.fusion_done("*"), zenoh.handlers.FifoChannel(64))
                              if self.fusion_groups else None)
-            self._late_join(s, join_timeout)
+            buf: list = []        # heap of (seq, message) waiting for their clock tick
+            self._late_join(s, join_timeout, buf)
             token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
             self.log(f"ready {self.unit} joined_t={self.joined_t}", flush=True)
-            buf: list = []
             done = False
             next_interest = 0.0
             last_sig = self._plan_signature()
@@ -248,7 +255,7 @@ class Peer:
         return {k: [round(e.x, 1), round(e.y, 1), e.strength, list(e.members)]
                 for k, e in sorted(self.ea.domain.pic.adj.picture().items())}
 
-    def _late_join(self, s, timeout: float) -> None:
+    def _late_join(self, s, timeout: float, buf: list) -> None:
         """Get the picture so far from the situation store and replay it silently."""
         t, entries = self._query_store(0, None, timeout)
         if not entries:
@@ -260,7 +267,7 @@ class Peer:
         finally:
             self.muted = False
         self.t = self.joined_t = t
-        self._resubscribe()
+        self._resubscribe(buf)   # new keys catch up, fused tracks included
 
 
 def _pcts(xs: list[float]) -> dict:

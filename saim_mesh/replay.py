@@ -16,33 +16,12 @@ import msgpack
 import numpy as np
 import zenoh
 
-from dissemination.keyspace import KeySpace
+from dissemination.keyspace import KeySpace, matcher
 
 from . import messages as M
 from .scenario import Scenario
 
 BLOCK = zenoh.CongestionControl.BLOCK
-
-
-def _matcher(exprs: list[str]):
-    """A fast test of concrete keys against key expressions: the `prefix/**` and
-    `prefix/*` forms our subscriptions use are string checks; others go to Zenoh."""
-    deep, one, other = [], [], []
-    for e in exprs:
-        head = e[:-3] if e.endswith("/**") else e[:-2] if e.endswith("/*") else None
-        if head is not None and "*" not in head:
-            (deep if e.endswith("/**") else one).append(head + "/")
-        else:
-            other.append(zenoh.KeyExpr(e))
-    deep_t, one_t = tuple(deep), tuple(one)
-
-    def match(k: str) -> bool:
-        if deep_t and k.startswith(deep_t):
-            return True
-        if one_t and k.startswith(one_t) and any(k.startswith(h) and "/" not in k[len(h):] for h in one_t):
-            return True
-        return bool(other) and any(zenoh.KeyExpr(k).intersects(x) for x in other)
-    return match
 
 
 def seq_bytes(seq: int) -> bytes:
@@ -71,7 +50,7 @@ class Replay:
             since, keys = int(req.get("since", 0)), req.get("keys")
             entries = self.entries[since:]
             if keys is not None:
-                match = _matcher(keys)
+                match = matcher(keys)
                 entries = [e for e, k in zip(entries, self.keys[since:]) if match(k)]
             query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True))
             del query   # a query kept alive makes the asker wait out its timeout

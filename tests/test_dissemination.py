@@ -52,7 +52,7 @@ def test_subscriptions_are_sufficient_and_selective(small, small_run, unit):
 
 
 def test_store_matcher_agrees_with_zenoh():
-    from saim_mesh.replay import _matcher
+    from dissemination.keyspace import matcher as _matcher
     exprs = ["r/pos/X1Y2/x5y9/**", "r/trk/X1Y2/*", "r/msn/A1/*", "r/pos/*/*/BN/A/**", "r/cff/*/*/A2/*"]
     keys = ["r/pos/X1Y2/x5y9/BN/B/B1/B1S1/E1", "r/pos/X1Y2/x5y8/BN/B/B1/B1S1/E1", "r/trk/X1Y2/x5y9/N-1",
             "r/trk/X1Y2/N-1", "r/msn/A1/A1-move", "r/msn/A1/x/y", "r/pos/X0Y0/x1y1/BN/A/A1/A1S1/E2",

@@ -9,7 +9,9 @@ import random
 import msgpack
 import zenoh
 
-from dissemination.keyspace import KeySpace, place
+import time
+
+from dissemination.keyspace import KeySpace, matcher, place
 from saim_mesh import messages as M
 from saim_mesh.scenario import Scenario
 
@@ -18,13 +20,31 @@ from .node import FusionNode
 BLOCK = zenoh.CongestionControl.BLOCK
 
 
-def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | None = None) -> dict:
+def _eas_present(s, ks: KeySpace) -> bool:
+    for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):
+        if r.ok is not None and not str(r.ok.key_expr).split("/")[-2].startswith("fusion-"):
+            return True
+    return False
+
+
+def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | None = None,
+                    linger_s: float = 30.0) -> dict:
     ks = KeySpace(root)
     node = FusionNode(group, sc.projection)
     rnd = random.Random(shuffle) if shuffle is not None else None
     dec = M.Decoder()
     sent = 0
+    log: list[tuple[str, bytes]] = []     # what we published, for peers that subscribe later
+
+    def serve(q) -> None:
+        while (query := q.try_recv()) is not None:
+            keys = msgpack.unpackb(query.payload.to_bytes()).get("keys") if query.payload is not None else None
+            match = matcher(keys) if keys is not None else (lambda k: True)
+            query.reply(ks.fusion_store(group), msgpack.packb({"entries": [p for k, p in log if match(k)]}))
+            del query   # a query kept alive makes the asker wait out its timeout
+
     with zenoh.open(conf) as s:
+        store = s.declare_queryable(ks.fusion_store(group), zenoh.handlers.FifoChannel(64))
         clock = s.declare_subscriber(ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
         hits = s.declare_subscriber(f"{root}/hit/{group}/*", zenoh.handlers.FifoChannel(1_000_000))
         token = s.liveliness().declare_token(ks.alive(f"fusion-{group}", str(s.info.zid())))
@@ -45,11 +65,19 @@ def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | No
                 rnd.shuffle(out)   # tests: arrival order must not matter
             for tr in out:
                 x, y = sc.projection.to_xy(tr.lon, tr.lat)
-                s.put(f"{root}/trk/{place(x, y)}/{tr.track}", M.encode(tr), congestion_control=BLOCK)
+                key, payload = f"{root}/trk/{place(x, y)}/{tr.track}", M.encode(tr)
+                log.append((key, payload))
+                s.put(key, payload, congestion_control=BLOCK)
                 sent += 1
+            serve(store)
             if info["end"]:
                 break
         s.put(ks.fusion_done(group), b"", congestion_control=BLOCK)
+        linger = time.monotonic() + linger_s   # keep answering catch-up queries while EAs finish
+        while time.monotonic() < linger and _eas_present(s, ks):
+            for _ in range(20):
+                serve(store)
+                time.sleep(0.01)
         token.undeclare()
     return {"group": group, "hits_in": node.stats["hits_in"], "tracks_out": sent}
 
