@@ -129,8 +129,9 @@ def test_malformed_messages_are_counted_and_the_peer_keeps_working(tmp_path, inp
         with zenoh.open(config([], [ep])) as s:
             pub = s.declare_publisher(f"{root}/msn/A2/bogus", congestion_control=zenoh.CongestionControl.BLOCK)
             # A fresh session only routes to subscribers it has heard of: wait for the A2 peer's.
+            listener = pub.declare_matching_listener()   # held: dropping it would close its channel
             if not pub.matching_status.matching:
-                next(st for st in pub.declare_matching_listener() if st.matching)
+                assert next(st for st in listener if st.matching)
             for payload, att in ((b"\x00garbage", None), (b"\xc1", (10**9).to_bytes(8, "big")),
                                  (__import__("msgpack").packb({"v": 1, "kind": "location", "t": 1.0}), None)):
                 pub.put(payload, attachment=att)
