@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import Counter
 
 import msgpack
 import numpy as np
@@ -55,12 +56,16 @@ class Replay:
             query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True))
             del query   # a query kept alive makes the asker wait out its timeout
 
-    def _present(self, s) -> set[str]:
-        units = set()
+    def _present(self, s) -> Counter:
+        """Live peers per unit (two peers may run one unit's EA)."""
+        units: Counter = Counter()
         for r in s.liveliness().get(self.ks.alive("*", "*"), timeout=2.0):
             if r.ok is not None:
-                units.add(str(r.ok.key_expr).split("/")[-2])
+                units[str(r.ok.key_expr).split("/")[-2]] += 1
         return units
+
+    def _missing(self, s) -> list[str]:
+        return sorted((Counter(self.wait_peers) - self._present(s)).elements())
 
     def _tick(self, s, t: float, end: bool = False) -> None:
         self.t = t
@@ -96,10 +101,10 @@ class Replay:
             q = s.declare_queryable(self.ks.store(), zenoh.handlers.FifoChannel(64))
             self.log(f"ready {s.info.zid()}", flush=True)
             deadline = time.monotonic() + self.wait_timeout
-            while self.wait_peers and not set(self.wait_peers) <= self._present(s):
+            while self.wait_peers and (missing := self._missing(s)):
                 self._serve(q)
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f"peers never came: {sorted(set(self.wait_peers) - self._present(s))}")
+                    raise TimeoutError(f"peers never came: {missing}")
             self.log("start", flush=True)
             t0 = time.monotonic()
             next_tick = self.tick_s
@@ -120,7 +125,7 @@ class Replay:
             self._tick(s, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
-            while time.monotonic() < linger and self._present(s) & set(self.wait_peers or ["?"]):
+            while time.monotonic() < linger and set(self._present(s)) & set(self.wait_peers or ["?"]):
                 self._serve(q)
                 time.sleep(0.01)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0}

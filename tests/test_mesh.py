@@ -40,7 +40,7 @@ def inproc():
 def launch(tmp, peers: list[tuple[str, str]], speed="max"):
     ep = f"tcp/127.0.0.1:{free_port()}"
     root = f"test/{uuid.uuid4().hex[:8]}"
-    replay = start_replay(SC, ep, root, sorted({u for u, _ in peers}), speed)
+    replay = start_replay(SC, ep, root, sorted(u for u, _ in peers), speed)   # every peer, twins too
     procs: list[Proc] = [replay]
     replay.wait_for("ready", 60)
     for unit, name in peers:
