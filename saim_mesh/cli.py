@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     rp = sub.add_parser("replay", help="publish a scenario's events into the mesh (stands in for SAIM)")
     rp.add_argument("scenario")
     rp.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
-    rp.add_argument("--wait-peers", nargs="*", metavar="UNIT", 
+    rp.add_argument("--wait-peers", nargs="*", metavar="UNIT",
                     help="start when these peers are present (name a unit twice to wait for two of its peers)")
     rp.add_argument("--linger", type=float, default=30.0, help="seconds to keep serving the store at the end")
     rp.add_argument("--until", type=float, default=None, help="stop at this scenario time")
