@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sys
 import time
+from bisect import bisect_right
 from collections import Counter
 
 import msgpack
@@ -23,6 +24,7 @@ from . import messages as M
 from .scenario import Scenario
 
 BLOCK = zenoh.CongestionControl.BLOCK
+STORE_PRIORITY = zenoh.Priority.INTERACTIVE_HIGH
 
 
 def seq_bytes(seq: int) -> bytes:
@@ -39,7 +41,7 @@ class Replay:
         self.speed, self.wait_peers, self.tick_s = speed, list(wait_peers), tick_s
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
         self.entries: list[tuple[int, bytes]] = []
-        self.keys: list[str] = []
+        self.by_key: dict[str, list[int]] = {}   # key -> its seqs: queries test each key once
         self.t = 0.0
         self.until = until
 
@@ -49,11 +51,14 @@ class Replay:
         while (query := q.try_recv()) is not None:
             req = msgpack.unpackb(query.payload.to_bytes()) if query.payload is not None else {}
             since, keys = int(req.get("since", 0)), req.get("keys")
-            entries = self.entries[since:]
-            if keys is not None:
+            if keys is None:
+                entries = self.entries[since:]
+            else:
                 match = matcher(keys)
-                entries = [e for e, k in zip(entries, self.keys[since:]) if match(k)]
-            query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True))
+                seqs = sorted(q for k, qs in self.by_key.items() if match(k) for q in qs[bisect_right(qs, since):])
+                entries = [self.entries[q - 1] for q in seqs]
+            query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True),
+                        priority=STORE_PRIORITY)   # overtakes the data queued ahead of it (dupes are dropped by seq)
             del query   # a query kept alive makes the asker wait out its timeout
 
     def _present(self, s) -> Counter:
@@ -120,14 +125,16 @@ class Replay:
                         self._serve(q)
                         time.sleep(min(wait, 0.005))
                 self.entries.append((len(self.entries) + 1, payload))
-                self.keys.append(key)
+                self.by_key.setdefault(key, []).append(len(self.entries))
                 s.put(key, payload, attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
             self._tick(s, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
             while time.monotonic() < linger and set(self._present(s)) & set(self.wait_peers or ["?"]):
-                self._serve(q)
-                time.sleep(0.01)
+                look = time.monotonic() + 0.5          # answer queries promptly, ask who is there less often
+                while time.monotonic() < look:
+                    self._serve(q)
+                    time.sleep(0.002)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0}
 
 
