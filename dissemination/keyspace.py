@@ -13,6 +13,7 @@ peer can subscribe by mission, geography (grid cells) and command (its subtree).
   <root>/alert/<owner>/<type>                  alerts raised by an EA
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
+  <root>/ack/<peer>                            the last clock tick a peer processed (replay pacing)
   <root>/store/log                             the situation store (queryable)
   <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
 """
@@ -106,6 +107,9 @@ class KeySpace:
 
     def fusion_done(self, group: str) -> str:
         return f"{self.root}/fusion-done/{group}"
+
+    def ack(self, peer: str) -> str:
+        return f"{self.root}/ack/{peer}"
 
     def bye(self, unit: str) -> str:
         return f"{self.root}/bye/{unit}"

@@ -119,7 +119,7 @@ def cmd_replay(a) -> int:
     from .zconf import config
     sc = S.load(a.scenario)
     return main_replay(sc, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}", a.speed,
-                       a.wait_peers or [], a.linger, a.until)
+                       a.wait_peers or [], a.linger, a.until, a.window)
 
 
 def cmd_peer(a) -> int:
@@ -186,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--wait-peers", nargs="*", metavar="UNIT",
                     help="start when these peers are present (name a unit twice to wait for two of its peers)")
     rp.add_argument("--linger", type=float, default=30.0, help="seconds to keep serving the store at the end")
+    rp.add_argument("--window", type=float, default=20.0, metavar="S",
+                    help="at max speed, stay at most S of scenario time ahead of the slowest peer (0: no pacing)")
     rp.add_argument("--until", type=float, default=None, help="stop at this scenario time")
     _zenoh_args(rp)
     rp.set_defaults(fn=cmd_replay)

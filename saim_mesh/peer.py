@@ -55,6 +55,8 @@ class Peer:
         self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
         self.interest_s = 30.0
         self.alert_lat: list[float] = []
+        self.seen_t = 0.0      # latest scenario time among received replay messages
+        self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
 
     # -- sinks -------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
@@ -124,6 +126,8 @@ class Peer:
                 if m is not None:
                     pending.add(seq)
                     heapq.heappush(buf, (seq, m))
+                    if m.t > self.seen_t:
+                        self.seen_t = m.t
 
     def _feed(self, items) -> None:
         for seq, m in sorted(items, key=lambda x: x[0]):
@@ -179,6 +183,7 @@ class Peer:
             buf: list = []        # heap of (seq, message) waiting for their clock tick
             self._late_join(s, join_timeout, buf)
             token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
+            ack_key = self.ks.ack(str(s.info.zid()))
             self.log(f"ready {self.unit} joined_t={self.joined_t}", flush=True)
             done = False
             next_interest = 0.0
@@ -190,6 +195,7 @@ class Peer:
                     t_first = time.monotonic()
                 info = msgpack.unpackb(tick.payload.to_bytes())
                 self._drain(buf)
+                self.max_lead = max(self.max_lead, self.seen_t - info["t"])
                 ready = []
                 while buf and buf[0][0] <= info["seq"]:
                     ready.append(heapq.heappop(buf))
@@ -208,6 +214,7 @@ class Peer:
                     done = True
                 else:
                     self.ea.advance(info["t"])
+                    s.put(ack_key, msgpack.packb(info["t"]))   # lets a max-speed replay pace itself
                     sig = self._plan_signature()
                     if info["t"] >= next_interest or sig != last_sig:   # moved on, or the plan/org changed
                         self._resubscribe(buf)
@@ -228,7 +235,7 @@ class Peer:
             by_p[a.priority] = by_p.get(a.priority, 0) + 1
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
                 "facts": self.ea.stats["facts"], "bad_messages": self.decoder.errors + self.ea.stats["errors"],
-                "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
+                "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),

@@ -34,7 +34,7 @@ def seq_bytes(seq: int) -> bytes:
 class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
                  wait_peers: list[str] = (), tick_s: float = 2.0, wait_timeout: float = 60.0,
-                 linger_s: float = 30.0, log=print, until: float | None = None):
+                 linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0):
         groups = sc.meta.get("fusion", {}).get("groups", {})
         self.sc, self.conf = sc, conf
         self.ks = KeySpace(root, {sid: g for g, sids in groups.items() for sid in sids})
@@ -44,6 +44,7 @@ class Replay:
         self.by_key: dict[str, list[int]] = {}   # key -> its seqs: queries test each key once
         self.t = 0.0
         self.until = until
+        self.window_s = window_s if speed is None else 0.0   # pacing only at max speed
 
     def _serve(self, q) -> None:
         """Answer store queries: entries after `since` whose key matches one of `keys`
@@ -110,11 +111,15 @@ class Replay:
                 self._serve(q)
                 if time.monotonic() > deadline:
                     raise TimeoutError(f"peers never came: {missing}")
+            pacer = (Pacer(s, self.ks, set(sc.taskorg.units), self.window_s, lambda: self._serve(q), self.log)
+                     if self.window_s > 0 else None)
             self.log("start", flush=True)
             t0 = time.monotonic()
             next_tick = self.tick_s
             for ev, key, payload in script:
                 while ev.t >= next_tick:
+                    if pacer:
+                        pacer.wait(next_tick)
                     self._tick(s, next_tick)
                     self._serve(q)
                     if int(next_tick) % 100 == 0 and next_tick == int(next_tick):
@@ -138,7 +143,60 @@ class Replay:
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0}
 
 
-def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None) -> int:
-    Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until,
+class Pacer:
+    """At max speed, keep the replay at most `window_s` of scenario time ahead of the
+    slowest EA peer. Without it the replay runs far ahead: tens of thousands of messages
+    sit in flight, a catch-up answer queues behind them, and peers' memory fills up.
+
+    EA peers (liveliness tokens of task-organization units; fusion nodes do not count)
+    are waited for from the moment they appear until they report progress
+    (`ack/<zid>`), and stop counting when their token goes or when they make no
+    progress for `stall_s` of wall time."""
+
+    def __init__(self, s, ks: KeySpace, units: set[str], window_s: float, serve, log, stall_s: float = 30.0):
+        self.units, self.window_s, self.serve, self.log, self.stall_s = units, window_s, serve, log, stall_s
+        self.acks = s.declare_subscriber(ks.ack("*"), zenoh.handlers.FifoChannel(100_000))
+        self.alive = s.liveliness().declare_subscriber(ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
+                                                       history=True)
+        self.live: set[str] = set()          # EA peers' zids
+        self.done: dict[str, float] = {}     # zid -> last tick it processed
+        self.moved: dict[str, float] = {}    # zid -> wall time of its last progress
+        self.ignored: set[str] = set()
+
+    def _take(self) -> None:
+        while (a := self.alive.try_recv()) is not None:
+            unit, zid = str(a.key_expr).split("/")[-2:]
+            if unit not in self.units:
+                continue
+            if a.kind == zenoh.SampleKind.PUT:
+                self.live.add(zid)
+                self.moved.setdefault(zid, time.monotonic())
+            else:
+                self.live.discard(zid)
+        while (a := self.acks.try_recv()) is not None:
+            zid = str(a.key_expr).split("/")[-1]
+            self.done[zid] = max(self.done.get(zid, -1.0), msgpack.unpackb(a.payload.to_bytes()))
+            self.moved[zid] = time.monotonic()
+
+    def wait(self, t: float) -> None:
+        need = t - self.window_s
+        while True:
+            self._take()
+            behind = [z for z in self.live - self.ignored if self.done.get(z, -1.0) < need]
+            if not behind:
+                return
+            now = time.monotonic()
+            for z in behind:
+                if now - self.moved[z] > self.stall_s:
+                    self.log(f"pacing: peer {z} made no progress for {self.stall_s:.0f} s; not waiting for it",
+                             flush=True)
+                    self.ignored.add(z)
+            self.serve()
+            time.sleep(0.0005)   # a peer's next ack is at most one of its ticks away
+
+
+def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None,
+                window_s: float = 20.0) -> int:
+    Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
            log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
     return 0

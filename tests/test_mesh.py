@@ -77,6 +77,14 @@ def test_mesh_peer_equals_in_process_run(mesh_run, inproc):
         assert [key(a) for a in plan_alerts(alerts[name])] == [key(a) for a in inproc[unit]], name
 
 
+def test_max_speed_replay_stays_within_its_window_of_the_slowest_peer(mesh_run):
+    _, summaries = mesh_run
+    # the replay publishes tick t only once every EA peer has done t - 20 s; its events
+    # before the next tick (2 s on) are then the furthest a peer can see ahead
+    leads = {name: s["max_lead_s"] for name, s in summaries.items()}
+    assert all(0 < lead <= 20 + 2 for lead in leads.values()), leads
+
+
 def test_echelons_share_threat_alerts_and_keep_their_own_plans(mesh_run):
     alerts, summaries = mesh_run
     by = lambda name, typ: [key(a) for a in alerts[name] if a["type"] == typ]

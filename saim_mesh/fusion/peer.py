@@ -36,15 +36,15 @@ def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | No
     sent = 0
     log: list[tuple[str, bytes]] = []     # what we published, for peers that subscribe later
 
-    def serve(q) -> None:
-        while (query := q.try_recv()) is not None:
-            keys = msgpack.unpackb(query.payload.to_bytes()).get("keys") if query.payload is not None else None
-            match = matcher(keys) if keys is not None else (lambda k: True)
-            query.reply(ks.fusion_store(group), msgpack.packb({"entries": [p for k, p in log if match(k)]}))
-            del query   # a query kept alive makes the asker wait out its timeout
+    def serve(query) -> None:
+        """Answered at once on Zenoh's thread: an EA waiting for its catch-up must not wait
+        for our next clock tick (a paced replay may be waiting for that EA)."""
+        keys = msgpack.unpackb(query.payload.to_bytes()).get("keys") if query.payload is not None else None
+        match = matcher(keys) if keys is not None else (lambda k: True)
+        query.reply(ks.fusion_store(group), msgpack.packb({"entries": [p for k, p in list(log) if match(k)]}))
 
     with zenoh.open(conf) as s:
-        store = s.declare_queryable(ks.fusion_store(group), zenoh.handlers.FifoChannel(64))
+        store = s.declare_queryable(ks.fusion_store(group), serve)
         clock = s.declare_subscriber(ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
         hits = s.declare_subscriber(f"{root}/hit/{group}/*", zenoh.handlers.FifoChannel(1_000_000))
         token = s.liveliness().declare_token(ks.alive(f"fusion-{group}", str(s.info.zid())))
@@ -69,16 +69,14 @@ def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | No
                 log.append((key, payload))
                 s.put(key, payload, congestion_control=BLOCK)
                 sent += 1
-            serve(store)
             if info["end"]:
                 break
         s.put(ks.fusion_done(group), b"", congestion_control=BLOCK)
         linger = time.monotonic() + linger_s   # keep answering catch-up queries while EAs finish
         while time.monotonic() < linger and _eas_present(s, ks):
-            for _ in range(20):
-                serve(store)
-                time.sleep(0.01)
+            time.sleep(0.2)    # queries are answered by the callback meanwhile
         token.undeclare()
+        store.undeclare()
     return {"group": group, "hits_in": node.stats["hits_in"], "tracks_out": sent}
 
 
