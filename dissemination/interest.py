@@ -9,13 +9,11 @@ from collections import defaultdict
 
 from .keyspace import KeySpace, block_of, cells_of_bounds, cells_within, command_path
 
-BLOCK_SHARE = 10   # take a whole block when we need this many of its 16 cells
-
-
 class Interest:
-    def __init__(self, ks: KeySpace, radius_m: float):
+    def __init__(self, ks: KeySpace, radius_m: float = 3000.0, block_share: int = 10):
         self.ks = ks
         self.radius = radius_m
+        self.block_share = block_share   # take a whole block when we need this many of its 16 cells
 
     def keys(self, dom) -> set[str]:
         """Key expressions for one SUO domain (an EA's state)."""
@@ -48,7 +46,7 @@ class Interest:
         for c in cells:
             blocks[block_of(c)].append(c)
         for b, cs in blocks.items():   # coarsen: fewer, wider subscriptions where we need most of a block
-            places = [f"{b}/*"] if len(cs) >= BLOCK_SHARE else [f"{b}/{c}" for c in cs]
+            places = [f"{b}/*"] if len(cs) >= self.block_share else [f"{b}/{c}" for c in cs]
             for pl in places:
                 out.update((f"{r}/pos/{pl}/**", f"{r}/trk/{pl}/*", f"{r}/cff/{pl}/**"))
         return out

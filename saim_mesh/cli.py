@@ -142,7 +142,7 @@ def cmd_fusion(a) -> int:
 
 def cmd_mesh(a) -> int:
     from .mesh import up
-    up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed))
+    up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window)
     return 0
 
 
@@ -196,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--unit", required=True)
     pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
     pe.add_argument("--config", metavar="TOML")
-    pe.add_argument("--radius", type=float, default=3000.0, help="geographic interest radius around our units (m)")
+    pe.add_argument("--radius", type=float, default=None,
+                    help="geographic interest radius around our units (m); default: [dissemination] in the config")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
     fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")
@@ -211,6 +212,8 @@ def main(argv: list[str] | None = None) -> int:
     me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
     me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     me.add_argument("--out-dir", default="out/mesh")
+    me.add_argument("--window", type=float, default=20.0, metavar="S",
+                    help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
     me.set_defaults(fn=cmd_mesh)
     a = p.parse_args(argv)
     try:

@@ -71,9 +71,9 @@ def py() -> list[str]:
 
 
 def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed: str = "max",
-                 linger: float = 30.0) -> Proc:
+                 linger: float = 30.0, window: float = 20.0) -> Proc:
     return Proc("replay", [*py(), "replay", scenario, "--listen", endpoint, "--root", root, "--speed", speed,
-                           "--linger", str(linger), "--wait-peers", *wait])
+                           "--linger", str(linger), "--window", str(window), "--wait-peers", *wait])
 
 
 def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Path, name: str | None = None,
@@ -89,7 +89,7 @@ def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: i
 
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 600.0,
-       root: str | None = None, echo=print) -> dict:
+       root: str | None = None, echo=print, window: float = 20.0) -> dict:
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
@@ -100,7 +100,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     procs: list[Proc] = []
     t0 = time.monotonic()
     try:
-        replay = start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed)
+        replay = start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
+                              window=window)
         procs.append(replay)
         replay.wait_for("ready", 60)
         fusion = [start_fusion(scenario, g, endpoint, root) for g in groups]

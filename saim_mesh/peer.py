@@ -31,12 +31,13 @@ DEBUG = bool(os.environ.get("SAIM_DEBUG"))
 
 class Peer:
     def __init__(self, sc: Scenario, unit: str, conf: zenoh.Config, root: str, out_path: str | None = None,
-                 config_path=None, radius_m: float = 3000.0, log=print):
+                 config_path=None, radius_m: float | None = None, log=print):
         self.sc, self.unit, self.conf = sc, unit, conf
         self.ks = KeySpace(root)
         self.cfg = load_config(config_path, unit)
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
-        self.interest = Interest(self.ks, radius_m)
+        dis = self.cfg["dissemination"]
+        self.interest = Interest(self.ks, radius_m or dis["radius_m"], int(dis["block_share"]))
         self.out = open(out_path, "a") if out_path else None
         self.log = log
         self.session = None
@@ -53,7 +54,7 @@ class Peer:
         self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
         self.n_direct = 0
         self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
-        self.interest_s = 30.0
+        self.interest_s = float(dis["reregister_s"])
         self.alert_lat: list[float] = []
         self.seen_t = 0.0      # latest scenario time among received replay messages
         self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
@@ -286,7 +287,7 @@ def _pcts(xs: list[float]) -> dict:
 
 
 def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None,
-              radius_m: float = 3000.0) -> int:
+              radius_m: float | None = None) -> int:
     p = Peer(sc, unit, conf, root, out, config_path, radius_m, log=lambda *a, **k: print(*a, **k, file=sys.stdout))
     summary = p.run()
     print("summary " + json.dumps(summary), flush=True)

@@ -61,3 +61,27 @@ def test_store_matcher_agrees_with_zenoh():
     kes = [zenoh.KeyExpr(e) for e in exprs]
     for k in keys:
         assert match(k) == any(zenoh.KeyExpr(k).intersects(x) for x in kes), k
+
+
+def test_dissemination_parameters_come_from_the_config(small, tmp_path):
+    """Radius and block coarsening are config, overridable per EA: a wider radius takes
+    more cells, and a block share above 16 never takes a whole block."""
+    from ea_agent.core.config import DEFAULT_PATH, load_config
+    text = DEFAULT_PATH.read_text() + "\n[ea.A2.dissemination]\nradius_m = 6000.0\nblock_share = 17\n"
+    (tmp_path / "ea.toml").write_text(text)
+    base, wide = load_config(None, "A2")["dissemination"], load_config(tmp_path / "ea.toml", "A2")["dissemination"]
+    assert base["radius_m"] == 3000.0 and wide == {**base, "radius_m": 6000.0, "block_share": 17}
+    ea = make_ea(small, "A2")
+    ea.start(0.0)
+    for ev in small.events:
+        if ev.t > 60.0:
+            break
+        ea.submit(ev)   # the units' positions are known
+    ea.advance(60.0)
+    ks = KeySpace("t")
+    geo = lambda keys: {k.split("/")[3] for k in keys if k.startswith("t/pos/") and "/BN" not in k}
+    near = geo(Interest(ks, base["radius_m"], 17).keys(ea.domain))
+    far = geo(Interest(ks, wide["radius_m"], wide["block_share"]).keys(ea.domain))
+    coarse = geo(Interest(ks, base["radius_m"], 1).keys(ea.domain))
+    assert "*" not in far and len(far) > len(near) > 0   # cell by cell, and more cells when wider
+    assert coarse == {"*"}                               # t/pos/<block>/*/** : whole blocks only
