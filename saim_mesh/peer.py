@@ -58,6 +58,8 @@ class Peer:
         self.alert_lat: list[float] = []
         self.seen_t = 0.0      # latest scenario time among received replay messages
         self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
+        self.tick_s = 2.0      # the replay's clock period
+        self.gaps = 0
 
     # -- sinks -------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
@@ -81,18 +83,25 @@ class Peer:
         for k in sorted(self.subs.keys() - want):
             self.subs.pop(k).undeclare()
         if new and buf is not None:
-            for g in self.fusion_groups:   # fused tracks are not in the replay's log: ask their nodes
-                for r in self.session.get(self.ks.fusion_store(g), payload=msgpack.packb({"keys": new}), timeout=10.0):
-                    if r.ok is not None:
-                        for p in msgpack.unpackb(r.ok.payload.to_bytes(), raw=False)["entries"]:
-                            if (m := self.decoder(p)) is not None:
-                                self.n_direct += 1
-                                heapq.heappush(self.direct, (m.t, self.n_direct, m))
-            _, entries = self._query_store(self.last_seq, new)
-            for seq, p in entries:
-                if seq > self.last_seq and seq not in self.pending and (m := self.decoder(p)) is not None:
-                    self.pending.add(seq)
-                    heapq.heappush(buf, (seq, m))
+            self._catch_up(new, buf)
+
+    def _catch_up(self, keys: list[str], buf: list, tracks_after: float = -1.0) -> None:
+        """Fetch what was published on `keys` after the last message we took, from the
+        situation store (duplicates are dropped by seq later) and the fusion nodes
+        (their tracks carry no seq: only those after `tracks_after` are taken)."""
+        for g in self.fusion_groups:   # fused tracks are not in the replay's log: ask their nodes
+            req = msgpack.packb({"keys": keys})
+            for r in self.session.get(self.ks.fusion_store(g), payload=req, timeout=10.0):
+                if r.ok is not None:
+                    for p in msgpack.unpackb(r.ok.payload.to_bytes(), raw=False)["entries"]:
+                        if (m := self.decoder(p)) is not None and m.t > tracks_after:
+                            self.n_direct += 1
+                            heapq.heappush(self.direct, (m.t, self.n_direct, m))
+        _, entries = self._query_store(self.last_seq, keys)
+        for seq, p in entries:
+            if seq > self.last_seq and seq not in self.pending and (m := self.decoder(p)) is not None:
+                self.pending.add(seq)
+                heapq.heappush(buf, (seq, m))
 
     def _plan_signature(self) -> tuple:
         """Changes when a reorganization or a mission transition may change our interest."""
@@ -162,6 +171,7 @@ class Peer:
                 self._system_alert(unit, "routine", f"EA of {to.name(unit)} is back on the mesh", left=False)
 
     def _system_alert(self, unit: str, prio: str, text: str, left: bool) -> None:
+        self.log(f"presence {unit} {'left' if left else 'back'} t={self.t:.0f}", flush=True)
         self.ea.emit(M.Alert(round(self.t, 3), self.unit, "unknown-position", "system-problem", prio, (unit,), text,
                              {"peer": unit, "left": left, "wall_clock_driven": True}))
 
@@ -195,6 +205,12 @@ class Peer:
                 if t_first is None:
                     t_first = time.monotonic()
                 info = msgpack.unpackb(tick.payload.to_bytes())
+                if info["t"] - self.t > self.tick_s + 1e-6 and self.last_seq and not info["end"]:
+                    # ticks went missing: we were cut off (frozen past our lease, or a broken
+                    # link) and everything sent meanwhile is lost. Take it from the store.
+                    self.log(f"gap t={self.t:.0f}..{info['t']:.0f}: catching up", flush=True)
+                    self.gaps += 1
+                    self._catch_up(sorted(self.subs), buf, tracks_after=self.t)
                 self._drain(buf)
                 self.max_lead = max(self.max_lead, self.seen_t - info["t"])
                 ready = []
@@ -237,6 +253,7 @@ class Peer:
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
                 "facts": self.ea.stats["facts"], "bad_messages": self.decoder.errors + self.ea.stats["errors"],
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
+                "gaps": self.gaps,
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),

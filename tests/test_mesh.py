@@ -127,6 +127,35 @@ def test_killed_peer_is_noticed_and_recovers_and_late_joiner_catches_up(tmp_path
         assert got == want and want, name
 
 
+def test_frozen_peer_is_noticed_by_its_lease_and_noted_when_it_thaws(tmp_path, inproc):
+    """A peer that stops reporting (SIGSTOP: no crash, no closed socket) is lost when its
+    Zenoh lease (configs/zenoh-peer.json5) runs out; thawed, it reconnects, is back, sees
+    the gap in the clock and takes what it missed from the store: its alerts are those
+    of a peer that never froze."""
+    import signal
+    ep, root, procs = launch(tmp_path, [("A", "A"), ("A2", "A2")], speed="200")
+    a, a2 = procs[1], procs[2]
+    try:
+        procs[0].wait_for("t=3300", 120)
+        a2.p.send_signal(signal.SIGSTOP)
+        left = a.wait_for("presence A2 left", 60)
+        procs[0].wait_for("t=4000", 60)   # cut off past A2's call for fire (t=3900): it must catch up
+        a2.p.send_signal(signal.SIGCONT)
+        back = a.wait_for("presence A2 back", 60)
+        a.wait_for("summary ", 180)
+        s2 = json.loads(a2.wait_for("summary ", 180)[8:])
+    finally:
+        for p in procs:
+            p.p.send_signal(signal.SIGCONT)
+        reap(procs)
+    t_left, t_back = int(left.split("t=")[1]), int(back.split("t=")[1])
+    assert 3300 <= t_left <= 3300 + 200 * 10 and t_back >= t_left   # lease 2 s of wall time, at speed 200
+    notes = [x for x in load(tmp_path / "A.jsonl") if x["category"] == "system-problem"]
+    assert [(x["subjects"], x["details"]["left"]) for x in notes] == [(["A2"], True), (["A2"], False)]
+    assert s2["gaps"] >= 1
+    assert [key(x) for x in plan_alerts(load(tmp_path / "A2.jsonl"))] == [key(x) for x in inproc["A2"]]
+
+
 def test_malformed_messages_are_counted_and_the_peer_keeps_working(tmp_path, inproc):
     import zenoh
 
