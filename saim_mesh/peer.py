@@ -176,6 +176,38 @@ class Peer:
                              {"peer": unit, "left": left, "wall_clock_driven": True}))
 
     # -- main loop --------------------------------------------------------------------------
+    def _on_tick(self, info: dict, buf: list, pres, bye) -> bool:
+        """Feed the EA every message up to the tick's seq, in seq order, then advance it to
+        the tick's time. True at the end tick."""
+        if info["t"] - self.t > self.tick_s + 1e-6 and self.last_seq and not info["end"]:
+            # ticks went missing: we were cut off (frozen past our lease, or a broken
+            # link) and everything sent meanwhile is lost. Take it from the store.
+            self.log(f"gap t={self.t:.0f}..{info['t']:.0f}: catching up", flush=True)
+            self.gaps += 1
+            self._catch_up(sorted(self.subs), buf, tracks_after=self.t)
+        ready = []
+        while buf and buf[0][0] <= info["seq"]:
+            ready.append(heapq.heappop(buf))
+        self.pending.difference_update(x[0] for x in ready)
+        self._feed(ready)
+        while self.direct and self.direct[0][0] <= info["t"]:
+            self.ea.submit(heapq.heappop(self.direct)[2])
+        if DEBUG and int(info["t"]) % 300 == 0:
+            self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
+                     f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
+        self.t = info["t"]
+        self._presence(pres, bye)
+        n_alerts = len(self.ea.alerts)
+        if info["end"]:
+            self.ea.finish(info["t"])
+        else:
+            self.ea.advance(info["t"])
+        if "w" in info:   # wall-clock latency from the tick's publication to its processing
+            lat = time.time() - info["w"]
+            self.tick_lat.append(lat)
+            self.alert_lat += [lat] * (len(self.ea.alerts) - n_alerts)
+        return bool(info["end"])
+
     def run(self, join_timeout: float = 10.0) -> dict:
         def stop(*_):
             raise SystemExit(0)
@@ -201,45 +233,27 @@ class Peer:
             last_sig = self._plan_signature()
             t_first = None
             while not done:
-                tick = clock.recv()   # blocks: no polling; every message before it is already queued
+                # Block for the next tick, then take every tick already queued behind it:
+                # one drain of the subscriber channels serves them all (every message up
+                # to the last tick's seq is already in its channel).
+                ticks = [clock.recv()]
+                while len(ticks) < 64 and (more := clock.try_recv()) is not None:
+                    ticks.append(more)
                 if t_first is None:
                     t_first = time.monotonic()
-                info = msgpack.unpackb(tick.payload.to_bytes())
-                if info["t"] - self.t > self.tick_s + 1e-6 and self.last_seq and not info["end"]:
-                    # ticks went missing: we were cut off (frozen past our lease, or a broken
-                    # link) and everything sent meanwhile is lost. Take it from the store.
-                    self.log(f"gap t={self.t:.0f}..{info['t']:.0f}: catching up", flush=True)
-                    self.gaps += 1
-                    self._catch_up(sorted(self.subs), buf, tracks_after=self.t)
+                infos = [msgpack.unpackb(x.payload.to_bytes()) for x in ticks]
                 self._drain(buf)
-                self.max_lead = max(self.max_lead, self.seen_t - info["t"])
-                ready = []
-                while buf and buf[0][0] <= info["seq"]:
-                    ready.append(heapq.heappop(buf))
-                self.pending.difference_update(x[0] for x in ready)
-                self._feed(ready)
-                while self.direct and self.direct[0][0] <= info["t"]:
-                    self.ea.submit(heapq.heappop(self.direct)[2])
-                if DEBUG and int(info["t"]) % 300 == 0:
-                    self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
-                             f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
-                self.t = info["t"]
-                self._presence(pres, bye)
-                n_alerts = len(self.ea.alerts)
-                if info["end"]:
-                    self.ea.finish(info["t"])
-                    done = True
-                else:
-                    self.ea.advance(info["t"])
-                    s.put(ack_key, msgpack.packb(info["t"]))   # lets a max-speed replay pace itself
+                self.max_lead = max(self.max_lead, self.seen_t - infos[0]["t"])
+                for info in infos:
+                    done = self._on_tick(info, buf, pres, bye)
+                    if done:
+                        break
                     sig = self._plan_signature()
                     if info["t"] >= next_interest or sig != last_sig:   # moved on, or the plan/org changed
                         self._resubscribe(buf)
                         next_interest, last_sig = info["t"] + self.interest_s, sig
-                if "w" in info:   # wall-clock latency from the tick's publication to its processing
-                    lat = time.time() - info["w"]
-                    self.tick_lat.append(lat)
-                    self.alert_lat += [lat] * (len(self.ea.alerts) - n_alerts)
+                if not done:
+                    s.put(ack_key, msgpack.packb(self.t))   # lets a max-speed replay pace itself
             self._await_fusion(s, buf)
             s.put(self.ks.bye(self.unit), b"")   # a clean leave is not a lost peer
             token.undeclare()
