@@ -118,7 +118,7 @@ def cmd_replay(a) -> int:
     from .replay import main_replay
     from .zconf import config
     sc = S.load(a.scenario)
-    return main_replay(sc, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}", a.speed,
+    return main_replay(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast), a.root or f"saim/{sc.name}", a.speed,
                        a.wait_peers or [], a.linger, a.until, a.window)
 
 
@@ -128,7 +128,7 @@ def cmd_peer(a) -> int:
     sc = S.load(a.scenario, events=False)
     if a.unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
-    return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}",
+    return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config, a.multicast), a.root or f"saim/{sc.name}",
                      a.out, a.config, a.radius)
 
 
@@ -136,7 +136,7 @@ def cmd_fusion(a) -> int:
     from .fusion.peer import main_fusion
     from .zconf import config
     sc = S.load(a.scenario, events=False)
-    return main_fusion(sc, a.group, config(a.listen, a.connect, a.zenoh_config), a.root or f"saim/{sc.name}",
+    return main_fusion(sc, a.group, config(a.listen, a.connect, a.zenoh_config, a.multicast), a.root or f"saim/{sc.name}",
                        a.shuffle)
 
 
@@ -150,6 +150,8 @@ def _zenoh_args(p) -> None:
     p.add_argument("--listen", nargs="*", metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
     p.add_argument("--connect", nargs="*", metavar="ENDPOINT")
     p.add_argument("--zenoh-config", metavar="JSON5", help="default configs/zenoh-peer.json5")
+    p.add_argument("--multicast", action="store_true",
+                   help="discover peers by UDP multicast scouting (a LAN) instead of configured endpoints only")
     p.add_argument("--root", help="key-expression root (default saim/<scenario name>)")
 
 

@@ -17,8 +17,12 @@ def free_port() -> int:
 
 
 def config(listen: list[str] | None = None, connect: list[str] | None = None,
-           path: str | Path | None = None) -> zenoh.Config:
+           path: str | Path | None = None, multicast: bool = False) -> zenoh.Config:
+    """The JSON5 file, with endpoints chosen at run time; `multicast` turns on UDP
+    multicast scouting (the file's default is off: tests and CI stay on loopback)."""
     conf = zenoh.Config.from_file(str(path or DEFAULT))
+    if multicast:
+        conf.insert_json5("scouting/multicast/enabled", "true")
     if listen is not None:
         conf.insert_json5("listen/endpoints", json.dumps(listen))
     if connect is not None:

@@ -177,3 +177,42 @@ def test_malformed_messages_are_counted_and_the_peer_keeps_working(tmp_path, inp
         reap(procs)
     assert summary["bad_messages"] == 3
     assert [key(a) for a in plan_alerts(load(tmp_path / "A2.jsonl"))] == [key(a) for a in inproc["A2"]]
+
+
+
+def _multicast_works() -> bool:
+    """Probe: two sessions with multicast scouting and no endpoints find each other."""
+    import threading
+
+    import zenoh
+
+    from saim_mesh.zconf import config
+    key, found = f"probe/{uuid.uuid4().hex}", threading.Event()
+    with zenoh.open(config(["tcp/127.0.0.1:0"], [], multicast=True)) as a, \
+            zenoh.open(config(["tcp/127.0.0.1:0"], [], multicast=True)) as b:
+        sub = b.declare_subscriber(key, zenoh.handlers.FifoChannel(1))
+        pub = a.declare_publisher(key)
+        listener = pub.declare_matching_listener(lambda st: found.set() if st.matching else None)
+        ok = pub.matching_status.matching or found.wait(10)
+        del sub, listener
+        return ok
+
+
+def test_peers_find_each_other_by_multicast_scouting(tmp_path, inproc):
+    """`--multicast`: no endpoint is configured to connect to; the replay and the peer
+    discover each other by UDP multicast scouting and the peer alerts as usual."""
+    if not _multicast_works():
+        pytest.skip("UDP multicast scouting does not work on this host's network")
+    from saim_mesh.mesh import py
+    root = f"test/{uuid.uuid4().hex[:8]}"
+    zargs = ["--listen", "tcp/127.0.0.1:0", "--multicast", "--root", root]
+    replay = Proc("replay", [*py(), "replay", SC, "--speed", "max", "--linger", "5", "--wait-peers", "A2", *zargs])
+    procs = [replay]
+    try:
+        replay.wait_for("ready", 60)
+        procs.append(Proc("A2", [*py(), "peer", "--scenario", SC, "--unit", "A2", "--out", str(tmp_path / "A2.jsonl"),
+                                 *zargs]))
+        procs[1].wait_for("summary ", 180)
+    finally:
+        reap(procs)
+    assert [key(a) for a in plan_alerts(load(tmp_path / "A2.jsonl"))] == [key(a) for a in inproc["A2"]]
