@@ -4,7 +4,7 @@ peer can subscribe by mission, geography (grid cells) and command (its subtree).
   <root>/pos/<block>/<cell>/<command path>/<entity>    friendly positions
   <root>/trk/<block>/<cell>/<track>                    hostile tracks (fused)
   <root>/hit/<fusion group>/<sensor>           raw sensor hits, to the group's fusion node
-  <root>/fusion-done/<group>                   a fusion node's last tracks are out
+  <root>/fusion-tick/<group>                   a fusion node's tracks up to clock time t are out
   <root>/msn/<unit>/<mission>                  mission start/end confirmations
   <root>/ord/<unit>                            orders to a unit (and its subordinates)
   <root>/cff/<block>/<cell>/<requester>/<cff>  calls for fire and confirmations
@@ -105,8 +105,8 @@ class KeySpace:
     def fusion_store(self, group: str) -> str:
         return f"{self.root}/store/fusion/{group}"
 
-    def fusion_done(self, group: str) -> str:
-        return f"{self.root}/fusion-done/{group}"
+    def fusion_tick(self, group: str) -> str:
+        return f"{self.root}/fusion-tick/{group}"
 
     def ack(self, peer: str) -> str:
         return f"{self.root}/ack/{peer}"

@@ -54,6 +54,9 @@ class Peer:
         self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
         self.n_direct = 0
         self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
+        self.ftick = {g: -1.0 for g in self.fusion_groups}   # clock time each node's tracks are out to
+        self.lost_groups: set[str] = set()
+        self.ftick_sub = None
         self.interest_s = float(dis["reregister_s"])
         self.alert_lat: list[float] = []
         self.seen_t = 0.0      # latest scenario time among received replay messages
@@ -140,10 +143,38 @@ class Peer:
                         self.seen_t = m.t
 
     def _feed(self, items) -> None:
+        """Submit in seq order; a fused track goes in before the first message of its
+        time or later, where the in-process run puts it."""
+        direct, submit = self.direct, self.ea.submit
         for seq, m in sorted(items, key=lambda x: x[0]):
             if seq > self.last_seq:
                 self.last_seq = seq
-                self.ea.submit(m)
+                while direct and direct[0][0] <= m.t:
+                    submit(heapq.heappop(direct)[2])
+                submit(m)
+
+    def _await_tracks(self, t: float, timeout: float = 30.0) -> None:
+        """Hold the clock at `t` until every fusion node has published its tracks up to it,
+        so that every peer takes each track at the same point of its stream. A node
+        silent for `timeout` s of wall time is not waited for again (and we say so)."""
+        if self.ftick_sub is None:
+            return
+        give_up = None
+        while True:
+            while (m := self.ftick_sub.try_recv()) is not None:
+                g = str(m.key_expr).split("/")[-1]
+                if g in self.ftick:
+                    self.ftick[g] = max(self.ftick[g], msgpack.unpackb(m.payload.to_bytes())["t"])
+            behind = [g for g, ft in self.ftick.items() if ft < t and g not in self.lost_groups]
+            if not behind:
+                return
+            now = time.monotonic()
+            give_up = give_up or now + timeout
+            if now > give_up:
+                self.log(f"fusion node(s) {behind} silent for {timeout:.0f} s: going on without them", flush=True)
+                self.lost_groups.update(behind)
+                return
+            time.sleep(0.0002)   # the node's marker is at most one of its ticks away
 
     # -- presence ---------------------------------------------------------------------------
     def _presence(self, ch, bye) -> None:
@@ -221,8 +252,8 @@ class Peer:
             pres = s.liveliness().declare_subscriber(self.ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
                                                      history=True)
             bye = s.declare_subscriber(self.ks.bye("*"), zenoh.handlers.FifoChannel(1024))
-            self.done_sub = (s.declare_subscriber(self.ks.fusion_done("*"), zenoh.handlers.FifoChannel(64))
-                             if self.fusion_groups else None)
+            if self.fusion_groups:
+                self.ftick_sub = s.declare_subscriber(self.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
             buf: list = []        # heap of (seq, message) waiting for their clock tick
             self._late_join(s, join_timeout, buf)
             token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
@@ -242,6 +273,7 @@ class Peer:
                 if t_first is None:
                     t_first = time.monotonic()
                 infos = [msgpack.unpackb(x.payload.to_bytes()) for x in ticks]
+                self._await_tracks(infos[-1]["t"])
                 self._drain(buf)
                 self.max_lead = max(self.max_lead, self.seen_t - infos[0]["t"])
                 for info in infos:
@@ -254,7 +286,6 @@ class Peer:
                         next_interest, last_sig = info["t"] + self.interest_s, sig
                 if not done:
                     s.put(ack_key, msgpack.packb(self.t))   # lets a max-speed replay pace itself
-            self._await_fusion(s, buf)
             s.put(self.ks.bye(self.unit), b"")   # a clean leave is not a lost peer
             token.undeclare()
             self.session = None
@@ -272,23 +303,6 @@ class Peer:
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),
                 "picture": self.picture()}
-
-    def _await_fusion(self, s, buf, timeout: float = 30.0) -> None:
-        """After the end tick, take the fusion nodes' last tracks before closing the picture."""
-        if not self.fusion_groups or self.done_sub is None:
-            return
-        done: set[str] = set()
-        end = time.monotonic() + timeout
-        while done != set(self.fusion_groups) and time.monotonic() < end:
-            d = self.done_sub.try_recv()
-            if d is None:
-                time.sleep(0.005)   # shutdown only: wait (bounded) for the nodes' last words
-                continue
-            done.add(str(d.key_expr).split("/")[-1])
-        self._drain(buf)
-        while self.direct:
-            self.ea.submit(heapq.heappop(self.direct)[2])
-        self.ea.finish(self.t)
 
     def picture(self) -> dict:
         return {k: [round(e.x, 1), round(e.y, 1), e.strength, list(e.members)]

@@ -32,6 +32,9 @@ class Fusion:
         f = sc.meta.get("fusion")
         return cls(sc, f["groups"]) if f else None
 
+    def flush(self, t: float) -> list:
+        return [tr for n in self.nodes.values() for tr in n.flush(t)]
+
     def feed(self, ev) -> list:
         out = []
         if ev.t >= self.next_t:
@@ -80,6 +83,10 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
             ea.submit(ev)
         if progress and i % step == 0:
             progress(i / n)
+    if fusion is not None:   # windows that closed after the last event (as a fusion peer does at the end)
+        for tr in fusion.flush(sc.duration_s):
+            for ea in eas:
+                ea.submit(tr)
     for ea in eas:
         ea.finish(sc.duration_s)
     if progress:

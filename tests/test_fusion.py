@@ -15,6 +15,7 @@ from saim_mesh.fusion import FusionNode
 from saim_mesh.geo import Projection
 from saim_mesh.mesh import start_fusion, start_peer, start_replay
 from saim_mesh.messages import SensorHit
+from saim_mesh.runner import run
 from saim_mesh.zconf import free_port
 
 from .conftest import ROOT
@@ -97,6 +98,13 @@ def test_two_fusion_nodes_three_peers_one_picture(tmp_path):
             p.stop()
     pictures = [s["picture"] for s in summaries]
     assert pictures[0] and pictures[0] == pictures[1] == pictures[2]
+    # each peer takes every track at the point of its stream where the in-process run
+    # does, so its alerts are those of the in-process run, shuffled arrival or not
+    inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
+              for ea in run(S.load(SMALL_SENSORS), units)}
+    for u in units:
+        got = [a for a in map(json.loads, open(tmp_path / f"{u}.jsonl")) if a["category"] != "system-problem"]
+        assert got == inproc[u] and got, u
     assert all(f["tracks_out"] > 0 and f["hits_in"] > f["tracks_out"] for f in fusion)
     # the two nodes overlap: some hostile is reported by both and adjudicated into one entity
     assert any({m.split("/")[0] for m in v[3]} == {"N", "F"} for v in pictures[0].values()), pictures[0]

@@ -69,9 +69,10 @@ def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | No
                 log.append((key, payload))
                 s.put(key, payload, congestion_control=BLOCK)
                 sent += 1
+            # after its tracks on the same session: an EA that sees this has them all
+            s.put(ks.fusion_tick(group), msgpack.packb({"t": info["t"]}), congestion_control=BLOCK)
             if info["end"]:
                 break
-        s.put(ks.fusion_done(group), b"", congestion_control=BLOCK)
         linger = time.monotonic() + linger_s   # keep answering catch-up queries while EAs finish
         while time.monotonic() < linger and _eas_present(s, ks):
             time.sleep(0.2)    # queries are answered by the callback meanwhile
