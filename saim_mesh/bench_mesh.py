@@ -134,6 +134,16 @@ def main(argv=None) -> int:
               for ea in run(sc, list(peers))}
     same = {u: [json.dumps(json.loads(line), sort_keys=True) for line in open(tmp / "battalion" / f"{u}.jsonl")
                 if json.loads(line)["category"] != "system-problem"] == inproc[u] for u in peers}
+    sens_path = str(Path(a.scenario).parent / "battalion-sensors")
+    sens_same = None
+    if Path(sens_path).is_dir():   # the same through fusion peers: alerts from fused tracks
+        rs = up(sens_path, None, tmp / "battalion-sensors", "max")
+        ssc = S.load(sens_path)
+        want = {ea.owner: [json.dumps(x.to_json_dict(), sort_keys=True) for x in ea.alerts]
+                for ea in run(ssc, list(rs["peers"]))}
+        sens_same = {u: [json.dumps(json.loads(line), sort_keys=True)
+                         for line in open(tmp / "battalion-sensors" / f"{u}.jsonl")
+                         if json.loads(line)["category"] != "system-problem"] == want[u] for u in rs["peers"]}
     out = {
         "raw_msgs_per_s": round(raw), "ea_events_per_s": round(ea_rate),
         "ea_share_of_raw": round(ea_rate / raw, 3),
@@ -143,6 +153,8 @@ def main(argv=None) -> int:
         "peak_rss_mb": max(s["peak_rss_mb"] for s in peers.values()),
         "peak_rss_mb_by_peer": {u: s["peak_rss_mb"] for u, s in peers.items()},
         "alerts_equal_in_process": same, "events": n_ev,
+        "sensors_wall_s": round(rs["wall_s"], 2) if sens_same is not None else None,
+        "sensors_alerts_equal_in_process": sens_same,
         "targets": {"ea_share_of_raw": 0.4, "latency_p99_ms": 20, "battalion_wall_s": 60, "peak_rss_mb": 200},
     }
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
