@@ -61,7 +61,7 @@ class Peer:
         self.alert_lat: list[float] = []
         self.seen_t = 0.0      # latest scenario time among received replay messages
         self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
-        self.tick_s = 2.0      # the replay's clock period
+        self.tick_n: int | None = None   # number of the last clock tick taken
         self.gaps = 0
 
     # -- sinks -------------------------------------------------------------------------
@@ -210,7 +210,7 @@ class Peer:
     def _on_tick(self, info: dict, buf: list, pres, bye) -> bool:
         """Feed the EA every message up to the tick's seq, in seq order, then advance it to
         the tick's time. True at the end tick."""
-        if info["t"] - self.t > self.tick_s + 1e-6 and self.last_seq and not info["end"]:
+        if self.tick_n is not None and info["n"] > self.tick_n + 1:
             # ticks went missing: we were cut off (frozen past our lease, or a broken
             # link) and everything sent meanwhile is lost. Take it from the store.
             self.log(f"gap t={self.t:.0f}..{info['t']:.0f}: catching up", flush=True)
@@ -226,7 +226,7 @@ class Peer:
         if DEBUG and int(info["t"]) % 300 == 0:
             self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
                      f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
-        self.t = info["t"]
+        self.t, self.tick_n = info["t"], info["n"]
         self._presence(pres, bye)
         n_alerts = len(self.ea.alerts)
         if info["end"]:

@@ -43,6 +43,7 @@ class Replay:
         self.entries: list[tuple[int, bytes]] = []
         self.by_key: dict[str, list[int]] = {}   # key -> its seqs: queries test each key once
         self.t = 0.0
+        self.n_ticks = 0
         self.until = until
         self.window_s = window_s if speed is None else 0.0   # pacing only at max speed
 
@@ -56,8 +57,8 @@ class Replay:
                 entries = self.entries[since:]
             else:
                 match = matcher(keys)
-                seqs = sorted(q for k, qs in self.by_key.items() if match(k) for q in qs[bisect_right(qs, since):])
-                entries = [self.entries[q - 1] for q in seqs]
+                seqs = sorted(n for k, ns in self.by_key.items() if match(k) for n in ns[bisect_right(ns, since):])
+                entries = [self.entries[n - 1] for n in seqs]
             query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True),
                         priority=STORE_PRIORITY)   # overtakes the data queued ahead of it (dupes are dropped by seq)
             del query   # a query kept alive makes the asker wait out its timeout
@@ -75,7 +76,9 @@ class Replay:
 
     def _tick(self, s, t: float, end: bool = False) -> None:
         self.t = t
-        s.put(self.ks.clock(), msgpack.packb({"t": t, "seq": len(self.entries), "end": end, "w": time.time()}),
+        self.n_ticks += 1
+        s.put(self.ks.clock(), msgpack.packb({"t": t, "n": self.n_ticks, "seq": len(self.entries), "end": end,
+                                              "w": time.time()}),
               congestion_control=BLOCK)
 
     def _prepare(self, end_t: float) -> list[tuple[object, str, bytes]]:
