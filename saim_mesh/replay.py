@@ -164,8 +164,11 @@ class Pacer:
         self.alive = s.liveliness().declare_subscriber(ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
                                                        history=True)
         self.live: set[str] = set()          # EA peers' zids
+        for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):   # those here now, for sure
+            if r.ok is not None and str(r.ok.key_expr).split("/")[-2] in units:
+                self.live.add(str(r.ok.key_expr).split("/")[-1])
         self.done: dict[str, float] = {}     # zid -> last tick it processed
-        self.moved: dict[str, float] = {}    # zid -> wall time of its last progress
+        self.moved = {z: time.monotonic() for z in self.live}   # zid -> wall time of its last progress
         self.ignored: set[str] = set()
 
     def _take(self) -> None:
