@@ -108,3 +108,31 @@ def test_two_fusion_nodes_three_peers_one_picture(tmp_path):
     assert all(f["tracks_out"] > 0 and f["hits_in"] > f["tracks_out"] for f in fusion)
     # the two nodes overlap: some hostile is reported by both and adjudicated into one entity
     assert any({m.split("/")[0] for m in v[3]} == {"N", "F"} for v in pictures[0].values()), pictures[0]
+
+
+@pytest.mark.timeout(240)
+def test_late_joiner_with_fusion_nodes_alerts_like_in_process(tmp_path):
+    """A peer that joins mid-run where fusion nodes make the tracks alerts, from its join
+    time on, like the in-process run (the track history it takes is applied silently)."""
+    sc = str(SMALL_SENSORS)
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    root = f"test/{uuid.uuid4().hex[:8]}"
+    procs = [start_replay(sc, ep, root, ["A", "fusion-N", "fusion-F"], "200")]
+    try:
+        procs[0].wait_for("ready", 60)
+        procs += [start_fusion(sc, "N", ep, root), start_fusion(sc, "F", ep, root),
+                  start_peer(sc, "A", ep, root, tmp_path / "A.jsonl")]
+        procs[0].wait_for("t=2500", 120)
+        procs.append(start_peer(sc, "C", ep, root, tmp_path / "C.jsonl", "C-late"))
+        joined = json.loads(procs[4].wait_for("summary ", 180)[8:])["joined_t"]
+        procs[3].wait_for("summary ", 180)
+    finally:
+        for p in procs:
+            p.stop()
+    inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
+              for ea in run(S.load(SMALL_SENSORS), ["A", "C"])}
+    for u, since in (("A", 0.0), ("C", joined)):
+        got = [a for a in map(json.loads, open(tmp_path / f"{u}.jsonl")) if a["category"] != "system-problem"]
+        want = [a for a in inproc[u] if a["t"] > since]
+        assert got == want and want, u
+    assert joined >= 2500
