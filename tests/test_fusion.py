@@ -79,8 +79,20 @@ def test_battalion_with_sensors_meets_targets():
     assert res["unwanted_share"] <= 0.05 and res["unwanted_flash"] == 0
 
 
+@pytest.fixture(scope="module")
+def inproc_sensors():
+    """Alerts of the in-process run on small-sensors, as they read back from JSON."""
+    return {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
+            for ea in run(S.load(SMALL_SENSORS), ["BN", "A", "C"])}
+
+
+def plan_alerts(path) -> list[dict]:
+    """A peer's alert file without the wall-clock-driven presence notes."""
+    return [a for a in map(json.loads, open(path)) if a["category"] != "system-problem"]
+
+
 @pytest.mark.timeout(240)
-def test_two_fusion_nodes_three_peers_one_picture(tmp_path):
+def test_two_fusion_nodes_three_peers_one_picture(tmp_path, inproc_sensors):
     sc = str(SMALL_SENSORS)
     ep = f"tcp/127.0.0.1:{free_port()}"
     root = f"test/{uuid.uuid4().hex[:8]}"
@@ -100,18 +112,16 @@ def test_two_fusion_nodes_three_peers_one_picture(tmp_path):
     assert pictures[0] and pictures[0] == pictures[1] == pictures[2]
     # each peer takes every track at the point of its stream where the in-process run
     # does, so its alerts are those of the in-process run, shuffled arrival or not
-    inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
-              for ea in run(S.load(SMALL_SENSORS), units)}
     for u in units:
-        got = [a for a in map(json.loads, open(tmp_path / f"{u}.jsonl")) if a["category"] != "system-problem"]
-        assert got == inproc[u] and got, u
+        got = plan_alerts(tmp_path / f"{u}.jsonl")
+        assert got == inproc_sensors[u] and got, u
     assert all(f["tracks_out"] > 0 and f["hits_in"] > f["tracks_out"] for f in fusion)
     # the two nodes overlap: some hostile is reported by both and adjudicated into one entity
     assert any({m.split("/")[0] for m in v[3]} == {"N", "F"} for v in pictures[0].values()), pictures[0]
 
 
 @pytest.mark.timeout(240)
-def test_late_joiner_with_fusion_nodes_alerts_like_in_process(tmp_path):
+def test_late_joiner_with_fusion_nodes_alerts_like_in_process(tmp_path, inproc_sensors):
     """A peer that joins mid-run where fusion nodes make the tracks alerts, from its join
     time on, like the in-process run (the track history it takes is applied silently)."""
     sc = str(SMALL_SENSORS)
@@ -129,10 +139,8 @@ def test_late_joiner_with_fusion_nodes_alerts_like_in_process(tmp_path):
     finally:
         for p in procs:
             p.stop()
-    inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
-              for ea in run(S.load(SMALL_SENSORS), ["A", "C"])}
     for u, since in (("A", 0.0), ("C", joined)):
-        got = [a for a in map(json.loads, open(tmp_path / f"{u}.jsonl")) if a["category"] != "system-problem"]
-        want = [a for a in inproc[u] if a["t"] > since]
+        got = plan_alerts(tmp_path / f"{u}.jsonl")
+        want = [a for a in inproc_sensors[u] if a["t"] > since]
         assert got == want and want, u
     assert joined >= 2500
