@@ -63,7 +63,7 @@ def _str(d: dict, kind: str, name: str, choices: tuple[str, ...] | None = None, 
     if not isinstance(v, str) or not v:
         raise MessageError(kind, name, "expected a non-empty string")
     if choices and v not in choices:
-        raise MessageError(kind, name, f"{v!r} not one of {', '.join(choices)}")
+        raise MessageError(kind, name, f"{_label(v)} not one of {', '.join(choices)}")
     return v
 
 
@@ -251,14 +251,24 @@ MESSAGE_TYPES: dict[str, type] = {c.KIND: c for c in (
     LocationReport, SensorTrack, SensorHit, MissionConfirm, Order, CallForFire, CallForFireConfirm, Reorganization, Alert)}
 
 
+def _label(v: Any) -> str:
+    """A value named in an error without rendering it: an attacker's value may be
+    a thousand levels deep or a megabyte long."""
+    if type(v) is str:
+        return repr(v[:40])
+    if type(v) in (int, float, bool) or v is None:
+        return repr(v)[:40]
+    return f"a {type(v).__name__}"
+
+
 def from_dict(d: Any) -> Message:
     """Build a message from a decoded mapping with a `kind` key; raises MessageError."""
     if not isinstance(d, dict):
         raise MessageError("?", "(message)", f"expected a mapping, got {type(d).__name__}")
     kind = d.get("kind")
-    cls = MESSAGE_TYPES.get(kind)  # type: ignore[arg-type]
+    cls = MESSAGE_TYPES.get(kind) if type(kind) is str else None
     if cls is None:
-        raise MessageError(str(kind), "kind", f"unknown message kind {kind!r}")
+        raise MessageError("?", "kind", f"unknown message kind {_label(kind)}")
     return cls.from_dict(d)
 
 
@@ -283,10 +293,16 @@ def decode(data: bytes) -> Message:
         raise MessageError("?", "(bytes)", f"not valid msgpack: {e}") from None
     if not isinstance(d, dict):
         raise MessageError("?", "(message)", "expected a mapping")
-    v = d.get("v")
-    if v != VERSION:
-        raise MessageError(str(d.get("kind")), "v", f"unsupported version {v!r} (expected {VERSION})")
-    return from_dict(d)
+    v, kind = d.get("v"), d.get("kind")
+    kind = kind if type(kind) is str and kind in MESSAGE_TYPES else "?"
+    if type(v) is not int or v != VERSION:   # `True == 1`: a bool is no version
+        raise MessageError(kind, "v", f"unsupported version {_label(v)} (expected {VERSION})")
+    try:
+        return from_dict(d)
+    except MessageError:
+        raise
+    except Exception as e:   # an odd shape the field checks did not foresee: still a rejection
+        raise MessageError(kind, "(message)", f"undecodable: {type(e).__name__}") from None
 
 
 class Decoder:

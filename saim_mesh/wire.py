@@ -1,0 +1,203 @@
+"""Control messages of the mesh as typed, bounded msgspec structs, and the one place
+where every payload a process receives is checked before use.
+
+Data messages (positions, tracks, orders, alerts...) keep their validating decoder
+in `messages.py`; the control messages that steer the peers (clock, acks, store
+queries and replies, fusion ticks, bye) are here. Both go through `Gate`: a size
+bound before decoding, an exact version, times inside the scenario's clock, and a
+`MessageError` (the project's own rejection) for everything else, so that no
+payload can raise anything a peer does not expect.
+"""
+from __future__ import annotations
+
+import time
+from typing import Annotated, Literal
+
+import msgspec
+
+from . import messages as M
+
+VERSION = 1
+T_LIMIT = 1e9            # no scenario lasts 30 years: the outer bound of any time
+SEQ_LIMIT = 2**53        # sequence numbers stay exact in every language that reads them
+KEY_LIMIT = 512          # characters in one key expression of a query
+KEYS_LIMIT = 20_000      # key expressions in one query
+
+Time = Annotated[float, msgspec.Meta(ge=0.0, le=T_LIMIT)]
+Seq = Annotated[int, msgspec.Meta(ge=0, le=SEQ_LIMIT)]
+KeyExprs = Annotated[list[Annotated[str, msgspec.Meta(min_length=1, max_length=KEY_LIMIT)]],
+                     msgspec.Meta(max_length=KEYS_LIMIT)]
+
+
+class _Wire(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    v: Literal[1]    # required: a message without its version is not ours (build with `make`)
+
+
+class Tick(_Wire, kw_only=True):
+    """The replay's clock: scenario time `t` reached, tick number `n` (a missing number
+    means we were cut off), every message up to `seq` sent; `w` is the wall clock."""
+    t: Time
+    n: Seq
+    seq: Seq
+    end: bool = False
+    w: Annotated[float, msgspec.Meta(ge=0.0, le=1e11)] | None = None
+
+
+class Ack(_Wire, kw_only=True):
+    """An EA peer has processed every tick up to scenario time `t` (replay pacing)."""
+    t: Time
+
+
+class StoreQuery(_Wire, kw_only=True):
+    """Entries after `since` on `keys` (every key when None)."""
+    since: Seq = 0
+    keys: KeyExprs | None = None
+
+
+class StoreReply(_Wire, kw_only=True):
+    """The situation store's answer: `(seq, payload)` entries and the time it reached;
+    `fusion` is the clock time each fusion group's tracks are out to."""
+    t: Time
+    entries: list[tuple[Seq, bytes]]
+    fusion: dict[str, Time] = {}
+
+
+class FusionTick(_Wire, kw_only=True):
+    """A fusion node's tracks up to clock time `t` are out; `last` is its highest track number."""
+    t: Time
+    last: Seq = 0
+
+
+class FusionQuery(_Wire, kw_only=True):
+    keys: KeyExprs | None = None
+
+
+class FusionReply(_Wire, kw_only=True):
+    entries: list[bytes]
+
+
+class Bye(_Wire, kw_only=True):
+    """A peer leaves cleanly: its liveliness DELETE is then no alarm."""
+    unit: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
+
+
+class Health(_Wire, kw_only=True):
+    """A peer's count of rejected messages, by kind: its superior alerts on a flood."""
+    unit: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
+    rejects: Seq
+    by_kind: Annotated[dict[Annotated[str, msgspec.Meta(max_length=64)], Seq], msgspec.Meta(max_length=64)] = {}
+
+
+CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health)
+_DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
+KINDS = frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}   # what rejects are counted under
+_ENCODER = msgspec.msgpack.Encoder()
+
+
+def make(cls: type, **fields) -> msgspec.Struct:
+    """A control message of this version."""
+    return cls(v=VERSION, **fields)
+
+
+def encode(msg: msgspec.Struct) -> bytes:
+    return _ENCODER.encode(msg)
+
+
+def decode_control(cls: type, data: bytes, max_bytes: int) -> msgspec.Struct:
+    """Decode one control payload into `cls`; raises MessageError and nothing else."""
+    name = cls.__name__.lower()
+    if len(data) > max_bytes:
+        raise M.MessageError(name, "(bytes)", f"{len(data)} bytes, over the {max_bytes} limit")
+    try:
+        return _DECODERS[cls].decode(data)
+    except (msgspec.ValidationError, msgspec.DecodeError) as e:
+        raise M.MessageError(name, "(message)", str(e)[:200]) from None
+    except Exception as e:   # a decoder bug must not kill a peer either
+        raise M.MessageError(name, "(message)", f"undecodable: {type(e).__name__}") from None
+
+
+class Rejects:
+    """Counts rejected payloads per kind and logs each kind once with a sample, then a
+    summary at most every `every_s` of wall time: a flood costs a counter, not a log."""
+
+    def __init__(self, log=None, every_s: float = 10.0, sample_chars: int = 160):
+        self.log, self.every_s, self.sample_chars = log, every_s, sample_chars
+        self.by_kind: dict[str, int] = {}
+        self.total = 0
+        self.recent: list[str] = []
+        self._said: dict[str, int] = {}
+        self._next = 0.0
+
+    def add(self, err: M.MessageError, key: str = "") -> None:
+        self.total += 1
+        kind = err.kind if err.kind in KINDS else "undecodable" if err.kind == "?" else "other"
+        n = self.by_kind[kind] = self.by_kind.get(kind, 0) + 1
+        self.recent = (self.recent + [str(err)[:self.sample_chars]])[-20:]
+        if self.log is None:
+            return
+        if n == 1:
+            self.log(f"reject {kind} on {key[:120]}: {str(err)[:self.sample_chars]}", flush=True)
+            self._said[kind] = 1
+            return
+        now = time.monotonic()
+        if now >= self._next:
+            self._next = now + self.every_s
+            new = {k: v - self._said.get(k, 0) for k, v in self.by_kind.items() if v > self._said.get(k, 0)}
+            if new:
+                self.log("rejects since last said: " + ", ".join(f"{k} {v}" for k, v in sorted(new.items())),
+                         flush=True)
+                self._said = dict(self.by_kind)
+
+
+class Gate:
+    """Every payload in: size bound, then typed decoding, then times inside the clock.
+
+    `t_max` is the scenario's end: a message dated after it can only be a forgery or
+    a fault, and holding it would cost memory until the end of time."""
+
+    def __init__(self, t_max: float, max_bytes: int = 65536, max_reply_bytes: int = 256 * 2**20, log=None):
+        self.t_max = float(t_max)
+        self.max_bytes, self.max_reply_bytes = max_bytes, max_reply_bytes
+        self.rejects = Rejects(log)
+        self.ok = 0
+
+    def _bound(self, kind: str, t: float) -> None:
+        if t > self.t_max:
+            raise M.MessageError(kind, "t", f"{t} after the scenario's end ({self.t_max})")
+
+    def data(self, payload: bytes | None, key: str = "") -> M.Message | None:
+        """A data message, or None (counted) when it is bad."""
+        try:
+            if payload is None:
+                raise M.MessageError("?", "(bytes)", "no payload")
+            if len(payload) > self.max_bytes:
+                raise M.MessageError("?", "(bytes)", f"{len(payload)} bytes, over the {self.max_bytes} limit")
+            m = M.decode(payload)
+            self._bound(m.KIND, m.t)
+        except M.MessageError as e:
+            self.rejects.add(e, key)
+            return None
+        self.ok += 1
+        return m
+
+    def control(self, cls: type, payload: bytes | None, key: str = ""):
+        """A control message of type `cls`, or None (counted) when it is bad."""
+        big = cls in (StoreReply, FusionReply)
+        try:
+            if payload is None:
+                raise M.MessageError(cls.__name__.lower(), "(bytes)", "no payload")
+            m = decode_control(cls, payload, self.max_reply_bytes if big else self.max_bytes)
+            t = getattr(m, "t", None)
+            if t is not None:
+                self._bound(cls.__name__.lower(), t)
+            for ft in getattr(m, "fusion", {}).values():
+                self._bound(cls.__name__.lower(), ft)
+        except M.MessageError as e:
+            self.rejects.add(e, key)
+            return None
+        self.ok += 1
+        return m
+
+    @property
+    def errors(self) -> int:
+        return self.rejects.total
