@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 from collections import Counter
 from pathlib import Path
@@ -21,8 +23,19 @@ def _speed(v: str) -> float | None:
         f = float(v)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--speed takes a factor or 'max', not {v!r}") from None
-    if f <= 0:
-        raise argparse.ArgumentTypeError("--speed factor must be > 0")
+    if not math.isfinite(f) or f <= 0:
+        raise argparse.ArgumentTypeError("--speed factor must be a finite number > 0")
+    return f
+
+
+def _seconds(v: str) -> float:
+    """A finite, non-negative number of seconds (or metres)."""
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {v!r}") from None
+    if not math.isfinite(f) or f < 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, not {v!r}")
     return f
 
 
@@ -54,11 +67,18 @@ def table(eas) -> str:
 
 
 def cmd_run(a) -> int:
+    from ea_agent.core.config import load_config
+
     from .runner import default_eas, run
     sc = S.load(a.scenario)
     owners = a.ea or default_eas(sc)
+    for o in owners:   # every bad input is reported before anything runs or is written
+        if o not in sc.taskorg.units:
+            raise KeyError(f"--ea {o}: unknown unit {o!r}: not in the task organization of {sc.name} "
+                           f"({sc.root / 'plan.json'})")
+        load_config(a.config, o)
     sinks = [] if a.quiet else [TerminalSink()]
-    out = open(a.out, "w") if a.out else None
+    out = open(a.out, "w", buffering=1) if a.out else None   # line-buffered; JsonlSink flushes each alert
     if out:
         sinks.append(JsonlSink(out))
     try:
@@ -107,7 +127,32 @@ def cmd_generate(a) -> int:
 
 
 def cmd_validate(a) -> int:
+    """Everything `run` would trip on: the whole scenario (events too), the default
+    configuration of each default EA, and those EAs built and started on every plan."""
+    from ea_agent.core.config import ConfigError, load_config
+    from ea_agent.domains.suo import make_ea
+
+    from .runner import default_eas
     sc = S.load(a.scenario)
+    owners = default_eas(sc)
+    for o in owners:   # `run` without --ea runs these
+        if o not in sc.taskorg.units:
+            raise S.ScenarioError(f"scenario.json: field 'default_eas': missing, and the built-in default EA "
+                                  f"{o!r} is not a unit of this scenario (list the owners to run by default)")
+    top = sc.taskorg.root
+    for o in dict.fromkeys([*owners, top]):
+        cfg = load_config(None, o)
+        try:
+            ea = make_ea(sc, o, cfg)
+            ea.start(0.0)
+            if o == top:   # the top unit's EA monitors every mission: start each plan once
+                for name in sc.plans:
+                    ea.domain.execute_plan(name, 0.0)
+        except ConfigError:
+            raise
+        except (KeyError, ValueError, TypeError) as e:
+            raise S.ScenarioError(f"{sc.root}: the EA of {o} cannot start: {type(e).__name__}: "
+                                  f"{e.args[0] if e.args else e}") from e
     print(f"{sc.name}: {len(sc.taskorg.units)} units, {len(sc.taskorg.entity_unit)} entities, "
           f"{sum(len(p.missions) for p in sc.plans.values())} missions, {len(sc.overlay)} control measures, "
           f"{len(sc.events)} events: OK")
@@ -118,8 +163,9 @@ def cmd_replay(a) -> int:
     from .replay import main_replay
     from .zconf import config
     sc = S.load(a.scenario)
-    return main_replay(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast), a.root or f"saim/{sc.name}", a.speed,
-                       a.wait_peers or [], a.linger, a.until, a.window)
+    root = a.root or f"saim/{sc.name}"
+    return main_replay(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "replay", sc, root), root,
+                       a.speed, a.wait_peers or [], a.linger, a.until, a.window, a.state)
 
 
 def cmd_peer(a) -> int:
@@ -128,22 +174,51 @@ def cmd_peer(a) -> int:
     sc = S.load(a.scenario, events=False)
     if a.unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
-    return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config, a.multicast), a.root or f"saim/{sc.name}",
-                     a.out, a.config, a.radius)
+    root = a.root or f"saim/{sc.name}"
+    return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc,
+                                        root), root, a.out, a.config, a.radius, a.deadline, a.connect)
 
 
 def cmd_fusion(a) -> int:
     from .fusion.peer import main_fusion
     from .zconf import config
     sc = S.load(a.scenario, events=False)
-    return main_fusion(sc, a.group, config(a.listen, a.connect, a.zenoh_config, a.multicast), a.root or f"saim/{sc.name}",
-                       a.shuffle)
+    if a.group not in sc.meta.get("fusion", {}).get("groups", {}):
+        raise KeyError(f"unknown fusion group {a.group!r}: not in {sc.name}'s scenario.json")
+    root = a.root or f"saim/{sc.name}"
+    return main_fusion(sc, a.group, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"fusion.{a.group}",
+                                           sc, root), root, a.shuffle)
 
 
 def cmd_mesh(a) -> int:
     from .mesh import up
-    up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window)
+    res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
+             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts)
+    return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
+
+
+def cmd_certs(a) -> int:
+    from .mesh import mesh_units
+    from .security.pki import make_pki, names_for
+    sc = S.load(a.scenario, events=False)
+    made = make_pki(Path(a.out), names_for(sc, a.units or mesh_units(sc)))
+    print(f"{len(made)} identities in {a.out} (CA: {Path(a.out) / 'ca.pem'}): {', '.join(sorted(made))}")
     return 0
+
+
+def _fail(what) -> int:
+    """One line on stderr and exit code 2 (SAIM_MESH_DEBUG=1 re-raises for the traceback)."""
+    if os.environ.get("SAIM_MESH_DEBUG"):
+        raise
+    print("saim-mesh: " + " ".join(str(what).split()), file=sys.stderr)
+    return 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line (`--help` still shows the usage)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
 def _zenoh_args(p) -> None:
@@ -153,10 +228,12 @@ def _zenoh_args(p) -> None:
     p.add_argument("--multicast", action="store_true",
                    help="discover peers by UDP multicast scouting (a LAN) instead of configured endpoints only")
     p.add_argument("--root", help="key-expression root (default saim/<scenario name>)")
+    p.add_argument("--pki", metavar="DIR", help="secure mode: mutual TLS with this folder's certificates "
+                   "(saim-mesh certs) and the mesh's access-control rules; endpoints are then tls/...")
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="saim-mesh", description=__doc__)
+    p = _Parser(prog="saim-mesh", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run EAs in one process over a scenario")
     r.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
@@ -187,10 +264,11 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     rp.add_argument("--wait-peers", nargs="*", metavar="UNIT",
                     help="start when these peers are present (name a unit twice to wait for two of its peers)")
-    rp.add_argument("--linger", type=float, default=30.0, help="seconds to keep serving the store at the end")
-    rp.add_argument("--window", type=float, default=20.0, metavar="S",
+    rp.add_argument("--linger", type=_seconds, default=30.0, help="seconds to keep serving the store at the end")
+    rp.add_argument("--window", type=_seconds, default=20.0, metavar="S",
                     help="at max speed, stay at most S of scenario time ahead of the slowest peer (0: no pacing)")
-    rp.add_argument("--until", type=float, default=None, help="stop at this scenario time")
+    rp.add_argument("--until", type=_seconds, default=None, help="stop at this scenario time")
+    rp.add_argument("--state", metavar="FILE", help="progress file: a restarted replay resumes from it")
     _zenoh_args(rp)
     rp.set_defaults(fn=cmd_replay)
     pe = sub.add_parser("peer", help="run one unit's EA as a Zenoh peer")
@@ -198,8 +276,10 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--unit", required=True)
     pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
     pe.add_argument("--config", metavar="TOML")
-    pe.add_argument("--radius", type=float, default=None,
+    pe.add_argument("--radius", type=_seconds, default=None,
                     help="geographic interest radius around our units (m); default: [dissemination] in the config")
+    pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",
+                    help="exit (code 3) after S seconds of wall time without a clock tick from the source")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
     fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")
@@ -214,17 +294,35 @@ def main(argv: list[str] | None = None) -> int:
     me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
     me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     me.add_argument("--out-dir", default="out/mesh")
-    me.add_argument("--window", type=float, default=20.0, metavar="S",
+    me.add_argument("--window", type=_seconds, default=20.0, metavar="S",
                     help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
+    me.add_argument("--insecure", action="store_true",
+                    help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
+    me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
+    me.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
     me.set_defaults(fn=cmd_mesh)
+    ce = sub.add_parser("certs", help="make a test CA and a certificate per identity of a scenario's mesh")
+    ce.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    ce.add_argument("--out", default="out/pki")
+    ce.add_argument("--units", nargs="+", metavar="UNIT", help="EA identities (default: battalion, companies, platoons)")
+    ce.set_defaults(fn=cmd_certs)
     a = p.parse_args(argv)
+    from ea_agent.core.config import ConfigError
     try:
         return a.fn(a)
-    except (S.ScenarioError, KeyError) as err:
-        print(f"saim-mesh: {err}", file=sys.stderr)
-        return 2
     except BrokenPipeError:
         return 0
+    except KeyboardInterrupt:
+        print("saim-mesh: interrupted", file=sys.stderr)
+        return 130
+    except (S.ScenarioError, ConfigError) as err:   # they name file, place and field
+        return _fail(err)
+    except KeyError as err:   # an unknown unit; str() of a KeyError would quote its message
+        return _fail(err.args[0] if err.args else err)
+    except ValueError as err:   # from a loader that does not name its file: still one line
+        return _fail(f"{type(err).__name__}: {err}")
+    except OSError as err:   # a file not found or unreadable (--out, --config, ...)
+        return _fail(f"{err.filename}: {err.strerror}" if err.filename and err.strerror else err)
 
 
 if __name__ == "__main__":

@@ -30,13 +30,15 @@ class TerminalSink:
 
 
 class JsonlSink:
-    """One JSON object per alert per line; keys sorted so that replays are byte-identical."""
+    """One JSON object per alert per line; keys sorted so that replays are byte-identical.
+    Flushed after every alert: a killed run loses no alert it has given."""
 
     def __init__(self, stream: IO[str]):
         self.stream = stream
 
     def __call__(self, a: Alert) -> None:
         self.stream.write(alert_line(a) + "\n")
+        self.stream.flush()
 
 
 class ListSink(list):

@@ -55,16 +55,37 @@ class TaskOrg:
         out, p = [], self.parent.get(unit)
         while p is not None:
             out.append(p)
+            if len(out) > len(self.parent):   # a cycle: never loop forever (loaders reject cycles)
+                raise ValueError(f"cycle in the task organization above {unit!r}")
             p = self.parent.get(p)
         return out
+
+    def cycle(self) -> list[str] | None:
+        """A cycle in the parent links, as [A, B, ..., A], or None if the hierarchy is a tree."""
+        done: set[str] = set()
+        for start in sorted(self.parent):
+            path: list[str] = []
+            on_path: set[str] = set()
+            u: str | None = start
+            while u is not None and u not in done:
+                if u in on_path:
+                    return path[path.index(u):] + [u]
+                path.append(u)
+                on_path.add(u)
+                u = self.parent.get(u)
+            done |= on_path
+        return None
 
     def subtree(self, unit: str) -> tuple[str, ...]:
         """`unit` and everything under it, sorted (cached per hierarchy version)."""
         hit = self._cache.get(unit)
         if hit is None:
-            out, todo = [], [unit]
+            out, todo, seen = [], [unit], set()
             while todo:
                 u = todo.pop()
+                if u in seen:   # a cycle: never loop forever (loaders reject cycles)
+                    raise ValueError(f"cycle in the task organization under {unit!r}")
+                seen.add(u)
                 out.append(u)
                 todo.extend(self.children(u))
             hit = self._cache[unit] = tuple(sorted(out))
@@ -110,6 +131,29 @@ class MissionSpec:
 class PlanSpec:
     name: str
     missions: list[MissionSpec]
+
+    def cycle(self) -> list[str] | None:
+        """A cycle in the missions' `after` lists, as [a, b, ..., a], or None if they form a
+        partial order (a cycle would leave its missions pending forever)."""
+        after = {m.id: m.after for m in self.missions}
+        state: dict[str, int] = {}   # 1: on the current path, 2: finished
+        for root in after:
+            if state.get(root):
+                continue
+            path, stack = [root], [iter(after[root])]
+            state[root] = 1
+            while stack:
+                nxt = next(stack[-1], None)
+                if nxt is None:
+                    state[path.pop()] = 2
+                    stack.pop()
+                elif state.get(nxt) == 1:
+                    return path[path.index(nxt):] + [nxt]
+                elif not state.get(nxt) and nxt in after:
+                    state[nxt] = 1
+                    path.append(nxt)
+                    stack.append(iter(after[nxt]))
+        return None
 
 
 class PlanState:
