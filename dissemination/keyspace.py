@@ -13,7 +13,8 @@ peer can subscribe by mission, geography (grid cells) and command (its subtree).
   <root>/alert/<owner>/<type>                  alerts raised by an EA
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
-  <root>/ack/<peer>                            the last clock tick a peer processed (replay pacing)
+  <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing)
+  <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
   <root>/store/log                             the situation store (queryable)
   <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
 """
@@ -96,6 +97,35 @@ class KeySpace:
             return f"{r}/alert/{msg.owner}/{msg.type}"
         raise ValueError(f"no key for {k.__name__}")
 
+    _CLAIMS = {  # key family -> message kinds it carries, and which chunks must equal which fields
+        "pos": ({"location"}, ((-1, "entity"),)),
+        "trk": ({"track"}, ((-1, "track"),)),
+        "hit": ({"hit"}, ((-1, "sensor"),)),
+        "msn": ({"mission"}, ((1, "unit"), (2, "mission"))),
+        "ord": ({"order"}, ((1, "issuer"),)),
+        "cff": ({"cff", "cff-confirm"}, ((-2, "requester"), (-1, "cff"))),
+        "org": ({"reorg"}, ((1, "unit"),)),
+        "alert": ({"alert"}, ((1, "owner"), (2, "type"))),
+    }
+
+    def mismatch(self, key: str, msg) -> str | None:
+        """Why a message does not belong on the key it came on (None when it does).
+        Access control says who may publish on a key; this says that what they
+        published is what the key claims (an order on ord/A2 is issued by A2)."""
+        n = len(self.root) + 1
+        if key[:n] != self.root + "/":
+            return f"key {key[:80]!r} outside the root"
+        chunks = key[n:].split("/")
+        rule = self._CLAIMS.get(chunks[0])
+        if rule is None or msg.KIND not in rule[0]:
+            return f"a {msg.KIND} message on {chunks[0]}/ keys"
+        for i, fname in rule[1]:
+            if not -len(chunks) < i < len(chunks):
+                return f"key {key[:80]!r} has too few chunks"
+            if chunks[i] != getattr(msg, fname):
+                return f"field '{fname}' {str(getattr(msg, fname))[:40]!r} differs from the key's {chunks[i][:40]!r}"
+        return None
+
     def clock(self) -> str:
         return f"{self.root}/clock"
 
@@ -108,8 +138,11 @@ class KeySpace:
     def fusion_tick(self, group: str) -> str:
         return f"{self.root}/fusion-tick/{group}"
 
-    def ack(self, peer: str) -> str:
-        return f"{self.root}/ack/{peer}"
+    def ack(self, unit: str, peer: str = "*") -> str:
+        return f"{self.root}/ack/{unit}/{peer}"
+
+    def health(self, unit: str) -> str:
+        return f"{self.root}/health/{unit}"
 
     def bye(self, unit: str) -> str:
         return f"{self.root}/bye/{unit}"

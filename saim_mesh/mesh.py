@@ -1,14 +1,16 @@
-"""`saim-mesh mesh up`: one OS process per unit EA plus the replay, on loopback,
-with alerts collected per peer and every child reaped on exit."""
+"""`saim-mesh mesh up`: one OS process per unit EA, the fusion nodes and the replay, on
+loopback, supervised: a child that dies is reported (which, exit code, last lines of
+its log) and restarted with backoff while the rest keep running; every child's output
+goes to its own log file under the output folder. Secure (mTLS + access control) by
+default; `insecure=True` keeps the open mode for quick experiments."""
 from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
+from .proc import Proc, clean_env, py
 from .zconf import free_port
 
 
@@ -17,112 +19,155 @@ def mesh_units(sc) -> list[str]:
     return sorted(u for u, x in sc.taskorg.units.items() if x.echelon in ("battalion", "company", "platoon"))
 
 
-class Proc:
-    """A child process whose stdout lines we read (without blocking on them)."""
-
-    def __init__(self, name: str, args: list[str], env=None):
-        self.name = name
-        self.p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-        os.set_blocking(self.p.stdout.fileno(), False)
-        self.lines: list[str] = []
-        self._partial = ""
-
-    def poll_lines(self) -> list[str]:
-        try:
-            chunk = self.p.stdout.read()
-        except (TypeError, ValueError):
-            chunk = None
-        if not chunk:
-            return []
-        text = self._partial + chunk
-        parts = text.split("\n")
-        self._partial = parts.pop()
-        self.lines += parts
-        return parts
-
-    def wait_for(self, prefix: str, timeout: float) -> str:
-        end = time.monotonic() + timeout
-        seen = 0
-        while time.monotonic() < end:
-            exited = self.p.poll() is not None   # checked first: then every line it wrote is readable
-            self.poll_lines()
-            for line in self.lines[seen:]:
-                if line.startswith(prefix):
-                    return line
-            seen = len(self.lines)
-            if exited:
-                raise RuntimeError(f"{self.name} exited ({self.p.returncode}) before '{prefix}': "
-                                   f"{self.p.stderr.read()[-2000:]}")
-            time.sleep(0.01)
-        raise TimeoutError(f"{self.name}: no '{prefix}' within {timeout} s")
-
-    def stop(self) -> None:
-        if self.p.poll() is None:
-            self.p.terminate()
-            try:
-                self.p.wait(5)
-            except subprocess.TimeoutExpired:
-                self.p.kill()
-                self.p.wait()
-
-
-def py() -> list[str]:
-    return [sys.executable, "-m", "saim_mesh"]
+def _sec(pki: str | Path | None) -> list[str]:
+    return ["--pki", str(pki)] if pki else []
 
 
 def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed: str = "max",
-                 linger: float = 30.0, window: float = 20.0) -> Proc:
-    return Proc("replay", [*py(), "replay", scenario, "--listen", endpoint, "--root", root, "--speed", speed,
-                           "--linger", str(linger), "--window", str(window), "--wait-peers", *wait])
+                 linger: float = 30.0, window: float = 20.0, pki=None, log_dir=None, state=None,
+                 name: str = "replay") -> Proc:
+    return Proc(name, [*py(), "replay", scenario, "--listen", endpoint, "--root", root, "--speed", speed,
+                       "--linger", str(linger), "--window", str(window), *_sec(pki),
+                       *(["--state", str(state)] if state else []), "--wait-peers", *wait],
+                env=clean_env(), log_dir=log_dir)
+
+
+def _listen(endpoint: str) -> str:
+    return ("tls" if endpoint.startswith("tls/") else "tcp") + "/127.0.0.1:0"
 
 
 def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Path, name: str | None = None,
-               extra: list[str] = ()) -> Proc:
+               extra: list[str] = (), pki=None, log_dir=None) -> Proc:
     return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, "--connect", endpoint,
-                               "--listen", "tcp/127.0.0.1:0", "--root", root, "--out", str(out), *extra])
+                               "--listen", _listen(endpoint), "--root", root, "--out", str(out), *_sec(pki), *extra],
+                env=clean_env(), log_dir=log_dir)
 
 
-def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: int | None = None) -> Proc:
+def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: int | None = None, pki=None,
+                 log_dir=None) -> Proc:
     return Proc(f"fusion-{group}", [*py(), "fusion", "--scenario", scenario, "--group", group, "--connect", endpoint,
-                                    "--listen", "tcp/127.0.0.1:0", "--root", root]
-                + (["--shuffle", str(shuffle)] if shuffle is not None else []))
+                                    "--listen", _listen(endpoint), "--root", root, *_sec(pki)]
+                + (["--shuffle", str(shuffle)] if shuffle is not None else []), env=clean_env(), log_dir=log_dir)
 
 
-def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 600.0,
-       root: str | None = None, echo=print, window: float = 20.0) -> dict:
+class Supervisor:
+    """Restart what dies, with backoff; remember what happened for the summary."""
+
+    def __init__(self, echo, max_restarts: int = 10, backoff_s: float = 0.5, pids_path: Path | None = None):
+        self.procs: dict[str, Proc] = {}
+        self.echo, self.max_restarts, self.backoff_s, self.pids_path = echo, max_restarts, backoff_s, pids_path
+        self.events: list[dict] = []
+        self.due: dict[str, float] = {}     # name -> wall time of its restart
+        self.given_up: set[str] = set()
+
+    def add(self, p: Proc) -> Proc:
+        self.procs[p.name] = p
+        self._write_pids()
+        return p
+
+    def finished(self, p: Proc) -> bool:
+        """Exited on its own after saying its summary (or, for the replay, its end)."""
+        return p.exited() == 0 and (p.find("summary ") is not None or p.find("end ") is not None)
+
+    def check(self) -> None:
+        now = time.monotonic()
+        for name, p in self.procs.items():
+            code = p.exited()
+            if code is None or name in self.given_up or self.finished(p):
+                continue
+            if name not in self.due:
+                ev = {"process": name, "exit_code": code, "start": p.starts, "last_lines": p.tail(5)}
+                self.events.append(ev)
+                self.echo(f"supervisor: {name} exited ({code}); last lines: " + " | ".join(ev["last_lines"][-3:]))
+                if p.starts > self.max_restarts:
+                    self.given_up.add(name)
+                    self.echo(f"supervisor: {name} died {p.starts} times: not restarting it")
+                    continue
+                self.due[name] = now + min(8.0, self.backoff_s * 2 ** (p.starts - 1))
+            elif now >= self.due[name]:
+                del self.due[name]
+                p._log.close()
+                p.start()
+                self.events.append({"process": name, "restarted": p.starts - 1})
+                self.echo(f"supervisor: restarted {name} (restart {p.starts - 1})")
+                self._write_pids()
+
+    def _write_pids(self) -> None:
+        if self.pids_path is not None:
+            tmp = self.pids_path.with_suffix(".tmp")
+            tmp.write_text(json.dumps({n: p.pid for n, p in self.procs.items()}))
+            os.replace(tmp, self.pids_path)
+
+    def stop(self) -> None:
+        for p in self.procs.values():
+            p.stop()
+
+
+def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 900.0,
+       root: str | None = None, echo=print, window: float = 20.0, insecure: bool = False,
+       pki: Path | None = None, max_restarts: int = 10) -> dict:
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
     groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
     out_dir.mkdir(parents=True, exist_ok=True)
+    logs = out_dir / "logs"
+    logs.mkdir(exist_ok=True)
+    for f in logs.glob("*.log"):
+        f.unlink()
     root = root or f"saim/{sc.name}/{os.getpid()}"
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs: list[Proc] = []
+    if insecure:
+        echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
+             "feed this mesh orders, positions and tracks")
+        endpoint, pki = f"tcp/127.0.0.1:{free_port()}", None
+    else:
+        from .security.pki import make_pki, names_for
+        pki = Path(pki or out_dir / "pki")
+        make_pki(pki, names_for(sc))
+        endpoint = f"tls/127.0.0.1:{free_port()}"
+    state = out_dir / "replay.state"
+    state.unlink(missing_ok=True)
+    sup = Supervisor(echo, max_restarts, pids_path=out_dir / "pids.json")
     t0 = time.monotonic()
+    summaries: dict[str, dict] = {}
     try:
-        replay = start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
-                              window=window)
-        procs.append(replay)
+        replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
+                                      window=window, pki=pki, log_dir=logs, state=state))
         replay.wait_for("ready", 60)
-        fusion = [start_fusion(scenario, g, endpoint, root) for g in groups]
-        procs += fusion
+        for g in groups:
+            sup.add(start_fusion(scenario, g, endpoint, root, pki=pki, log_dir=logs))
         for u in units:
             (out_dir / f"{u}.jsonl").unlink(missing_ok=True)
-            procs.append(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl"))
-        summaries = {}
+            sup.add(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl", pki=pki, log_dir=logs))
         end = time.monotonic() + timeout
-        for p in procs[1 + len(fusion):]:
-            line = p.wait_for("summary ", max(1.0, end - time.monotonic()))
-            summaries[p.name] = json.loads(line[len("summary "):])
-        replay.p.wait(max(1.0, end - time.monotonic()))
-        replay.poll_lines()
+        while time.monotonic() < end:
+            sup.check()
+            for u in units:
+                if u not in summaries and sup.finished(p := sup.procs[u]):
+                    summaries[u] = json.loads(p.find("summary ")[len("summary "):])
+            if len(summaries) + len(sup.given_up & set(units)) >= len(units):
+                break
+            time.sleep(0.05)
+        else:
+            echo(f"mesh: timed out after {timeout:.0f} s; peers without a summary: "
+                 f"{sorted(set(units) - set(summaries))}")
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not sup.finished(replay) and replay.exited() is None:
+            time.sleep(0.05)
         wall = time.monotonic() - t0
     finally:
-        for p in procs:
-            p.stop()
-    echo(f"{'peer':>6} {'alerts':>7} {'flash':>6} {'facts':>7} {'subs':>5} {'rss MB':>7} {'wall s':>7}")
+        sup.stop()
+    echo(f"{'peer':>6} {'alerts':>7} {'flash':>6} {'late':>5} {'facts':>7} {'subs':>5} {'rss MB':>7} {'wall s':>7}")
     for u, s in summaries.items():
-        echo(f"{u:>6} {s['alerts']:>7} {s['by_priority'].get('flash', 0):>6} {s['facts']:>7} "
-             f"{s['subscriptions']:>5} {s['peak_rss_mb']:>7} {s['wall_s']:>7}")
-    echo(f"{len(summaries)} peers, wall {wall:.1f} s; alerts in {out_dir}/")
-    return {"peers": summaries, "wall_s": wall, "replay": replay.lines}
+        echo(f"{u:>6} {s['alerts']:>7} {s['by_priority'].get('flash', 0):>6} {s.get('late_alerts', 0):>5} "
+             f"{s['facts']:>7} {s['subscriptions']:>5} {s['peak_rss_mb']:>7} {s['wall_s']:>7}")
+    crashes = [e for e in sup.events if "exit_code" in e]
+    echo(f"{len(summaries)} peers, wall {wall:.1f} s, {'insecure' if insecure else 'mTLS + access control'}; "
+         f"{len(crashes)} crash(es), {sum(1 for e in sup.events if 'restarted' in e)} restart(s); "
+         f"alerts in {out_dir}/, logs in {logs}/")
+    for e in crashes:
+        echo(f"  {e['process']} exited ({e['exit_code']}): {' | '.join(e['last_lines'][-2:])}")
+    result = {"peers": summaries, "wall_s": wall, "events": sup.events, "replay": replay.lines,
+              "secure": not insecure, "given_up": sorted(sup.given_up)}
+    (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
+    return result

@@ -1,19 +1,22 @@
 """One unit's Execution Assistant as a Zenoh peer (one OS process per unit).
 
 The same EA core as `saim-mesh run`; only the source of facts (subscriptions
-computed by `dissemination`) and the sinks (JSON lines file + the mesh) differ.
+computed by `dissemination`) and the sinks (a durable alert log + the mesh) differ.
+Every payload goes through `wire.Gate` before use, and nothing a peer receives can
+stop it: a bad message is counted, a lost source or fusion node is an alert.
 """
 from __future__ import annotations
 
 import heapq
 import json
 import os
+import queue
 import resource
 import signal
 import sys
 import time
+from dataclasses import replace
 
-import msgpack
 import zenoh
 
 from dissemination.interest import Interest
@@ -22,37 +25,50 @@ from ea_agent.core.config import load_config
 from ea_agent.domains.suo import make_ea
 
 from . import messages as M
+from . import wire as W
+from .alertlog import AlertLog
+from .presence import Presence
 from .scenario import Scenario
-from .sinks import alert_line
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
 
 
+class SourceLost(RuntimeError):
+    """No clock tick for longer than the peer's deadline."""
+
+
 class Peer:
     def __init__(self, sc: Scenario, unit: str, conf: zenoh.Config, root: str, out_path: str | None = None,
-                 config_path=None, radius_m: float | None = None, log=print):
+                 config_path=None, radius_m: float | None = None, log=print, deadline_s: float | None = None,
+                 connect: list[str] | None = None):
         self.sc, self.unit, self.conf = sc, unit, conf
         self.ks = KeySpace(root)
         self.cfg = load_config(config_path, unit)
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
-        dis = self.cfg["dissemination"]
+        dis, mesh = self.cfg["dissemination"], self.cfg["mesh"]
         self.interest = Interest(self.ks, radius_m or dis["radius_m"], int(dis["block_share"]))
-        self.out = open(out_path, "a") if out_path else None
+        self.gate = W.Gate(sc.duration_s, int(mesh["max_payload_bytes"]), log=log)
+        self.max_ahead, self.silence_s = float(mesh["max_ahead_s"]), float(mesh["clock_silence_s"])
+        self.fusion_grace = float(mesh["fusion_grace_s"])
+        self.reject_alert = int(mesh["reject_alert"])
+        self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
+        self.deadline_s, self.connect = deadline_s, connect or []
         self.log = log
         self.session = None
-        self.muted = False
+        self.replaying = False     # feeding the store's past at (re)join
+        self.late = 0              # alerts raised late after a restart
         self.last_seq = 0
         self.t = 0.0
+        self.clock_t = 0.0         # the latest valid tick received (bounds how far ahead data may be)
         self.subs: dict[str, object] = {}
-        self.peers: dict[str, str] = {}       # unit -> "up" / "down"
-        self.decoder = M.Decoder()
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
-        self.clean: set[str] = set()
-        self.pending: set[int] = set()
+        self.pending: dict[int, bytes] = {}   # seq -> payload, waiting for its tick
+        self.contested: set[int] = set()      # seqs that came with two different payloads
         self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
         self.n_direct = 0
+        self.seen_tracks: set[tuple[str, float]] = set()   # a restarted fusion node may repeat some
         self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
         self.ftick = {g: -1.0 for g in self.fusion_groups}   # clock time each node's tracks are out to
         self.lost_groups: set[str] = set()
@@ -63,16 +79,28 @@ class Peer:
         self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
         self.tick_n: int | None = None   # number of the last clock tick taken
         self.gaps = 0
+        self.silences = 0
+        self.next_health = self.reject_alert
+        self.presence: Presence | None = None
 
     # -- sinks -------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
-        if self.muted:   # replaying the store: the commander is not told the past again
-            return
-        if self.out:
-            self.out.write(alert_line(a) + "\n")
-            self.out.flush()
+        if self.replaying:
+            # the past from the store: a fresh joiner does not tell it again; a restarted
+            # peer tells what fell while it was down (not in its log), marked late
+            if self.alog is None or not self.alog.restarted or self.alog.already(a):
+                return
+            a = replace(a, details={**a.details, "late": True, "raised_at_t": self.joined_t})
+            self.late += 1
+        if self.alog:
+            self.alog.write(a)
         if self.session is not None:
             self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
+
+    def system_alert(self, subject: str, prio: str, text: str, **details) -> None:
+        self.log(f"presence {subject} {details.get('event', '')} t={self.t:.0f}", flush=True)
+        self.ea.emit(M.Alert(round(self.t, 3), self.unit, "unknown-position", "system-problem", prio, (subject,), text,
+                             {"peer": subject, "wall_clock_driven": True, **details}))
 
     # -- subscriptions ----------------------------------------------------------------------
     def _resubscribe(self, buf: list | None = None) -> None:
@@ -93,17 +121,18 @@ class Peer:
         situation store (duplicates are dropped by seq later) and the fusion nodes
         (their tracks carry no seq: only those after `tracks_after` are taken)."""
         for g in self.fusion_groups:   # fused tracks are not in the replay's log: ask their nodes
-            req = msgpack.packb({"keys": keys})
+            req = W.encode(W.make(W.FusionQuery, keys=keys))
             for r in self.session.get(self.ks.fusion_store(g), payload=req, timeout=10.0):
-                if r.ok is not None:
-                    for p in msgpack.unpackb(r.ok.payload.to_bytes(), raw=False)["entries"]:
-                        if (m := self.decoder(p)) is not None and m.t > tracks_after:
-                            self.n_direct += 1
-                            heapq.heappush(self.direct, (m.t, self.n_direct, m))
+                if r.ok is None:
+                    continue
+                rep = self.gate.control(W.FusionReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
+                for p in rep.entries if rep else ():
+                    if (m := self.gate.data(p, "store/fusion")) is not None and m.t > tracks_after:
+                        self._hold(m)
         _, entries = self._query_store(self.last_seq, keys)
         for seq, p in entries:
-            if seq > self.last_seq and seq not in self.pending and (m := self.decoder(p)) is not None:
-                self.pending.add(seq)
+            if seq > self.last_seq and seq not in self.pending and (m := self.gate.data(p, "store")) is not None:
+                self.pending[seq] = p
                 heapq.heappush(buf, (seq, m))
 
     def _plan_signature(self) -> tuple:
@@ -113,34 +142,85 @@ class Peer:
         return dom.taskorg.version, hash(states)
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
-        req = msgpack.packb({"since": since, "keys": keys})
+        req = W.encode(W.make(W.StoreQuery, since=since, keys=keys))
         for r in self.session.get(self.ks.store(), payload=req, timeout=timeout):
             if r.ok is not None:
-                d = msgpack.unpackb(r.ok.payload.to_bytes(), raw=False)
-                return d["t"], d["entries"]
+                rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
+                if rep is not None:
+                    return rep.t, rep.entries
         return 0.0, []
 
+    def _reject(self, kind: str, field: str, problem: str, key: str) -> None:
+        self.gate.rejects.add(M.MessageError(kind, field, problem), key)
+
+    def _hold(self, m) -> None:
+        """A message outside the replay's sequence (a fused track), held until its time."""
+        if type(m) is M.SensorTrack:
+            k = (m.track, m.t)
+            if k in self.seen_tracks:
+                return
+            self.seen_tracks.add(k)
+        self.n_direct += 1
+        heapq.heappush(self.direct, (m.t, self.n_direct, m))
+
     def _drain(self, buf: list) -> None:
-        """Move received samples into the seq-ordered heap; a message that came twice
-        (overlapping subscriptions) is decoded once."""
-        pending = self.pending
+        """Move received samples into the seq-ordered heap. A message that came twice
+        (overlapping subscriptions) is decoded once; a seq that came with two different
+        payloads is contested and settled by the store; a message that does not belong
+        on its key, or is dated far ahead of the clock, is rejected, never held."""
+        pending, gate, ks, ahead = self.pending, self.gate, self.ks, self.clock_t + self.max_ahead
         for sub in self.subs.values():
             while (s := sub.try_recv()) is not None:
-                if s.attachment is None:   # not from the replay (fused tracks): held until their time comes
-                    m = self.decoder(s.payload.to_bytes())
-                    if m is not None:
-                        self.n_direct += 1
-                        heapq.heappush(self.direct, (m.t, self.n_direct, m))
+                payload = s.payload.to_bytes()
+                att = s.attachment
+                if att is not None:
+                    raw = att.to_bytes()
+                    seq = int.from_bytes(raw, "big") if len(raw) == 8 else -1
+                    if seq <= self.last_seq:
+                        if seq < 0:
+                            self._reject("?", "(seq)", f"attachment of {len(raw)} bytes is no sequence number",
+                                         str(s.key_expr))
+                        continue
+                    prev = pending.get(seq)
+                    if prev is not None:
+                        if prev != payload:
+                            self.contested.add(seq)
+                        continue
+                key = str(s.key_expr)
+                m = gate.data(payload, key)
+                if m is None:
                     continue
-                seq = int.from_bytes(s.attachment.to_bytes(), "big")
-                if seq <= self.last_seq or seq in pending:
+                if m.t > ahead:
+                    self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
                     continue
-                m = self.decoder(s.payload.to_bytes())
-                if m is not None:
-                    pending.add(seq)
-                    heapq.heappush(buf, (seq, m))
-                    if m.t > self.seen_t:
-                        self.seen_t = m.t
+                if (why := ks.mismatch(key, m)) is not None:
+                    self._reject(m.KIND, "(key)", why, key)
+                    continue
+                if att is None:   # not from the replay (fused tracks): held until their time comes
+                    self._hold(m)
+                    continue
+                pending[seq] = payload
+                heapq.heappush(buf, (seq, m))
+                if m.t > self.seen_t:
+                    self.seen_t = m.t
+
+    def _settle(self, buf: list, upto: int) -> None:
+        """Contested seqs (junk that carried a real message's number) take the store's version."""
+        now = sorted(q for q in self.contested if q <= upto)
+        if not now:
+            return
+        self.log(f"contested seqs {now[:5]}{'...' if len(now) > 5 else ''}: taking the store's version", flush=True)
+        _, entries = self._query_store(now[0] - 1, sorted(self.subs))
+        truth = {seq: p for seq, p in entries if seq in self.contested}
+        keep = [(q, m) for q, m in buf if q not in self.contested or q > upto]
+        for q in now:
+            self.contested.discard(q)
+            self.pending.pop(q, None)
+            if q in truth and (m := self.gate.data(truth[q], "store")) is not None:
+                self.pending[q] = truth[q]
+                keep.append((q, m))
+        buf[:] = keep
+        heapq.heapify(buf)
 
     def _feed(self, items) -> None:
         """Submit in seq order; a fused track goes in before the first message of its
@@ -153,152 +233,210 @@ class Peer:
                     submit(heapq.heappop(direct)[2])
                 submit(m)
 
-    def _await_tracks(self, t: float, timeout: float = 30.0) -> None:
+    def _await_tracks(self, t: float) -> None:
         """Hold the clock at `t` until every fusion node has published its tracks up to it,
-        so that every peer takes each track at the same point of its stream. A node
-        silent for `timeout` s of wall time is not waited for again (and we say so)."""
+        so that every peer takes each track at the same point of its stream. A node that
+        is gone or silent for `fusion_grace_s` of wall time is not waited for (we say so)
+        until it is back."""
         if self.ftick_sub is None:
             return
         give_up = None
         while True:
             while (m := self.ftick_sub.try_recv()) is not None:
-                g = str(m.key_expr).split("/")[-1]
-                if g in self.ftick:
-                    self.ftick[g] = max(self.ftick[g], msgpack.unpackb(m.payload.to_bytes())["t"])
+                key = str(m.key_expr)
+                g = key.rsplit("/", 1)[-1]
+                ft = self.gate.control(W.FusionTick, m.payload.to_bytes(), key)
+                if g in self.ftick and ft is not None:
+                    self.ftick[g] = max(self.ftick[g], ft.t)
+            self.presence.take()
+            for g in [g for g in self.lost_groups if self.ftick[g] >= t]:   # back on track
+                self.lost_groups.discard(g)
+                self.system_alert(f"fusion-{g}", "routine", f"fusion node {g} is publishing tracks again",
+                                  event="fusion-back", fusion=g)
             behind = [g for g, ft in self.ftick.items() if ft < t and g not in self.lost_groups]
             if not behind:
                 return
             now = time.monotonic()
-            give_up = give_up or now + timeout
+            give_up = give_up or now + self.fusion_grace
             if now > give_up:
-                self.log(f"fusion node(s) {behind} silent for {timeout:.0f} s: going on without them", flush=True)
                 self.lost_groups.update(behind)
+                for g in behind:
+                    self.system_alert(f"fusion-{g}", "immediate",
+                                      f"fusion node {g} silent for {self.fusion_grace:.0f} s: the clock goes on "
+                                      f"without its tracks", event="fusion-silent", fusion=g)
                 return
             time.sleep(0.0002)   # the node's marker is at most one of its ticks away
 
-    # -- presence ---------------------------------------------------------------------------
-    def _presence(self, ch, bye) -> None:
-        while (b := bye.try_recv()) is not None:
-            self.clean.add(str(b.key_expr).split("/")[-1])
-        to = self.ea.domain.taskorg
-        watch = set(to.children(self.unit)) | set(to.subtree(self.unit)) | set(to.ancestors(self.unit)[:1])
-        while (s := ch.try_recv()) is not None:
-            unit = str(s.key_expr).split("/")[-2]
-            if DEBUG:
-                self.log(f"debug presence {s.kind} {s.key_expr}", flush=True)
-            if unit == self.unit or unit not in watch:
-                continue
-            up = s.kind == zenoh.SampleKind.PUT
-            before = self.peers.get(unit)
-            self.peers[unit] = "up" if up else "down"
-            if not up and unit in self.clean:
-                continue
-            if up:
-                self.clean.discard(unit)
-            if not up:
-                self._system_alert(unit, "immediate", f"EA of {to.name(unit)} left the mesh: its picture and "
-                                   f"confirmations no longer reach us", left=True)
-            elif before == "down":
-                self._system_alert(unit, "routine", f"EA of {to.name(unit)} is back on the mesh", left=False)
+    # -- clock --------------------------------------------------------------------------
+    def _valid_tick(self, tick: W.Tick) -> bool:
+        if self.tick_n is not None and tick.n <= self.tick_n:
+            return False   # a restarted replay repeats its last tick: nothing new
+        if tick.t < self.t:
+            self._reject("tick", "t", f"{tick.t} before the clock's {self.t}", self.ks.clock())
+            return False
+        if tick.end and tick.t < self.sc.duration_s:
+            self._reject("tick", "end", f"an end tick at t={tick.t} before the scenario's end", self.ks.clock())
+            return False
+        return True
 
-    def _system_alert(self, unit: str, prio: str, text: str, left: bool) -> None:
-        self.log(f"presence {unit} {'left' if left else 'back'} t={self.t:.0f}", flush=True)
-        self.ea.emit(M.Alert(round(self.t, 3), self.unit, "unknown-position", "system-problem", prio, (unit,), text,
-                             {"peer": unit, "left": left, "wall_clock_driven": True}))
+    def _next_ticks(self, clock: queue.SimpleQueue) -> list[W.Tick]:
+        """Block for the next tick(s); a silent source is an alert, then an exit at the deadline."""
+        last = time.monotonic()
+        said = False
+        while True:
+            try:
+                raw = [clock.get(timeout=0.5)]
+            except queue.Empty:
+                self.presence.take()
+                quiet = time.monotonic() - last
+                if quiet > self.silence_s and not said:
+                    said = True
+                    self.silences += 1
+                    self.system_alert("SAIM", "immediate", f"no clock from the source (replay) for "
+                                      f"{self.silence_s:.0f} s: the picture is not moving", event="source-silent")
+                if self.deadline_s is not None and quiet > self.deadline_s:
+                    raise SourceLost(f"no clock from the source for {self.deadline_s:.0f} s: giving up")
+                continue
+            while len(raw) < 64:
+                try:
+                    raw.append(clock.get_nowait())
+                except queue.Empty:
+                    break
+            ticks = []
+            for payload in raw:
+                tick = self.gate.control(W.Tick, payload, self.ks.clock())
+                if tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n):
+                    ticks.append(tick)
+            if said and ticks:
+                self.system_alert("SAIM", "routine", "the source's clock is back", event="source-back")
+            if ticks:
+                self.clock_t = max(self.clock_t, ticks[-1].t)
+                return ticks
 
-    # -- main loop --------------------------------------------------------------------------
-    def _on_tick(self, info: dict, buf: list, pres, bye) -> bool:
+    def _on_tick(self, tick: W.Tick, buf: list) -> bool:
         """Feed the EA every message up to the tick's seq, in seq order, then advance it to
         the tick's time. True at the end tick."""
-        if self.tick_n is not None and info["n"] > self.tick_n + 1:
+        if self.tick_n is not None and tick.n > self.tick_n + 1:
             # ticks went missing: we were cut off (frozen past our lease, or a broken
             # link) and everything sent meanwhile is lost. Take it from the store.
-            self.log(f"gap t={self.t:.0f}..{info['t']:.0f}: catching up", flush=True)
+            self.log(f"gap t={self.t:.0f}..{tick.t:.0f}: catching up", flush=True)
             self.gaps += 1
             self._catch_up(sorted(self.subs), buf, tracks_after=self.t)
+        self._settle(buf, tick.seq)
         ready = []
-        while buf and buf[0][0] <= info["seq"]:
+        while buf and buf[0][0] <= tick.seq:
             ready.append(heapq.heappop(buf))
-        self.pending.difference_update(x[0] for x in ready)
+        for q, _ in ready:
+            self.pending.pop(q, None)
         self._feed(ready)
-        while self.direct and self.direct[0][0] <= info["t"]:
+        while self.direct and self.direct[0][0] <= tick.t:
             self.ea.submit(heapq.heappop(self.direct)[2])
-        if DEBUG and int(info["t"]) % 300 == 0:
-            self.log(f"debug t={info['t']} facts={self.ea.stats['facts']} in={self.ea.stats['in']} "
-                     f"subs={len(self.subs)} buf={len(buf)} last_seq={self.last_seq} hw={info['seq']}", flush=True)
-        self.t, self.tick_n = info["t"], info["n"]
-        self._presence(pres, bye)
+        if DEBUG and int(tick.t) % 300 == 0:
+            self.log(f"debug t={tick.t} facts={self.ea.stats['facts']} subs={len(self.subs)} buf={len(buf)} "
+                     f"last_seq={self.last_seq} hw={tick.seq}", flush=True)
+        self.t, self.tick_n = tick.t, tick.n
+        self.presence.take()
         n_alerts = len(self.ea.alerts)
-        if info["end"]:
-            self.ea.finish(info["t"])
+        if tick.end:
+            self.ea.finish(tick.t)
         else:
-            self.ea.advance(info["t"])
-        if "w" in info:   # wall-clock latency from the tick's publication to its processing
-            lat = time.time() - info["w"]
+            self.ea.advance(tick.t)
+        if tick.w is not None:   # wall-clock latency from the tick's publication to its processing
+            lat = time.time() - tick.w
             self.tick_lat.append(lat)
             self.alert_lat += [lat] * (len(self.ea.alerts) - n_alerts)
-        return bool(info["end"])
+        return tick.end
 
+    def _report_health(self) -> None:
+        """Tell our superior (health/<unit>) when rejects pass the next threshold."""
+        r = self.gate.rejects
+        if r.total >= self.next_health:
+            self.next_health *= 10
+            self.session.put(self.ks.health(self.unit), W.encode(W.make(W.Health, unit=self.unit, rejects=r.total,
+                                                                           by_kind=dict(r.by_kind))),
+                             congestion_control=BLOCK)
+
+    def _check_connected(self, s) -> None:
+        if not self.connect:
+            return
+        end = time.monotonic() + 5.0
+        while time.monotonic() < end:
+            if list(s.info.peers_zid()) or list(s.info.routers_zid()):
+                return
+            time.sleep(0.05)
+        msg = f"not connected: nothing answered at {', '.join(self.connect)} within 5 s (still trying)"
+        self.log(msg, flush=True)
+        print(f"saim-mesh peer {self.unit}: {msg}", file=sys.stderr, flush=True)
+
+    # -- main loop --------------------------------------------------------------------------
     def run(self, join_timeout: float = 10.0) -> dict:
         def stop(*_):
             raise SystemExit(0)
         signal.signal(signal.SIGTERM, stop)
         self.ea.start(0.0)
         t_wall = time.monotonic()
-        with zenoh.open(self.conf) as s:
-            self.session = s
-            clock = s.declare_subscriber(self.ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
-            self._resubscribe()
-            pres = s.liveliness().declare_subscriber(self.ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
-                                                     history=True)
-            bye = s.declare_subscriber(self.ks.bye("*"), zenoh.handlers.FifoChannel(1024))
-            if self.fusion_groups:
-                self.ftick_sub = s.declare_subscriber(self.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
-            buf: list = []        # heap of (seq, message) waiting for their clock tick
-            self._late_join(s, join_timeout, buf)
-            token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
-            ack_key = self.ks.ack(str(s.info.zid()))
-            self.log(f"ready {self.unit} joined_t={self.joined_t}", flush=True)
-            done = False
-            next_interest = 0.0
-            last_sig = self._plan_signature()
-            t_first = None
-            while not done:
-                # Block for the next tick, then take every tick already queued behind it:
-                # one drain of the subscriber channels serves them all (every message up
-                # to the last tick's seq is already in its channel).
-                ticks = [clock.recv()]
-                while len(ticks) < 64 and (more := clock.try_recv()) is not None:
-                    ticks.append(more)
-                if t_first is None:
-                    t_first = time.monotonic()
-                infos = [msgpack.unpackb(x.payload.to_bytes()) for x in ticks]
-                self._await_tracks(infos[-1]["t"])
-                self._drain(buf)
-                self.max_lead = max(self.max_lead, self.seen_t - infos[0]["t"])
-                for info in infos:
-                    done = self._on_tick(info, buf, pres, bye)
-                    if done:
-                        break
-                    sig = self._plan_signature()
-                    if info["t"] >= next_interest or sig != last_sig:   # moved on, or the plan/org changed
-                        self._resubscribe(buf)
-                        next_interest, last_sig = info["t"] + self.interest_s, sig
-                if not done:
-                    s.put(ack_key, msgpack.packb(self.t))   # lets a max-speed replay pace itself
-            s.put(self.ks.bye(self.unit), b"")   # a clean leave is not a lost peer
-            token.undeclare()
-            self.session = None
-        if self.out:
-            self.out.close()
+        clockq: queue.SimpleQueue = queue.SimpleQueue()
+        t_first = None
+        try:
+            with zenoh.open(self.conf) as s:
+                self.session = s
+                # a callback into our own queue: waiting on it has a timeout (a lost source is
+                # noticed); Zenoh has put every sample before a tick into its channel already
+                clock = s.declare_subscriber(self.ks.clock(), lambda smp: clockq.put(smp.payload.to_bytes()))
+                self._check_connected(s)
+                self._resubscribe()
+                self.presence = Presence(self, s)
+                if self.fusion_groups:
+                    self.ftick_sub = s.declare_subscriber(self.ks.fusion_tick("*"),
+                                                          zenoh.handlers.FifoChannel(100_000))
+                buf: list = []        # heap of (seq, message) waiting for their clock tick
+                self._late_join(join_timeout, buf)
+                token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
+                ack_key = self.ks.ack(self.unit, str(s.info.zid()))
+                self.log(f"ready {self.unit} joined_t={self.joined_t}" + (f" late_alerts={self.late}" if self.late
+                                                                           else ""), flush=True)
+                done = False
+                next_interest = 0.0
+                last_sig = self._plan_signature()
+                while not done:
+                    # Take every tick already queued: one drain of the subscriber channels
+                    # serves them all (every message up to the last tick's seq is already in it).
+                    ticks = self._next_ticks(clockq)
+                    t_first = t_first or time.monotonic()
+                    self._await_tracks(ticks[-1].t)
+                    self._drain(buf)
+                    self.max_lead = max(self.max_lead, self.seen_t - ticks[0].t)
+                    for tick in ticks:
+                        done = self._on_tick(tick, buf)
+                        if done:
+                            break
+                        sig = self._plan_signature()
+                        if tick.t >= next_interest or sig != last_sig:   # moved on, or the plan/org changed
+                            self._resubscribe(buf)
+                            next_interest, last_sig = tick.t + self.interest_s, sig
+                    self._report_health()
+                    if not done:
+                        s.put(ack_key, W.encode(W.make(W.Ack, t=self.t)))   # lets a max-speed replay pace itself
+                s.put(self.ks.bye(self.unit), W.encode(W.make(W.Bye, unit=self.unit)))   # a clean leave is no lost peer
+                token.undeclare()
+                clock.undeclare()
+                self.session = None
+        finally:
+            if self.alog:
+                self.alog.close()
+        return self.summary(t_wall, t_first)
+
+    def summary(self, t_wall: float, t_first: float | None) -> dict:
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         by_p: dict[str, int] = {}
         for a in self.ea.alerts:
             by_p[a.priority] = by_p.get(a.priority, 0) + 1
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
-                "facts": self.ea.stats["facts"], "bad_messages": self.decoder.errors + self.ea.stats["errors"],
+                "late_alerts": self.late, "restarted": bool(self.alog and self.alog.restarted),
+                "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
+                "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
-                "gaps": self.gaps,
+                "gaps": self.gaps, "lost_fusion": sorted(self.lost_groups),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),
@@ -308,18 +446,20 @@ class Peer:
         return {k: [round(e.x, 1), round(e.y, 1), e.strength, list(e.members)]
                 for k, e in sorted(self.ea.domain.pic.adj.picture().items())}
 
-    def _late_join(self, s, timeout: float, buf: list) -> None:
-        """Get the picture so far from the situation store and replay it silently."""
+    def _late_join(self, timeout: float, buf: list) -> None:
+        """Get the picture so far from the situation store and replay it: silently for a
+        new joiner, raising what fell while we were down for a restarted peer."""
         t, entries = self._query_store(0, None, timeout)
         if not entries:
             return
-        self.muted = True
+        self.joined_t = t
+        self.replaying = True
         try:
-            self._feed([(seq, m) for seq, p in entries if (m := self.decoder(p)) is not None])
+            self._feed([(seq, m) for seq, p in entries if (m := self.gate.data(p, "store")) is not None])
             self.ea.advance(t)
         finally:
-            self.muted = False
-        self.t = self.joined_t = t
+            self.replaying = False
+        self.t = self.clock_t = t
         self._resubscribe(buf)   # new keys catch up, fused tracks included
 
 
@@ -332,8 +472,13 @@ def _pcts(xs: list[float]) -> dict:
 
 
 def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None,
-              radius_m: float | None = None) -> int:
-    p = Peer(sc, unit, conf, root, out, config_path, radius_m, log=lambda *a, **k: print(*a, **k, file=sys.stdout))
-    summary = p.run()
+              radius_m: float | None = None, deadline_s: float | None = None, connect: list[str] | None = None) -> int:
+    p = Peer(sc, unit, conf, root, out, config_path, radius_m, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
+             deadline_s=deadline_s, connect=connect)
+    try:
+        summary = p.run()
+    except SourceLost as e:
+        print(f"saim-mesh peer {unit}: {e}", file=sys.stderr, flush=True)
+        return 3
     print("summary " + json.dumps(summary), flush=True)
     return 0

@@ -9,18 +9,21 @@ sees the tick has every earlier message in its channels.
 """
 from __future__ import annotations
 
+import json
+import os
 import sys
 import time
+from pathlib import Path
 from bisect import bisect_right
 from collections import Counter
 
-import msgpack
 import numpy as np
 import zenoh
 
 from dissemination.keyspace import KeySpace, matcher
 
 from . import messages as M
+from . import wire as W
 from .scenario import Scenario
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -34,7 +37,8 @@ def seq_bytes(seq: int) -> bytes:
 class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
                  wait_peers: list[str] = (), tick_s: float = 2.0, wait_timeout: float = 60.0,
-                 linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0):
+                 linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0,
+                 state_path: str | Path | None = None, max_bytes: int = 65536):
         groups = sc.meta.get("fusion", {}).get("groups", {})
         self.sc, self.conf = sc, conf
         self.ks = KeySpace(root, {sid: g for g, sids in groups.items() for sid in sids})
@@ -46,22 +50,45 @@ class Replay:
         self.n_ticks = 0
         self.until = until
         self.window_s = window_s if speed is None else 0.0   # pacing only at max speed
+        self.gate = W.Gate(sc.duration_s, max_bytes, log=log)
+        self.fusion_t: dict[str, float] = {}   # group -> clock time its tracks are out to
+        self.state_path = Path(state_path) if state_path else None
+        self.resumed_from: dict | None = None
 
     def _serve(self, q) -> None:
         """Answer store queries: entries after `since` whose key matches one of `keys`
-        (all when keys is None), and the scenario time the log has reached."""
+        (all when keys is None), the scenario time the log has reached and how far each
+        fusion node's tracks are out. A malformed query is counted and answered with nothing."""
         while (query := q.try_recv()) is not None:
-            req = msgpack.unpackb(query.payload.to_bytes()) if query.payload is not None else {}
-            since, keys = int(req.get("since", 0)), req.get("keys")
-            if keys is None:
-                entries = self.entries[since:]
-            else:
-                match = matcher(keys)
-                seqs = sorted(n for k, ns in self.by_key.items() if match(k) for n in ns[bisect_right(ns, since):])
-                entries = [self.entries[n - 1] for n in seqs]
-            query.reply(self.ks.store(), msgpack.packb({"t": self.t, "entries": entries}, use_bin_type=True),
-                        priority=STORE_PRIORITY)   # overtakes the data queued ahead of it (dupes are dropped by seq)
+            req = self.gate.control(W.StoreQuery, query.payload.to_bytes() if query.payload is not None
+                                    else W.encode(W.make(W.StoreQuery, )), self.ks.store())
+            if req is not None:
+                try:
+                    entries = self._entries(req)
+                except ValueError as e:   # a key expression Zenoh will not parse
+                    self.gate.rejects.add(M.MessageError("storequery", "keys", str(e)[:160]), self.ks.store())
+                    entries = None
+                if entries is not None:
+                    query.reply(self.ks.store(), W.encode(W.make(W.StoreReply, t=self.t, entries=entries,
+                                                                       fusion=dict(self.fusion_t))),
+                                priority=STORE_PRIORITY)   # overtakes the data queued ahead of it
             del query   # a query kept alive makes the asker wait out its timeout
+
+    def _entries(self, req: W.StoreQuery) -> list[tuple[int, bytes]]:
+        if req.keys is None:
+            return self.entries[req.since:]
+        match = matcher(req.keys)
+        seqs = sorted(n for k, ns in self.by_key.items() if match(k) for n in ns[bisect_right(ns, req.since):])
+        return [self.entries[n - 1] for n in seqs]
+
+    def _take_fusion_ticks(self, sub) -> None:
+        """Remember how far each fusion node's tracks are out: a restarted node resumes there."""
+        while (smp := sub.try_recv()) is not None:
+            key = str(smp.key_expr)
+            ft = self.gate.control(W.FusionTick, smp.payload.to_bytes(), key)
+            if ft is not None:
+                g = key.rsplit("/", 1)[-1]
+                self.fusion_t[g] = max(self.fusion_t.get(g, -1.0), ft.t)
 
     def _present(self, s) -> Counter:
         """Live peers per unit (two peers may run one unit's EA)."""
@@ -77,9 +104,13 @@ class Replay:
     def _tick(self, s, t: float, end: bool = False) -> None:
         self.t = t
         self.n_ticks += 1
-        s.put(self.ks.clock(), msgpack.packb({"t": t, "n": self.n_ticks, "seq": len(self.entries), "end": end,
-                                              "w": time.time()}),
+        s.put(self.ks.clock(), W.encode(W.make(W.Tick, t=t, n=self.n_ticks, seq=len(self.entries), end=end, w=time.time())),
               congestion_control=BLOCK)
+        if self.state_path is not None:   # where a restarted replay resumes
+            tmp = self.state_path.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"n": self.n_ticks, "t": t, "seq": len(self.entries),
+                                       "fusion": self.fusion_t}))
+            os.replace(tmp, self.state_path)
 
     def _prepare(self, end_t: float) -> list[tuple[object, str, bytes]]:
         """Keys and payloads for the whole script, before the clock starts: one bulk
@@ -106,33 +137,35 @@ class Replay:
         sc = self.sc
         end_t = sc.duration_s if self.until is None else min(self.until, sc.duration_s)
         script = self._prepare(end_t)
+        start = self._resume(script)
         with zenoh.open(self.conf) as s:
             q = s.declare_queryable(self.ks.store(), zenoh.handlers.FifoChannel(64))
+            fticks = s.declare_subscriber(self.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
+            serve = lambda: (self._take_fusion_ticks(fticks), self._serve(q))
             # one declared publisher per key: a put then skips parsing and resolving the key
             pubs = {k: s.declare_publisher(k, congestion_control=BLOCK) for k in sorted({k for _, k, _ in script})}
             self.log(f"ready {s.info.zid()}", flush=True)
             deadline = time.monotonic() + self.wait_timeout
             while self.wait_peers and (missing := self._missing(s)):
-                self._serve(q)
+                serve()
                 if time.monotonic() > deadline:
                     raise TimeoutError(f"peers never came: {missing}")
-            pacer = (Pacer(s, self.ks, set(sc.taskorg.units), self.window_s, lambda: self._serve(q), self.log)
-                     if self.window_s > 0 else None)
-            self.log("start", flush=True)
-            t0 = time.monotonic()
-            next_tick = self.tick_s
-            for ev, key, payload in script:
+            pacer = (Pacer(s, self.ks, self.window_s, serve, self.log, self.gate) if self.window_s > 0 else None)
+            self.log("start" + (f" resumed n={self.n_ticks} t={self.t:.0f}" if self.resumed_from else ""), flush=True)
+            t0 = time.monotonic() - (self.t / self.speed if self.speed else 0.0)
+            next_tick = self.t + self.tick_s
+            for ev, key, payload in script[start:]:
                 while ev.t >= next_tick:
                     if pacer:
                         pacer.wait(next_tick)
                     self._tick(s, next_tick)
-                    self._serve(q)
+                    serve()
                     if int(next_tick) % 100 == 0 and next_tick == int(next_tick):
                         self.log(f"t={next_tick:.0f}", flush=True)
                     next_tick += self.tick_s
                 if self.speed:
                     while (wait := t0 + ev.t / self.speed - time.monotonic()) > 0:
-                        self._serve(q)
+                        serve()
                         time.sleep(min(wait, 0.005))
                 self.entries.append((len(self.entries) + 1, payload))
                 self.by_key.setdefault(key, []).append(len(self.entries))
@@ -143,9 +176,31 @@ class Replay:
             while time.monotonic() < linger and set(self._present(s)) & set(self.wait_peers or ["?"]):
                 look = time.monotonic() + 0.5          # answer queries promptly, ask who is there less often
                 while time.monotonic() < look:
-                    self._serve(q)
+                    serve()
                     time.sleep(0.002)
-            return {"events": len(self.entries), "wall_s": time.monotonic() - t0}
+            return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors}
+
+    def _resume(self, script) -> int:
+        """After a crash, take up where the last tick left off: the log up to its seq is
+        rebuilt without publishing (peers have it), and the clock goes on from its tick.
+        Returns the index of the first event still to publish."""
+        if self.state_path is None or not self.state_path.exists():
+            return 0
+        try:
+            st = json.loads(self.state_path.read_text())
+            n, t, seq = int(st["n"]), float(st["t"]), int(st["seq"])
+            fusion = {str(g): float(v) for g, v in dict(st.get("fusion", {})).items()}
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"{self.state_path}: unreadable replay state ({e}); remove it to start over") from None
+        if not (0 <= seq <= len(script) and 0 <= t <= self.sc.duration_s and n >= 0):
+            raise ValueError(f"{self.state_path}: replay state n={n} t={t} seq={seq} does not fit this scenario")
+        for ev, key, payload in script[:seq]:
+            self.entries.append((len(self.entries) + 1, payload))
+            self.by_key.setdefault(key, []).append(len(self.entries))
+        self.n_ticks, self.t, self.fusion_t = n, t, fusion
+        self.resumed_from = st
+        self.log(f"resuming after tick n={n} t={t:.0f} seq={seq}", flush=True)
+        return seq
 
 
 class Pacer:
@@ -158,33 +213,45 @@ class Pacer:
     (`ack/<zid>`), and stop counting when their token goes or when they make no
     progress for `stall_s` of wall time."""
 
-    def __init__(self, s, ks: KeySpace, units: set[str], window_s: float, serve, log, stall_s: float = 30.0):
-        self.units, self.window_s, self.serve, self.log, self.stall_s = units, window_s, serve, log, stall_s
-        self.acks = s.declare_subscriber(ks.ack("*"), zenoh.handlers.FifoChannel(100_000))
+    def __init__(self, s, ks: KeySpace, window_s: float, serve, log, gate: W.Gate, stall_s: float = 30.0):
+        self.window_s, self.serve, self.log, self.stall_s, self.gate = window_s, serve, log, stall_s, gate
+        self.ks = ks
+        self.acks = s.declare_subscriber(ks.ack("*", "*"), zenoh.handlers.FifoChannel(100_000))
         self.alive = s.liveliness().declare_subscriber(ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
                                                        history=True)
-        self.live: set[str] = set()          # EA peers' zids
+        self.live: set[str] = set()          # EA peers, as "<unit>/<zid>"
         for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):   # those here now, for sure
-            if r.ok is not None and str(r.ok.key_expr).split("/")[-2] in units:
-                self.live.add(str(r.ok.key_expr).split("/")[-1])
-        self.done: dict[str, float] = {}     # zid -> last tick it processed
-        self.moved = {z: time.monotonic() for z in self.live}   # zid -> wall time of its last progress
+            if r.ok is not None and (p := self._ea(str(r.ok.key_expr))):
+                self.live.add(p)
+        self.done: dict[str, float] = {}     # peer -> last tick it processed
+        self.moved = {z: time.monotonic() for z in self.live}   # peer -> wall time of its last progress
         self.ignored: set[str] = set()
+
+    def _ea(self, key: str) -> str | None:
+        """'<unit>/<zid>' of an EA peer's key (fusion nodes and the replay do not ack)."""
+        unit_zid = key.split("/")[-2:]
+        if len(unit_zid) != 2 or unit_zid[0].startswith("fusion-") or unit_zid[0] == "replay":
+            return None
+        return "/".join(unit_zid)
 
     def _take(self) -> None:
         while (a := self.alive.try_recv()) is not None:
-            unit, zid = str(a.key_expr).split("/")[-2:]
-            if unit not in self.units:
+            p = self._ea(str(a.key_expr))
+            if p is None:
                 continue
             if a.kind == zenoh.SampleKind.PUT:
-                self.live.add(zid)
-                self.moved.setdefault(zid, time.monotonic())
+                self.live.add(p)
+                self.moved.setdefault(p, time.monotonic())
             else:
-                self.live.discard(zid)
+                self.live.discard(p)
         while (a := self.acks.try_recv()) is not None:
-            zid = str(a.key_expr).split("/")[-1]
-            self.done[zid] = max(self.done.get(zid, -1.0), msgpack.unpackb(a.payload.to_bytes()))
-            self.moved[zid] = time.monotonic()
+            key = str(a.key_expr)
+            ack = self.gate.control(W.Ack, a.payload.to_bytes(), key)
+            p = self._ea(key)
+            if ack is None or p is None:
+                continue
+            self.done[p] = max(self.done.get(p, -1.0), ack.t)
+            self.moved[p] = time.monotonic()
 
     def wait(self, t: float) -> None:
         need = t - self.window_s
@@ -204,7 +271,8 @@ class Pacer:
 
 
 def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None,
-                window_s: float = 20.0) -> int:
-    Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
-           log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
+                window_s: float = 20.0, state_path=None) -> int:
+    res = Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
+                 state_path=state_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
+    print("summary " + json.dumps(res), flush=True)
     return 0

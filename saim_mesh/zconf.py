@@ -17,9 +17,12 @@ def free_port() -> int:
 
 
 def config(listen: list[str] | None = None, connect: list[str] | None = None,
-           path: str | Path | None = None, multicast: bool = False) -> zenoh.Config:
+           path: str | Path | None = None, multicast: bool = False, pki: str | Path | None = None,
+           name: str | None = None, sc=None, root: str | None = None) -> zenoh.Config:
     """The JSON5 file, with endpoints chosen at run time; `multicast` turns on UDP
-    multicast scouting (the file's default is off: tests and CI stay on loopback)."""
+    multicast scouting (the file's default is off: tests and CI stay on loopback).
+    With `pki` (a folder made by `saim-mesh certs`), the session is `name`'s identity
+    over mutual TLS and carries the mesh's access-control rules, made from scenario `sc`."""
     conf = zenoh.Config.from_file(str(path or DEFAULT))
     if multicast:
         conf.insert_json5("scouting/multicast/enabled", "true")
@@ -27,4 +30,9 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None,
         conf.insert_json5("listen/endpoints", json.dumps(listen))
     if connect is not None:
         conf.insert_json5("connect/endpoints", json.dumps(connect))
+    if pki is not None:
+        from .mesh import mesh_units
+        from .security.acl import secure_config
+        groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
+        conf = secure_config(conf, pki, name, root, mesh_units(sc), groups)
     return conf

@@ -1,18 +1,24 @@
 """A fusion node as a Zenoh peer: takes its sensor group's hits (in the replay's order,
-by sequence number and clock ticks) and publishes fused tracks into the mesh."""
+by sequence number and clock ticks) and publishes fused tracks into the mesh.
+
+A restarted node resumes where its predecessor stopped: it asks the situation store
+for its group's hits so far and how far its tracks were out, re-runs the (deterministic)
+fusion over them without publishing, and goes on. Tracks keep their numbers, and
+peers get every track exactly once."""
 from __future__ import annotations
 
 import heapq
 import json
 import random
-
-import msgpack
-import zenoh
-
+import signal
+import sys
 import time
+
+import zenoh
 
 from dissemination.keyspace import KeySpace, matcher, place
 from saim_mesh import messages as M
+from saim_mesh import wire as W
 from saim_mesh.scenario import Scenario
 
 from .node import FusionNode
@@ -22,63 +28,128 @@ BLOCK = zenoh.CongestionControl.BLOCK
 
 def _eas_present(s, ks: KeySpace) -> bool:
     for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):
-        if r.ok is not None and not str(r.ok.key_expr).split("/")[-2].startswith("fusion-"):
+        if r.ok is not None and not str(r.ok.key_expr).split("/")[-2].startswith(("fusion-", "replay")):
             return True
     return False
 
 
-def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | None = None,
-                    linger_s: float = 30.0) -> dict:
-    ks = KeySpace(root)
-    node = FusionNode(group, sc.projection)
-    rnd = random.Random(shuffle) if shuffle is not None else None
-    dec = M.Decoder()
-    sent = 0
-    log: list[tuple[str, bytes]] = []     # what we published, for peers that subscribe later
+class FusionPeer:
+    def __init__(self, sc: Scenario, group: str, conf, root: str, shuffle: int | None = None,
+                 linger_s: float = 30.0, log=print, max_bytes: int = 65536):
+        self.sc, self.group, self.conf, self.linger_s, self.log = sc, group, conf, linger_s, log
+        self.ks = KeySpace(root)
+        self.node = FusionNode(group, sc.projection)
+        self.rnd = random.Random(shuffle) if shuffle is not None else None
+        self.gate = W.Gate(sc.duration_s, max_bytes, log=log)
+        self.sent = 0
+        self.log_out: list[tuple[str, bytes]] = []   # what we published, for peers that subscribe later
+        self.heap: list = []                         # (seq, hit) waiting for their tick
+        self.seen: set[int] = set()                  # seqs taken (the store and the live feed overlap)
+        self.done_t = -1.0                           # clock time our tracks are out to
+        self.resumed = False
 
-    def serve(query) -> None:
+    def serve(self, query) -> None:
         """Answered at once on Zenoh's thread: an EA waiting for its catch-up must not wait
         for our next clock tick (a paced replay may be waiting for that EA)."""
-        keys = msgpack.unpackb(query.payload.to_bytes()).get("keys") if query.payload is not None else None
-        match = matcher(keys) if keys is not None else (lambda k: True)
-        query.reply(ks.fusion_store(group), msgpack.packb({"entries": [p for k, p in list(log) if match(k)]}))
+        req = self.gate.control(W.FusionQuery, query.payload.to_bytes() if query.payload is not None
+                                else W.encode(W.make(W.FusionQuery, )), self.ks.fusion_store(self.group))
+        if req is None:
+            return
+        try:
+            match = matcher(req.keys) if req.keys is not None else (lambda k: True)
+            entries = [p for k, p in list(self.log_out) if match(k)]
+        except ValueError:
+            return
+        query.reply(self.ks.fusion_store(self.group), W.encode(W.make(W.FusionReply, entries=entries)))
 
-    with zenoh.open(conf) as s:
-        store = s.declare_queryable(ks.fusion_store(group), serve)
-        clock = s.declare_subscriber(ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
-        hits = s.declare_subscriber(f"{root}/hit/{group}/*", zenoh.handlers.FifoChannel(1_000_000))
-        token = s.liveliness().declare_token(ks.alive(f"fusion-{group}", str(s.info.zid())))
-        print(f"ready fusion-{group}", flush=True)
-        heap: list = []
-        while True:
-            info = msgpack.unpackb(clock.recv().payload.to_bytes())
-            while (smp := hits.try_recv()) is not None:
-                seq = int.from_bytes(smp.attachment.to_bytes(), "big") if smp.attachment is not None else 0
-                m = dec(smp.payload.to_bytes())
-                if m is not None:
-                    heapq.heappush(heap, (seq, m))
-            out = []
-            while heap and heap[0][0] <= info["seq"]:
-                out += node.add(heapq.heappop(heap)[1])
-            out += node.flush(info["t"])
-            if rnd is not None:
-                rnd.shuffle(out)   # tests: arrival order must not matter
-            for tr in out:
-                x, y = sc.projection.to_xy(tr.lon, tr.lat)
-                key, payload = f"{root}/trk/{place(x, y)}/{tr.track}", M.encode(tr)
-                log.append((key, payload))
-                s.put(key, payload, congestion_control=BLOCK)
-                sent += 1
-            # after its tracks on the same session: an EA that sees this has them all
-            s.put(ks.fusion_tick(group), msgpack.packb({"t": info["t"]}), congestion_control=BLOCK)
-            if info["end"]:
-                break
-        linger = time.monotonic() + linger_s   # keep answering catch-up queries while EAs finish
-        while time.monotonic() < linger and _eas_present(s, ks):
-            time.sleep(0.2)    # queries are answered by the callback meanwhile
-        token.undeclare()
-        store.undeclare()
-    return {"group": group, "hits_in": node.stats["hits_in"], "tracks_out": sent}
+    def _take_hit(self, seq: int, payload: bytes, key: str | None) -> None:
+        """One hit by seq; `key` None for the store's entries (their keys were checked on the way in)."""
+        if seq in self.seen or seq <= 0:
+            return
+        m = self.gate.data(payload, key or "store")
+        if m is None:
+            return
+        why = "not a sensor hit" if type(m) is not M.SensorHit else key and self.ks.mismatch(key, m)
+        if why:
+            self.gate.rejects.add(M.MessageError(m.KIND, "(key)", why), key)
+            return
+        self.seen.add(seq)
+        heapq.heappush(self.heap, (seq, m))
+
+    def _resume(self, s) -> None:
+        """Take the store's hits and our predecessor's progress; replay them silently."""
+        req = W.encode(W.make(W.StoreQuery, since=0, keys=[f"{self.ks.root}/hit/{self.group}/*"]))
+        for r in s.get(self.ks.store(), payload=req, timeout=10.0):
+            if r.ok is None:
+                continue
+            rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
+            if rep is None:
+                continue
+            done = rep.fusion.get(self.group, -1.0)
+            for seq, p in rep.entries:
+                self._take_hit(seq, p, None)
+            if done < 0:
+                return
+            while self.heap and self.heap[0][1].t < done:   # what our predecessor had fused and sent
+                self.node.add(heapq.heappop(self.heap)[1])
+            self.node.flush(done)
+            self.done_t, self.resumed = done, True
+            self.log(f"resumed fusion-{self.group} at t={done:.0f} (track numbers from {self.node.seq})", flush=True)
+            return
+
+    def run(self) -> dict:
+        def stop(*_):
+            raise SystemExit(0)
+        signal.signal(signal.SIGTERM, stop)
+        ks, group = self.ks, self.group
+        with zenoh.open(self.conf) as s:
+            store = s.declare_queryable(ks.fusion_store(group), self.serve)
+            clock = s.declare_subscriber(ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
+            hits = s.declare_subscriber(f"{ks.root}/hit/{group}/*", zenoh.handlers.FifoChannel(1_000_000))
+            self._resume(s)
+            token = s.liveliness().declare_token(ks.alive(f"fusion-{group}", str(s.info.zid())))
+            print(f"ready fusion-{group}", flush=True)
+            while True:
+                smp = clock.recv()
+                info = self.gate.control(W.Tick, smp.payload.to_bytes(), ks.clock())
+                if info is None or info.t <= self.done_t:
+                    continue
+                while (h := hits.try_recv()) is not None:
+                    att = h.attachment.to_bytes() if h.attachment is not None else b""
+                    self._take_hit(int.from_bytes(att, "big") if len(att) == 8 else -1,
+                                   h.payload.to_bytes(), str(h.key_expr))
+                out = []
+                while self.heap and self.heap[0][0] <= info.seq:
+                    out += self.node.add(heapq.heappop(self.heap)[1])
+                out += self.node.flush(info.t)
+                if self.rnd is not None:
+                    self.rnd.shuffle(out)   # tests: arrival order must not matter
+                for tr in out:
+                    x, y = self.sc.projection.to_xy(tr.lon, tr.lat)
+                    key, payload = f"{ks.root}/trk/{place(x, y)}/{tr.track}", M.encode(tr)
+                    self.log_out.append((key, payload))
+                    s.put(key, payload, congestion_control=BLOCK)
+                    self.sent += 1
+                # after its tracks on the same session: an EA that sees this has them all
+                s.put(ks.fusion_tick(group), W.encode(W.make(W.FusionTick, t=info.t, last=self.node.seq)),
+                      congestion_control=BLOCK)
+                self.done_t = info.t
+                if info.end and info.t >= self.sc.duration_s:
+                    break
+            linger = time.monotonic() + self.linger_s   # keep answering catch-up queries while EAs finish
+            while time.monotonic() < linger and _eas_present(s, ks):
+                time.sleep(0.2)    # queries are answered by the callback meanwhile
+            s.put(ks.bye(f"fusion-{group}"), W.encode(W.make(W.Bye, unit=f"fusion-{group}")))
+            token.undeclare()
+            store.undeclare()
+        return {"group": group, "hits_in": self.node.stats["hits_in"], "tracks_out": self.sent,
+                "resumed": self.resumed, "rejects": dict(self.gate.rejects.by_kind)}
+
+
+def run_fusion_peer(sc: Scenario, group: str, conf, root: str, shuffle: int | None = None,
+                    linger_s: float = 30.0) -> dict:
+    return FusionPeer(sc, group, conf, root, shuffle, linger_s,
+                      log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
 
 
 def main_fusion(sc: Scenario, group: str, conf, root: str, shuffle: int | None) -> int:

@@ -1,0 +1,95 @@
+"""A child process whose output goes to a log file (always drained, whatever it
+writes), and whose lines we scan for what it says: `ready`, `summary`, ..."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def py() -> list[str]:
+    return [sys.executable, "-m", "saim_mesh"]
+
+
+class Proc:
+    def __init__(self, name: str, args: list[str], env=None, log_dir: str | Path | None = None):
+        self.name, self.args, self.env = name, list(args), env
+        self.log_dir = Path(log_dir) if log_dir else Path(tempfile.mkdtemp(prefix="saim-"))
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.log_path = self.log_dir / f"{name}.log"
+        self.starts = 0
+        self.lines: list[str] = []
+        self.start()
+
+    def start(self) -> None:
+        """(Re)start: output is appended to the same log; lines are those of this run."""
+        self.starts += 1
+        self._log = open(self.log_path, "ab")
+        self._pos = self._log.tell()
+        self._partial = b""
+        self.lines = []
+        self.p = subprocess.Popen(self.args, stdout=self._log, stderr=subprocess.STDOUT, env=self.env,
+                                  stdin=subprocess.DEVNULL)
+
+    def poll_lines(self) -> list[str]:
+        with open(self.log_path, "rb") as f:
+            f.seek(self._pos)
+            chunk = f.read()
+        if not chunk:
+            return []
+        self._pos += len(chunk)
+        parts = (self._partial + chunk).split(b"\n")
+        self._partial = parts.pop()
+        new = [x.decode("utf-8", "replace") for x in parts]
+        self.lines += new
+        return new
+
+    def tail(self, n: int = 8) -> list[str]:
+        self.poll_lines()
+        return self.lines[-n:]
+
+    def find(self, prefix: str) -> str | None:
+        self.poll_lines()
+        return next((x for x in self.lines if x.startswith(prefix)), None)
+
+    def wait_for(self, prefix: str, timeout: float) -> str:
+        end = time.monotonic() + timeout
+        seen = 0
+        while time.monotonic() < end:
+            exited = self.p.poll() is not None   # checked first: then every line it wrote is readable
+            self.poll_lines()
+            for line in self.lines[seen:]:
+                if line.startswith(prefix):
+                    return line
+            seen = len(self.lines)
+            if exited:
+                raise RuntimeError(f"{self.name} exited ({self.p.returncode}) before '{prefix}': "
+                                   + " | ".join(self.lines[-10:]))
+            time.sleep(0.01)
+        raise TimeoutError(f"{self.name}: no '{prefix}' within {timeout} s")
+
+    def stop(self) -> None:
+        if self.p.poll() is None:
+            self.p.terminate()
+            try:
+                self.p.wait(5)
+            except subprocess.TimeoutExpired:
+                self.p.kill()
+                self.p.wait()
+        self._log.close()
+
+    @property
+    def pid(self) -> int:
+        return self.p.pid
+
+    def exited(self) -> int | None:
+        return self.p.poll()
+
+
+def clean_env() -> dict:
+    env = dict(os.environ)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env

@@ -1,0 +1,153 @@
+"""Zenoh mTLS configuration and access-control rules generated from the scenario.
+
+Every secured process carries the same `access_control` section: each process enforces
+on its own links (ingress: what it accepts from the peer whose certificate CN is the
+subject), so a forged order, clock tick, liveliness token or store reply is dropped by
+the receiver itself. Default deny; egress allows everything under the root (reads are
+limited on ingress, by who may declare subscribers and queries) except `delete`, which
+nobody may send or accept.
+
+Each CN is exactly one subject (a CN in two subjects with different attributes would get
+the union of their allows), and keys come from `KeySpace` where it has a method, so the
+rules and the keys cannot drift apart.
+
+| subject | ingress allowed, besides reading |
+|---|---|
+| `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log; query store/**; token alive/replay/* |
+| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>; token alive/<U>/*; query store/** |
+| `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
+| `observer` | reading alert/** and alive/** only |
+| `console` | as observer, plus put cmd/** |
+
+Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
+(observer and console: on alert/** and alive/** only).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import zenoh
+
+from dissemination.keyspace import KeySpace
+
+from .pki import SecurityError, check_identity
+
+ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
+READ = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
+SENT = [m for m in ALL_MESSAGES if m != "delete"]
+READ_ONLY_ROLES = ("observer", "console")
+
+
+def endpoint_tls(port: int, host: str = "127.0.0.1") -> str:
+    """'tls/127.0.0.1:PORT' (the listener's certificate carries SAN IP:127.0.0.1)."""
+    return f"tls/{host}:{int(port)}"
+
+
+def tls_config(pki_dir: str | Path, name: str) -> dict:
+    """The `transport/link` part for mutual TLS as NAME: the same certificate for
+    listening and connecting (serverAuth + clientAuth), absolute paths, checked first."""
+    ca, cert, key = check_identity(pki_dir, name)
+    return {"protocols": ["tls"],
+            "tls": {"root_ca_certificate": str(ca),
+                    "listen_certificate": str(cert), "listen_private_key": str(key),
+                    "connect_certificate": str(cert), "connect_private_key": str(key),
+                    "enable_mtls": True}}
+
+
+def _chunk(kind: str, name: str) -> str:
+    if not name or any(c in name for c in "/*$#?") or name != name.strip():
+        raise SecurityError(f"bad {kind} name {name!r} for a key chunk")
+    return name
+
+
+def identities(units, groups) -> list[str]:
+    """Every certificate CN the rules know (one subject each)."""
+    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES]
+
+
+def access_control(root: str, units, groups) -> dict:
+    """The full `access_control` section for a mesh under ROOT with an EA per unit of
+    UNITS and a fusion node per group of GROUPS (names, or a dict group -> sensors)."""
+    ks = KeySpace(root)
+    r = ks.root
+    units = sorted(dict.fromkeys(_chunk("unit", u) for u in units))
+    groups = sorted(dict.fromkeys(_chunk("fusion group", g) for g in groups))
+    for u in units:
+        # an EA's alive/bye chunk must not be the replay's or a fusion node's
+        if u == "replay" or u.startswith("fusion-"):
+            raise SecurityError(f"unit name {u!r} collides with the replay's or a fusion node's keys")
+
+    rules: list[dict] = []
+    subjects: list[dict] = []
+    policies: list[dict] = []
+
+    def rule(rid: str, messages: list[str], keys: list[str], flow: str = "ingress") -> str:
+        rules.append({"id": rid, "flows": [flow], "permission": "allow", "messages": messages,
+                      "key_exprs": keys})
+        return rid
+
+    out = rule("egress", SENT, [f"{r}/**"], "egress")
+    read_all = rule("read", READ, [f"{r}/**"])
+    read_public = rule("read_public", READ, [f"{r}/alert/**", f"{r}/alive/**"])
+    query_store = rule("query_store", ["query"], [f"{r}/store/**"])
+
+    def subject(cn: str, rule_ids: list[str]) -> None:
+        subjects.append({"id": cn, "cert_common_names": [cn]})
+        policies.append({"id": f"policy.{cn}", "rules": rule_ids, "subjects": [cn]})
+
+    subject("replay", [out, read_all, query_store,
+                       rule("replay_put", ["put"], [ks.clock(), *(f"{r}/{k}/**" for k in
+                                                                   ("pos", "trk", "hit", "msn", "ord", "cff", "org"))]),
+                       rule("replay_store", ["declare_queryable", "reply"], [ks.store()]),
+                       rule("replay_token", ["liveliness_token"], [ks.alive("replay", "*")])])
+    for u in units:
+        subject(f"ea.{u}", [out, read_all, query_store,
+                            rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
+                                                          f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u)]),
+                            rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
+    for g in groups:
+        subject(f"fusion.{g}", [out, read_all, query_store,
+                                rule(f"fusion.{g}.put", ["put"], [f"{r}/trk/**", ks.fusion_tick(g),
+                                                                  ks.bye(f"fusion-{g}")]),
+                                rule(f"fusion.{g}.store", ["declare_queryable", "reply"], [ks.fusion_store(g)]),
+                                rule(f"fusion.{g}.token", ["liveliness_token"], [ks.alive(f"fusion-{g}", "*")])])
+    subject("observer", [out, read_public])
+    subject("console", [out, read_public, rule("console_put", ["put"], [f"{r}/cmd/**"])])
+    for kind, items in (("rule", rules), ("subject", subjects), ("policy", policies)):
+        ids = [x["id"] for x in items]
+        if len(ids) != len(set(ids)):
+            raise SecurityError(f"duplicate {kind} ids in the access-control rules: {sorted(ids)}")
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
+
+
+def _endpoints(conf: zenoh.Config, path: str) -> list[str]:
+    try:
+        v = json.loads(conf.get_json(path))
+    except Exception:
+        return []
+    if isinstance(v, dict):   # listen/connect endpoints may be given per mode
+        return [e for eps in v.values() if isinstance(eps, list) for e in eps]
+    return list(v or [])
+
+
+def secure_config(conf: zenoh.Config, pki_dir: str | Path, name: str, root: str, units, groups) -> zenoh.Config:
+    """Insert mTLS as NAME (certificates checked first: Zenoh's connecting side is silent
+    about bad files), `transport/link/protocols: ["tls"]` (else a plain-tcp peer found
+    by scouting joins) and the access-control rules into CONF; returns CONF."""
+    if name not in identities(units, groups):
+        raise SecurityError(f"identity {name!r} has no subject in the access-control rules "
+                            f"(units: {', '.join(units)}; fusion groups: {', '.join(groups) or 'none'})")
+    for path in ("listen/endpoints", "connect/endpoints"):
+        plain = [e for e in _endpoints(conf, path) if not str(e).startswith("tls/")]
+        if plain:
+            raise SecurityError(f"{path}: {', '.join(plain)} not TLS (use endpoint_tls(port))")
+    link = tls_config(pki_dir, name)
+    acl = access_control(root, units, groups)
+    conf.insert_json5("transport/link/protocols", json.dumps(link["protocols"]))
+    for k, v in link["tls"].items():
+        conf.insert_json5(f"transport/link/tls/{k}", json.dumps(v))
+    conf.insert_json5("access_control", json.dumps(acl))
+    return conf
