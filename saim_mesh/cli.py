@@ -193,7 +193,7 @@ def cmd_fusion(a) -> int:
 def cmd_mesh(a) -> int:
     from .mesh import up
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
-             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts)
+             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root)
     return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
 
 
@@ -300,6 +300,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
     me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
     me.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
+    me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
     me.set_defaults(fn=cmd_mesh)
     ce = sub.add_parser("certs", help="make a test CA and a certificate per identity of a scenario's mesh")
     ce.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
