@@ -27,6 +27,7 @@ from ea_agent.domains.suo import make_ea
 from . import messages as M
 from . import wire as W
 from .alertlog import AlertLog
+from .fusion.barrier import TrackBarrier
 from .presence import Presence
 from .scenario import Scenario
 
@@ -50,7 +51,6 @@ class Peer:
         self.interest = Interest(self.ks, radius_m or dis["radius_m"], int(dis["block_share"]))
         self.gate = W.Gate(sc.duration_s, int(mesh["max_payload_bytes"]), log=log)
         self.max_ahead, self.silence_s = float(mesh["max_ahead_s"]), float(mesh["clock_silence_s"])
-        self.fusion_grace = float(mesh["fusion_grace_s"])
         self.reject_alert = int(mesh["reject_alert"])
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
         self.deadline_s, self.connect = deadline_s, connect or []
@@ -70,9 +70,7 @@ class Peer:
         self.n_direct = 0
         self.seen_tracks: set[tuple[str, float]] = set()   # a restarted fusion node may repeat some
         self.fusion_groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
-        self.ftick = {g: -1.0 for g in self.fusion_groups}   # clock time each node's tracks are out to
-        self.lost_groups: set[str] = set()
-        self.ftick_sub = None
+        self.barrier = TrackBarrier(self, float(mesh["fusion_grace_s"]))
         self.interest_s = float(dis["reregister_s"])
         self.alert_lat: list[float] = []
         self.seen_t = 0.0      # latest scenario time among received replay messages
@@ -233,40 +231,6 @@ class Peer:
                     submit(heapq.heappop(direct)[2])
                 submit(m)
 
-    def _await_tracks(self, t: float) -> None:
-        """Hold the clock at `t` until every fusion node has published its tracks up to it,
-        so that every peer takes each track at the same point of its stream. A node that
-        is gone or silent for `fusion_grace_s` of wall time is not waited for (we say so)
-        until it is back."""
-        if self.ftick_sub is None:
-            return
-        give_up = None
-        while True:
-            while (m := self.ftick_sub.try_recv()) is not None:
-                key = str(m.key_expr)
-                g = key.rsplit("/", 1)[-1]
-                ft = self.gate.control(W.FusionTick, m.payload.to_bytes(), key)
-                if g in self.ftick and ft is not None:
-                    self.ftick[g] = max(self.ftick[g], ft.t)
-            self.presence.take()
-            for g in [g for g in self.lost_groups if self.ftick[g] >= t]:   # back on track
-                self.lost_groups.discard(g)
-                self.system_alert(f"fusion-{g}", "routine", f"fusion node {g} is publishing tracks again",
-                                  event="fusion-back", fusion=g)
-            behind = [g for g, ft in self.ftick.items() if ft < t and g not in self.lost_groups]
-            if not behind:
-                return
-            now = time.monotonic()
-            give_up = give_up or now + self.fusion_grace
-            if now > give_up:
-                self.lost_groups.update(behind)
-                for g in behind:
-                    self.system_alert(f"fusion-{g}", "immediate",
-                                      f"fusion node {g} silent for {self.fusion_grace:.0f} s: the clock goes on "
-                                      f"without its tracks", event="fusion-silent", fusion=g)
-                return
-            time.sleep(0.0002)   # the node's marker is at most one of its ticks away
-
     # -- clock --------------------------------------------------------------------------
     def _valid_tick(self, tick: W.Tick) -> bool:
         if self.tick_n is not None and tick.n <= self.tick_n or tick.t < self.t:
@@ -384,9 +348,7 @@ class Peer:
                 self._check_connected(s)
                 self._resubscribe()
                 self.presence = Presence(self, s)
-                if self.fusion_groups:
-                    self.ftick_sub = s.declare_subscriber(self.ks.fusion_tick("*"),
-                                                          zenoh.handlers.FifoChannel(100_000))
+                self.barrier.open(s)
                 buf: list = []        # heap of (seq, message) waiting for their clock tick
                 self._late_join(join_timeout, buf)
                 token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
@@ -401,7 +363,7 @@ class Peer:
                     # serves them all (every message up to the last tick's seq is already in it).
                     ticks = self._next_ticks(clockq)
                     t_first = t_first or time.monotonic()
-                    self._await_tracks(ticks[-1].t)
+                    self.barrier.wait(ticks[-1].t)
                     self._drain(buf)
                     self.max_lead = max(self.max_lead, self.seen_t - ticks[0].t)
                     for tick in ticks:
@@ -434,7 +396,7 @@ class Peer:
                 "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
-                "gaps": self.gaps, "lost_fusion": sorted(self.lost_groups),
+                "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),
