@@ -35,6 +35,26 @@ BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
 
 
+class Held(dict):
+    """seq -> payload waiting for its tick, and the bytes they hold (bounded by the peer)."""
+
+    def __init__(self):
+        super().__init__()
+        self.bytes = 0
+
+    def __setitem__(self, seq: int, payload: bytes) -> None:
+        old = super().get(seq)
+        self.bytes += len(payload) - (len(old) if old is not None else 0)
+        super().__setitem__(seq, payload)
+
+    def pop(self, seq: int, default=None):
+        v = super().pop(seq, None)
+        if v is None:
+            return default
+        self.bytes -= len(v)
+        return v
+
+
 class SourceLost(RuntimeError):
     """No clock tick for longer than the peer's deadline."""
 
@@ -64,7 +84,11 @@ class Peer:
         self.subs: dict[str, object] = {}
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
-        self.pending: dict[int, bytes] = {}   # seq -> payload, waiting for its tick
+        self.pending = Held()                 # seq -> payload, waiting for its tick
+        self.max_held = int(mesh["max_held_mb"] * 2**20)
+        self.max_seq_ahead = int(mesh["max_seq_ahead"])
+        self.tick_seq = 0                     # the latest valid tick's seq
+        self.evicted = False                  # held messages were dropped: the store has them
         self.contested: set[int] = set()      # seqs that came with two different payloads
         self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
         self.n_direct = 0
@@ -184,6 +208,12 @@ class Peer:
                         if prev != payload:
                             self.contested.add(seq)
                         continue
+                    if seq > self.tick_seq + self.max_seq_ahead:
+                        self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
+                                     f"clock's {self.tick_seq}", str(s.key_expr))
+                        continue
+                    if pending.bytes + len(payload) > self.max_held:
+                        self._evict(buf)
                 key = str(s.key_expr)
                 m = gate.data(payload, key)
                 if m is None:
@@ -201,6 +231,19 @@ class Peer:
                 heapq.heappush(buf, (seq, m))
                 if m.t > self.seen_t:
                     self.seen_t = m.t
+
+    def _evict(self, buf: list) -> None:
+        """Held messages passed `max_held_mb` (a flood of plausible junk): drop every one
+        not yet due; when their ticks come, the store gives back the real ones."""
+        due = self.tick_seq
+        for q in [q for q in self.pending if q > due]:
+            self.pending.pop(q)
+        buf[:] = [(q, m) for q, m in buf if q <= due]
+        heapq.heapify(buf)
+        if not self.evicted:
+            self._reject("?", "(held)", f"over {self.max_held >> 20} MB of messages waiting for their tick: "
+                         f"dropped, to be taken from the store", "")
+        self.evicted = True
 
     def _settle(self, buf: list, upto: int) -> None:
         """Contested seqs (junk that carried a real message's number) take the store's version."""
@@ -273,6 +316,7 @@ class Peer:
                 self.system_alert("SAIM", "routine", "the source's clock is back", event="source-back")
             if ticks:
                 self.clock_t = max(self.clock_t, ticks[-1].t)
+                self.tick_seq = max(self.tick_seq, ticks[-1].seq)
                 return ticks
 
     def _on_tick(self, tick: W.Tick, buf: list) -> bool:
@@ -284,6 +328,9 @@ class Peer:
             self.log(f"gap t={self.t:.0f}..{tick.t:.0f}: catching up", flush=True)
             self.gaps += 1
             self._catch_up(sorted(self.subs), buf, tracks_after=self.t)
+        if self.evicted:   # what we dropped to stay bounded comes back from the store
+            self.evicted = False
+            self._catch_up(sorted(self.subs), buf)
         self._settle(buf, tick.seq)
         ready = []
         while buf and buf[0][0] <= tick.seq:
