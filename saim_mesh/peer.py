@@ -276,12 +276,16 @@ class Peer:
 
     # -- clock --------------------------------------------------------------------------
     def _valid_tick(self, tick: W.Tick) -> bool:
-        if self.tick_n is not None and tick.n <= self.tick_n or tick.t < self.t:
-            return False   # a restarted replay repeats its last tick, or the store took us past it
-
         if tick.end and tick.t < self.sc.duration_s:
             self._reject("tick", "end", f"an end tick at t={tick.t} before the scenario's end", self.ks.clock())
             return False
+        # tick n is at n x TICK_S (the end tick may come early in number): a forged number
+        # would make every real tick look stale
+        if tick.n > tick.t / W.TICK_S + 1.5 or not tick.end and tick.n < tick.t / W.TICK_S - 1.5:
+            self._reject("tick", "n", f"tick number {tick.n} does not fit its time {tick.t}", self.ks.clock())
+            return False
+        if self.tick_n is not None and tick.n <= self.tick_n or tick.t < self.t:
+            return False   # a restarted replay repeats its last tick, or the store took us past it
         return True
 
     def _next_ticks(self, clock: queue.SimpleQueue) -> list[W.Tick]:

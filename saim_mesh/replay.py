@@ -36,7 +36,7 @@ def seq_bytes(seq: int) -> bytes:
 
 class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
-                 wait_peers: list[str] = (), tick_s: float = 2.0, wait_timeout: float = 60.0,
+                 wait_peers: list[str] = (), tick_s: float = W.TICK_S, wait_timeout: float = 60.0,
                  linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0,
                  state_path: str | Path | None = None, max_bytes: int = 65536):
         groups = sc.meta.get("fusion", {}).get("groups", {})

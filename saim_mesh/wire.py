@@ -22,6 +22,7 @@ T_LIMIT = 1e9            # no scenario lasts 30 years: the outer bound of any ti
 SEQ_LIMIT = 2**53        # sequence numbers stay exact in every language that reads them
 KEY_LIMIT = 512          # characters in one key expression of a query
 KEYS_LIMIT = 20_000      # key expressions in one query
+TICK_S = 2.0             # the replay's clock period: tick n is at scenario time n x TICK_S
 
 Time = Annotated[float, msgspec.Meta(ge=0.0, le=T_LIMIT)]
 Seq = Annotated[int, msgspec.Meta(ge=0, le=SEQ_LIMIT)]
