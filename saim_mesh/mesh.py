@@ -86,7 +86,6 @@ class Supervisor:
                 self.due[name] = now + min(8.0, self.backoff_s * 2 ** (p.starts - 1))
             elif now >= self.due[name]:
                 del self.due[name]
-                p._log.close()
                 p.start()
                 self.events.append({"process": name, "restarted": p.starts - 1})
                 self.echo(f"supervisor: restarted {name} (restart {p.starts - 1})")

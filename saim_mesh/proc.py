@@ -22,11 +22,14 @@ class Proc:
         self.log_path = self.log_dir / f"{name}.log"
         self.starts = 0
         self.lines: list[str] = []
+        self._log = None
         self.start()
 
     def start(self) -> None:
         """(Re)start: output is appended to the same log; lines are those of this run."""
         self.starts += 1
+        if self._log is not None:
+            self._log.close()
         self._log = open(self.log_path, "ab")
         self._pos = self._log.tell()
         self._partial = b""

@@ -36,13 +36,14 @@ def seq_bytes(seq: int) -> bytes:
 
 class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
-                 wait_peers: list[str] = (), tick_s: float = W.TICK_S, wait_timeout: float = 60.0,
+                 wait_peers: list[str] = (), wait_timeout: float = 60.0,
                  linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0,
                  state_path: str | Path | None = None, max_bytes: int = 65536):
         groups = sc.meta.get("fusion", {}).get("groups", {})
         self.sc, self.conf = sc, conf
         self.ks = KeySpace(root, {sid: g for g, sids in groups.items() for sid in sids})
-        self.speed, self.wait_peers, self.tick_s = speed, list(wait_peers), tick_s
+        self.speed, self.wait_peers = speed, list(wait_peers)
+        self.tick_s = W.TICK_S   # peers check that tick n is at n x TICK_S
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
         self.entries: list[tuple[int, bytes]] = []
         self.by_key: dict[str, list[int]] = {}   # key -> its seqs: queries test each key once
@@ -61,7 +62,7 @@ class Replay:
         fusion node's tracks are out. A malformed query is counted and answered with nothing."""
         while (query := q.try_recv()) is not None:
             req = self.gate.control(W.StoreQuery, query.payload.to_bytes() if query.payload is not None
-                                    else W.encode(W.make(W.StoreQuery, )), self.ks.store())
+                                    else W.encode(W.make(W.StoreQuery)), self.ks.store())
             if req is not None:
                 try:
                     entries = self._entries(req)
@@ -104,7 +105,8 @@ class Replay:
     def _tick(self, s, t: float, end: bool = False) -> None:
         self.t = t
         self.n_ticks += 1
-        s.put(self.ks.clock(), W.encode(W.make(W.Tick, t=t, n=self.n_ticks, seq=len(self.entries), end=end, w=time.time())),
+        tick = W.make(W.Tick, t=t, n=self.n_ticks, seq=len(self.entries), end=end, w=time.time())
+        s.put(self.ks.clock(), W.encode(tick),
               congestion_control=BLOCK)
         if self.state_path is not None:   # where a restarted replay resumes
             tmp = self.state_path.with_suffix(".tmp")

@@ -52,7 +52,7 @@ class FusionPeer:
         """Answered at once on Zenoh's thread: an EA waiting for its catch-up must not wait
         for our next clock tick (a paced replay may be waiting for that EA)."""
         req = self.gate.control(W.FusionQuery, query.payload.to_bytes() if query.payload is not None
-                                else W.encode(W.make(W.FusionQuery, )), self.ks.fusion_store(self.group))
+                                else W.encode(W.make(W.FusionQuery)), self.ks.fusion_store(self.group))
         if req is None:
             return
         try:
