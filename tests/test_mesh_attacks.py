@@ -32,6 +32,7 @@ from saim_mesh.security.pki import make_pki, names_for
 from saim_mesh.zconf import config, free_port
 
 from .conftest import SMALL
+from .zqueue import CallbackQueue
 from .test_mesh import inproc, key, load, plan_alerts, reap  # noqa: F401  (inproc: a fixture)
 
 pytestmark = pytest.mark.timeout(240)
@@ -84,17 +85,8 @@ def attacker(ep: str, root: str, sc, pki=None, name: str | None = None):
         yield s
 
 
-class Q:
-    """A queue fed by a Zenoh callback."""
-
-    def __init__(self):
-        self.q = queue.Queue()
-
-    def __call__(self, x):
-        self.q.put(x)
-
-    def get(self, timeout=WAIT):
-        return self.q.get(timeout=timeout)
+class Q(CallbackQueue):
+    wait = WAIT
 
 
 def matched(s, k: str):

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import queue
 import stat
 import string
 import time
@@ -27,6 +26,7 @@ from saim_mesh.security import (SecurityError, access_control, check_files, chec
 from saim_mesh.zconf import config, free_port
 
 from .conftest import ROOT, SMALL
+from .zqueue import CallbackQueue
 
 pytestmark = pytest.mark.timeout(120)
 SENSORS = ROOT / "scenarios" / "small-sensors"
@@ -254,25 +254,8 @@ def test_secure_config_checks_before_open(pki, tmp_path):
 
 # ---------------------------------------------------------------------------- end to end
 
-class Q:
-    """A queue fed by a Zenoh callback (runs on a Python thread, never blocks)."""
-
-    def __init__(self):
-        self.q = queue.Queue()
-
-    def __call__(self, x):
-        self.q.put(x)
-
-    def get(self, timeout=WAIT):
-        return self.q.get(timeout=timeout)
-
-    def drain(self) -> list:
-        out = []
-        while True:
-            try:
-                out.append(self.q.get_nowait())
-            except queue.Empty:
-                return out
+class Q(CallbackQueue):
+    wait = WAIT
 
 
 def sample(s):
