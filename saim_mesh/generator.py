@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .geo import Projection
+from ea_agent.core.geo import Projection
 
 EPSG = 32611
 ORIGIN_LONLAT = (-116.62, 35.22)   # south-west corner of the battalion sector

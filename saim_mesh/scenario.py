@@ -25,7 +25,7 @@ from ea_agent.core.plan import (ECHELONS, END_TYPES, START_TYPES, MissionSpec, P
 from ea_agent.domains.suo.missions import REGISTRY
 
 from . import messages as M
-from .geo import Projection
+from ea_agent.core.geo import Projection
 
 AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
 LINE_KINDS = {"route", "phase-line", "avenue-of-approach"}

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from saim_mesh import scenario as S
-from saim_mesh.adjudication import Adjudicator, Report
+from ea_agent.core.adjudication import Adjudicator, Report
 from saim_mesh.evaluate import evaluate
 from saim_mesh.fusion import FusionNode
-from saim_mesh.geo import Projection
+from ea_agent.core.geo import Projection
 from saim_mesh.mesh import start_fusion, start_peer, start_replay
 from saim_mesh.messages import SensorHit
 from saim_mesh.runner import run

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Hashable
+from typing import Any, ClassVar, Hashable
+
+from .messages import MessageError, need, text, time_of, register
 
 PRIORITIES = ("flash", "immediate", "priority", "routine")  # highest first
 
@@ -51,3 +53,38 @@ class Candidate:
     friendly: bool = True               # friendly (120 s) or hostile (90 s) suppression
     repeat: bool = False                 # set by VOA when this is a progressive repeat
     also: tuple = ()                     # ((key, measure), ...) histories this alert also updates
+
+
+
+@dataclass(slots=True, frozen=True)
+class Alert:
+    """An alert as shown to a commander and sent on the mesh."""
+    KIND: ClassVar[str] = "alert"
+    t: float
+    owner: str
+    type: str
+    category: str
+    priority: str
+    subjects: tuple[str, ...]
+    message: str
+    details: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Alert":
+        k = cls.KIND
+        subjects = need(d, k, "subjects")
+        if not isinstance(subjects, (list, tuple)) or not all(isinstance(s, str) for s in subjects):
+            raise MessageError(k, "subjects", "expected a list of strings")
+        details = need(d, k, "details", {})
+        if not isinstance(details, dict):
+            raise MessageError(k, "details", "expected a mapping")
+        return cls(time_of(d, k), text(d, k, "owner"), text(d, k, "type"), text(d, k, "category"),
+                   text(d, k, "priority", PRIORITIES), tuple(subjects), text(d, k, "message"), details)
+
+    def to_json_dict(self) -> dict:
+        return {"t": self.t, "owner": self.owner, "type": self.type, "category": self.category,
+                "priority": self.priority, "subjects": list(self.subjects),
+                "message": self.message, "details": self.details}
+
+
+register(Alert)

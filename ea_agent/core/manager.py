@@ -15,7 +15,7 @@ import math
 from collections import Counter
 from typing import Callable, Iterable, Protocol
 
-from saim_mesh.messages import Alert
+from .alert import Alert
 
 from .alert import Candidate
 from .timed import TimedMonitors

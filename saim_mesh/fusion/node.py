@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from saim_mesh.geo import Projection
+from ea_agent.core.geo import Projection
 from saim_mesh.messages import SensorHit, SensorTrack
 
 

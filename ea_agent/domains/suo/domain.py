@@ -10,11 +10,12 @@ from collections import defaultdict
 import numpy as np
 import shapely
 
-from ea_agent.core.alert import Candidate, highest, hms
+from ea_agent.core.alert import Alert, Candidate, highest, hms
+from ea_agent.core.geo import Projection, bearing_name
 from ea_agent.core.plan import MissionSpec, PlanSpec, PlanState, TaskOrg, TimeConstraint
-from saim_mesh.geo import Projection, bearing_name
-from saim_mesh.messages import (Alert, CallForFire, CallForFireConfirm, LocationReport, MissionConfirm, Order,
-                                Reorganization, SensorTrack)
+
+from .messages import (CallForFire, CallForFireConfirm, LocationReport, MissionConfirm, Order, Reorganization,
+                       SensorTrack)
 
 from . import detectors as D
 from .missions import REGISTRY, ContingentMission, Mission, make

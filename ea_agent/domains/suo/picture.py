@@ -8,9 +8,9 @@ from collections import Counter, defaultdict
 import numpy as np
 
 from ea_agent.core.plan import TaskOrg
-from saim_mesh.adjudication import Adjudicator, Entity, Report
-from saim_mesh.geo import Projection
-from saim_mesh.messages import LocationReport, SensorTrack
+from ea_agent.core.adjudication import Adjudicator, Entity, Report
+from ea_agent.core.geo import Projection
+from .messages import LocationReport, SensorTrack
 
 
 class Picture:

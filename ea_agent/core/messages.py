@@ -1,0 +1,167 @@
+"""The typed, versioned wire form every domain's messages share (msgpack).
+
+A message is a frozen dataclass with a `KIND` tag and a validating `from_dict`;
+a domain registers its classes here (`register`) so that one decoder serves every
+domain. `from_dict` raises `MessageError` naming the offending field, so a bad
+message is counted and dropped instead of crashing a peer.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+from typing import Any
+
+import msgpack
+
+VERSION = 1
+
+class MessageError(ValueError):
+    """A message that cannot be decoded; `field` names what was wrong."""
+
+    def __init__(self, kind: str, field_name: str, problem: str):
+        super().__init__(f"{kind} message: field '{field_name}': {problem}")
+        self.kind = kind
+        self.field = field_name
+        self.problem = problem
+
+
+def need(d: dict, kind: str, name: str, default: Any = ...):
+    if name in d:
+        return d[name]
+    if default is ...:
+        raise MessageError(kind, name, "missing")
+    return default
+
+
+def number(d: dict, kind: str, name: str, lo: float = -math.inf, hi: float = math.inf, default: Any = ...) -> float:
+    v = need(d, kind, name, default)
+    if v is None and default is None:
+        return None  # type: ignore[return-value]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise MessageError(kind, name, f"expected a number, got {type(v).__name__}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise MessageError(kind, name, f"not a finite number ({v})")
+    if not lo <= v <= hi:
+        raise MessageError(kind, name, f"{v} outside [{lo}, {hi}]")
+    return v
+
+
+def integer(d: dict, kind: str, name: str, lo: int = 0, default: Any = ...) -> int:
+    v = need(d, kind, name, default)
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise MessageError(kind, name, f"expected an integer, got {type(v).__name__}")
+    if v < lo:
+        raise MessageError(kind, name, f"{v} below {lo}")
+    return v
+
+
+def text(d: dict, kind: str, name: str, choices: tuple[str, ...] | None = None, default: Any = ...) -> str:
+    v = need(d, kind, name, default)
+    if v is None and default is None:
+        return None  # type: ignore[return-value]
+    if not isinstance(v, str) or not v:
+        raise MessageError(kind, name, "expected a non-empty string")
+    if choices and v not in choices:
+        raise MessageError(kind, name, f"{label(v)} not one of {', '.join(choices)}")
+    return v
+
+
+NUMERIC = (float, int)
+
+
+def time_of(d: dict, kind: str) -> float:
+    return number(d, kind, "t", 0.0)
+
+
+def lonlat(d: dict, kind: str) -> tuple[float, float]:
+    return number(d, kind, "lon", -180.0, 180.0), number(d, kind, "lat", -90.0, 90.0)
+
+
+
+MESSAGE_TYPES: dict[str, type] = {}
+
+
+def register(*classes: type) -> None:
+    """Make message classes decodable; a kind may be registered once (by one class)."""
+    for c in classes:
+        old = MESSAGE_TYPES.setdefault(c.KIND, c)
+        if old is not c:
+            raise ValueError(f"message kind {c.KIND!r} already registered by {old.__name__}")
+
+
+Message = Any   # an instance of one of MESSAGE_TYPES
+
+
+def label(v: Any) -> str:
+    """A value named in an error without rendering it: an attacker's value may be
+    a thousand levels deep or a megabyte long."""
+    if type(v) is str:
+        return repr(v[:40])
+    if type(v) in (int, float, bool) or v is None:
+        return repr(v)[:40]
+    return f"a {type(v).__name__}"
+
+
+def from_dict(d: Any) -> Message:
+    """Build a message from a decoded mapping with a `kind` key; raises MessageError."""
+    if not isinstance(d, dict):
+        raise MessageError("?", "(message)", f"expected a mapping, got {type(d).__name__}")
+    kind = d.get("kind")
+    cls = MESSAGE_TYPES.get(kind) if type(kind) is str else None
+    if cls is None:
+        raise MessageError("?", "kind", f"unknown message kind {label(kind)}")
+    return cls.from_dict(d)
+
+
+def to_dict(msg: Message) -> dict:
+    d = msg.to_json_dict() if hasattr(msg, "to_json_dict") else asdict(msg)
+    d["kind"] = msg.KIND
+    return d
+
+
+def encode(msg: Message) -> bytes:
+    """Wire form: msgpack map with a version `v` and a `kind` tag."""
+    d = to_dict(msg)
+    d["v"] = VERSION
+    return msgpack.packb(d, use_bin_type=True)
+
+
+def decode(data: bytes) -> Message:
+    """Parse and validate wire bytes; raises MessageError on anything malformed."""
+    try:
+        d = msgpack.unpackb(data, raw=False, strict_map_key=True)
+    except Exception as e:  # msgpack raises several unrelated types
+        raise MessageError("?", "(bytes)", f"not valid msgpack: {e}") from None
+    if not isinstance(d, dict):
+        raise MessageError("?", "(message)", "expected a mapping")
+    v, kind = d.get("v"), d.get("kind")
+    kind = kind if type(kind) is str and kind in MESSAGE_TYPES else "?"
+    if type(v) is not int or v != VERSION:   # `True == 1`: a bool is no version
+        raise MessageError(kind, "v", f"unsupported version {label(v)} (expected {VERSION})")
+    try:
+        return from_dict(d)
+    except MessageError:
+        raise
+    except Exception as e:   # an odd shape the field checks did not foresee: still a rejection
+        raise MessageError(kind, "(message)", f"undecodable: {type(e).__name__}") from None
+
+
+class Decoder:
+    """Decodes a stream of wire messages, counting and keeping the last errors instead of raising."""
+
+    def __init__(self, keep: int = 20):
+        self.ok = 0
+        self.errors = 0
+        self.recent: list[str] = []
+        self._keep = keep
+
+    def __call__(self, data: bytes) -> Message | None:
+        try:
+            m = decode(data)
+        except MessageError as e:
+            self.errors += 1
+            self.recent = (self.recent + [str(e)])[-self._keep:]
+            return None
+        self.ok += 1
+        return m

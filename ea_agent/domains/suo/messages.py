@@ -1,0 +1,144 @@
+"""Small-unit operations messages: friendly positions, hostile tracks and raw
+sensor hits, mission confirmations, orders, calls for fire and reorganizations."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from ea_agent.core.messages import integer, lonlat, NUMERIC, number, text, time_of, register
+
+@dataclass(slots=True, frozen=True)
+class LocationReport:
+    """A friendly entity's GPS position (from SAIM's network)."""
+    KIND: ClassVar[str] = "location"
+    t: float
+    entity: str
+    lon: float
+    lat: float
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "LocationReport":
+        # Fast path for the most frequent message; anything odd takes the validating
+        # path below, which names the bad field. NaN fails every comparison.
+        t, e, lon, lat = d.get("t"), d.get("entity"), d.get("lon"), d.get("lat")
+        if (type(t) in NUMERIC and type(lon) in NUMERIC and type(lat) in NUMERIC and type(e) is str and e
+                and 0.0 <= t <= 1e15 and -180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):
+            return cls(float(t), e, float(lon), float(lat))
+        k = cls.KIND
+        lon, lat = lonlat(d, k)
+        return cls(time_of(d, k), text(d, k, "entity"), lon, lat)
+
+
+@dataclass(slots=True, frozen=True)
+class SensorTrack:
+    """A fused hostile track: position, strength (entity count) and kinematics."""
+    KIND: ClassVar[str] = "track"
+    t: float
+    track: str
+    lon: float
+    lat: float
+    strength: int
+    heading: float | None = None
+    speed: float | None = None
+    source: str = "fusion"
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SensorTrack":
+        k = cls.KIND
+        lon, lat = lonlat(d, k)
+        return cls(time_of(d, k), text(d, k, "track"), lon, lat, integer(d, k, "strength", 0),
+                   number(d, k, "heading", 0.0, 360.0, default=None),
+                   number(d, k, "speed", 0.0, default=None), text(d, k, "source", default="fusion"))
+
+
+@dataclass(slots=True, frozen=True)
+class SensorHit:
+    """One raw detection by one sensor (before fusion): where something was seen."""
+    KIND: ClassVar[str] = "hit"
+    t: float
+    sensor: str
+    lon: float
+    lat: float
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SensorHit":
+        k = cls.KIND
+        lon, lat = lonlat(d, k)
+        return cls(time_of(d, k), text(d, k, "sensor"), lon, lat)
+
+
+@dataclass(slots=True, frozen=True)
+class MissionConfirm:
+    """Confirmation that a unit started or ended a mission (from its EA, or local)."""
+    KIND: ClassVar[str] = "mission"
+    t: float
+    mission: str
+    unit: str
+    phase: str  # "start" | "end"
+    source: str = "message"  # "message" | "local"
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "MissionConfirm":
+        k = cls.KIND
+        return cls(time_of(d, k), text(d, k, "mission"), text(d, k, "unit"),
+                   text(d, k, "phase", ("start", "end")),
+                   text(d, k, "source", ("message", "local"), default="message"))
+
+
+@dataclass(slots=True, frozen=True)
+class Order:
+    """An order from a superior: execute a (new) plan, or abort the current one."""
+    KIND: ClassVar[str] = "order"
+    t: float
+    action: str  # "execute-plan" | "abort-plan"
+    plan: str
+    issuer: str
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Order":
+        k = cls.KIND
+        return cls(time_of(d, k), text(d, k, "action", ("execute-plan", "abort-plan")),
+                   text(d, k, "plan"), text(d, k, "issuer"))
+
+
+@dataclass(slots=True, frozen=True)
+class CallForFire:
+    """A request for indirect fire on a target; `radius_m` is the danger radius."""
+    KIND: ClassVar[str] = "cff"
+    t: float
+    cff: str
+    requester: str
+    lon: float
+    lat: float
+    radius_m: float
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CallForFire":
+        k = cls.KIND
+        lon, lat = lonlat(d, k)
+        return cls(time_of(d, k), text(d, k, "cff"), text(d, k, "requester"), lon, lat,
+                   number(d, k, "radius_m", 1.0, 100_000.0))
+
+
+@dataclass(slots=True, frozen=True)
+class CallForFireConfirm(CallForFire):
+    """The requester confirmed the fire mission: everyone near the target is warned."""
+    KIND: ClassVar[str] = "cff-confirm"
+
+
+@dataclass(slots=True, frozen=True)
+class Reorganization:
+    """Resubordinate `unit` under `new_parent` (task organization change)."""
+    KIND: ClassVar[str] = "reorg"
+    t: float
+    unit: str
+    new_parent: str
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Reorganization":
+        k = cls.KIND
+        return cls(time_of(d, k), text(d, k, "unit"), text(d, k, "new_parent"))
+
+
+register(LocationReport, SensorTrack, SensorHit, MissionConfirm, Order, CallForFire, CallForFireConfirm,
+         Reorganization)
