@@ -16,7 +16,7 @@ from .zconf import free_port
 
 def mesh_units(sc) -> list[str]:
     """Battalion, companies and platoons: every unit above squad level."""
-    return sorted(u for u, x in sc.taskorg.units.items() if x.echelon in ("battalion", "company", "platoon"))
+    return sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("battalion", "company", "platoon"))
 
 
 def _sec(pki: str | Path | None) -> list[str]:

@@ -20,13 +20,14 @@ import shapely
 from shapely.geometry import shape
 
 from ea_agent.core.config import ConfigError
-from ea_agent.core.plan import (ECHELONS, END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg,
+from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg,
                                 TimeConstraint, Unit)
 from ea_agent.domains.suo.missions import REGISTRY
 
 from . import messages as M
 from ea_agent.core.geo import Projection
 
+ECHELONS = ("battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
 AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
 LINE_KINDS = {"route", "phase-line", "avenue-of-approach"}
 POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon
@@ -283,8 +284,9 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
         if bnd is not None and (not isinstance(bnd, str) or bnd not in overlay or overlay[bnd].kind != "boundary"):
             raise ScenarioError(f"{where}: field 'boundary': {bnd!r} is not a boundary in the overlay")
         wr = u.get("weapons_range_m")
-        units.append(Unit(uid, str(u.get("name", uid)), ech, parent, tuple(ents),
-                          _number(wr, where, "weapons_range_m", positive=True) if wr is not None else None, bnd))
+        attrs = {"boundary": bnd,
+                 "weapons_range_m": _number(wr, where, "weapons_range_m", positive=True) if wr is not None else None}
+        units.append(Unit(uid, str(u.get("name", uid)), ech, parent, tuple(ents), attrs))
     roots = [u.id for u in units if u.parent is None]
     if len(roots) != 1:
         raise ScenarioError(f"{p.name}: task_organization: field 'parent': need exactly one top unit, found {roots}")

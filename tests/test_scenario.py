@@ -15,7 +15,7 @@ def test_battalion_is_big_enough():
     assert len(sc.taskorg.entity_unit) >= 400
     assert len(sc.events) >= 45_000
     assert sc.duration_s >= 5400
-    echelons = [u.echelon for u in sc.taskorg.units.values()]
+    echelons = [u.kind for u in sc.taskorg.units.values()]
     assert echelons.count("company") >= 3 and "squad" in echelons and "platoon" in echelons
     assert {type(e).__name__ for e in sc.events} >= {"LocationReport", "SensorTrack", "MissionConfirm",
                                                       "CallForFire", "CallForFireConfirm"}

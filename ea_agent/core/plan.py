@@ -7,7 +7,6 @@ from typing import Any, Iterable
 
 START_TYPES = ("ASAP", "ON-ORDER", "START-AT", "START-NLT", "START-NET")
 END_TYPES = ("ASAP", "ON-ORDER", "END-AT", "END-NLT", "END-NET")
-ECHELONS = ("battalion", "company", "platoon", "squad")
 
 
 @dataclass(slots=True, frozen=True)
@@ -19,13 +18,15 @@ class TimeConstraint:
 
 @dataclass(slots=True)
 class Unit:
+    """A node of the command hierarchy. `kind` is the domain's word for it (an
+    echelon, a robot type); `attrs` holds what only the domain reads (a weapons
+    range, an owned boundary, a sensor footprint)."""
     id: str
     name: str
-    echelon: str
+    kind: str
     parent: str | None
     entities: tuple[str, ...] = ()
-    weapons_range_m: float | None = None
-    boundary: str | None = None   # id of the overlay boundary this unit owns
+    attrs: dict[str, Any] = field(default_factory=dict)
 
 
 class TaskOrg:
@@ -39,7 +40,7 @@ class TaskOrg:
         self._cache: dict[str, tuple[str, ...]] = {}
 
     def copy(self) -> "TaskOrg":
-        t = TaskOrg(Unit(u.id, u.name, u.echelon, u.parent, u.entities, u.weapons_range_m, u.boundary)
+        t = TaskOrg(Unit(u.id, u.name, u.kind, u.parent, u.entities, dict(u.attrs))
                     for u in self.units.values())
         t.parent = dict(self.parent)
         return t
@@ -103,10 +104,11 @@ class TaskOrg:
         self.version += 1
         self._cache.clear()
 
-    def boundary_owner(self, unit: str) -> str | None:
-        """The nearest unit at or above `unit` that owns a boundary."""
+    def nearest_with(self, unit: str, attr: str) -> str | None:
+        """The nearest unit at or above `unit` whose `attrs` set `attr` (e.g. the
+        unit whose boundary governs it)."""
         for u in [unit, *self.ancestors(unit)]:
-            if self.units[u].boundary:
+            if self.units[u].attrs.get(attr) is not None:
                 return u
         return None
 

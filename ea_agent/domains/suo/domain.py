@@ -98,15 +98,15 @@ class SuoDomain:
         self.watchman.set_own(self.own_leaves)
         self.leaves = self.pic.leaves
         self.leaf_i = {u: i for i, u in enumerate(self.leaves)}
-        bnd_units = sorted({to.boundary_owner(u) for u in self.leaves if to.boundary_owner(u)})
-        self.bnd_polys = [self.overlay[to.units[b].boundary].area for b in bnd_units]
+        bnd_units = sorted({to.nearest_with(u, 'boundary') for u in self.leaves if to.nearest_with(u, 'boundary')})
+        self.bnd_polys = [self.overlay[to.units[b].attrs['boundary']].area for b in bnd_units]
         bi = {b: k for k, b in enumerate(bnd_units)}
-        self.leaf_bnd = np.array([bi.get(to.boundary_owner(u), -1) for u in self.leaves])
+        self.leaf_bnd = np.array([bi.get(to.nearest_with(u, 'boundary'), -1) for u in self.leaves])
         self.frat_ok = self.leaf_bnd >= 0
         dflt = float(self.voi_cfg["weapons_range_m"])
         self.leaf_rng = np.array([self._weapons_range(u, dflt) for u in self.leaves])
         self.leaf_mine = np.array([u in self.own_units for u in self.leaves])
-        env = [u for u in sorted(self.own_units) if to.units[u].echelon == "platoon"]
+        env = [u for u in sorted(self.own_units) if to.units[u].kind == "platoon"]
         self.env_units = env or [self.owner]
         self.unit_pos = {u: self.pic.centroid(u) for u in to.units}
         self._up = {leaf: (leaf, *to.ancestors(leaf)) for leaf in self.leaves}
@@ -117,11 +117,8 @@ class SuoDomain:
         self.dirty_leaves |= set(self.leaves)
 
     def _weapons_range(self, unit: str, dflt: float) -> float:
-        for u in [unit, *self.taskorg.ancestors(unit)]:
-            r = self.taskorg.units[u].weapons_range_m
-            if r is not None:
-                return r
-        return dflt
+        u = self.taskorg.nearest_with(unit, "weapons_range_m")
+        return dflt if u is None else float(self.taskorg.units[u].attrs["weapons_range_m"])
 
     def name(self, unit: str) -> str:
         return self.taskorg.name(unit)
@@ -400,7 +397,7 @@ class SuoDomain:
 
     def _platoon_of(self, unit: str) -> str:
         for u in [unit, *self.taskorg.ancestors(unit)]:
-            if self.taskorg.units[u].echelon in ("platoon", "company", "battalion"):
+            if self.taskorg.units[u].kind in ("platoon", "company", "battalion"):
                 return u
         return unit
 
