@@ -5,12 +5,9 @@ scenario is fixed in one look.
 """
 from __future__ import annotations
 
-import gzip
 import json
 import math
-import re
 import warnings
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +23,8 @@ from ea_agent.domains.suo.missions import REGISTRY
 
 from . import messages as M
 from ea_agent.core.geo import Projection
+from ea_agent.core.scenario import (ScenarioError, check_key_chunk, need as _need, number as _number,  # noqa: F401
+                                    read_events, read_json as _read_json)
 
 ECHELONS = ("battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
 AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
@@ -33,11 +32,6 @@ LINE_KINDS = {"route", "phase-line", "avenue-of-approach"}
 POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon
 KINDS = AREA_KINDS | LINE_KINDS | POINT_KINDS
 MAX_DURATION_S = 7 * 86400.0   # a week of scenario time: far more than an operation, bounded so nothing spins
-_NOT_IN_CHUNK = re.compile(r"[/*#?$\s]")
-
-
-class ScenarioError(ValueError):
-    pass
 
 
 @dataclass(slots=True)
@@ -73,56 +67,6 @@ class Scenario:
         if not p.exists():
             raise ScenarioError(f"{p}: no ground-truth file in this scenario")
         return json.loads(p.read_text())
-
-
-def _need(d: dict, key: str, where: str, types: type | tuple = object):
-    if not isinstance(d, dict):
-        raise ScenarioError(f"{where}: expected an object")
-    if key not in d:
-        raise ScenarioError(f"{where}: field '{key}': missing")
-    v = d[key]
-    if not isinstance(v, types) or isinstance(v, bool) and types is not bool:
-        raise ScenarioError(f"{where}: field '{key}': expected {getattr(types, '__name__', types)}, got {type(v).__name__}")
-    return v
-
-
-def check_key_chunk(value: Any, where: str, name: str) -> str:
-    """An id that becomes one Zenoh key chunk (unit, entity, mission, track, cff, sensor,
-    plan, fusion group): a non-empty string without '/', '*', '#', '?', '$' or whitespace.
-    Anything else would be published on keys nobody subscribes to (or be no key at all)."""
-    if not isinstance(value, str) or not value:
-        raise ScenarioError(f"{where}: field '{name}': expected a non-empty id string, got {value!r:.60}")
-    bad = _NOT_IN_CHUNK.search(value)
-    if bad:
-        raise ScenarioError(f"{where}: field '{name}': id {value!r:.60} contains {bad.group()!r}; ids are Zenoh key "
-                            f"chunks and may not contain '/', '*', '#', '?', '$' or whitespace")
-    return value
-
-
-def _number(v: Any, where: str, name: str, positive: bool = False) -> float:
-    """A finite number >= 0 (> 0 if `positive`), never a bool."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ScenarioError(f"{where}: field '{name}': expected a number, got {type(v).__name__}")
-    if not math.isfinite(v):
-        raise ScenarioError(f"{where}: field '{name}': not a finite number ({v})")
-    if v < 0 or positive and v == 0:
-        raise ScenarioError(f"{where}: field '{name}': must be {'> 0' if positive else '>= 0'} (got {v})")
-    return float(v)
-
-
-def _read_json(p: Path) -> Any:
-    try:
-        return json.loads(p.read_text())
-    except FileNotFoundError:
-        raise ScenarioError(f"{p}: file missing") from None
-    except OSError as e:
-        raise ScenarioError(f"{p}: cannot read: {e.strerror or e}") from None
-    except UnicodeDecodeError as e:
-        raise ScenarioError(f"{p}: not UTF-8 text: {e.reason}") from None
-    except json.JSONDecodeError as e:
-        raise ScenarioError(f"{p}:{e.lineno}: invalid JSON: {e.msg}") from None
-    except RecursionError:
-        raise ScenarioError(f"{p}: invalid JSON: nested too deeply") from None
 
 
 def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
@@ -377,17 +321,6 @@ def _check_trigger(tr: Any, where: str, overlay: dict, ids: set[str]) -> None:
             raise ScenarioError(f"{where}: field 'min_strength': expected an integer >= 0, got {ms!r:.40}")
 
 
-def _open_events(root: Path):
-    for name in ("events.jsonl", "events.jsonl.gz"):
-        p = root / name
-        if p.exists():
-            try:
-                return p, (gzip.open(p, "rt", encoding="utf-8") if name.endswith(".gz") else p.open(encoding="utf-8"))
-            except OSError as e:
-                raise ScenarioError(f"{p}: cannot read: {e.strerror or e}") from None
-    raise ScenarioError(f"{root}: no events.jsonl or events.jsonl.gz")
-
-
 @dataclass
 class EventContext:
     """What the events are checked against: every event must lie in [0, duration_s] and
@@ -477,39 +410,12 @@ def load_events(root: Path, context: EventContext | None = None) -> list:
     """The event script, time-ordered; with a `context` (as `load` gives) also checked
     against the scenario: times within duration_s, known units, missions and plans."""
     cx = context or EventContext()
-    p, fh = _open_events(root)
-    out = []
-    last_t = 0.0
-    lineno = 0
-    check, dur, good, loc = _check_event, cx.duration_s, cx.good, M.LocationReport
-    try:
-        with fh:
-            for lineno, line in enumerate(fh, 1):
-                if not line.strip():
-                    continue
-                try:
-                    d = json.loads(line)
-                except (json.JSONDecodeError, RecursionError) as e:
-                    why = getattr(e, "msg", "nested too deeply")
-                    raise ScenarioError(f"{p.name}:{lineno}: invalid JSON: {why}") from None
-                try:
-                    m = M.from_dict(d)
-                except M.MessageError as e:
-                    raise ScenarioError(f"{p.name}:{lineno}: {e}") from None
-                if m.t < last_t:
-                    raise ScenarioError(f"{p.name}:{lineno}: field 't': {m.t} is earlier than the line before ({last_t}); events must be time-ordered")
-                last_t = m.t
-                if not (type(m) is loc and m.t <= dur and m.entity in good):   # the common case, checked
-                    check(m, cx, f"{p.name}:{lineno}: {m.KIND} message")
-                out.append(m)
-    except (EOFError, zlib.error, gzip.BadGzipFile) as e:
-        after = f" after line {lineno}" if lineno else ""
-        raise ScenarioError(f"{p.name}:{lineno + 1}: truncated or corrupt gzip{after} ({e})") from None
-    except UnicodeDecodeError as e:
-        raise ScenarioError(f"{p.name}:{lineno + 1}: not UTF-8 text ({e.reason})") from None
-    except OSError as e:
-        raise ScenarioError(f"{p.name}:{lineno + 1}: cannot read: {e.strerror or e}") from None
-    return out
+    dur, good, loc = cx.duration_s, cx.good, M.LocationReport
+
+    def check(m, where: str) -> None:
+        if not (type(m) is loc and m.t <= dur and m.entity in good):   # the common case, checked
+            _check_event(m, cx, where)
+    return read_events(root, check)
 
 
 def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list[str]] | None]:

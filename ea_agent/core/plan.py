@@ -112,6 +112,10 @@ class TaskOrg:
                 return u
         return None
 
+    def path(self, unit: str) -> str:
+        """'top/.../unit': the unit's place in the hierarchy (one key chunk per level)."""
+        return "/".join(reversed([unit, *self.ancestors(unit)]))
+
     def name(self, unit: str) -> str:
         u = self.units.get(unit)
         return u.name if u else unit

@@ -13,6 +13,7 @@ import shapely
 from ea_agent.core.alert import Alert, Candidate, highest, hms
 from ea_agent.core.geo import Projection, bearing_name
 from ea_agent.core.plan import MissionSpec, PlanSpec, PlanState, TaskOrg, TimeConstraint
+from ea_agent.core.schedule import Schedule
 
 from .messages import (CallForFire, CallForFireConfirm, LocationReport, MissionConfirm, Order, Reorganization,
                        SensorTrack)
@@ -70,6 +71,8 @@ class SuoDomain:
     def bind(self, ea) -> None:
         self.ea = ea
         self.timers = ea.timers
+        self.schedule = Schedule(ea.timers, ea.post, self.name, self.in_plan, lambda m: self.voi(m, "schedule_s"),
+                                 self.voi_cfg["schedule_repeat_s"])
 
     def _reset_monitors(self) -> None:
         self.loc_monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)
@@ -223,38 +226,7 @@ class SuoDomain:
 
     # -- the monitoring API that mission methods call (6.5) ----------------------------
     def post_time_constraint(self, m: Mission, phase: str, tc: TimeConstraint) -> None:
-        if tc.type in ("ASAP", "ON-ORDER") or tc.t is None:
-            return
-        thr = self.voi(m, "schedule_s")
-        steps = sorted(x for x in self.voi_cfg["schedule_repeat_s"] if x > thr)
-        event, when = (phase, m.id), tc.t
-        kind = tc.type.split("-")[1]
-
-        def late(tf: float, mon, how: str) -> float | None:
-            if not self.in_plan(m):
-                return None
-            off = tf - when if how == "late" else when - tf
-            self._schedule_candidate(m, phase, tc, tf, off, how)
-            if how == "late":
-                nxt = [s for s in steps if s > off + 1e-9]
-                return when + nxt[0] if nxt else None
-            return None
-
-        if kind == "NLT":
-            self.timers.not_later_than(event, when + thr, late, tag=m.id)
-        elif kind == "NET":
-            self.timers.not_earlier_than(event, when - thr, late, tag=m.id)
-        else:  # AT
-            self.timers.near_time(event, when, thr, late, tag=m.id)
-
-    def _schedule_candidate(self, m: Mission, phase: str, tc: TimeConstraint, t: float, off: float, how: str) -> None:
-        verb = "starting" if phase == "start" else "ending"
-        what = f"{self.name(m.unit)} {how} {verb} {m.TYPE} ({tc.type} {hms(tc.t)})"
-        text = f"{what}: {off:.0f} s {how}" if how == "late" else f"{self.name(m.unit)} {phase}ed {m.TYPE} {off:.0f} s early ({tc.type} {hms(tc.t)})"
-        self.ea.post(Candidate(t, "schedule", m.compute_priority("schedule"), (m.unit,), text,
-                               key=("schedule", m.id, phase), measure=off,
-                               details={"mission": m.id, "phase": phase, "constraint": tc.type,
-                                        "planned_t": tc.t, "how": how, "off_s": round(off, 1)}))
+        self.schedule.post(m, phase, tc)
 
     def post_location_monitor(self, m: Mission, geom: str, rule: str, what: str) -> None:
         self.loc_monitors[m.id].append((m, geom, rule, what))

@@ -8,14 +8,14 @@ Leaf classes carry Army doctrine names (FM 3-90) in `TYPE`.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
-from ea_agent.core.plan import MissionSpec
+from ea_agent.core.mission import Mission as CoreMission, Registry
 
 if TYPE_CHECKING:  # the domain implements the monitoring API used here
     from .domain import SuoDomain
 
-REGISTRY: dict[str, type["Mission"]] = {}
+REGISTRY = Registry()
 
 DEFAULT_PRIORITY = {
     "fratricide": "flash", "contact": "flash", "call-for-fire": "flash",
@@ -26,83 +26,23 @@ DEFAULT_PRIORITY = {
 }
 
 
-def mission(cls):
-    """Register a leaf mission class under its doctrine name."""
-    REGISTRY[cls.TYPE] = cls
-    return cls
+mission = REGISTRY.leaf   # registers a leaf mission class under its doctrine name
 
 
-class Mission:
-    """Root of the model: every mission has start and end time constraints."""
-    TYPE: ClassVar[str] = "mission"
-    PARAMS: ClassVar[dict[str, str]] = {
+class Mission(CoreMission):
+    """Root of the SUO model: time constraints (from the core), places on the
+    overlay, and how hostile activity near the unit is judged."""
+    PARAMS = {
         "voi": "optional per-mission VOI overrides, e.g. {out_of_position_m: 100, schedule_s: 10}",
     }
-    REQUIRED: ClassVar[tuple[str, ...]] = ()
     GEOMETRY_PARAMS: ClassVar[tuple[str, ...]] = ()   # params that name overlay features
-    UNIT_PARAMS: ClassVar[tuple[str, ...]] = ()       # params that name units
     LOCATION_RULE: ClassVar[str] = "centroid"         # centroid | any | all members
     DESIRED_STRENGTH_RATIO: ClassVar[float] = 1.0     # friendly:hostile combat power wanted
-    PRIORITY: ClassVar[dict[str, str]] = {}           # per-mission priority overrides
-    AUTO_START: ClassVar[bool] = False                # executed by the EA itself (no confirmation)
-
-    def __init__(self, spec: MissionSpec):
-        self.spec = spec
-        self.id = spec.id
-        self.unit = spec.unit
-        self.params: dict[str, Any] = spec.params
-
-    @classmethod
-    def all_params(cls) -> dict[str, str]:
-        out: dict[str, str] = {}
-        for k in reversed(cls.__mro__):
-            out.update(getattr(k, "PARAMS", {}) if "PARAMS" in vars(k) else {})
-        return out
-
-    @classmethod
-    def required(cls) -> tuple[str, ...]:
-        out: list[str] = []
-        for k in reversed(cls.__mro__):
-            out += [p for p in vars(k).get("REQUIRED", ()) if p not in out]
-        return tuple(out)
-
-    def __repr__(self) -> str:
-        return f"<{self.TYPE} {self.id} by {self.unit}>"
-
-    # -- the monitoring API (paper 6.5) ----------------------------------------------
-    def post_execution_constraints(self, ctx: "SuoDomain") -> None:
-        """Main entry: post every constraint this mission wants enforced."""
-        self.start_time_constraints(ctx)
-        self.end_time_constraints(ctx)
-        self.location_constraints(ctx)
-
-    def start_time_constraints(self, ctx: "SuoDomain") -> None:
-        ctx.post_time_constraint(self, "start", self.spec.start)
-
-    def end_time_constraints(self, ctx: "SuoDomain") -> None:
-        ctx.post_time_constraint(self, "end", self.spec.end)
-
-    def location_constraints(self, ctx: "SuoDomain") -> None:
-        """Where the unit must be while executing; the root class expects nothing."""
-
-    def check_initial_location(self, ctx: "SuoDomain", t: float) -> None:
-        """At mission start; most missions accept any start position."""
-
-    def check_final_location(self, ctx: "SuoDomain", t: float) -> None:
-        """At mission end; the root class has no destination."""
-
-    def contingency_satisfied(self, ctx: "SuoDomain") -> bool:
-        return False
+    DEFAULT_PRIORITY = DEFAULT_PRIORITY
 
     def respond_to_monitored_red_activity(self, ctx: "SuoDomain", area: str, t: float,
                                           tracks: list[str], strength: int) -> None:
         ctx.monitored_candidate(self, area, t, tracks, strength, expected=False)
-
-    def execute_mission(self, ctx: "SuoDomain", t: float) -> None:
-        """Missions carried out by people need nothing from the EA."""
-
-    def compute_priority(self, alert_type: str) -> str:
-        return self.PRIORITY.get(alert_type, DEFAULT_PRIORITY.get(alert_type, "priority"))
 
     def desired_strength_ratio(self) -> float:
         return self.DESIRED_STRENGTH_RATIO
@@ -461,5 +401,4 @@ class Reorganize(ReorganizationMission):
     TYPE = "reorganize"
 
 
-def make(spec: MissionSpec) -> Mission:
-    return REGISTRY[spec.type](spec)
+make = REGISTRY.make

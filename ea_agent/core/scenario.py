@@ -1,0 +1,118 @@
+"""What every domain's scenario loader shares: one error type naming the file and
+field at fault, field checks, ids that are safe key chunks, and the time-ordered,
+validated event script (events.jsonl or events.jsonl.gz)."""
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import re
+import zlib
+from pathlib import Path
+from typing import Any, Callable
+
+from . import messages as M
+
+_NOT_IN_CHUNK = re.compile(r"[/*#?$\s]")
+
+
+class ScenarioError(ValueError):
+    pass
+
+
+def need(d: dict, key: str, where: str, types: type | tuple = object):
+    if not isinstance(d, dict):
+        raise ScenarioError(f"{where}: expected an object")
+    if key not in d:
+        raise ScenarioError(f"{where}: field '{key}': missing")
+    v = d[key]
+    if not isinstance(v, types) or isinstance(v, bool) and types is not bool:
+        raise ScenarioError(f"{where}: field '{key}': expected {getattr(types, '__name__', types)}, got {type(v).__name__}")
+    return v
+
+
+def check_key_chunk(value: Any, where: str, name: str) -> str:
+    """An id that becomes one Zenoh key chunk (unit, entity, mission, track, cff, sensor,
+    plan, fusion group): a non-empty string without '/', '*', '#', '?', '$' or whitespace.
+    Anything else would be published on keys nobody subscribes to (or be no key at all)."""
+    if not isinstance(value, str) or not value:
+        raise ScenarioError(f"{where}: field '{name}': expected a non-empty id string, got {value!r:.60}")
+    bad = _NOT_IN_CHUNK.search(value)
+    if bad:
+        raise ScenarioError(f"{where}: field '{name}': id {value!r:.60} contains {bad.group()!r}; ids are Zenoh key "
+                            f"chunks and may not contain '/', '*', '#', '?', '$' or whitespace")
+    return value
+
+
+def number(v: Any, where: str, name: str, positive: bool = False) -> float:
+    """A finite number >= 0 (> 0 if `positive`), never a bool."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ScenarioError(f"{where}: field '{name}': expected a number, got {type(v).__name__}")
+    if not math.isfinite(v):
+        raise ScenarioError(f"{where}: field '{name}': not a finite number ({v})")
+    if v < 0 or positive and v == 0:
+        raise ScenarioError(f"{where}: field '{name}': must be {'> 0' if positive else '>= 0'} (got {v})")
+    return float(v)
+
+
+def read_json(p: Path) -> Any:
+    try:
+        return json.loads(p.read_text())
+    except FileNotFoundError:
+        raise ScenarioError(f"{p}: file missing") from None
+    except OSError as e:
+        raise ScenarioError(f"{p}: cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise ScenarioError(f"{p}: not UTF-8 text: {e.reason}") from None
+    except json.JSONDecodeError as e:
+        raise ScenarioError(f"{p}:{e.lineno}: invalid JSON: {e.msg}") from None
+    except RecursionError:
+        raise ScenarioError(f"{p}: invalid JSON: nested too deeply") from None
+
+
+def open_events(root: Path):
+    for name in ("events.jsonl", "events.jsonl.gz"):
+        p = root / name
+        if p.exists():
+            try:
+                return p, (gzip.open(p, "rt", encoding="utf-8") if name.endswith(".gz") else p.open(encoding="utf-8"))
+            except OSError as e:
+                raise ScenarioError(f"{p}: cannot read: {e.strerror or e}") from None
+    raise ScenarioError(f"{root}: no events.jsonl or events.jsonl.gz")
+
+
+def read_events(root: Path, check: Callable[[Any, str], None] | None = None) -> list:
+    """The event script, decoded with the shared codec and time-ordered; `check(msg,
+    where)` adds the domain's scenario-level checks (known units, times in range)."""
+    p, fh = open_events(root)
+    out = []
+    last_t = 0.0
+    lineno = 0
+    try:
+        with fh:
+            for lineno, line in enumerate(fh, 1):
+                if not line.strip():
+                    continue
+                try:
+                    d = json.loads(line)
+                except (json.JSONDecodeError, RecursionError) as e:
+                    why = getattr(e, "msg", "nested too deeply")
+                    raise ScenarioError(f"{p.name}:{lineno}: invalid JSON: {why}") from None
+                try:
+                    m = M.from_dict(d)
+                except M.MessageError as e:
+                    raise ScenarioError(f"{p.name}:{lineno}: {e}") from None
+                if m.t < last_t:
+                    raise ScenarioError(f"{p.name}:{lineno}: field 't': {m.t} is earlier than the line before ({last_t}); events must be time-ordered")
+                last_t = m.t
+                if check is not None:
+                    check(m, f"{p.name}:{lineno}: {m.KIND} message")
+                out.append(m)
+    except (EOFError, zlib.error, gzip.BadGzipFile) as e:
+        after = f" after line {lineno}" if lineno else ""
+        raise ScenarioError(f"{p.name}:{lineno + 1}: truncated or corrupt gzip{after} ({e})") from None
+    except UnicodeDecodeError as e:
+        raise ScenarioError(f"{p.name}:{lineno + 1}: not UTF-8 text ({e.reason})") from None
+    except OSError as e:
+        raise ScenarioError(f"{p.name}:{lineno + 1}: cannot read: {e.strerror or e}") from None
+    return out
