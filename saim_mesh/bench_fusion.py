@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from . import scenario as S
-from .generator import ORIGIN_LONLAT, build_sim
+from ea_agent.domains.suo.generator import ORIGIN_LONLAT, build_sim
 from .messages import SensorHit
 from .runner import Fusion
 

@@ -48,12 +48,12 @@ def _progress(frac: float) -> None:
         sys.stderr.flush()
 
 
-def table(eas) -> str:
-    """Alerts by type per echelon (like the paper's Fig. 7)."""
-    from ea_agent.domains.suo import ALERT_TYPES
+def table(eas, alert_types=()) -> str:
+    """Alerts by type per EA (like the paper's Fig. 7)."""
     cols = [ea.owner for ea in eas]
     counts = {ea.owner: Counter(a.type for a in ea.alerts) for ea in eas}
-    types = [t for t in (*ALERT_TYPES, "call-for-fire") if any(counts[c][t] for c in cols)]
+    seen = {t for c in cols for t in counts[c]}
+    types = [t for t in (*alert_types, *sorted(seen - set(alert_types))) if any(counts[c][t] for c in cols)]
     w = max([len(t) for t in types] + [16])
     lines = [f"{'alert type':{w}} " + " ".join(f"{c:>6}" for c in cols),
              f"{'missions in plan':{w}} " + " ".join(
@@ -67,16 +67,16 @@ def table(eas) -> str:
 
 
 def cmd_run(a) -> int:
-    from ea_agent.core.config import load_config
+    from ea_agent import domains
 
-    from .runner import default_eas, run
+    from .runner import config_for, default_eas, run
     sc = S.load(a.scenario)
     owners = a.ea or default_eas(sc)
     for o in owners:   # every bad input is reported before anything runs or is written
         if o not in sc.taskorg.units:
             raise KeyError(f"--ea {o}: unknown unit {o!r}: not in the task organization of {sc.name} "
                            f"({sc.root / 'plan.json'})")
-        load_config(a.config, o)
+        config_for(sc, o, a.config)
     sinks = [] if a.quiet else [TerminalSink()]
     out = open(a.out, "w", buffering=1) if a.out else None   # line-buffered; JsonlSink flushes each alert
     if out:
@@ -87,7 +87,7 @@ def cmd_run(a) -> int:
         if out:
             out.close()
     print()
-    print(table(eas))
+    print(table(eas, tuple(domains.of(sc).ALERT_TYPES)))
     errs = sum(ea.stats["errors"] for ea in eas)
     if errs:
         print(f"\n{errs} bad inputs were counted and dropped; last: {eas[0].errors[-1:] or '-'}")
@@ -111,28 +111,34 @@ def cmd_evaluate(a) -> int:
 
 
 def cmd_missions(a) -> int:
-    from ea_agent.domains.suo.missions import REGISTRY
-    for name, cls in sorted(REGISTRY.items()):
+    import importlib
+
+    from ea_agent import domains
+    domains.get(a.domain)
+    registry = importlib.import_module(f"{domains.DOMAINS[a.domain]}.missions").REGISTRY
+    for name, cls in sorted(registry.items()):
         parents = " < ".join(k.__name__ for k in cls.__mro__[1:-1])
         req = set(cls.required())
         params = ", ".join(f"{p}{'' if p in req else '?'}" for p in cls.all_params())
-        print(f"{name:22} [{parents}] location={cls.LOCATION_RULE}\n{'':22} params: {params}")
+        rule = getattr(cls, "LOCATION_RULE", None)
+        print(f"{name:22} [{parents}]{f' location={rule}' if rule else ''}\n{'':22} params: {params}")
     return 0
 
 
 def cmd_generate(a) -> int:
-    from .generator import write
-    print(json.dumps(write(Path(a.out), small=a.small, seed=a.seed, sensors=a.sensors)))
+    from ea_agent import domains
+    dom = domains.get(a.domain)
+    extra = {"small": a.small, "sensors": a.sensors} if a.domain == "suo" else {}
+    print(json.dumps(dom.generate(Path(a.out), seed=a.seed, **extra)))
     return 0
 
 
 def cmd_validate(a) -> int:
     """Everything `run` would trip on: the whole scenario (events too), the default
     configuration of each default EA, and those EAs built and started on every plan."""
-    from ea_agent.core.config import ConfigError, load_config
-    from ea_agent.domains.suo import make_ea
+    from ea_agent.core.config import ConfigError
 
-    from .runner import default_eas
+    from .runner import config_for, default_eas, make_ea
     sc = S.load(a.scenario)
     owners = default_eas(sc)
     for o in owners:   # `run` without --ea runs these
@@ -141,7 +147,7 @@ def cmd_validate(a) -> int:
                                   f"{o!r} is not a unit of this scenario (list the owners to run by default)")
     top = sc.taskorg.root
     for o in dict.fromkeys([*owners, top]):
-        cfg = load_config(None, o)
+        cfg = config_for(sc, o)
         try:
             ea = make_ea(sc, o, cfg)
             ea.start(0.0)
@@ -153,8 +159,9 @@ def cmd_validate(a) -> int:
         except (KeyError, ValueError, TypeError) as e:
             raise S.ScenarioError(f"{sc.root}: the EA of {o} cannot start: {type(e).__name__}: "
                                   f"{e.args[0] if e.args else e}") from e
+    places = getattr(sc, "overlay", None) or getattr(sc, "world", {})
     print(f"{sc.name}: {len(sc.taskorg.units)} units, {len(sc.taskorg.entity_unit)} entities, "
-          f"{sum(len(p.missions) for p in sc.plans.values())} missions, {len(sc.overlay)} control measures, "
+          f"{sum(len(p.missions) for p in sc.plans.values())} missions, {len(places)} places, "
           f"{len(sc.events)} events: OK")
     return 0
 
@@ -198,10 +205,11 @@ def cmd_mesh(a) -> int:
 
 
 def cmd_certs(a) -> int:
-    from .mesh import mesh_units
+    from ea_agent import domains
+
     from .security.pki import make_pki, names_for
     sc = S.load(a.scenario, events=False)
-    made = make_pki(Path(a.out), names_for(sc, a.units or mesh_units(sc)))
+    made = make_pki(Path(a.out), names_for(sc, a.units or domains.of(sc).mesh_units(sc)))
     print(f"{len(made)} identities in {a.out} (CA: {Path(a.out) / 'ca.pem'}): {', '.join(sorted(made))}")
     return 0
 
@@ -249,9 +257,12 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--json", action="store_true")
     e.add_argument("--config", metavar="TOML")
     e.set_defaults(fn=cmd_evaluate)
-    sub.add_parser("missions", help="list the mission model").set_defaults(fn=cmd_missions)
-    g = sub.add_parser("generate", help="generate the battalion scenario (seeded, deterministic)")
+    mi = sub.add_parser("missions", help="list a domain's mission model")
+    mi.add_argument("--domain", default="suo", choices=["suo", "uv"])
+    mi.set_defaults(fn=cmd_missions)
+    g = sub.add_parser("generate", help="generate a scenario (seeded, deterministic): the battalion, or --domain uv")
     g.add_argument("out")
+    g.add_argument("--domain", default="suo", choices=["suo", "uv"])
     g.add_argument("--small", action="store_true", help="small fast variant for tests")
     g.add_argument("--seed", type=int, default=7)
     g.add_argument("--sensors", action="store_true", help="raw sensor hits instead of ready-made tracks")

@@ -5,7 +5,6 @@ from collections import Counter
 
 from .messages import Alert
 from .runner import run
-from .scenario import Scenario
 
 
 def _matches(a: Alert, item: dict) -> bool:
@@ -33,7 +32,7 @@ def score(alerts: list[Alert], truth: dict) -> dict:
     }
 
 
-def evaluate(sc: Scenario, config_path=None) -> dict:
+def evaluate(sc, config_path=None) -> dict:
     truth = sc.truth()
     owners = truth["owners"]
     eas = run(sc, owners, config_path=config_path)
@@ -44,5 +43,5 @@ def evaluate(sc: Scenario, config_path=None) -> dict:
     res["reduction"] = round(res["naive_alerts"] / max(1, res["alerts"]), 1)
     res["owners"] = owners
     res["events"] = len(sc.events)
-    res["watchman"] = {ea.owner: dict(ea.domain.watchman.stats) for ea in eas}
+    res["watchman"] = {ea.owner: dict(getattr(getattr(ea.domain, "watchman", None), "stats", {})) for ea in eas}
     return res

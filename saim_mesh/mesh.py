@@ -15,8 +15,9 @@ from .zconf import free_port
 
 
 def mesh_units(sc) -> list[str]:
-    """Battalion, companies and platoons: every unit above squad level."""
-    return sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("battalion", "company", "platoon"))
+    """The units that run an EA peer (the scenario's domain says which)."""
+    from ea_agent import domains
+    return domains.of(sc).mesh_units(sc)
 
 
 def _sec(pki: str | Path | None) -> list[str]:

@@ -4,19 +4,26 @@ from __future__ import annotations
 import time
 from typing import Callable, Iterable
 
+from ea_agent import domains
 from ea_agent.core.config import load_config
 from ea_agent.core.manager import ExecutionAssistant, Sink
-from ea_agent.domains.suo import make_ea
 
 from .fusion import FusionNode
 from .messages import SensorHit
 from .scenario import Scenario
 
-DEFAULT_EAS = ("BN", "A", "B", "C", "A2")
-
 
 def default_eas(sc: Scenario) -> list[str]:
-    return list(sc.meta.get("default_eas", DEFAULT_EAS))
+    return domains.of(sc).default_eas(sc)
+
+
+def config_for(sc: Scenario, owner: str, config_path=None, overrides: dict | None = None) -> dict:
+    """`owner`'s parameters: the scenario's domain's defaults, then the given file."""
+    return load_config(config_path, owner, overrides, defaults=domains.of(sc).CONFIG_PATH)
+
+
+def make_ea(sc: Scenario, owner: str, cfg: dict, sinks=(), voa: bool = True) -> ExecutionAssistant:
+    return domains.of(sc).make_ea(sc, owner, cfg, sinks, voa=voa)
 
 
 class Fusion:
@@ -58,7 +65,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
     for o in owners:
         if o not in sc.taskorg.units:
             raise KeyError(f"unknown unit {o!r}: not in the task organization of {sc.name}")
-        eas.append(make_ea(sc, o, load_config(config_path, o, overrides), sinks, voa=voa))
+        eas.append(make_ea(sc, o, config_for(sc, o, config_path, overrides), sinks, voa=voa))
     for ea in eas:
         ea.start(0.0)
     fusion = Fusion.of(sc)

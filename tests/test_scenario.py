@@ -5,7 +5,7 @@ import shutil
 import pytest
 
 from saim_mesh import scenario as S
-from saim_mesh.generator import write
+from ea_agent.domains.suo.generator import write
 
 from .conftest import BATTALION, SMALL
 

@@ -107,22 +107,24 @@ def _read(p: Path) -> dict:
         raise ConfigError(f"{p}: invalid TOML: {e}") from None
 
 
-def _defaults() -> tuple[dict, dict]:
-    """The schema (configs/ea.toml without [ea]) and that file's own [ea] tables."""
-    raw = _read(DEFAULT_PATH)
+def _defaults(schema: Path) -> tuple[dict, dict]:
+    """The schema (a domain's defaults file without [ea]) and that file's own [ea] tables."""
+    raw = _read(schema)
     per_ea = raw.pop("ea", {})
-    _merge(raw, raw, str(DEFAULT_PATH))   # the defaults obey their own rules too
+    _merge(raw, raw, str(schema))   # the defaults obey their own rules too
     return raw, per_ea
 
 
 def load_config(path: str | Path | None = None, owner: str | None = None,
-                overrides: dict[str, Any] | None = None) -> dict:
-    """The effective parameters for one EA: defaults, then the file at `path` (any subset
-    of the default keys), then its [ea.owner], then `overrides`. Every [ea.*] table of
-    the file is checked, not only the owner's."""
-    cfg, per_ea = _defaults()
-    p = DEFAULT_PATH
-    if path and Path(path).resolve() != DEFAULT_PATH:
+                overrides: dict[str, Any] | None = None, defaults: str | Path | None = None) -> dict:
+    """The effective parameters for one EA: the domain's `defaults` file (configs/ea.toml
+    for small-unit operations, configs/uv.toml for robot teams), then the file at `path`
+    (any subset of the default keys), then its [ea.owner], then `overrides`. Every [ea.*]
+    table of the file is checked, not only the owner's."""
+    schema = Path(defaults).resolve() if defaults else DEFAULT_PATH
+    cfg, per_ea = _defaults(schema)
+    p = schema
+    if path and Path(path).resolve() != schema:
         p = Path(path)
         raw = _read(p)
         per_ea = raw.pop("ea", {})

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from ea_agent.core.manager import ExecutionAssistant, Sink
-from ea_agent.core.config import load_config
+from ea_agent.core.config import DEFAULT_PATH, load_config
 
 from .domain import ALERT_TYPES, CATEGORY, SuoDomain
 
@@ -16,4 +16,30 @@ def make_ea(scenario, owner: str, cfg: dict | None = None, sinks: list[Sink] | t
     return ExecutionAssistant(owner, dom, cfg, sinks, voa=voa)
 
 
-__all__ = ["make_ea", "ALERT_TYPES", "CATEGORY", "SuoDomain"]
+NAME = "suo"
+CONFIG_PATH = DEFAULT_PATH   # configs/ea.toml: the defaults and the schema of SUO parameters
+DEFAULT_EAS = ("BN", "A", "B", "C", "A2")
+
+
+def load(path, events: bool = True):
+    """The SUO scenario folder at `path` (scenario.json, overlay.geojson, plan.json, events)."""
+    from .scenario import load as _load
+    return _load(path, events=events)
+
+
+def default_eas(sc) -> list[str]:
+    return list(sc.meta.get("default_eas", DEFAULT_EAS))
+
+
+def mesh_units(sc) -> list[str]:
+    """Battalion, companies and platoons: every unit above squad level has a peer."""
+    return sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("battalion", "company", "platoon"))
+
+
+def generate(out, seed: int = 7, small: bool = False, sensors: bool = False) -> dict:
+    from .generator import write
+    return write(out, small=small, seed=seed, sensors=sensors)
+
+
+__all__ = ["make_ea", "ALERT_TYPES", "CATEGORY", "SuoDomain", "NAME", "load", "default_eas", "mesh_units",
+           "generate"]

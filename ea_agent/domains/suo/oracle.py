@@ -17,7 +17,7 @@ import numpy as np
 from shapely.geometry import Point, Polygon, shape
 
 from ea_agent.core.config import load_config
-from ea_agent.domains.suo.missions import REGISTRY
+from .missions import REGISTRY
 
 TICK = 5.0
 SLACK = 40.0        # friendly reports may be up to one report interval old
