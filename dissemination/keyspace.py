@@ -1,6 +1,13 @@
 """The Zenoh key space (docs/keyspace.md): one key per message, chosen so that a
 peer can subscribe by mission, geography (grid cells) and command (its subtree).
 
+Data keys come from each message class's `KEY` template (the domain owns its
+messages and says where they go); this module builds and parses every key from
+them, and owns the control keys. Placeholders: `{place}` (two chunks, block/cell,
+from the message's lon/lat), `{path:F}` (the command path of the unit field F
+names, any depth), `{group:F}` (the fusion group of sensor F), `{F}` (field F).
+SUO's families:
+
   <root>/pos/<block>/<cell>/<command path>/<entity>    friendly positions
   <root>/trk/<block>/<cell>/<track>                    hostile tracks (fused)
   <root>/hit/<fusion group>/<sensor>           raw sensor hits, to the group's fusion node
@@ -17,17 +24,19 @@ peer can subscribe by mission, geography (grid cells) and command (its subtree).
   <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
   <root>/store/log                             the situation store (queryable)
   <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
+UV (robot team): <root>/st/<block>/<cell>/<robot>, <root>/sgt/<block>/<cell>/<robot>/<target>,
+<root>/agm/<to>/<sender> (docs/uv-domain.md).
 """
 from __future__ import annotations
 
 import math
+import re
 
 import zenoh
 
-from saim_mesh import messages as M
-
 CELL_M = 2000.0
-BLOCK = 4   # cells per block side: a block chunk groups 4 x 4 cells (8 km)
+BLOCK = 4   # cells per block side: a block chunk groups 4 x 4 cells (8 km with 2 km cells)
+_PH = re.compile(r"^\{(\w+)(?::(\w+))?\}$")
 
 
 def cell(x: float, y: float, size: float = CELL_M) -> str:
@@ -41,9 +50,9 @@ def block_of(c: str) -> str:
     return f"X{int(i) // BLOCK}Y{int(j) // BLOCK}"
 
 
-def place(x: float, y: float) -> str:
+def place(x: float, y: float, size: float = CELL_M) -> str:
     """'<block>/<cell>': two key chunks, so that peers subscribe per cell or per block."""
-    c = cell(x, y)
+    c = cell(x, y, size)
     return f"{block_of(c)}/{c}"
 
 
@@ -61,52 +70,104 @@ def cells_of_bounds(b: tuple[float, float, float, float], size: float = CELL_M) 
 
 
 def command_path(taskorg, unit: str) -> str:
-    return "/".join(reversed([unit, *taskorg.ancestors(unit)]))
+    return taskorg.path(unit)
+
+
+class Template:
+    """One message class's key template, split into chunk operations: ("lit", text),
+    ("place", ""), ("path", field) (any number of chunks), ("group", field), ("field", name)."""
+
+    def __init__(self, text: str):
+        self.text = text
+        self.ops: list[tuple[str, str]] = []
+        for chunk in text.split("/"):
+            m = _PH.match(chunk)
+            if m is None:
+                if "{" in chunk or not chunk:
+                    raise ValueError(f"bad key template {text!r}")
+                self.ops.append(("lit", chunk))
+            elif m.group(1) in ("place",):
+                self.ops.append(("place", ""))
+            elif m.group(1) in ("path", "group"):
+                self.ops.append((m.group(1), m.group(2) or ""))
+            else:
+                self.ops.append(("field", m.group(1)))
+        if not self.ops or self.ops[0][0] != "lit":
+            raise ValueError(f"key template {text!r} must start with its family name")
+        if sum(op == "path" for op, _ in self.ops) > 1:
+            raise ValueError(f"key template {text!r} has two variable-depth placeholders")
+        self.family = self.ops[0][1]
+        self.names = {a if op == "field" else op for op, a in self.ops if op != "lit"}
+
+    def expr(self, bind: dict[str, str]) -> str:
+        """A key expression selecting this template's keys with the placeholders in
+        `bind` fixed (others are wildcards); everything after a path is `**`."""
+        out = []
+        for op, a in self.ops:
+            if op == "lit":
+                out.append(a)
+            elif op == "place":
+                out.append(bind.get("place", "*/*"))
+            elif op == "path":
+                out.append(f"{bind['path']}/**" if "path" in bind else "**")
+                break
+            else:
+                out.append(bind.get(a if op == "field" else op, "*"))
+        return "/".join(out)
+
+
+_TEMPLATES: dict[type, Template] = {}
+
+
+def template(cls: type) -> Template:
+    t = _TEMPLATES.get(cls)
+    if t is None:
+        text = getattr(cls, "KEY", None)
+        if text is None:
+            raise ValueError(f"no key for {cls.__name__}")
+        t = _TEMPLATES[cls] = Template(text)
+    return t
 
 
 class KeySpace:
-    def __init__(self, root: str, sensor_group: dict[str, str] | None = None):
+    def __init__(self, root: str, sensor_group: dict[str, str] | None = None, cell_m: float = CELL_M):
         if not root or any(c in root for c in "#?*$") or root.startswith("/") or "//" in root:
             raise ValueError(f"bad key-expression root {root!r}")
+        if not (isinstance(cell_m, (int, float)) and math.isfinite(cell_m) and cell_m > 0):
+            raise ValueError(f"bad grid cell size {cell_m!r}")
         self.root = root
         self.sensor_group = sensor_group or {}   # sensor id -> fusion group
+        self.cell_m = float(cell_m)
+
+    @classmethod
+    def of(cls, sc, root: str) -> "KeySpace":
+        """The key space of a scenario: its fusion groups and grid cell size (scenario.json)."""
+        groups = sc.meta.get("fusion", {}).get("groups", {})
+        cell_m = sc.meta.get("keyspace", {}).get("cell_m", CELL_M)
+        return cls(root, {sid: g for g, sids in groups.items() for sid in sids}, cell_m)
+
+    def place(self, x: float, y: float) -> str:
+        return place(x, y, self.cell_m)
 
     def key(self, msg, taskorg, proj, xy: tuple[float, float] | None = None) -> str:
         """The key of one message; `xy` (its projected position) saves a pyproj call."""
-        r = self.root
-        k = type(msg)
-        if xy is None and hasattr(msg, "lon") and k is not M.Alert:
-            xy = proj.to_xy(msg.lon, msg.lat)
-        if k is M.LocationReport:
-            unit = taskorg.entity_unit.get(msg.entity, "unknown")
-            path = command_path(taskorg, unit) if unit in taskorg.units else "unknown"
-            return f"{r}/pos/{place(*xy)}/{path}/{msg.entity}"
-        if k is M.SensorTrack:
-            return f"{r}/trk/{place(*xy)}/{msg.track}"
-        if k is M.SensorHit:
-            return f"{r}/hit/{self.sensor_group.get(msg.sensor, 'ungrouped')}/{msg.sensor}"
-        if k is M.MissionConfirm:
-            return f"{r}/msn/{msg.unit}/{msg.mission}"
-        if k is M.Order:
-            return f"{r}/ord/{msg.issuer}"
-        if k is M.CallForFire or k is M.CallForFireConfirm:
-            return f"{r}/cff/{place(*xy)}/{msg.requester}/{msg.cff}"
-        if k is M.Reorganization:
-            return f"{r}/org/{msg.unit}"
-        if k is M.Alert:
-            return f"{r}/alert/{msg.owner}/{msg.type}"
-        raise ValueError(f"no key for {k.__name__}")
-
-    _CLAIMS = {  # key family -> message kinds it carries, and which chunks must equal which fields
-        "pos": ({"location"}, ((-1, "entity"),)),
-        "trk": ({"track"}, ((-1, "track"),)),
-        "hit": ({"hit"}, ((-1, "sensor"),)),
-        "msn": ({"mission"}, ((1, "unit"), (2, "mission"))),
-        "ord": ({"order"}, ((1, "issuer"),)),
-        "cff": ({"cff", "cff-confirm"}, ((-2, "requester"), (-1, "cff"))),
-        "org": ({"reorg"}, ((1, "unit"),)),
-        "alert": ({"alert"}, ((1, "owner"), (2, "type"))),
-    }
+        out = [self.root]
+        for op, a in template(type(msg)).ops:
+            if op == "lit":
+                out.append(a)
+            elif op == "field":
+                out.append(getattr(msg, a))
+            elif op == "place":
+                if xy is None:
+                    xy = proj.to_xy(msg.lon, msg.lat)
+                out.append(place(xy[0], xy[1], self.cell_m))
+            elif op == "path":
+                v = getattr(msg, a)
+                unit = v if v in taskorg.units else taskorg.entity_unit.get(v, "unknown")
+                out.append(taskorg.path(unit) if unit in taskorg.units else "unknown")
+            else:   # group
+                out.append(self.sensor_group.get(getattr(msg, a), "ungrouped"))
+        return "/".join(out)
 
     def mismatch(self, key: str, msg) -> str | None:
         """Why a message does not belong on the key it came on (None when it does).
@@ -116,18 +177,41 @@ class KeySpace:
         if key[:n] != self.root + "/":
             return f"key {key[:80]!r} outside the root"
         chunks = key[n:].split("/")
-        rule = self._CLAIMS.get(chunks[0])
-        if rule is None or msg.KIND not in rule[0]:
+        tpl = _TEMPLATES.get(type(msg)) or template(type(msg))
+        if chunks[0] != tpl.family:
             return f"a {msg.KIND} message on {chunks[0]}/ keys"
-        for i, fname in rule[1]:
-            if not -len(chunks) < i < len(chunks):
+        ops: list[tuple[str, str]] = []
+        for op, a in tpl.ops:   # a place is two chunks
+            ops += [("any", ""), ("any", "")] if op == "place" else [(op, a)]
+        var = next((i for i, (op, _) in enumerate(ops) if op == "path"), None)
+        if var is None:
+            if len(chunks) != len(ops):
+                return f"key {key[:80]!r} has {len(chunks)} chunks, not {len(ops)}"
+            pairs = zip(ops, chunks)
+        else:
+            left, right = ops[:var], ops[var + 1:]
+            if len(chunks) < len(left) + len(right) + 1:
                 return f"key {key[:80]!r} has too few chunks"
-            if chunks[i] != getattr(msg, fname):
-                return f"field '{fname}' {str(getattr(msg, fname))[:40]!r} differs from the key's {chunks[i][:40]!r}"
+            pairs = [*zip(left, chunks), *zip(right, chunks[len(chunks) - len(right):])]
+        for (op, a), c in pairs:
+            if op == "field" and c != getattr(msg, a):
+                return f"field '{a}' {str(getattr(msg, a))[:40]!r} differs from the key's {c[:40]!r}"
         return None
 
     def clock(self) -> str:
         return f"{self.root}/clock"
+
+    def data(self, cls: type, **bind: str) -> str:
+        """A key expression for messages of `cls` with some placeholders fixed."""
+        return f"{self.root}/{template(cls).expr(bind)}"
+
+    def family(self, key: str) -> str:
+        """The family chunk of a key under our root ('pos', 'alert', 'clock', ...)."""
+        return key[len(self.root) + 1:].split("/", 1)[0]
+
+    def last(self, key: str, n: int = 1) -> list[str]:
+        """The last `n` chunks of a key (the unit and peer of alive/ack keys, ...)."""
+        return key.rsplit("/", n)[1:]
 
     def alive(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/alive/{unit}/{peer}"

@@ -21,14 +21,13 @@ import zenoh
 
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
-from ea_agent.core.config import load_config
-from ea_agent.domains.suo import make_ea
 
 from . import messages as M
 from . import wire as W
 from .alertlog import AlertLog
 from .fusion.barrier import TrackBarrier
 from .presence import Presence
+from .runner import config_for, make_ea
 from .scenario import Scenario
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -64,8 +63,8 @@ class Peer:
                  config_path=None, radius_m: float | None = None, log=print, deadline_s: float | None = None,
                  connect: list[str] | None = None):
         self.sc, self.unit, self.conf = sc, unit, conf
-        self.ks = KeySpace(root)
-        self.cfg = load_config(config_path, unit)
+        self.ks = KeySpace.of(sc, root)
+        self.cfg = config_for(sc, unit, config_path)
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         dis, mesh = self.cfg["dissemination"], self.cfg["mesh"]
         self.interest = Interest(self.ks, radius_m or dis["radius_m"], int(dis["block_share"]))
@@ -160,7 +159,7 @@ class Peer:
     def _plan_signature(self) -> tuple:
         """Changes when a reorganization or a mission transition may change our interest."""
         dom = self.ea.domain
-        states = tuple(sorted(dom.plan.state.items())) if dom.plan else ()
+        states = tuple(sorted(dom.plan.state.items())) if getattr(dom, "plan", None) else ()
         return dom.taskorg.version, hash(states)
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
@@ -454,8 +453,10 @@ class Peer:
                 "picture": self.picture()}
 
     def picture(self) -> dict:
-        return {k: [round(e.x, 1), round(e.y, 1), e.strength, list(e.members)]
-                for k, e in sorted(self.ea.domain.pic.adj.picture().items())}
+        """The adjudicated hostile picture (domains with fused tracks), for identity checks."""
+        adj = getattr(getattr(self.ea.domain, "pic", None), "adj", None)
+        return {} if adj is None else {k: [round(e.x, 1), round(e.y, 1), e.strength, list(e.members)]
+                                       for k, e in sorted(adj.picture().items())}
 
     def _late_join(self, timeout: float, buf: list) -> None:
         """Get the picture so far from the situation store and replay it: silently for a

@@ -32,12 +32,11 @@ class Presence:
         while (b := self.bye.try_recv()) is not None:
             key = str(b.key_expr)
             msg = gate.control(W.Bye, b.payload.to_bytes(), key)
-            if msg is not None and key.rsplit("/", 1)[-1] == msg.unit:
+            if msg is not None and p.ks.last(key) == [msg.unit]:
                 self.clean.add(msg.unit)
         watch = None
         while (s := self.alive.try_recv()) is not None:
-            chunks = str(s.key_expr).split("/")
-            unit = chunks[-2] if len(chunks) >= 2 else ""
+            unit = p.ks.last(str(s.key_expr), 2)[0]   # <root>/alive/<unit>/<zid>
             watch = watch if watch is not None else self._watched()
             if unit == p.unit or unit not in watch:
                 continue
@@ -45,7 +44,7 @@ class Presence:
         while (h := self.health.try_recv()) is not None:
             key = str(h.key_expr)
             msg = gate.control(W.Health, h.payload.to_bytes(), key)
-            if msg is None or key.rsplit("/", 1)[-1] != msg.unit:
+            if msg is None or p.ks.last(key) != [msg.unit]:
                 continue
             if msg.unit in p.ea.domain.taskorg.children(p.unit) and msg.rejects > self.health_said.get(msg.unit, 0):
                 self.health_said[msg.unit] = msg.rejects

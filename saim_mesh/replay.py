@@ -39,9 +39,8 @@ class Replay:
                  wait_peers: list[str] = (), wait_timeout: float = 60.0,
                  linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0,
                  state_path: str | Path | None = None, max_bytes: int = 65536):
-        groups = sc.meta.get("fusion", {}).get("groups", {})
         self.sc, self.conf = sc, conf
-        self.ks = KeySpace(root, {sid: g for g, sids in groups.items() for sid in sids})
+        self.ks = KeySpace.of(sc, root)
         self.speed, self.wait_peers = speed, list(wait_peers)
         self.tick_s = W.TICK_S   # peers check that tick n is at n x TICK_S
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
@@ -88,7 +87,7 @@ class Replay:
             key = str(smp.key_expr)
             ft = self.gate.control(W.FusionTick, smp.payload.to_bytes(), key)
             if ft is not None:
-                g = key.rsplit("/", 1)[-1]
+                g = self.ks.last(key)[0]
                 self.fusion_t[g] = max(self.fusion_t.get(g, -1.0), ft.t)
 
     def _present(self, s) -> Counter:
@@ -96,7 +95,7 @@ class Replay:
         units: Counter = Counter()
         for r in s.liveliness().get(self.ks.alive("*", "*"), timeout=2.0):
             if r.ok is not None:
-                units[str(r.ok.key_expr).split("/")[-2]] += 1
+                units[self.ks.last(str(r.ok.key_expr), 2)[0]] += 1
         return units
 
     def _missing(self, s) -> list[str]:
@@ -231,7 +230,7 @@ class Pacer:
 
     def _ea(self, key: str) -> str | None:
         """'<unit>/<zid>' of an EA peer's key (fusion nodes and the replay do not ack)."""
-        unit_zid = key.split("/")[-2:]
+        unit_zid = self.ks.last(key, 2)
         if len(unit_zid) != 2 or unit_zid[0].startswith("fusion-") or unit_zid[0] == "replay":
             return None
         return "/".join(unit_zid)

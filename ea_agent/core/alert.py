@@ -60,6 +60,7 @@ class Candidate:
 class Alert:
     """An alert as shown to a commander and sent on the mesh."""
     KIND: ClassVar[str] = "alert"
+    KEY: ClassVar[str] = "alert/{owner}/{type}"
     t: float
     owner: str
     type: str

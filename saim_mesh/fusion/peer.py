@@ -16,7 +16,7 @@ import time
 
 import zenoh
 
-from dissemination.keyspace import KeySpace, matcher, place
+from dissemination.keyspace import KeySpace, matcher
 from saim_mesh import messages as M
 from saim_mesh import wire as W
 from saim_mesh.scenario import Scenario
@@ -28,7 +28,7 @@ BLOCK = zenoh.CongestionControl.BLOCK
 
 def _eas_present(s, ks: KeySpace) -> bool:
     for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):
-        if r.ok is not None and not str(r.ok.key_expr).split("/")[-2].startswith(("fusion-", "replay")):
+        if r.ok is not None and not ks.last(str(r.ok.key_expr), 2)[0].startswith(("fusion-", "replay")):
             return True
     return False
 
@@ -37,7 +37,7 @@ class FusionPeer:
     def __init__(self, sc: Scenario, group: str, conf, root: str, shuffle: int | None = None,
                  linger_s: float = 30.0, log=print, max_bytes: int = 65536):
         self.sc, self.group, self.conf, self.linger_s, self.log = sc, group, conf, linger_s, log
-        self.ks = KeySpace(root)
+        self.ks = KeySpace.of(sc, root)
         self.node = FusionNode(group, sc.projection)
         self.rnd = random.Random(shuffle) if shuffle is not None else None
         self.gate = W.Gate(sc.duration_s, max_bytes, log=log)
@@ -78,7 +78,7 @@ class FusionPeer:
 
     def _resume(self, s) -> None:
         """Take the store's hits and our predecessor's progress; replay them silently."""
-        req = W.encode(W.make(W.StoreQuery, since=0, keys=[f"{self.ks.root}/hit/{self.group}/*"]))
+        req = W.encode(W.make(W.StoreQuery, since=0, keys=[self.ks.data(M.SensorHit, group=self.group)]))
         for r in s.get(self.ks.store(), payload=req, timeout=10.0):
             if r.ok is None:
                 continue
@@ -105,7 +105,7 @@ class FusionPeer:
         with zenoh.open(self.conf) as s:
             store = s.declare_queryable(ks.fusion_store(group), self.serve)
             clock = s.declare_subscriber(ks.clock(), zenoh.handlers.FifoChannel(1_000_000))
-            hits = s.declare_subscriber(f"{ks.root}/hit/{group}/*", zenoh.handlers.FifoChannel(1_000_000))
+            hits = s.declare_subscriber(ks.data(M.SensorHit, group=group), zenoh.handlers.FifoChannel(1_000_000))
             self._resume(s)
             token = s.liveliness().declare_token(ks.alive(f"fusion-{group}", str(s.info.zid())))
             print(f"ready fusion-{group}", flush=True)
@@ -126,7 +126,7 @@ class FusionPeer:
                     self.rnd.shuffle(out)   # tests: arrival order must not matter
                 for tr in out:
                     x, y = self.sc.projection.to_xy(tr.lon, tr.lat)
-                    key, payload = f"{ks.root}/trk/{place(x, y)}/{tr.track}", M.encode(tr)
+                    key, payload = ks.key(tr, None, None, (x, y)), M.encode(tr)
                     self.log_out.append((key, payload))
                     s.put(key, payload, congestion_control=BLOCK)
                     self.sent += 1

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import zenoh
 
-from dissemination.keyspace import KeySpace
+from dissemination.keyspace import KeySpace, template
 
 from .pki import SecurityError, check_identity
 
@@ -60,6 +60,13 @@ def _chunk(kind: str, name: str) -> str:
     if not name or any(c in name for c in "/*$#?") or name != name.strip():
         raise SecurityError(f"bad {kind} name {name!r} for a key chunk")
     return name
+
+
+def data_families() -> list[str]:
+    """Key families of every registered data message (what the replay publishes for
+    SAIM); alerts are the EAs' own."""
+    from saim_mesh import messages as M
+    return sorted({template(c).family for c in M.MESSAGE_TYPES.values()} - {template(M.Alert).family})
 
 
 def identities(units, groups) -> list[str]:
@@ -98,8 +105,7 @@ def access_control(root: str, units, groups) -> dict:
         policies.append({"id": f"policy.{cn}", "rules": rule_ids, "subjects": [cn]})
 
     subject("replay", [out, read_all, query_store,
-                       rule("replay_put", ["put"], [ks.clock(), *(f"{r}/{k}/**" for k in
-                                                                   ("pos", "trk", "hit", "msn", "ord", "cff", "org"))]),
+                       rule("replay_put", ["put"], [ks.clock(), *(f"{r}/{k}/**" for k in data_families())]),
                        rule("replay_store", ["declare_queryable", "reply"], [ks.store()]),
                        rule("replay_token", ["liveliness_token"], [ks.alive("replay", "*")])])
     for u in units:

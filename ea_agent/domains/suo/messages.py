@@ -11,6 +11,7 @@ from ea_agent.core.messages import integer, lonlat, NUMERIC, number, text, time_
 class LocationReport:
     """A friendly entity's GPS position (from SAIM's network)."""
     KIND: ClassVar[str] = "location"
+    KEY: ClassVar[str] = "pos/{place}/{path:entity}/{entity}"
     t: float
     entity: str
     lon: float
@@ -33,6 +34,7 @@ class LocationReport:
 class SensorTrack:
     """A fused hostile track: position, strength (entity count) and kinematics."""
     KIND: ClassVar[str] = "track"
+    KEY: ClassVar[str] = "trk/{place}/{track}"
     t: float
     track: str
     lon: float
@@ -55,6 +57,7 @@ class SensorTrack:
 class SensorHit:
     """One raw detection by one sensor (before fusion): where something was seen."""
     KIND: ClassVar[str] = "hit"
+    KEY: ClassVar[str] = "hit/{group:sensor}/{sensor}"
     t: float
     sensor: str
     lon: float
@@ -71,6 +74,7 @@ class SensorHit:
 class MissionConfirm:
     """Confirmation that a unit started or ended a mission (from its EA, or local)."""
     KIND: ClassVar[str] = "mission"
+    KEY: ClassVar[str] = "msn/{unit}/{mission}"
     t: float
     mission: str
     unit: str
@@ -89,6 +93,7 @@ class MissionConfirm:
 class Order:
     """An order from a superior: execute a (new) plan, or abort the current one."""
     KIND: ClassVar[str] = "order"
+    KEY: ClassVar[str] = "ord/{issuer}"
     t: float
     action: str  # "execute-plan" | "abort-plan"
     plan: str
@@ -105,6 +110,7 @@ class Order:
 class CallForFire:
     """A request for indirect fire on a target; `radius_m` is the danger radius."""
     KIND: ClassVar[str] = "cff"
+    KEY: ClassVar[str] = "cff/{place}/{requester}/{cff}"
     t: float
     cff: str
     requester: str
@@ -130,6 +136,7 @@ class CallForFireConfirm(CallForFire):
 class Reorganization:
     """Resubordinate `unit` under `new_parent` (task organization change)."""
     KIND: ClassVar[str] = "reorg"
+    KEY: ClassVar[str] = "org/{unit}"
     t: float
     unit: str
     new_parent: str

@@ -1,0 +1,34 @@
+"""What an SUO EA must hear, for dissemination: by command, the positions of its
+subtree, the orders of its chain of command and the fires it called; by mission, the
+confirmations of every unit its plan names; by geography, what is reported near its
+units and in the control measures it watches."""
+from __future__ import annotations
+
+from ea_agent.core.needs import Needs
+
+from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
+from .missions import ContingentMission
+
+TEMPLATES = tuple(c.KEY for c in (LocationReport, SensorTrack, MissionConfirm, Order, CallForFire, Reorganization))
+
+
+def needs(dom, radius_m: float) -> Needs:
+    to = dom.taskorg
+    units = set(dom.own_units)
+    for m in dom.missions.values():
+        if dom.in_plan(m):
+            units.add(m.unit)
+            units.update(m.params[p] for p in type(m).UNIT_PARAMS if m.params.get(p))
+        elif isinstance(m, ContingentMission) and m.params.get("owner") == dom.owner:   # ours, for another unit
+            units.add(m.unit)
+    circles = []
+    for u in sorted(dom.own_units):
+        p = dom.unit_pos.get(u)
+        if p is not None and to.units[u].entities:
+            circles.append((p[0], p[1], radius_m))
+    boxes = tuple(dom.overlay[a].area.bounds for a in sorted(dom.watched_areas()))
+    return Needs(TEMPLATES, by={"path": frozenset({to.path(dom.owner)}),
+                                "issuer": frozenset([dom.owner, *to.ancestors(dom.owner)]),
+                                "requester": frozenset({dom.owner}),
+                                "unit": frozenset(units)},
+                 circles=tuple(circles), boxes=boxes, whole=("org",))

@@ -1,0 +1,69 @@
+"""The layers point one way (docs/architecture.md): the core imports neither a domain
+nor the application; a domain imports neither another domain, dissemination nor the
+application; dissemination imports no domain and not the application. Read from the
+source (every import statement, also inside functions), so a test fails the day an
+import goes the wrong way."""
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOMAINS = sorted(p.name for p in (ROOT / "ea_agent" / "domains").iterdir()
+                 if p.is_dir() and (p / "__init__.py").exists())
+
+
+def imports(path: Path) -> set[str]:
+    """Absolute module names a file imports (relative imports resolved)."""
+    pkg = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                base = ".".join(p for p in [*parts, base] if p)
+            out.add(base)
+            out.update(f"{base}.{a.name}" for a in node.names)
+    return out
+
+
+def files(folder: str) -> list[Path]:
+    return sorted((ROOT / folder).rglob("*.py"))
+
+
+def offenders(folder: str, forbidden: list[str]) -> list[str]:
+    bad = []
+    for f in files(folder):
+        for m in sorted(imports(f)):
+            if any(m == x or m.startswith(x + ".") for x in forbidden):
+                bad.append(f"{f.relative_to(ROOT)} imports {m}")
+    return bad
+
+
+def test_the_walker_sees_imports_inside_functions_and_relative_ones(tmp_path):
+    """The checker itself: a function-level import and a relative import are seen."""
+    f = ROOT / "ea_agent" / "domains" / "suo" / "__init__.py"
+    found = imports(f)
+    assert "ea_agent.domains.suo.scenario" in found          # imported inside load()
+    assert "ea_agent.core.manager" in found
+
+
+def test_core_imports_no_domain_and_not_the_application():
+    assert offenders("ea_agent/core", ["ea_agent.domains", "saim_mesh", "dissemination"]) == []
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_a_domain_is_one_folder(domain):
+    others = [f"ea_agent.domains.{d}" for d in DOMAINS if d != domain]
+    assert offenders(f"ea_agent/domains/{domain}", ["saim_mesh", "dissemination", *others]) == []
+
+
+def test_dissemination_imports_no_domain_and_not_the_application():
+    assert offenders("dissemination", ["ea_agent.domains", "saim_mesh"]) == []
+
+
+def test_there_are_two_domains():
+    assert {"suo", "uv"} <= set(DOMAINS)
