@@ -8,3 +8,4 @@ from ea_agent.core.messages import (MESSAGE_TYPES, VERSION, Decoder, Message, Me
 from ea_agent.core.alert import PRIORITIES, Alert  # noqa: F401
 from ea_agent.domains.suo.messages import (CallForFire, CallForFireConfirm, LocationReport, MissionConfirm,  # noqa: F401
                                            Order, Reorganization, SensorHit, SensorTrack)
+from ea_agent.domains.uv.messages import UvAgent, UvSighting, UvState  # noqa: F401

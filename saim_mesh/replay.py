@@ -22,8 +22,11 @@ import zenoh
 
 from dissemination.keyspace import KeySpace, matcher
 
+from ea_agent import domains
+
 from . import messages as M
 from . import wire as W
+from .radios import Radios
 from .scenario import Scenario
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -152,6 +155,8 @@ class Replay:
                 if time.monotonic() > deadline:
                     raise TimeoutError(f"peers never came: {missing}")
             pacer = (Pacer(s, self.ks, self.window_s, serve, self.log, self.gate) if self.window_s > 0 else None)
+            source_of = getattr(domains.of(sc), "source_of", None)   # robots send their own state
+            radios = Radios(s, self.ks, source_of, self.log) if source_of else None
             self.log("start" + (f" resumed n={self.n_ticks} t={self.t:.0f}" if self.resumed_from else ""), flush=True)
             t0 = time.monotonic() - (self.t / self.speed if self.speed else 0.0)
             next_tick = self.t + self.tick_s
@@ -168,6 +173,8 @@ class Replay:
                     while (wait := t0 + ev.t / self.speed - time.monotonic()) > 0:
                         serve()
                         time.sleep(min(wait, 0.005))
+                if radios is not None and radios.silent(ev):
+                    continue
                 self.entries.append((len(self.entries) + 1, payload))
                 self.by_key.setdefault(key, []).append(len(self.entries))
                 pubs[key].put(payload, attachment=seq_bytes(len(self.entries)))
@@ -179,7 +186,8 @@ class Replay:
                 while time.monotonic() < look:
                     serve()
                     time.sleep(0.002)
-            return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors}
+            return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors,
+                    "silenced": radios.silenced if radios else 0}
 
     def _resume(self, script) -> int:
         """After a crash, take up where the last tick left off: the log up to its seq is

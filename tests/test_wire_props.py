@@ -233,6 +233,9 @@ DATA_SAMPLES = [
     M.CallForFireConfirm(6.0, "CFF-1", "A2", -116.5, 35.3, 600.0),
     M.Reorganization(7.0, "R", "BN"),
     M.Alert(8.0, "BN", "contact", "adversarial-activity", "flash", ("A1", "H4"), "Contact", {"x": 1}),
+    M.UvState(9.0, "UGV1", -116.5, 35.3, 1.5, 270.0, 2.0, "moving"),
+    M.UvSighting(9.5, "UAV1", "EV1", -116.5, 35.3, 3.0),
+    M.UvAgent(10.0, "UGV1", "UGV2", "delegate", "pursue", "EV1"),
 ]
 CONTROL_SAMPLES = [
     W.make(W.Tick, t=10.0, n=3, seq=42, end=False, w=1.7e9),
