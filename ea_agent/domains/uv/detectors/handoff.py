@@ -1,0 +1,51 @@
+"""Handoff (reporting-requirement): agent-to-agent task messages (paper 7.2).
+
+`delegate` A->B: B's own EA commits B to the task at once (its controller accepts),
+within B's patrol sector (the target entered it) else A's;
+`accept` B->A: A's EA drops A's pursuit and the operator's EA moves it from A to B.
+`success`/`failure` end the sender's named mission (how an EA learns that a
+teammate's step is done, which the partial order may wait for)."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..messages import UvAgent
+
+if TYPE_CHECKING:
+    from ..domain import UvDomain
+
+
+def on_agent(dom: "UvDomain", f: UvAgent, cands: list) -> None:
+    if f.act == "delegate":
+        dom.delegations[(f.sender, f.to, f.task)] = f
+        if f.to == dom.owner:   # we are asked: our controller takes the pursuit
+            target = f.target or _target_of(dom, f.task)
+            if target:
+                dom.policies.take_over(f.to, target, dom.patrol_sector(f.to) or dom.sector_of(f.task, f.sender), f.t)
+            cands.append(_cand(dom, f, f.sender, f.to, target, "delegated to us"))
+    elif f.act == "accept":
+        d = dom.delegations.pop((f.to, f.sender, f.task), None)
+        target = f.target or (d.target if d else None) or _target_of(dom, f.task)
+        frm, to = f.to, f.sender
+        if dom.owner == to:
+            return   # our own acceptance: the delegate already moved the task
+        if frm in dom.mine or to in dom.mine:
+            dom.policies.transfer(frm, to, target, dom.patrol_sector(to) or dom.sector_of(f.task, frm), f.task, f.t)
+            cands.append(_cand(dom, f, frm, to, target, "accepted"))
+    else:
+        m = dom.missions.get(f.task)
+        if m is not None and m.unit == f.sender and dom.plan is not None and \
+                dom.plan.state.get(m.id) in ("active", "ready", "suspended"):
+            dom.end_mission(m, f.t)
+
+
+def _target_of(dom: "UvDomain", task: str) -> str | None:
+    m = dom.missions.get(task)
+    return m.params.get("target") if m is not None else None
+
+
+def _cand(dom: "UvDomain", f: UvAgent, frm: str, to: str, target: str | None, how: str):
+    what = f"pursuit of {target}" if target else f"task {f.task}"
+    return dom.cand(f.t, "handoff", None, tuple(x for x in (frm, to, target) if x),
+                    f"{dom.name(frm)} handed {what} to {dom.name(to)} ({how})", ("handoff", f.task, frm, to), None,
+                    {"from": frm, "to": to, "task": f.task, "target": target, "act": f.act})

@@ -1,0 +1,109 @@
+"""Progress toward a basic action (paper 7.3, 7.5): at-goal, stuck, divergent.
+
+Each robot keeps an event history on its `Robot` record: where it last moved from
+(stuck) and its best distance to the current waypoint since the last progress
+check (divergent). Subtleties: a robot paused or waiting for GPS is not stuck; a
+turning robot is neither stuck nor divergent until its turn could have completed
+(heading error / turn rate); the divergent threshold grows with expected speed.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from ..render import m_
+from ..watchman import NEG, Robot
+
+if TYPE_CHECKING:
+    from ..domain import UvDomain
+
+
+def heading_error(r: Robot, gx: float, gy: float) -> float:
+    """Degrees between the robot's compass heading and the bearing to (gx, gy)."""
+    bearing = math.degrees(math.atan2(gx - r.x, gy - r.y)) % 360.0
+    return abs((bearing - r.heading + 180.0) % 360.0 - 180.0)
+
+
+def track(dom: "UvDomain", t: float) -> None:
+    """Update the stuck anchor and turn state of every robot heard this epoch."""
+    stuck_m = float(dom.uv["stuck_m"])
+    for rid in dom.watchman.dirty:
+        r = dom.robots[rid]
+        if r.anchor_t == NEG or r.paused_t >= r.anchor_t or math.hypot(r.x - r.anchor_x, r.y - r.anchor_y) > stuck_m:
+            # moved (or paused / waiting for GPS): the stuck clock starts again from here
+            r.anchor_t, r.anchor_x, r.anchor_y = max(r.t, r.paused_t), r.x, r.y
+
+
+def at_goal(dom: "UvDomain", t: float, cands: list) -> None:
+    """A robot within its goto waypoint's radius: report it and end the goto."""
+    dirty = dom.watchman.dirty
+    for mid, (m, place) in list(dom.goal_missions.items()):
+        if m.unit not in dirty or not dom.active(mid):
+            continue
+        r = dom.robots[m.unit]
+        gx, gy, rad = dom.goals[place]
+        d = math.hypot(r.x - gx, r.y - gy)
+        if d > rad:
+            continue
+        if m.unit in dom.mine:
+            cands.append(dom.cand(r.t, "at-goal", m, (m.unit,), f"{dom.name(m.unit)} at goal {place} ({m_(d)} away)",
+                                  ("at-goal", mid), None, {"mission": mid, "place": place, "places": [place],
+                                                           "distance_m": round(d, 1)}))
+        dom.end_mission(m, r.t)
+
+
+def stuck(dom: "UvDomain", t: float, cands: list) -> None:
+    """Moved less than stuck_m in stuck_s while a moving task is active, not at its
+    goal, in `moving` mode and not turning."""
+    stuck_s = float(dom.uv["stuck_s"])
+    fresh = float(dom.uv["no_status_s"])
+    for rid, m in dom.moving_tasks().items():
+        r = dom.robots[rid]
+        if r.t == NEG or r.mode != "moving" or t - r.t > fresh or t < r.turn_until:
+            continue   # silent robots are no-status, paused ones are waiting, turning ones turning
+        still = t - max(r.anchor_t, dom.started_at(m))
+        if still < stuck_s:
+            continue
+        goal = m.goal()
+        if goal is not None:
+            gx, gy, rad = dom.goals[goal]
+            if math.hypot(r.x - gx, r.y - gy) <= rad:
+                continue
+        cands.append(dom.cand(t, "stuck", m, (rid,), f"{dom.name(rid)} stuck for {still:.0f} s during {m.TYPE} "
+                              f"(moved less than {m_(float(dom.uv['stuck_m']))})", ("stuck", rid), still,
+                              {"mission": m.id, "still_s": round(still, 1), "x": round(r.x, 1), "y": round(r.y, 1)}))
+
+
+def divergent(dom: "UvDomain", t: float, cands: list) -> None:
+    """Distance to the current waypoint grew by more than base + k x expected speed
+    since the best distance at the last progress check."""
+    uv = dom.uv
+    base, k = float(uv["divergent_base_m"]), float(uv["divergent_speed_s"])
+    tol, settle = float(uv["turn_tolerance_deg"]), float(uv["turn_settle_s"])
+    dirty = dom.watchman.dirty
+    for mid, (m, place) in dom.goal_missions.items():
+        rid = m.unit
+        if rid not in dirty or rid not in dom.mine or not dom.active(mid):
+            continue
+        r = dom.robots[rid]
+        gx, gy, _ = dom.goals[place]
+        d = math.hypot(r.x - gx, r.y - gy)
+        err = heading_error(r, gx, gy)
+        if r.ref_goal != mid:   # a new waypoint: a new history
+            r.ref_goal, r.ref_d, r.ref_t, r.aligned = mid, d, r.t, True
+            r.turn_until = NEG
+        if err > tol and r.aligned:    # a turn begins: allow the time it needs
+            r.turn_until = r.t + err / r.turn_rate + settle
+        r.aligned = err <= tol
+        if r.t < r.turn_until or d < r.ref_d or r.mode != "moving":
+            r.ref_d, r.ref_t = min(d, r.ref_d) if r.t >= r.turn_until else d, r.t
+            continue
+        grown = d - r.ref_d
+        expected = float(m.params.get("speed_mps", r.max_speed))
+        thr = base + k * expected
+        if grown > thr:
+            cands.append(dom.cand(t, "divergent", m, (rid,), f"{dom.name(rid)} diverging from {place}: "
+                                  f"{m_(grown)} farther than at {r.ref_t:.0f} s (now {m_(d)} away)",
+                                  ("divergent", mid), grown,
+                                  {"mission": mid, "place": place, "places": [place], "distance_m": round(d, 1),
+                                   "grown_m": round(grown, 1), "threshold_m": round(thr, 1)}))

@@ -1,0 +1,322 @@
+"""Loading and validating a UV scenario folder (docs/uv-domain.md): scenario.json,
+world.geojson, plan.json, events.jsonl[.gz], truth.json.
+
+Every error is a ScenarioError naming the file, the feature, unit, mission or line,
+and the field, so that a broken scenario is fixed in one look.
+"""
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapely
+from shapely.geometry import shape
+
+from ea_agent.core.geo import Projection
+from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, TimeConstraint, Unit
+from ea_agent.core.scenario import ScenarioError, check_key_chunk, need, number, read_events, read_json
+
+from . import messages as M   # registers the uv-* message kinds with the core codec
+from .missions import REGISTRY
+from .world import KINDS, Place
+
+UNIT_KINDS = ("team", "ugv", "uav", "operator")
+ROBOT_KINDS = ("ugv", "uav")
+ROBOT_ATTRS = ("max_speed_mps", "turn_rate_dps", "sensor_range_m", "comm_range_m", "radius_m")
+GEOM = {"obstacle": "Polygon", "waypoint": "Point", "patrol-area": "Polygon", "sector": "Polygon", "base": "Point"}
+MAX_DURATION_S = 7 * 86400.0
+
+
+@dataclass
+class UvScenario:
+    name: str
+    root: Path
+    projection: Projection
+    duration_s: float
+    taskorg: TaskOrg
+    plans: dict[str, PlanSpec]
+    initial_plan: str
+    world: dict[str, Place]
+    events: list
+    meta: dict
+
+    @property
+    def plan(self) -> PlanSpec:
+        return self.plans[self.initial_plan]
+
+    @property
+    def robots(self) -> list[str]:
+        return sorted(u.id for u in self.taskorg.units.values() if u.kind in ROBOT_KINDS)
+
+    def truth(self) -> dict:
+        p = self.root / "truth.json"
+        if not p.exists():
+            raise ScenarioError(f"{p}: no ground-truth file in this scenario")
+        return json.loads(p.read_text())
+
+
+def _load_meta(root: Path) -> tuple[dict, str, Projection, float]:
+    where = "scenario.json"
+    meta = read_json(root / where)
+    if not isinstance(meta, dict):
+        raise ScenarioError(f"{where}: expected an object")
+    if meta.get("domain") != "uv":
+        raise ScenarioError(f"{where}: field 'domain': expected \"uv\", got {meta.get('domain')!r:.40}")
+    name = check_key_chunk(meta.get("name", root.resolve().name), where, "name")
+    epsg = need(meta, "epsg", where, int)
+    try:
+        proj = Projection(epsg)
+    except Exception as e:   # pyproj raises its own CRSError (and ValueError for a geographic CRS)
+        raise ScenarioError(f"{where}: field 'epsg': {e}") from None
+    duration = number(need(meta, "duration_s", where, (int, float)), where, "duration_s", positive=True)
+    if duration > MAX_DURATION_S:
+        raise ScenarioError(f"{where}: field 'duration_s': {duration} is more than {MAX_DURATION_S:.0f} s (7 days)")
+    ks = meta.get("keyspace")
+    if ks is not None:
+        number(need(ks, "cell_m", f"{where}: keyspace", (int, float)), f"{where}: keyspace", "cell_m", positive=True)
+    targets = meta.get("targets")
+    if targets is not None:
+        if not isinstance(targets, list):
+            raise ScenarioError(f"{where}: field 'targets': expected a list of target ids")
+        for t in targets:
+            check_key_chunk(t, where, "targets")
+    return meta, name, proj, duration
+
+
+def load_world(p: Path, proj: Projection) -> dict[str, Place]:
+    fc = read_json(p)
+    out: dict[str, Place] = {}
+    for i, f in enumerate(need(fc, "features", p.name, list)):
+        where = f"{p.name}: feature {i}"
+        props = need(f, "properties", where, dict)
+        fid = check_key_chunk(need(props, "id", where, str), where, "id")
+        where = f"{p.name}: feature {i} ({fid})"
+        kind = need(props, "kind", where, str)
+        if kind not in KINDS:
+            raise ScenarioError(f"{where}: field 'kind': unknown kind {kind!r} (one of {', '.join(KINDS)})")
+        if fid in out:
+            raise ScenarioError(f"{where}: field 'id': duplicate id {fid!r}")
+        g = need(f, "geometry", where, dict)
+        try:
+            with warnings.catch_warnings():   # NaN coordinates warn on stderr; they are reported below
+                warnings.simplefilter("ignore", RuntimeWarning)
+                geom = shape(g)
+        except Exception as e:   # shapely raises several unrelated types for malformed GeoJSON
+            raise ScenarioError(f"{where}: field 'geometry': {type(e).__name__}: {e}") from None
+        coords = shapely.get_coordinates(geom)
+        if len(coords) == 0:
+            raise ScenarioError(f"{where}: field 'geometry': no coordinates")
+        bad = ~np.isfinite(coords).all(axis=1) | (np.abs(coords[:, 0]) > 180) | (np.abs(coords[:, 1]) > 90)
+        if bad.any():
+            lon, lat = coords[np.argmax(bad)]
+            what = (f"lat {lat} is not a WGS84 latitude in [-90, 90]" if math.isfinite(lon) and abs(lon) <= 180
+                    else f"lon {lon} is not a WGS84 longitude in [-180, 180]")
+            raise ScenarioError(f"{where}: field 'geometry': point ({lon}, {lat}): {what}")
+        if geom.geom_type != GEOM[kind]:
+            raise ScenarioError(f"{where}: field 'geometry': a {kind} must be a {GEOM[kind]}, not {geom.geom_type}")
+        if not shapely.is_valid(geom):
+            why = shapely.is_valid_reason(geom)
+            raise ScenarioError(f"{where}: field 'geometry': invalid {geom.geom_type} ({why})")
+        xy = shapely.transform(geom, lambda c: proj.to_xy_array(c))
+        if not np.isfinite(shapely.get_coordinates(xy)).all():
+            raise ScenarioError(f"{where}: field 'geometry': cannot be projected to EPSG:{proj.epsg}")
+        if props.get("radius_m") is not None:
+            number(props["radius_m"], where, "radius_m", positive=True)
+        shapely.prepare(xy)
+        out[fid] = Place(fid, kind, xy, dict(props))
+    return out
+
+
+def _tc(d: Any, where: str, allowed: tuple[str, ...]) -> TimeConstraint:
+    if d is None:
+        return TimeConstraint()
+    typ = need(d, "type", where, str)
+    if typ not in allowed:
+        raise ScenarioError(f"{where}: field 'type': {typ!r} not one of {', '.join(allowed)}")
+    if typ in ("ASAP", "ON-ORDER"):
+        return TimeConstraint(typ)
+    return TimeConstraint(typ, number(need(d, "t", where, (int, float)), where, "t"))
+
+
+def _units(doc: dict, p: Path) -> TaskOrg:
+    units: list[Unit] = []
+    for i, u in enumerate(need(doc, "team", p.name, list)):
+        where = f"{p.name}: team[{i}]"
+        uid = check_key_chunk(need(u, "id", where, str), where, "id")
+        where += f" ({uid})"
+        if any(x.id == uid for x in units):
+            raise ScenarioError(f"{where}: field 'id': duplicate unit id")
+        kind = need(u, "kind", where, str)
+        if kind not in UNIT_KINDS:
+            raise ScenarioError(f"{where}: field 'kind': {kind!r} not one of {', '.join(UNIT_KINDS)}")
+        parent = u.get("parent")
+        if parent is not None and not isinstance(parent, str):
+            raise ScenarioError(f"{where}: field 'parent': expected a unit id or null, got {type(parent).__name__}")
+        attrs = u.get("attrs", {})
+        if not isinstance(attrs, dict):
+            raise ScenarioError(f"{where}: field 'attrs': expected an object")
+        for k in ROBOT_ATTRS if kind in ROBOT_KINDS else ():
+            number(need(attrs, k, f"{where} attrs", (int, float)), where, f"attrs.{k}", positive=True)
+        for k, v in attrs.items():
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                number(v, where, f"attrs.{k}")
+        ents = (uid,) if kind in ROBOT_KINDS else ()
+        units.append(Unit(uid, str(u.get("name", uid)), kind, parent, ents, dict(attrs)))
+    roots = [u.id for u in units if u.parent is None]
+    if len(roots) != 1:
+        raise ScenarioError(f"{p.name}: team: field 'parent': need exactly one top unit, found {roots}")
+    ids = {u.id for u in units}
+    for u in units:
+        if u.parent is not None and u.parent not in ids:
+            raise ScenarioError(f"{p.name}: team ({u.id}): field 'parent': unknown unit {u.parent!r}")
+    taskorg = TaskOrg(units)
+    cyc = taskorg.cycle()
+    if cyc:
+        raise ScenarioError(f"{p.name}: team ({cyc[0]}): field 'parent': cycle {' -> '.join(cyc)}")
+    return taskorg
+
+
+def _params(cls, params: Any, where: str, world: dict[str, Place], targets: set[str] | None) -> None:
+    if not isinstance(params, dict):
+        raise ScenarioError(f"{where}: field 'params': expected an object")
+    for r in cls.required():
+        if r not in params:
+            raise ScenarioError(f"{where}: field 'params.{r}': missing (required by {cls.TYPE})")
+    for k in cls.PLACE_PARAMS:
+        v = params.get(k)
+        if v is None:
+            continue
+        kinds = cls.PLACE_KINDS.get(k, KINDS)
+        if not isinstance(v, str) or v not in world:
+            raise ScenarioError(f"{where}: field 'params.{k}': {v!r:.60} names no feature of world.geojson")
+        if world[v].kind not in kinds:
+            raise ScenarioError(f"{where}: field 'params.{k}': {v!r} is a {world[v].kind}, not a {' or '.join(kinds)}")
+    tp = cls.TARGET_PARAM
+    if tp and params.get(tp) is not None:
+        check_key_chunk(params[tp], where, f"params.{tp}")
+        if targets is not None and params[tp] not in targets:
+            raise ScenarioError(f"{where}: field 'params.{tp}': unknown target {params[tp]!r} (scenario.json targets)")
+    if params.get("every_s") is not None:
+        number(params["every_s"], where, "params.every_s", positive=True)
+    voi = params.get("voi")
+    if voi is not None:
+        if not isinstance(voi, dict):
+            raise ScenarioError(f"{where}: field 'params.voi': expected an object of thresholds")
+        for k, v in voi.items():
+            number(v, where, f"params.voi.{k}")
+
+
+def load_plan(p: Path, world: dict[str, Place], targets: set[str] | None) -> tuple[TaskOrg, dict[str, PlanSpec], str]:
+    doc = read_json(p)
+    if not isinstance(doc, dict):
+        raise ScenarioError(f"{p.name}: expected an object")
+    taskorg = _units(doc, p)
+    plans: dict[str, PlanSpec] = {}
+    for pname, ms in need(doc, "plans", p.name, dict).items():
+        check_key_chunk(pname, f"{p.name}: plans", "name")
+        if not isinstance(ms, list):
+            raise ScenarioError(f"{p.name}: plans.{pname}: expected a list of missions")
+        specs: list[MissionSpec] = []
+        for i, m in enumerate(ms):
+            where = f"{p.name}: plans.{pname}[{i}]"
+            mid = check_key_chunk(need(m, "id", where, str), where, "id")
+            where += f" ({mid})"
+            if any(s.id == mid for s in specs):
+                raise ScenarioError(f"{where}: field 'id': duplicate mission id")
+            unit = need(m, "unit", where, str)
+            if unit not in taskorg.units:
+                raise ScenarioError(f"{where}: field 'unit': unknown unit {unit!r}")
+            if taskorg.units[unit].kind not in ROBOT_KINDS:
+                raise ScenarioError(f"{where}: field 'unit': {unit!r} is a {taskorg.units[unit].kind}, not a robot")
+            typ = need(m, "type", where, str)
+            cls = REGISTRY.get(typ)
+            if cls is None:
+                raise ScenarioError(f"{where}: field 'type': unknown mission type {typ!r} "
+                                    f"(one of {', '.join(sorted(REGISTRY))})")
+            params = m.get("params", {})
+            _params(cls, params, where, world, targets)
+            after = m.get("after", [])
+            if not isinstance(after, list) or not all(isinstance(a, str) for a in after):
+                raise ScenarioError(f"{where}: field 'after': expected a list of mission ids")
+            if mid in after:
+                raise ScenarioError(f"{where}: field 'after': a mission cannot come after itself")
+            specs.append(MissionSpec(mid, unit, typ, _tc(m.get("start"), where + " start", START_TYPES),
+                                     _tc(m.get("end"), where + " end", END_TYPES), tuple(after), params))
+        mids = {s.id for s in specs}
+        for s in specs:
+            for a in s.after:
+                if a not in mids:
+                    raise ScenarioError(f"{p.name}: plans.{pname} ({s.id}): field 'after': unknown mission {a!r}")
+        plan = PlanSpec(pname, specs)
+        cyc = plan.cycle()
+        if cyc:
+            raise ScenarioError(f"{p.name}: plans.{pname} ({cyc[0]}): field 'after': cycle {' -> '.join(cyc)}")
+        plans[pname] = plan
+    initial = doc.get("initial_plan", "main")
+    if not isinstance(initial, str) or initial not in plans:
+        raise ScenarioError(f"{p.name}: field 'initial_plan': no plan named {initial!r}")
+    return taskorg, plans, initial
+
+
+def load_events(root: Path, duration: float, taskorg: TaskOrg, targets: set[str] | None) -> list:
+    """The event script, time-ordered, within [0, duration_s], naming known robots."""
+    robots = {u.id for u in taskorg.units.values() if u.kind in ROBOT_KINDS}
+    units = set(taskorg.units)
+
+    def known(v: str, where: str, name: str, pool: set[str], what: str) -> None:
+        if v not in pool:
+            check_key_chunk(v, where, name)
+            raise ScenarioError(f"{where}: field '{name}': unknown {what} {v!r}")
+
+    def check(m, where: str) -> None:
+        if m.t > duration:
+            raise ScenarioError(f"{where}: field 't': {m.t} is after the end of the scenario "
+                                f"(scenario.json duration_s = {duration})")
+        k = type(m)
+        if k is M.UvState or k is M.UvSighting:
+            known(m.robot, where, "robot", robots, "robot")
+            if k is M.UvSighting:
+                check_key_chunk(m.target, where, "target")
+                if targets is not None and m.target not in targets:
+                    raise ScenarioError(f"{where}: field 'target': unknown target {m.target!r} (scenario.json targets)")
+        elif k is M.UvAgent:
+            known(m.sender, where, "sender", units, "unit")
+            known(m.to, where, "to", units, "unit")
+            check_key_chunk(m.task, where, "task")
+        else:
+            raise ScenarioError(f"{where}: field 'kind': {m.KIND!r} is not a UV input message")
+    return read_events(root, check)
+
+
+def _guarded(fname: str, fn, *args):
+    """Run one file's loader; an error its checks did not foresee still names the file."""
+    try:
+        return fn(*args)
+    except ScenarioError:
+        raise
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as e:
+        raise ScenarioError(f"{fname}: unexpected {type(e).__name__} while loading: {e}") from e
+
+
+def load(path: str | Path, events: bool = True) -> UvScenario:
+    root = Path(path)
+    if not root.is_dir():
+        raise ScenarioError(f"{root}: not a scenario folder")
+    meta, name, proj, duration = _guarded("scenario.json", _load_meta, root)
+    targets = set(meta["targets"]) if meta.get("targets") is not None else None
+    world = _guarded("world.geojson", load_world, root / "world.geojson", proj)
+    taskorg, plans, initial = _guarded("plan.json", load_plan, root / "plan.json", world, targets)
+    dflt = meta.get("default_eas")
+    if dflt is not None:
+        if not isinstance(dflt, list) or not dflt:
+            raise ScenarioError("scenario.json: field 'default_eas': expected a non-empty list of unit ids")
+        for u in dflt:
+            if not isinstance(u, str) or u not in taskorg.units:
+                raise ScenarioError(f"scenario.json: field 'default_eas': unknown unit {u!r:.40}")
+    evs = _guarded("events", load_events, root, duration, taskorg, targets) if events else []
+    return UvScenario(name, root, proj, duration, taskorg, plans, initial, world, evs, meta)
