@@ -450,6 +450,7 @@ class Peer:
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),
+                "alert_latencies_ms": [round(1000 * x, 3) for x in self.alert_lat[:5000]],
                 "picture": self.picture()}
 
     def picture(self) -> dict:

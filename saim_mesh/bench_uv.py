@@ -1,0 +1,193 @@
+"""The robot domain's speed, against the paper (7.2, 7.4): a robot's EA takes two state
+messages a second from itself and two from each teammate, and must detect every alert
+within 1 s. For a team of 20 that is 40 messages/s per robot EA; we aim for 1,000x.
+
+Measured in one run (written to bench/results/uv.json):
+- messages/s of one robot's EA and of the operator's (TEAM) EA over a synthetic team of
+  20 robots patrolling at 2 Hz, in process; baselines from the same run: the bare loop and
+  msgpack decoding of the same stream;
+- detection delay in scenario time on scenarios/uv-team: first matching alert minus the
+  ground truth's onset, per incident (p50, p99, max);
+- the team of 20 on the mesh at real time (speed 1): 21 Zenoh peers (every robot and the
+  operator) and the replay; each peer's wall latency from a clock tick to the alerts it
+  raised in that tick (p50, p99).
+"""
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import math
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ea_agent.core.geo import Projection
+from ea_agent.domains.uv import load_uv_config, make_ea
+
+from . import messages as M
+from . import scenario as S
+
+ROOT = Path(__file__).resolve().parents[1]
+EPSG, LON0, LAT0 = 32611, -116.60, 35.26
+HZ = 2.0
+
+
+def team_folder(out: Path, n: int = 20, duration_s: float = 600.0) -> Path:
+    """A scenario folder: n robots, each patrolling its own 200 m square on a 5-wide grid
+    (neighbours within radio range), reporting state at 2 Hz; one robot stops for a while
+    and one falls silent, so that alerts are raised."""
+    proj = Projection(EPSG)
+    x0, y0 = proj.to_xy(LON0, LAT0)
+    team = [{"id": "TEAM", "name": "Operator", "kind": "team", "parent": None, "attrs": {}}]
+    feats, missions, events = [], [], []
+
+    def poly(pid: str, kind: str, cx: float, cy: float, half: float) -> None:
+        ring = [(cx - half, cy - half), (cx + half, cy - half), (cx + half, cy + half), (cx - half, cy + half)]
+        lon, lat = proj.to_lonlat(np.array([p[0] for p in ring]), np.array([p[1] for p in ring]))
+        coords = [[round(a, 7), round(b, 7)] for a, b in zip(lon.tolist(), lat.tolist())]
+        feats.append({"type": "Feature", "properties": {"id": pid, "kind": kind},
+                      "geometry": {"type": "Polygon", "coordinates": [coords + coords[:1]]}})
+
+    ts = np.arange(0.0, duration_s, 1.0 / HZ)
+    for i in range(n):
+        rid = f"R{i + 1:02d}"
+        cx, cy = x0 + 300.0 * (i % 5), y0 + 300.0 * (i // 5)
+        team.append({"id": rid, "name": f"Robot {i + 1}", "kind": "ugv", "parent": "TEAM",
+                     "attrs": {"max_speed_mps": 3.0, "turn_rate_dps": 45, "sensor_range_m": 60,
+                               "comm_range_m": 400, "radius_m": 0.5}})
+        poly(f"PA-{rid}", "patrol-area", cx, cy, 100.0)
+        poly(f"SEC-{rid}", "sector", cx, cy, 150.0)
+        missions.append({"id": f"{rid}-patrol", "unit": rid, "type": "patrol", "start": {"type": "ASAP"},
+                         "end": {"type": "ASAP"}, "after": [], "params": {"area": f"PA-{rid}",
+                                                                          "sector": f"SEC-{rid}"}})
+        ang = 2 * math.pi * ts / 400.0 + i   # a circle of 80 m radius at ~1.3 m/s
+        xs, ys = cx + 80.0 * np.cos(ang), cy + 80.0 * np.sin(ang)
+        stop = (i == 3) & (ts > 200) & (ts < 260)
+        xs[stop], ys[stop] = xs[np.argmax(stop)], ys[np.argmax(stop)]
+        lon, lat = proj.to_lonlat(xs, ys)
+        hdg = (np.degrees(np.arctan2(np.cos(ang), -np.sin(ang))) % 360.0).round(1) % 360.0
+        for k, t in enumerate(ts.tolist()):
+            if i == 7 and 300 <= t < 320:
+                continue   # a radio gap: no-status
+            events.append({"kind": "uv-state", "t": t, "robot": rid, "lon": round(float(lon[k]), 7),
+                           "lat": round(float(lat[k]), 7), "speed_mps": 0.0 if stop[k] else 1.26,
+                           "heading_deg": float(hdg[k]), "sigma_m": 1.0, "mode": "moving"})
+    events.sort(key=lambda e: (e["t"], e["robot"]))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scenario.json").write_text(json.dumps({
+        "name": f"uv-bench-{n}", "domain": "uv", "epsg": EPSG, "duration_s": duration_s,
+        "default_eas": ["TEAM", "R01"], "keyspace": {"cell_m": 250}}))
+    (out / "world.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    (out / "plan.json").write_text(json.dumps({"team": team, "plans": {"main": missions}, "initial_plan": "main"}))
+    with gzip.open(out / "events.jsonl.gz", "wt") as f:
+        f.writelines(json.dumps(e) + "\n" for e in events)
+    return out
+
+
+def throughput(sc, owner: str, repeat: int = 3) -> tuple[float, int]:
+    best, alerts = math.inf, 0
+    for _ in range(repeat):
+        ea = make_ea(sc, owner, load_uv_config(None, owner))
+        ea.start(0.0)
+        submit = ea.submit
+        t0 = time.perf_counter()
+        for ev in sc.events:
+            submit(ev)
+        ea.finish(sc.duration_s)
+        best, alerts = min(best, time.perf_counter() - t0), len(ea.alerts)
+    return len(sc.events) / best, alerts
+
+
+def pct(xs: list[float]) -> dict:
+    if not xs:
+        return {"n": 0}
+    a = np.array(xs)
+    return {"n": len(xs), "p50": round(float(np.percentile(a, 50)), 3), "p99": round(float(np.percentile(a, 99)), 3),
+            "max": round(float(a.max()), 3)}
+
+
+def detection_delays() -> dict:
+    """Scenario seconds from each true incident's onset to the first alert matching it."""
+    from .evaluate import _matches
+    from .runner import run
+    sc = S.load(ROOT / "scenarios" / "uv-team")
+    truth = sc.truth()
+    alerts = [a for ea in run(sc, truth["owners"]) for a in ea.alerts]
+    delays, by_type = [], {}
+    for inc in truth["incidents"]:
+        hit = [a.t for a in alerts if _matches(a, inc)]
+        if hit:
+            d = max(0.0, min(hit) - inc["t0"])
+            delays.append(d)
+            by_type.setdefault(inc["type"], []).append(d)
+    return {"incidents": len(truth["incidents"]), "detected": len(delays), "delay_s": pct(delays),
+            "delay_s_by_type": {k: pct(v) for k, v in sorted(by_type.items())}}
+
+
+def mesh_latency(folder: Path, until_s: float, timeout: float = 400.0) -> dict:
+    """The team on the mesh at real time: every robot's and the operator's peer."""
+    from .mesh import up
+    sc = S.load(folder, events=False)
+    out = Path(tempfile.mkdtemp(prefix="uvbench-"))
+    t0 = time.monotonic()
+    res = up(str(folder), None, out, speed="1", timeout=timeout, insecure=True, echo=lambda *a, **k: None,
+             until=until_s)
+    peers = res["peers"]
+    lat = [v for s in peers.values() for v in s.get("alert_latencies_ms", [])]
+    return {"peers": len(peers), "expected_peers": len(sc.taskorg.units), "wall_s": round(time.monotonic() - t0, 1),
+            "scenario_s": until_s, "alerts": sum(s["alerts"] for s in peers.values()),
+            "alert_latency_ms": pct(lat),
+            "tick_latency_ms_p99_worst_peer": max((s["tick_latency_ms"].get("p99", 0) for s in peers.values()),
+                                                  default=None),
+            "peak_rss_mb_max": max((s["peak_rss_mb"] for s in peers.values()), default=None)}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--robots", type=int, default=20)
+    p.add_argument("--mesh-s", type=float, default=60.0, help="scenario seconds of the real-time mesh run (0: skip)")
+    p.add_argument("--out", default=str(ROOT / "bench" / "results" / "uv.json"))
+    a = p.parse_args(argv)
+    folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), a.robots)
+    sc = S.load(folder)
+    n = len(sc.events)
+    t0 = time.perf_counter()
+    for _ in sc.events:
+        pass
+    loop = n / (time.perf_counter() - t0)
+    wire = [M.encode(e) for e in sc.events]
+    t0 = time.perf_counter()
+    for w in wire:
+        M.decode(w)
+    decode = n / (time.perf_counter() - t0)
+    robot_rate, robot_alerts = throughput(sc, "R01")
+    team_rate, team_alerts = throughput(sc, "TEAM")
+    paper_rate = HZ * a.robots   # 2/s from itself and 2/s from each teammate
+    res = {
+        "team": a.robots, "state_hz": HZ, "events": n, "scenario_s": sc.duration_s,
+        "paper_rate_msgs_per_s_per_robot_ea": paper_rate,
+        "robot_ea_msgs_per_s": round(robot_rate), "robot_ea_x_paper_rate": round(robot_rate / paper_rate),
+        "team_ea_msgs_per_s": round(team_rate), "team_ea_x_its_rate": round(team_rate / paper_rate),
+        "alerts": {"R01": robot_alerts, "TEAM": team_alerts},
+        "baseline_loop_msgs_per_s": round(loop), "baseline_msgpack_decode_per_s": round(decode),
+        "robot_ea_share_of_decode": round(robot_rate / decode, 3),
+        "detection_uv_team": detection_delays(),
+        "python": platform.python_version(), "machine": platform.machine(),
+    }
+    print(json.dumps({k: res[k] for k in ("robot_ea_msgs_per_s", "robot_ea_x_paper_rate", "team_ea_msgs_per_s",
+                                          "baseline_msgpack_decode_per_s")}), flush=True)
+    if a.mesh_s > 0:
+        res["mesh_real_time"] = mesh_latency(folder, a.mesh_s)
+        print(json.dumps(res["mesh_real_time"]), flush=True)
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
