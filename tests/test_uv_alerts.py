@@ -395,3 +395,149 @@ def test_replay_gives_the_same_alerts():
         runs.append([a.to_json_dict() for a in run(e, msgs, 40)])
     assert runs[0] == runs[1] == runs[2]
     assert {a["type"] for a in runs[0]} >= {"collision", "target-visible", "no-status", "lost-target"}
+
+
+# -- fixes from the uv-team evaluation ------------------------------------------------------------
+def test_at_goal_when_success_report_precedes_the_state():
+    """The robot's controller reports `success` on its true position, before the state of
+    the same instant (sim.py); that state may lie just outside the radius by GPS error.
+    The goto used to end on the report, before at-goal looked at the state."""
+    msgs = line("UGV1", 0, 0, 2, 0, 0, 47.5)                       # x = 0 .. 93.0
+    msgs += [UvAgent(47.5, "UGV1", "TEAM", "success", "G1"), st(47.5, "UGV1", 94.6, 0, 2.0, 90.0)]
+    msgs += still("UGV1", 94.6, 0, 48, 52)
+    for owner in ("UGV1", "TEAM"):
+        e = ea(scenario([GOTO1, GOTO2]), owner)
+        for m in msgs:          # in this order: the report first, as the robots send it
+            e.submit(m)
+        goal = of(e.finish(52), "at-goal")
+        assert len(goal) == 1 and goal[0].t == 47.5 and goal[0].details["distance_m"] == 5.4, owner
+        assert e.domain.plan.state["G1"] == "done" and e.domain.plan.state["G2"] == "active"
+
+
+def test_success_far_from_goal_ends_goto_without_at_goal():
+    e = ea(scenario([GOTO1, GOTO2]))
+    for m in still("UGV1", 40, 0, 0, 10) + [UvAgent(5.0, "UGV1", "TEAM", "success", "G1")]:
+        e.submit(m)
+    assert not of(e.finish(10), "at-goal")
+    assert e.domain.plan.state["G1"] == "done" and e.domain.plan.state["G2"] == "active"
+
+
+def test_teammate_no_status_within_range_not_after_driving_out():
+    # UGV2 heard 100 m away, then silent: UGV1's EA tells its controller
+    msgs = still("UGV1", 0, 0, 0, 30) + still("UGV2", 100, 0, 0, 10)
+    ns = of(run(ea(scenario([GOTO1])), msgs, 30), "no-status")
+    assert ns and ns[0].subjects == ("UGV2",) and 14.5 <= ns[0].t <= 15.5 and ns[0].details["teammate"]
+    assert all(a.subjects == ("UGV2",) for a in ns)               # UAV1, never heard, is not watched
+    # UGV2 drives out of range (heard last 400 m away): not silent, merely unheard
+    away = still("UGV1", 0, 0, 0, 30) + line("UGV2", 380, 0, 2, 0, 0, 30)
+    e = ea(scenario([GOTO1]))
+    assert not of(run(e, away, 30), "no-status") and e.domain.watchman.dropped > 0
+    # a UAV (800 m) hears a UGV killed 700 m away: 700 + 2 x 5 is within range
+    uav = [robot("UGV1"), robot("UGV2"), robot("UAV1", 10.0, comm=800.0, kind="uav")]
+    far = still("UAV1", 0, 0, 0, 30) + still("UGV2", 700, 0, 0, 10)
+    ns = of(run(ea(scenario([GOTO1], uav), "UAV1"), far, 30), "no-status")
+    assert [a.subjects for a in ns][:1] == [("UGV2",)]
+
+
+def test_uav_flies_over_obstacles():
+    uav = [robot("UGV1"), robot("UGV2"), robot("UAV1", 10.0, kind="uav")]
+    over = line("UAV1", 50, 150, 0, 5, 0, 20)                     # straight over OBS1 (y 200..220)
+    for owner in ("UAV1", "TEAM"):
+        assert not of(run(ea(scenario([GOTO1], uav), owner), over, 20), "collision"), owner
+    ugv = line("UGV1", 50, 180, 0, 2, 0, 10)                      # the same path on the ground
+    assert of(run(ea(scenario([GOTO1], uav), "TEAM"), ugv, 10), "collision")
+
+
+def test_robot_ea_takes_only_its_own_agent_messages():
+    msgs = still("UGV1", 0, 0, 0, 10) + still("UGV2", 100, 0, 0, 10) + [UvAgent(5.0, "UGV2", "TEAM", "success", "P2")]
+    e = ea(scenario([PATROL1, PATROL2]), "UGV1")
+    run(e, msgs, 10)
+    assert e.domain.watchman.dropped == 1 and e.domain.plan.state["P2"] == "active"   # not ours: not heard
+    team = ea(scenario([PATROL1, PATROL2]), "TEAM")
+    run(team, msgs, 10)
+    assert team.domain.watchman.dropped == 0 and team.domain.plan.state["P2"] == "done"
+    own = ea(scenario([PATROL1, PATROL2]), "UGV2")                # the sender's own EA hears it
+    run(own, msgs, 10)
+    assert own.domain.plan.state["P2"] == "done"
+
+
+def test_needs_bind_own_conversations_and_cover_comm_range_plus_travel():
+    e = ea(scenario([PATROL1]), "UGV1")
+    d = e.domain
+    n0 = d.needs(3000.0)
+    assert set(n0.whole) == {"st", "sgt"}                        # before our own first state: everything
+    run(e, still("UGV1", 10, 20, 0, 2), 2)
+    n = d.needs(3000.0)
+    assert n.by["to"] == n.by["sender"] == n.by["robot"] == frozenset({"UGV1"}) and "agm" not in n.whole
+    (x, y, r), = n.circles
+    assert (round(x - X0, 1), round(y - Y0, 1)) == (10.0, 20.0)
+    assert r == 400.0 + 2.0 * d.cfg["dissemination"]["reregister_s"] + 60.0   # comm + travel + sensor
+    team = ea(scenario([PATROL1]), "TEAM").domain.needs(3000.0)
+    assert set(team.whole) == {"st", "sgt", "agm"}
+
+
+def test_lost_target_clock_starts_with_a_taken_over_pursuit():
+    """UGV2's EA heard UGV1's old sighting of E1; after taking the pursuit over at 20 s
+    UGV2 has lost_s of its own before it has lost the target (as its controller)."""
+    msgs = still("UGV1", 0, 0, 0, 40) + still("UGV2", 150, 0, 0, 40) + [sg(2 + k / 2, "UGV1", "E1", 30, 0) for k in range(3)]
+    msgs.append(UvAgent(20.0, "UGV1", "UGV2", "delegate", "P1/pursue-E1-1", "E1"))
+    lost = of(run(ea(scenario([PATROL1, SHARED2]), "UGV2"), msgs, 40), "lost-target")
+    assert lost and 22.5 <= lost[0].t <= 24.0 and lost[0].details["unseen_s"] == 3.0
+
+
+def test_target_gone_when_failure_report_precedes_the_sighting():
+    """A planned pursuit fails (the robot reports `failure`) at the instant the target is
+    seen outside its sector: target-gone must be told before the report ends the task."""
+    pu = MissionSpec("PU", "UGV1", "pursue", params={"target": "E1", "sector": "SEC1"})
+    msgs = still("UGV1", 0, 0, 0, 10) + [sg(1 + k / 2, "UGV1", "E1", 70 + 5 * k, 0) for k in range(8)]
+    msgs.append(UvAgent(4.5, "UGV1", "TEAM", "failure", "PU"))   # the sighting at 4.5 is at x=105
+    for owner in ("UGV1", "TEAM"):
+        e = ea(scenario([pu]), owner)
+        for m in sorted(msgs, key=lambda m: (m.t, type(m) is not UvAgent)):
+            e.submit(m)
+        gone = of(e.finish(10), "target-gone")
+        assert len(gone) == 1 and gone[0].t == 5.0 and gone[0].details["sector"] == "SEC1", owner
+        assert e.domain.plan.state["PU"] == "done"
+
+
+def test_policy_handoff_only_to_a_patrolling_teammate():
+    """A teammate whose patrol is suspended by a pursuit of its own is not handed another."""
+    e = ea(scenario([PATROL1, PATROL2]), "TEAM")
+    msgs = still("UGV1", 0, 0, 0, 14) + still("UGV2", 200, 0, 0, 14) \
+        + [sg(1 + k / 2, "UGV2", "E2", 210, 0) for k in range(26)] \
+        + [sg(4 + k / 2, "UGV1", "E1", 60 + 10 * k, 0) for k in range(10)]
+    alerts = run(e, msgs, 14)
+    assert of(alerts, "target-gone") and not of(alerts, "handoff")
+
+
+def test_mesh_subscriptions_give_the_same_alerts_on_uv_team():
+    """Each EA fed only what its needs() subscribe to (re-registered every reregister_s)
+    alerts exactly as one fed everything (docs/uv-domain.md, communication range)."""
+    from pathlib import Path
+
+    from dissemination.interest import Interest
+    from dissemination.keyspace import KeySpace, matcher
+    from saim_mesh.runner import config_for, make_ea as mk, run as run_all
+    from saim_mesh.scenario import load as load_sc
+
+    sc = load_sc(Path(__file__).resolve().parents[1] / "scenarios" / "uv-team")
+    full = {e.owner: e for e in run_all(sc, ["TEAM", "UGV1", "UGV2", "UGV3", "UAV1", "UAV2"])}
+    ks = KeySpace.of(sc, "t")
+    for unit, whole in full.items():
+        cfg = config_for(sc, unit)
+        it = Interest(ks, cfg["dissemination"]["radius_m"])
+        e = mk(sc, unit, cfg)
+        e.start(0.0)
+        nxt, fed, match = 0.0, 0, None
+        for ev in sc.events:
+            if ev.t >= nxt:
+                e.advance(ev.t - 1e-9)
+                match = matcher(sorted(it.keys(e.domain)))
+                nxt = ev.t + cfg["dissemination"]["reregister_s"]
+            if match(ks.key(ev, sc.taskorg, sc.projection)):
+                e.submit(ev)
+                fed += 1
+        e.finish(sc.duration_s)
+        assert [a.to_json_dict() for a in e.alerts] == [a.to_json_dict() for a in whole.alerts], unit
+        if unit != "TEAM":
+            assert fed < 0.95 * len(sc.events), unit

@@ -69,6 +69,7 @@ class UvDomain:
         self.auto: list[tuple[float, str]] = []    # (start time, mission) of ready tasks
         self.ends: list[tuple[float, str]] = []    # (END-AT time, mission)
         self.delegations: dict[tuple[str, str, str], UvAgent] = {}
+        self.reported: dict[str, tuple[float, str]] = {}   # mid -> (t, act): success/failure heard, ended in detect
         self.since: dict = {}                      # latency: key -> first epoch the condition held
         self.posted_here: list[Candidate] = []
 
@@ -251,7 +252,7 @@ class UvDomain:
     # -- facts and detection -----------------------------------------------------------------
     def busy(self) -> bool:
         w = self.watchman
-        return bool(w.dirty or w.dirty_targets or w.acquired or self.posted_here or self.since)
+        return bool(w.dirty or w.dirty_targets or w.acquired or self.posted_here or self.since or self.reported)
 
     def next_wakeup(self) -> float:
         nxt = D.status.wakeup(self, self.now)
@@ -260,8 +261,7 @@ class UvDomain:
                 nxt = min(nxt, q[0][0])
         lost = float(self.uv["lost_s"])
         for m, target in D.targets._pursuits(self):
-            tg = self.watchman.targets.get(target)
-            last = tg.t if tg is not None and tg.t != NEG else self.started_at(m)
+            last = D.targets.last_seen(self, m, target)
             nxt = min(nxt, last + lost if last + lost > self.now else self.now + lost)
         return nxt
 
@@ -297,6 +297,7 @@ class UvDomain:
             D.targets.target_visible(self, t, cands)
             D.targets.lost_target(self, t, cands)
             D.targets.target_gone(self, t, cands)
+            self._end_reported()
             self._photos(t)
             self._due(t)
         D.status.no_status(self, t, cands)
@@ -304,6 +305,19 @@ class UvDomain:
         self.watchman.dirty = set()
         self.watchman.dirty_targets = set()
         return self._gate(t, cands)
+
+    def report_end(self, m: Mission, t: float, act: str) -> None:
+        """A robot reported its task done (`uv-agent` success/failure). The report comes
+        with (often just before) the state and sightings that show why, so the task ends
+        after this epoch's detectors judged them: at-goal of a goto that reports success
+        on arrival, target-gone of a pursuit that fails because the target left."""
+        self.reported[m.id] = (t, act)
+
+    def _end_reported(self) -> None:
+        reported, self.reported = self.reported, {}
+        for mid, (tf, _) in sorted(reported.items(), key=lambda kv: (kv[1][0], kv[0])):
+            if self.plan is not None and self.plan.state.get(mid) in LIVE:
+                self.end_mission(self.missions[mid], tf)
 
     def _gate(self, t: float, cands: list[Candidate]) -> list[Candidate]:
         """Per-type latency: a persistent condition must hold this long before it is proposed."""
@@ -326,24 +340,25 @@ class UvDomain:
         return render.to_alert(c, self.owner, self.audience)
 
     # -- what this EA must hear (for the mesh) --------------------------------------------
-    def needs(self) -> Needs:
+    def needs(self, radius_m: float) -> Needs:
+        """Exactly a superset of what the watchman accepts, so an EA fed by its mesh
+        subscriptions alerts as one fed everything. The TEAM hears every robot and every
+        agent message. A robot's EA: its own states and sightings, the agent messages it
+        sends or receives, and states and sightings placed within `comm_range_m` of it,
+        widened by how far it can move before the next re-registration
+        (`max_speed_mps x [dissemination] reregister_s`) and, for sightings, by the
+        teammates' sensor range (a sighting lies that far from its sender). Before its
+        own first state it hears everything (as the watchman does). `radius_m`, the
+        dissemination layer's geographic interest, is not used: comm range decides."""
         templates = (UvState.KEY, UvSighting.KEY, UvAgent.KEY)
         me = self.robots.get(self.owner)
         if me is None:   # the operator's EA hears every robot
             return Needs(templates, {"to": frozenset({self.owner})}, whole=("st", "sgt", "agm"))
-        by = {"robot": frozenset({self.owner}), "to": frozenset({self.owner})}
-        xy = (me.x, me.y) if me.t != NEG else self._first_place()
-        if xy is None or not math.isfinite(me.comm_range):
+        mine = frozenset({self.owner})
+        by = {"robot": mine, "to": mine, "sender": mine}
+        if me.t == NEG or not math.isfinite(me.comm_range):
             return Needs(templates, by, whole=("st", "sgt"))
-        return Needs(templates, by, circles=((float(xy[0]), float(xy[1]), me.comm_range),))
-
-    def _first_place(self) -> tuple[float, float] | None:
-        for s in self.plans[self.initial_plan].missions:
-            if s.unit != self.owner:
-                continue
-            for p in REGISTRY[s.type].PLACE_PARAMS:
-                place = self.world.get(s.params.get(p) or "")
-                if place is not None:
-                    c = place.geom.centroid
-                    return c.x, c.y
-        return None
+        rereg = float(self.cfg.get("dissemination", {}).get("reregister_s", 0.0))
+        sensor = max((r.sensor_range for r in self.robots.values()), default=0.0)
+        rad = me.comm_range + me.max_speed * rereg + sensor
+        return Needs(templates, by, circles=((float(me.x), float(me.y), rad),))

@@ -5,7 +5,8 @@ replaying the same messages gives the same plan and alerts.
   plan state; the patrol is suspended);
 - lost-target past `drop_s`: drop the pursuit and resume the patrol;
 - a handoff (delegate + accept) moves the pursuit from A to B;
-- target-gone: drop the pursuit and hand it to a teammate whose area holds the target.
+- target-gone: drop the pursuit and hand it to a patrolling teammate (its patrol active,
+  not suspended by a pursuit of its own) whose sector (else area) holds the target.
 """
 from __future__ import annotations
 
@@ -82,9 +83,9 @@ class Policies:
         for rid in dom.robot_ids:
             if rid == m.unit:
                 continue
-            for other in dom.missions_of(rid):
+            for other in dom.active_of(rid):   # a patrolling teammate: not one busy with its own pursuit
                 area = other.params.get("sector") or other.params.get("area")
-                if other.TYPE in ("patrol", "search") and area in dom.world and \
+                if other.TYPE == "patrol" and area in dom.world and \
                         shapely.contains_xy(dom.world[area].geom, tg.x, tg.y):
                     cands.append(dom.cand(t, "handoff", m, (m.unit, rid, target),
                                           f"{dom.name(m.unit)} hands pursuit of {target} to {dom.name(rid)} "

@@ -58,8 +58,7 @@ def _wrap(a: float) -> float:
 
 def compass(heading: float) -> float:
     """Math radians -> compass degrees in [0, 360)."""
-    h = round((90.0 - math.degrees(heading)) % 360.0, 1)
-    return 0.0 if h >= 360.0 else h
+    return round((90.0 - math.degrees(heading)) % 360.0, 1) % 360.0   # 359.96 rounds to 360.0: that is 0
 
 
 class Sim:

@@ -21,13 +21,14 @@ NEG = -math.inf
 class Robot:
     """What the EA believes about one robot; the progress fields are the event
     history the stuck and divergent detectors keep (paper 7.4)."""
-    __slots__ = ("id", "x", "y", "vx", "vy", "speed", "heading", "mode", "sigma", "t", "n",
+    __slots__ = ("id", "kind", "x", "y", "vx", "vy", "speed", "heading", "mode", "sigma", "t", "n",
                  "max_speed", "turn_rate", "sensor_range", "comm_range", "radius",
                  "anchor_t", "anchor_x", "anchor_y", "paused_t",
-                 "ref_goal", "ref_d", "ref_t", "turn_until", "aligned")
+                 "ref_goal", "ref_d", "ref_t", "turn_until", "aligned", "silence")
 
-    def __init__(self, rid: str, attrs: dict):
+    def __init__(self, rid: str, attrs: dict, kind: str = "ugv"):
         self.id = rid
+        self.kind = kind        # "ugv" or "uav" (a UAV flies over obstacles)
         self.x = self.y = self.vx = self.vy = self.speed = self.heading = self.sigma = 0.0
         self.mode = "moving"
         self.t = NEG            # time of the last state heard
@@ -44,6 +45,7 @@ class Robot:
         self.ref_t = NEG
         self.turn_until = NEG
         self.aligned = True
+        self.silence: tuple[float, bool] | None = None   # no-status of a teammate: (last state t, was in range)
 
     def at(self, t: float) -> tuple[float, float]:
         """Position extrapolated to t from the last state (dead reckoning)."""
@@ -69,7 +71,7 @@ class Watchman:
         self.owner = owner
         self.proj = proj
         self.to_xy = proj._fwd.transform   # scalar projection, ~1 us
-        self.robots: dict[str, Robot] = {u.id: Robot(u.id, u.attrs) for u in taskorg.units.values()
+        self.robots: dict[str, Robot] = {u.id: Robot(u.id, u.attrs, u.kind) for u in taskorg.units.values()
                                          if u.kind in ROBOT_KINDS}
         self.units = set(taskorg.units)
         self.me: Robot | None = self.robots.get(owner)
@@ -84,12 +86,15 @@ class Watchman:
         self.dirty_targets: set[str] = set()
         self.dropped = 0                          # out of comm range
 
-    def _in_range(self, sender: str, x: float, y: float) -> bool:
+    def _in_range(self, sender: str, x: float, y: float, extra: float = 0.0) -> bool:
+        """(x, y) within our comm range (plus `extra`) of our own last position; before
+        we have heard ourselves we hear everyone (and subscribe to everything)."""
         me = self.me
         if self.hears_all or sender == self.owner or me.t == NEG:
             return True
         dx, dy = x - me.x, y - me.y
-        return dx * dx + dy * dy <= me.comm_range * me.comm_range
+        rng = me.comm_range + extra
+        return dx * dx + dy * dy <= rng * rng
 
     def watch(self, msg):
         k = type(msg)
@@ -118,13 +123,20 @@ class Watchman:
             x, y = self.to_xy(msg.lon, msg.lat)
             if msg.robot != self.owner and not self.hears_all:
                 s = self.robots[msg.robot]
-                # judged by where the sender last was; a sender never heard is out of range
-                if s.t == NEG or not self._in_range(msg.robot, s.x, s.y):
+                # judged by where the sender last was (a sender never heard is out of range),
+                # and the sighting itself no farther than the sender could see from our range
+                # (a sender that left our range since its last state we heard is not heard;
+                # dissemination subscribes to comm + sensor range, see UvDomain.needs)
+                if s.t == NEG or not self._in_range(msg.robot, s.x, s.y) or \
+                        not self._in_range(msg.robot, x, y, s.sensor_range):
                     self.dropped += 1
                     return None
             self._sighting(msg, x, y)
             return None
         if k is UvAgent:
+            if not self.hears_all and msg.sender != self.owner and msg.to != self.owner:
+                self.dropped += 1   # a robot's EA hears only its own conversations (as subscribed)
+                return None
             if msg.sender not in self.units or msg.to not in self.units:
                 raise KeyError(f"agent message names unknown unit {msg.sender if msg.sender not in self.units else msg.to!r}")
             return msg

@@ -1,9 +1,10 @@
 """Collision (constraint-violation-projected): the closest point of approach within
 `collision_m` in the next `collision_horizon_s`, from positions and velocities,
-between teammates (numpy, all pairs at once) and against obstacle polygons
-(shapely, once per epoch, only for moving robots)."""
+between teammates (plain floats: a handful of robots) and against obstacle polygons
+(shapely, once per epoch, only for moving ground vehicles: UAVs fly over obstacles)."""
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,65 +27,73 @@ class Obstacles:
         if self.union is not None:
             shapely.prepare(self.union)
             shapely.prepare(self.geoms)
-
-
-def cpa(p: np.ndarray, v: np.ndarray, horizon: float) -> tuple[np.ndarray, np.ndarray]:
-    """Time in [0, horizon] and distance of the closest approach of relative
-    positions `p` moving at relative velocities `v` (both (..., 2))."""
-    vv = (v * v).sum(-1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ts = np.where(vv > 1e-12, -(p * v).sum(-1) / vv, 0.0)
-    ts = np.clip(ts, 0.0, horizon)
-    q = p + v * ts[..., None]
-    return ts, np.hypot(q[..., 0], q[..., 1])
+        self.bounds = [tuple(world[i].geom.bounds) for i in self.ids]
 
 
 def collisions(dom: "UvDomain", t: float, cands: list) -> None:
     uv = dom.uv
     lim, horizon, fresh = float(uv["collision_m"]), float(uv["collision_horizon_s"]), float(uv["no_status_s"])
-    rs = [dom.robots[r] for r in dom.robot_ids if dom.robots[r].t != NEG and t - dom.robots[r].t <= fresh]
-    if not rs or not any(r.id in dom.mine for r in rs):
+    rs = [r for r in (dom.robots[x] for x in dom.robot_ids) if r.t != NEG and t - r.t <= fresh]
+    mine = dom.mine
+    if not rs or not any(r.id in mine for r in rs):
         return
-    pos = np.array([r.at(t) for r in rs])
-    vel = np.array([(r.vx, r.vy) for r in rs])
-    rad = np.array([r.radius for r in rs])
-    mine = np.array([r.id in dom.mine for r in rs])
-    if len(rs) > 1:
-        p = pos[None, :, :] - pos[:, None, :]
-        v = vel[None, :, :] - vel[:, None, :]
-        ts, d = cpa(p, v, horizon)
-        clear = d - rad[:, None] - rad[None, :]
-        now = np.hypot(p[..., 0], p[..., 1]) - rad[:, None] - rad[None, :]
-        hit = (clear <= lim) & ((ts > 0) | (now <= 0)) & (mine[:, None] | mine[None, :])
-        hit = np.triu(hit, 1)
-        for i, j in zip(*np.nonzero(hit)):
-            a, b = rs[i].id, rs[j].id
-            c = float(max(clear[i, j], 0.0))
-            cands.append(dom.cand(t, "collision", None, (a, b),
-                                  f"{dom.name(a)} and {dom.name(b)} may collide in {ts[i, j]:.1f} s "
-                                  f"(closest {m_(c)})", ("collision", a, b), 10.0 / (c + 1.0),
-                                  {"robots": [a, b], "in_s": round(float(ts[i, j]), 2), "clearance_m": round(c, 2)}))
-    _obstacles(dom, t, rs, pos, vel, rad, mine, lim, horizon, cands)
+    pos = [r.at(t) for r in rs]
+    # Pairs: a handful of robots, so plain floats beat numpy; a pair that cannot come within
+    # `lim` in the horizon (distance now minus relative speed x horizon) is skipped exactly.
+    hyp = math.hypot
+    for i, a in enumerate(rs):
+        ax, ay = pos[i]
+        for j in range(i + 1, len(rs)):
+            b = rs[j]
+            if a.id not in mine and b.id not in mine:
+                continue
+            px, py = pos[j][0] - ax, pos[j][1] - ay
+            vx, vy = b.vx - a.vx, b.vy - a.vy
+            radii = a.radius + b.radius
+            now = hyp(px, py) - radii
+            if now - hyp(vx, vy) * horizon > lim:
+                continue
+            vv = vx * vx + vy * vy
+            ts = min(max(-(px * vx + py * vy) / vv if vv > 1e-12 else 0.0, 0.0), horizon)
+            clear = hyp(px + vx * ts, py + vy * ts) - radii
+            if clear <= lim and (ts > 0 or now <= 0):
+                c = max(clear, 0.0)
+                cands.append(dom.cand(t, "collision", None, (a.id, b.id),
+                                      f"{dom.name(a.id)} and {dom.name(b.id)} may collide in {ts:.1f} s "
+                                      f"(closest {m_(c)})", ("collision", a.id, b.id), 10.0 / (c + 1.0),
+                                      {"robots": [a.id, b.id], "in_s": round(ts, 2), "clearance_m": round(c, 2)}))
+    _obstacles(dom, t, rs, pos, lim, horizon, cands)
 
 
-def _obstacles(dom, t, rs, pos, vel, rad, mine, lim, horizon, cands) -> None:
+def _obstacles(dom, t, rs, pos, lim, horizon, cands) -> None:
     obs: Obstacles = dom.obstacles
     if obs.union is None:
         return
-    idx = [i for i in range(len(rs)) if mine[i] and rs[i].speed > 0.05]   # parked robots hit nothing
+    # parked robots hit nothing; UAVs fly over obstacles (docs/uv-domain.md): ground vehicles
+    # only, and only those whose path's box, widened by radius + lim, meets an obstacle's box
+    idx = []
+    for i, r in enumerate(rs):
+        if r.kind != "ugv" or r.id not in dom.mine or r.speed <= 0.05:
+            continue
+        (x, y), m = pos[i], r.radius + lim
+        ex, ey = x + r.vx * horizon, y + r.vy * horizon
+        x0, x1, y0, y1 = min(x, ex) - m, max(x, ex) + m, min(y, ey) - m, max(y, ey) + m
+        if any(x0 <= bx1 and bx0 <= x1 and y0 <= by1 and by0 <= y1 for bx0, by0, bx1, by1 in obs.bounds):
+            idx.append(i)
     if not idx:
         return
-    ends = pos[idx] + vel[idx] * horizon
-    lines = shapely.linestrings(np.stack([pos[idx], ends], axis=1))
-    d = shapely.distance(lines, obs.union) - rad[idx]
+    p = np.array([pos[i] for i in idx])
+    vel = np.array([(rs[i].vx, rs[i].vy) for i in idx])
+    rad = np.array([rs[i].radius for i in idx])
+    lines = shapely.linestrings(np.stack([p, p + vel * horizon], axis=1))
+    d = shapely.distance(lines, obs.union) - rad
     for k in np.nonzero(d <= lim)[0].tolist():
-        i = idx[k]
-        r = rs[i]
-        near = shapely.distance(obs.geoms, lines[k]) - rad[i]
+        r = rs[idx[k]]
+        near = shapely.distance(obs.geoms, lines[k]) - rad[k]
         oid = obs.ids[int(np.argmin(near))]
-        zone = dom.world[oid].geom.buffer(lim + rad[i])
-        speed = float(np.hypot(*vel[i]))
-        start = shapely.Point(pos[i])
+        zone = dom.world[oid].geom.buffer(lim + rad[k])
+        speed = float(np.hypot(*vel[k]))
+        start = shapely.Point(p[k])
         if zone.contains(start) or speed < 1e-6:
             when = 0.0
         else:

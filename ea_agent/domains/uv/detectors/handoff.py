@@ -4,7 +4,10 @@
 within B's patrol sector (the target entered it) else A's;
 `accept` B->A: A's EA drops A's pursuit and the operator's EA moves it from A to B.
 `success`/`failure` end the sender's named mission (how an EA learns that a
-teammate's step is done, which the partial order may wait for)."""
+teammate's step is done, which the partial order may wait for), after the epoch's
+detectors ran on the states that came with the report (see `UvDomain.report_end`).
+A robot's EA hears only the agent messages it sends or receives (its subscription);
+the TEAM's hears all."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -36,7 +39,7 @@ def on_agent(dom: "UvDomain", f: UvAgent, cands: list) -> None:
         m = dom.missions.get(f.task)
         if m is not None and m.unit == f.sender and dom.plan is not None and \
                 dom.plan.state.get(m.id) in ("active", "ready", "suspended"):
-            dom.end_mission(m, f.t)
+            dom.report_end(m, f.t, f.act)   # ended once this epoch's detectors have run
 
 
 def _target_of(dom: "UvDomain", task: str) -> str | None:

@@ -35,21 +35,34 @@ def track(dom: "UvDomain", t: float) -> None:
 
 
 def at_goal(dom: "UvDomain", t: float, cands: list) -> None:
-    """A robot within its goto waypoint's radius: report it and end the goto."""
+    """A robot within its goto waypoint's radius: report it and end the goto.
+
+    A robot's controller decides it arrived on its true position and reports
+    `success` at once, usually just before the state that shows it inside the radius
+    (docs/uv-domain.md; sim.py `_policy`). So a goto whose success was heard this epoch
+    is judged on the latest state (allowing twice the reported GPS error), before the
+    report ends it (`UvDomain.report_end`)."""
     dirty = dom.watchman.dirty
+    reported = dom.reported
     for mid, (m, place) in list(dom.goal_missions.items()):
-        if m.unit not in dirty or not dom.active(mid):
+        done = reported.get(mid)
+        if (m.unit not in dirty and done is None) or not dom.active(mid):
             continue
         r = dom.robots[m.unit]
+        if r.t == NEG:
+            continue
         gx, gy, rad = dom.goals[place]
         d = math.hypot(r.x - gx, r.y - gy)
+        if done is not None and done[1] == "success":
+            rad += 2.0 * r.sigma
         if d > rad:
             continue
         if m.unit in dom.mine:
             cands.append(dom.cand(r.t, "at-goal", m, (m.unit,), f"{dom.name(m.unit)} at goal {place} ({m_(d)} away)",
                                   ("at-goal", mid), None, {"mission": mid, "place": place, "places": [place],
                                                            "distance_m": round(d, 1)}))
-        dom.end_mission(m, r.t)
+        reported.pop(mid, None)
+        dom.end_mission(m, r.t if done is None else min(r.t, done[0]))
 
 
 def stuck(dom: "UvDomain", t: float, cands: list) -> None:

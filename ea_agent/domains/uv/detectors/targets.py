@@ -42,12 +42,21 @@ def _pursuits(dom: "UvDomain"):
             yield m, target
 
 
+def last_seen(dom: "UvDomain", m, target: str) -> float:
+    """When the pursuit last had its target: its last sighting heard, but never before
+    the pursuit began (a pursuit taken over from a teammate starts its own clock, as the
+    robot's controller does, even if we heard an older sighting)."""
+    tg = dom.watchman.targets.get(target)
+    start = dom.started_at(m)
+    return max(tg.t, start) if tg is not None and tg.t != NEG else start
+
+
 def lost_target(dom: "UvDomain", t: float, cands: list) -> None:
     uv = dom.uv
     lost_s, human_s, drop_s = float(uv["lost_s"]), float(uv["lost_human_s"]), float(uv["drop_s"])
     for m, target in list(_pursuits(dom)):
         tg = dom.watchman.targets.get(target)
-        last = tg.t if tg is not None and tg.t != NEG else dom.started_at(m)
+        last = last_seen(dom, m, target)
         unseen = t - last
         if unseen < lost_s:
             continue
