@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ea_agent.domains.suo import make_ea
-from ea_agent.domains.suo.detectors import fratricide_pairs
+from ea_agent.domains.suo.detect.fratricide import fratricide_pairs
 from saim_mesh.messages import LocationReport, MissionConfirm, Order, Reorganization
 from saim_mesh.runner import run
 from saim_mesh.sinks import JsonlSink

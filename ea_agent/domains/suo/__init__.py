@@ -5,9 +5,6 @@ from ea_agent.core.manager import ExecutionAssistant, Sink
 from ea_agent.core.config import DEFAULT_PATH, load_config
 
 from .domain import ALERT_TYPES, CATEGORY, SuoDomain
-from .needs import needs as _needs
-
-SuoDomain.needs = _needs   # TODO(layering): a method of SuoDomain once its split lands
 
 
 def make_ea(scenario, owner: str, cfg: dict | None = None, sinks: list[Sink] | tuple = (), voa: bool = True,

@@ -1,40 +1,13 @@
-"""Specialized reasoners of the SUO domain, vectorised with numpy/shapely.
+"""Numpy/shapely reasoners the detectors share: distances of units from control
+measures, point-in-polygon matrices, which tracks are in which areas.
 
-They only compute situations; the domain turns them into candidates and VOA
+They only compute situations; detectors turn them into candidates and VOA
 decides what is worth saying.
 """
 from __future__ import annotations
 
 import numpy as np
 import shapely
-
-
-def fratricide_pairs(pos: np.ndarray, bnd: np.ndarray, inside: np.ndarray, rng: np.ndarray,
-                     dirty: np.ndarray, mine: np.ndarray) -> list[tuple[int, int, float]]:
-    """Pairs of units at fratricide risk by the unit-boundary rule (paper 6.7.2).
-
-    pos: (n,2) positions (NaN unknown); bnd: (n,) index of each unit's boundary;
-    inside: (n,b) whether unit i is inside boundary k; rng: weapons range per unit;
-    dirty: units whose position changed; mine: units of the EA owner.
-
-    Two units inside their own boundaries never alert, even within range. A pair
-    alerts when one is inside the other's boundary (and not its own) and within
-    weapons range, or when both are outside their own boundaries and in range.
-    Units sharing a boundary are one owner's business and are not paired.
-    """
-    n = len(pos)
-    if n < 2 or not dirty.any():
-        return []
-    d = np.hypot(pos[:, None, 0] - pos[None, :, 0], pos[:, None, 1] - pos[None, :, 1])
-    in_range = d <= np.maximum(rng[:, None], rng[None, :])   # NaN compares False
-    in_own = inside[np.arange(n), bnd]
-    in_other = inside[:, bnd]            # [i, j]: i inside j's boundary
-    i_fault = ~in_own[:, None] & in_other
-    risk = in_range & (bnd[:, None] != bnd[None, :]) & (
-        i_fault | i_fault.T | (~in_own[:, None] & ~in_own[None, :]))
-    risk &= (dirty[:, None] | dirty[None, :]) & (mine[:, None] | mine[None, :])
-    ii, jj = np.nonzero(np.triu(risk, 1))
-    return [(int(i), int(j), float(d[i, j])) for i, j in zip(ii, jj)]
 
 
 def inside_matrix(pos: np.ndarray, polys: list) -> np.ndarray:

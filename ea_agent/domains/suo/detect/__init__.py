@@ -1,0 +1,32 @@
+"""The SUO detectors, one module per alert family, and their registration.
+
+DETECTORS is the one list to extend with a new family. Its order is the order
+of Fig. 4 (CATEGORY and ALERT_TYPES follow it, and so do the CLI's columns) and
+the order in which detectors run each epoch. Detectors are independent (the
+manager sorts candidates before VOA) except that Contingencies runs before
+Areas, which does not repeat the activity a fired contingency already told.
+"""
+from __future__ import annotations
+
+from .areas import Areas
+from .base import BASE, Changes, Detector
+from .contingency import Contingencies
+from .coordination import Coordination
+from .fires import CallsForFire
+from .fratricide import Fratricide
+from .location import LocationMonitors
+from .schedule import ScheduleMonitors
+from .threats import ThreatEnvelopes
+from .unknown import UnknownPositions
+
+DETECTORS: tuple[type[Detector], ...] = (
+    Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
+    Contingencies, Areas, ThreatEnvelopes,
+)
+
+CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
+ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4
+
+__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "CallsForFire",
+           "Contingencies", "Coordination", "Fratricide", "LocationMonitors", "ScheduleMonitors",
+           "ThreatEnvelopes", "UnknownPositions"]

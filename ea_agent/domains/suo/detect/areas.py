@@ -1,0 +1,109 @@
+"""Hostile activity in watched areas: global monitors of our plan (decision
+points, NAIs, avenues of approach), areas missions watch (engagement areas,
+screened areas) and hostiles a mission expects by a time (hostile-expected)."""
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+
+from ea_agent.core.alert import Candidate, hms
+
+from ..missions import Mission
+from .base import BASE, Changes, Detector
+from .geometry import AreaIndex
+
+ADVERSARIAL = "adversarial-activity"
+
+
+class Areas(Detector):
+    """Owns which areas are watched and, each epoch tracks change, which tracks are
+    in each (read by contingency triggers before the area alerts are made)."""
+    TYPES = {"monitored": ADVERSARIAL, "ave-of-approach": ADVERSARIAL, "hostile-expected": ADVERSARIAL}
+
+    def __init__(self, dom) -> None:
+        super().__init__(dom)
+        self.strength: dict[str, int] = {}        # area -> hostile strength in it (last time tracks changed)
+        self.tracks: dict[str, set[str]] = {}     # area -> tracks in it
+        self._tids: list[str] = []
+        self._members: dict[str, np.ndarray] = {}
+
+    def reset(self) -> None:
+        self.red_monitors: dict[str, list[tuple[Mission, bool]]] = defaultdict(list)  # area -> missions
+        self.global_areas: dict[str, str] = {}   # area -> alert type (monitored / ave-of-approach)
+
+    def reindex(self) -> None:
+        """The watched areas changed: rebuild the spatial index over all of them."""
+        ids = set(self.global_areas) | set(self.red_monitors) | self.dom.contingency.trigger_areas()
+        self.index = AreaIndex({a: self.dom.overlay[a].area for a in sorted(ids)})
+
+    def post_plan_monitors(self) -> None:
+        """Global monitors: decision points, NAIs and avenues of approach in our plan."""
+        owner = self.dom.owner
+        for cm in self.dom.overlay.values():
+            if cm.owner == owner and cm.kind in ("decision-point", "nai"):
+                self.global_areas[cm.id] = "monitored"
+            elif cm.owner == owner and cm.kind == "avenue-of-approach":
+                self.global_areas[cm.id] = "ave-of-approach"
+        self.reindex()
+
+    def post_red_monitor(self, m: Mission, area: str, expected: bool, expect_by: float | None = None) -> None:
+        dom = self.dom
+        self.red_monitors[area].append((m, expected))
+        self.reindex()
+        if expect_by is not None:
+            def absent(tf, mon, how):
+                if dom.in_plan(m):
+                    dom.ea.post(Candidate(tf, "hostile-expected", m.compute_priority("hostile-expected"),
+                                          (m.unit,), f"Expected hostile activity absent at {area} for "
+                                          f"{dom.name(m.unit)} {m.TYPE} (expected by {hms(float(expect_by))})",
+                                          key=("hostile-expected", m.id), friendly=False,
+                                          details={"mission": m.id, "area": area, "places": [area]}))
+                return None
+            dom.timers.not_later_than(("hostile", m.id), float(expect_by), absent, tag=m.id)
+
+    def end_mission(self, mid: str) -> None:
+        for area in list(self.red_monitors):
+            self.red_monitors[area] = [x for x in self.red_monitors[area] if x[0].id != mid]
+
+    def monitored_candidate(self, m: Mission | None, area: str, t: float, tracks: list[str], strength: int,
+                            expected: bool, kind: str = "monitored") -> None:
+        dom = self.dom
+        prio = m.compute_priority(kind) if m is not None else BASE.compute_priority(kind)
+        where = f" ({'expected' if expected else 'unexpected'} for {dom.name(m.unit)} {m.TYPE})" if m else ""
+        label = "Enemy activity on ave of approach" if kind == "ave-of-approach" else "Red activity at"
+        dom.ea.post(Candidate(t, kind, prio, tuple(tracks), f"{label} {area}{where}: {strength} entities in "
+                              f"{len(tracks)} track{'s' if len(tracks) > 1 else ''}",
+                              key=(kind, area, m.id if m else None), measure=float(strength), friendly=False,
+                              details={"place": area, "places": [area], "strength": strength,
+                                       "mission": m.id if m else None, "expected": expected}))
+
+    def observe(self, t: float, ch: Changes) -> None:
+        if not ch.tracks:
+            return
+        pic = self.dom.pic
+        tids = sorted(pic.tracks)
+        xy = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids]) if tids else np.zeros((0, 2))
+        members = self.index.members(xy)
+        self.strength = {a: int(sum(pic.tracks[tids[k]].strength for k in idx)) for a, idx in members.items()}
+        self.tracks = {a: {tids[k] for k in idx} for a, idx in members.items()}
+        self._tids, self._members = tids, members
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        if not ch.tracks:
+            return
+        dom = self.dom
+        fired = dom.contingency.fired   # a triggered contingency says it already
+        tids = self._tids
+        for area, idx in self._members.items():
+            ids = [tids[k] for k in idx]
+            if not ch.tracks.intersection(ids):
+                continue
+            strength = self.strength[area]
+            for m, expected in self.red_monitors.get(area, ()):
+                if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m):
+                    dom.timers.occurred(("hostile", m.id), t)
+                    m.respond_to_monitored_red_activity(dom, area, t, ids, strength)
+            kind = self.global_areas.get(area)
+            if kind and area not in fired:
+                self.monitored_candidate(None, area, t, ids, strength, expected=False, kind=kind)

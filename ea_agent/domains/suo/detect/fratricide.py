@@ -1,0 +1,109 @@
+"""Fratricide risk by the unit-boundary rule (paper 6.7.2)."""
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+import shapely
+
+from ea_agent.core.alert import Candidate
+
+from ..render import km
+from .base import Changes, Detector, platoon_of
+from .geometry import inside_matrix
+
+
+def fratricide_pairs(pos: np.ndarray, bnd: np.ndarray, inside: np.ndarray, rng: np.ndarray,
+                     dirty: np.ndarray, mine: np.ndarray) -> list[tuple[int, int, float]]:
+    """Pairs of units at fratricide risk by the unit-boundary rule (paper 6.7.2).
+
+    pos: (n,2) positions (NaN unknown); bnd: (n,) index of each unit's boundary;
+    inside: (n,b) whether unit i is inside boundary k; rng: weapons range per unit;
+    dirty: units whose position changed; mine: units of the EA owner.
+
+    Two units inside their own boundaries never alert, even within range. A pair
+    alerts when one is inside the other's boundary (and not its own) and within
+    weapons range, or when both are outside their own boundaries and in range.
+    Units sharing a boundary are one owner's business and are not paired.
+    """
+    n = len(pos)
+    if n < 2 or not dirty.any():
+        return []
+    d = np.hypot(pos[:, None, 0] - pos[None, :, 0], pos[:, None, 1] - pos[None, :, 1])
+    in_range = d <= np.maximum(rng[:, None], rng[None, :])   # NaN compares False
+    in_own = inside[np.arange(n), bnd]
+    in_other = inside[:, bnd]            # [i, j]: i inside j's boundary
+    i_fault = ~in_own[:, None] & in_other
+    risk = in_range & (bnd[:, None] != bnd[None, :]) & (
+        i_fault | i_fault.T | (~in_own[:, None] & ~in_own[None, :]))
+    risk &= (dirty[:, None] | dirty[None, :]) & (mine[:, None] | mine[None, :])
+    ii, jj = np.nonzero(np.triu(risk, 1))
+    return [(int(i), int(j), float(d[i, j])) for i, j in zip(ii, jj)]
+
+
+class Fratricide(Detector):
+    """Only units outside their own boundary can be at risk, so the pair check runs
+    only while some unit is outside; the inside test runs for movers."""
+    TYPES = {"fratricide": "policy-constraint-violated"}
+
+    def org_changed(self) -> None:
+        """Boundaries, weapons ranges and ownership per leaf, as arrays."""
+        dom = self.dom
+        to = dom.taskorg
+        leaves = dom.leaves
+        bnd_units = sorted({to.nearest_with(u, 'boundary') for u in leaves if to.nearest_with(u, 'boundary')})
+        self.bnd_polys = [dom.overlay[to.units[b].attrs['boundary']].area for b in bnd_units]
+        bi = {b: k for k, b in enumerate(bnd_units)}
+        self.leaf_bnd = np.array([bi.get(to.nearest_with(u, 'boundary'), -1) for u in leaves])
+        self.frat_ok = self.leaf_bnd >= 0
+        dflt = float(dom.voi_cfg["weapons_range_m"])
+        self.leaf_rng = np.array([self._weapons_range(u, dflt) for u in leaves])
+        self.leaf_mine = np.array([u in dom.own_units for u in leaves])
+        self.outside = np.zeros(len(leaves), dtype=bool)
+        self.leaf_own_poly = [self.bnd_polys[b] if b >= 0 else None for b in self.leaf_bnd]
+
+    def _weapons_range(self, unit: str, dflt: float) -> float:
+        to = self.dom.taskorg
+        u = to.nearest_with(unit, "weapons_range_m")
+        return dflt if u is None else float(to.units[u].attrs["weapons_range_m"])
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        rows = [dom.leaf_i[u] for u in ch.leaves if self.frat_ok[dom.leaf_i[u]]]
+        if not rows:
+            return
+        pos = dom.leaf_xy
+        r = np.array(rows)
+        ok = ~np.isnan(pos[r, 0])
+        polys = np.array([self.leaf_own_poly[i] for i in r[ok]], dtype=object)
+        self.outside[r] = False
+        if len(polys):
+            self.outside[r[ok]] = ~shapely.contains_xy(polys, pos[r[ok], 0], pos[r[ok], 1])
+        if not self.outside.any():
+            return
+        dirty = np.zeros(len(dom.leaves), dtype=bool)
+        dirty[r] = True
+        inside = inside_matrix(pos, self.bnd_polys)
+        bnd = np.where(self.frat_ok, self.leaf_bnd, 0)
+        pos = np.where(self.frat_ok[:, None], pos, np.nan)
+        to = dom.taskorg
+        groups: dict[tuple[str, str], list[tuple[str, str, float]]] = defaultdict(list)
+        for i, j, d in fratricide_pairs(pos, bnd, inside, self.leaf_rng, dirty, self.leaf_mine):
+            a, b = dom.leaves[i], dom.leaves[j]
+            pa, pb = platoon_of(to, a), platoon_of(to, b)
+            if (pa, a) > (pb, b):
+                a, b, pa, pb = b, a, pb, pa
+            groups[(pa, pb)].append((a, b, d))
+        for (pa, pb), pairs in sorted(groups.items()):
+            dmin = min(p[2] for p in pairs)
+            squads = sorted({s for p in pairs for s in p[:2]})
+            out_a = [s for s in squads if to.is_under(s, pa) and not inside[dom.leaf_i[s], bnd[dom.leaf_i[s]]]]
+            out_b = [s for s in squads if to.is_under(s, pb) and not inside[dom.leaf_i[s], bnd[dom.leaf_i[s]]]]
+            culprit = pa if out_a else pb
+            other = pb if culprit == pa else pa
+            cands.append(Candidate(t, "fratricide", "flash", tuple([pa, pb] + squads),
+                                   f"Fratricide risk: {dom.name(culprit)} out of its boundary within "
+                                   f"{km(dmin)} of {dom.name(other)}",
+                                   key=("fratricide", pa, pb), measure=1000.0 / max(dmin, 1.0),
+                                   details={"pairs": [[a, b, round(d, 1)] for a, b, d in sorted(pairs)],
+                                            "outside_boundary": sorted(out_a + out_b), "min_distance_m": round(dmin, 1)}))

@@ -1,0 +1,79 @@
+"""Out-of-position: location monitors a mission posts while active (route, axis,
+position) and the checks it asks for at start and end (destination, objective)."""
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+import shapely
+
+from ea_agent.core.alert import Candidate
+from ea_agent.core.geo import bearing_name
+
+from ..missions import Mission
+from ..render import km
+from .base import Changes, Detector
+from .geometry import judged_distance
+
+
+class LocationMonitors(Detector):
+    TYPES = {"out-of-position": "plan-constraint-violated"}
+
+    def reset(self) -> None:
+        self.monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)
+
+    def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
+        self.monitors[m.id].append((m, geom, rule, what))
+
+    def end_mission(self, mid: str) -> None:
+        self.monitors.pop(mid, None)
+
+    def check(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:
+        """A one-off check (start or end of a mission), alerted at once."""
+        c = self._oop(m, geom_id, rule, what, t)
+        if c is not None:
+            self.dom.ea.post(c)
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        if not ch.leaves or dom.plan is None:
+            return
+        todo = [mon for mid, mons in self.monitors.items()
+                if mons and mons[0][0].unit in ch.units and dom.plan.state.get(mid) == "active"
+                for mon in mons if dom.in_plan(mon[0])]
+        cent = [mon for mon in todo if mon[2] == "centroid" and dom.unit_pos.get(mon[0].unit)]
+        if cent:   # one vectorised distance call for every centroid-judged monitor
+            ds = shapely.distance(np.array([self._geom(g, w) for _, g, _, w in cent], dtype=object),
+                                  shapely.points(np.array([dom.unit_pos[m.unit] for m, _, _, _ in cent])))
+            for (m, g, rule, what), d in zip(cent, ds.tolist()):
+                if d > dom.voi(m, "out_of_position_m"):
+                    cands.append(self._oop(m, g, rule, what, t, d))
+        for m, g, rule, what in todo:
+            if rule != "centroid":
+                c = self._oop(m, g, rule, what, t)
+                if c is not None:
+                    cands.append(c)
+
+    def _geom(self, geom_id: str, what: str):
+        """Routes and axes are judged by distance to the line; everything else to its area."""
+        cm = self.dom.overlay[geom_id]
+        return cm.geom if what in ("route", "axis") else cm.area
+
+    def _oop(self, m: Mission, geom_id: str, rule: str, what: str, t: float, d: float | None = None) -> Candidate | None:
+        dom = self.dom
+        pos = dom.unit_pos.get(m.unit)
+        geom = self._geom(geom_id, what)
+        if d is None:
+            d = judged_distance(geom, dom.pic.member_xy(m.unit), rule, pos)
+        thr = dom.voi(m, "out_of_position_m")
+        if d is None or d <= thr:
+            return None
+        ref = f"should be at {geom_id}"
+        if pos is not None:
+            near = shapely.shortest_line(shapely.Point(pos), geom).coords[-1]
+            ref += f" ({km(d)} {bearing_name(near[0] - pos[0], near[1] - pos[1])} of {dom.name(m.unit)})" if rule == "centroid" else f" ({rule} members within {km(thr)})"
+        return Candidate(t, "out-of-position", m.compute_priority("out-of-position"), (m.unit,),
+                         f"{dom.name(m.unit)} out of position for {m.TYPE} mission: {ref}",
+                         key=("out-of-position", m.id, what), measure=d,
+                         details={"mission": m.id, "control_measure": geom_id, "rule": rule, "check": what,
+                                  "distance_m": round(d, 1), "threshold_m": thr, "places": [geom_id]})

@@ -1,0 +1,105 @@
+"""Threat envelopes (paper 6.7.1): hostile tracks close enough to threaten each
+platoon-level unit, told as contact, closer, stronger, and merged per parent as
+proximity."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ea_agent.core.alert import Candidate
+from ea_agent.core.geo import bearing_name
+
+from ..render import km
+from .base import BASE, Changes, Detector
+from .geometry import distances
+
+ADVERSARIAL = "adversarial-activity"
+
+
+class ThreatEnvelopes(Detector):
+    """A unit is re-evaluated only when it moved or a track in or near its envelope
+    changed, so what happens far away (which a mesh peer may never receive)
+    cannot change its alerts."""
+    TYPES = {"contact": ADVERSARIAL, "distance": ADVERSARIAL, "strength": ADVERSARIAL,
+             "proximity": ADVERSARIAL}   # proximity: the merged alert (render.merge)
+
+    def __init__(self, dom) -> None:
+        super().__init__(dom)
+        # unit -> (tracks in its envelope, nearest distance, strength) when last evaluated;
+        # kept across plan changes, the tracks are still there
+        self.env_prev: dict[str, tuple[frozenset, float, int]] = {}
+
+    def org_changed(self) -> None:
+        self.env_prev = {u: v for u, v in self.env_prev.items() if u in self.dom.own_units}
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        rescan = ch.rescan   # periodic: expiry-driven reminders
+        if not (rescan or ch.tracks or ch.units.intersection(dom.env_units)):
+            return
+        radius = float(dom.voi_cfg["threat_radius_m"])
+        danger = float(dom.voi_cfg["danger_close_m"])
+        pic = dom.pic
+        tids = sorted(pic.tracks)
+        units = [u for u in dom.env_units if dom.unit_pos.get(u)]
+        if not units:
+            return
+        upos = np.array([dom.unit_pos[u] for u in units])
+        if tids:
+            tpos = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids])
+            dist = distances(upos, tpos)
+        close = (dist <= radius) if tids else np.zeros((len(units), 0), dtype=bool)
+        moved = np.array([k in ch.tracks for k in tids], dtype=bool)
+        for ui, u in enumerate(units):
+            prev0 = self.env_prev.get(u, (frozenset(),))[0]
+            if not (rescan and prev0) and u not in ch.units and not (close[ui] & moved).any() \
+                    and not prev0 & ch.tracks:
+                continue
+            if not close[ui].any():
+                if self.env_prev.get(u, (frozenset(),))[0]:
+                    self.env_prev[u] = (frozenset(), math.inf, 0)
+                continue
+            inn = np.nonzero(close[ui])[0]
+            ids = frozenset(tids[k] for k in inn)
+            prev = self.env_prev.get(u, (frozenset(), math.inf, 0))
+            k_near = inn[np.argmin(dist[ui, inn])]
+            nearest = float(dist[ui, k_near])
+            strength = int(sum(pic.tracks[tids[k]].strength for k in inn))
+            self.env_prev[u] = (ids, nearest, strength)
+            m = dom.current_mission(u)
+            fs = len(pic.members[u])
+            tr = pic.tracks[tids[k_near]]
+            upx = dom.unit_pos[u]
+            where = f"{km(nearest)} {bearing_name(tr.x - upx[0], tr.y - upx[1])} of {dom.name(u)}"
+            base = dict(unit=u, nearest_track=tr.id, distance_m=round(nearest, 1), strength=strength,
+                        friendly_strength=fs, tracks=sorted(ids), mission=m.id if m is not BASE else None)
+            subj = (u, *sorted(ids))
+            group = ("prox", dom.taskorg.parent.get(u) or u)
+            rec = [(("threat", u, "distance"), 1000.0 / max(nearest, 1.0)), (("threat", u, "strength"), float(strength))]
+            new = ids - prev[0]
+            voa = dom.ea.voa
+            # A contact the user no longer remembers (expired) is told again as a contact;
+            # "closer" and "stronger" only make sense against an alert the user remembers.
+            remembered = voa.enabled and voa.last(("threat", u, "contact"), t) is not None
+            if new or not remembered:
+                p = m.red_alert_priority("contact", fs, strength, nearest, danger)
+                again = not new
+                cands.append(Candidate(t, "contact", "immediate" if again else p, subj,
+                                       f"{'Contact continues' if again else 'Contact'}: {strength} hostile entities {where}",
+                                       key=("threat", u, "contact"), friendly=False, merge_group=group, also=tuple(rec),
+                                       details={**base, "new_tracks": sorted(new), "reminder": again}))
+            if remembered or not voa.enabled:
+                # Propose on every re-evaluation; VOA compares with what the user was last told.
+                if not new:
+                    p = m.red_alert_priority("distance", fs, strength, nearest, danger)
+                    cands.append(Candidate(t, "distance", p, subj, f"Closest threat is now closer: {where}",
+                                           key=("threat", u, "distance"), measure=1000.0 / max(nearest, 1.0),
+                                           friendly=False, merge_group=group, details=dict(base)))
+                p = m.red_alert_priority("strength", fs, strength, nearest, danger)
+                if p is not None:
+                    cands.append(Candidate(t, "strength", p, subj,
+                                           f"Threat near {dom.name(u)} stronger: {strength} hostile entities, "
+                                           f"nearest {where}",
+                                           key=("threat", u, "strength"), measure=float(strength), friendly=False,
+                                           merge_group=group, details=dict(base)))
