@@ -26,11 +26,10 @@ def _sec(pki: str | Path | None) -> list[str]:
 
 def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed: str = "max",
                  linger: float = 30.0, window: float = 20.0, pki=None, log_dir=None, state=None,
-                 name: str = "replay", until: float | None = None) -> Proc:
+                 name: str = "replay") -> Proc:
     return Proc(name, [*py(), "replay", scenario, "--listen", endpoint, "--root", root, "--speed", speed,
                        "--linger", str(linger), "--window", str(window), *_sec(pki),
-                       *(["--state", str(state)] if state else []),
-                       *(["--until", str(until)] if until is not None else []), "--wait-peers", *wait],
+                       *(["--state", str(state)] if state else []), "--wait-peers", *wait],
                 env=clean_env(), log_dir=log_dir)
 
 
@@ -106,7 +105,7 @@ class Supervisor:
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 900.0,
        root: str | None = None, echo=print, window: float = 20.0, insecure: bool = False,
-       pki: Path | None = None, max_restarts: int = 10, until: float | None = None) -> dict:
+       pki: Path | None = None, max_restarts: int = 10) -> dict:
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
@@ -133,7 +132,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     summaries: dict[str, dict] = {}
     try:
         replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
-                                      window=window, pki=pki, log_dir=logs, state=state, until=until))
+                                      window=window, pki=pki, log_dir=logs, state=state))
         replay.wait_for("ready", 60)
         for g in groups:
             sup.add(start_fusion(scenario, g, endpoint, root, pki=pki, log_dir=logs))

@@ -7,9 +7,14 @@ import gzip
 import json
 import math
 import re
+import warnings
 import zlib
 from pathlib import Path
 from typing import Any, Callable
+
+import numpy as np
+import shapely
+from shapely.geometry import shape
 
 from . import messages as M
 
@@ -116,3 +121,24 @@ def read_events(root: Path, check: Callable[[Any, str], None] | None = None) -> 
     except OSError as e:
         raise ScenarioError(f"{p.name}:{lineno + 1}: cannot read: {e.strerror or e}") from None
     return out
+
+
+def lonlat_geometry(g: dict, where: str):
+    """A GeoJSON geometry in WGS84 lon/lat as a shapely geometry, every point checked
+    (NaN, out-of-range longitudes and latitudes are named, never projected)."""
+    try:
+        with warnings.catch_warnings():   # NaN coordinates warn on stderr; they are reported below
+            warnings.simplefilter("ignore", RuntimeWarning)
+            geom = shape(g)
+    except Exception as e:   # shapely raises several unrelated types for malformed GeoJSON
+        raise ScenarioError(f"{where}: field 'geometry': {type(e).__name__}: {e}") from None
+    coords = shapely.get_coordinates(geom)
+    if len(coords) == 0:
+        raise ScenarioError(f"{where}: field 'geometry': no coordinates")
+    bad = ~np.isfinite(coords).all(axis=1) | (np.abs(coords[:, 0]) > 180) | (np.abs(coords[:, 1]) > 90)
+    if bad.any():
+        lon, lat = coords[np.argmax(bad)]
+        what = (f"lat {lat} is not a WGS84 latitude in [-90, 90]" if math.isfinite(lon) and abs(lon) <= 180
+                else f"lon {lon} is not a WGS84 longitude in [-180, 180]")
+        raise ScenarioError(f"{where}: field 'geometry': point ({lon}, {lat}): {what}")
+    return geom

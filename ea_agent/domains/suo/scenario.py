@@ -7,14 +7,12 @@ from __future__ import annotations
 
 import json
 import math
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import shapely
-from shapely.geometry import shape
 
 from ea_agent.core.config import ConfigError
 from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg,
@@ -22,8 +20,8 @@ from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, T
 
 from ea_agent.core.alert import Alert
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import (ScenarioError, check_key_chunk, need as _need, number as _number,  # noqa: F401
-                                    read_events, read_json as _read_json)
+from ea_agent.core.scenario import (ScenarioError, check_key_chunk, lonlat_geometry, need as _need,  # noqa: F401
+                                    number as _number, read_events, read_json as _read_json)
 
 from . import messages as M
 from .missions import REGISTRY
@@ -88,21 +86,7 @@ def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
         if fid in out:
             raise ScenarioError(f"{where}: field 'id': duplicate id {fid!r}")
         g = _need(f, "geometry", where, dict)
-        try:
-            with warnings.catch_warnings():   # NaN coordinates warn on stderr; they are reported below
-                warnings.simplefilter("ignore", RuntimeWarning)
-                geom = shape(g)
-        except Exception as e:   # shapely raises several unrelated types for malformed GeoJSON
-            raise ScenarioError(f"{where}: field 'geometry': {type(e).__name__}: {e}") from None
-        coords = shapely.get_coordinates(geom)
-        if len(coords) == 0:
-            raise ScenarioError(f"{where}: field 'geometry': no coordinates")
-        bad = ~np.isfinite(coords).all(axis=1) | (np.abs(coords[:, 0]) > 180) | (np.abs(coords[:, 1]) > 90)
-        if bad.any():
-            lon, lat = coords[np.argmax(bad)]
-            what = (f"lat {lat} is not a WGS84 latitude in [-90, 90]" if math.isfinite(lon) and abs(lon) <= 180
-                    else f"lon {lon} is not a WGS84 longitude in [-180, 180]")
-            raise ScenarioError(f"{where}: field 'geometry': point ({lon}, {lat}): {what}")
+        geom = lonlat_geometry(g, where)
         want = {"Polygon"} if kind in AREA_KINDS else {"LineString"} if kind in LINE_KINDS else {"Point", "Polygon"}
         if geom.geom_type not in want:
             raise ScenarioError(f"{where}: field 'geometry': a {kind} must be {' or '.join(sorted(want))}, not {geom.geom_type}")
