@@ -125,8 +125,8 @@ class Replay:
         lat = np.array([getattr(e, "lat", 0.0) for e in evs])
         xs, ys = sc.projection.to_xy(lon, lat)
         to = sc.taskorg.copy()
-        reorgs = sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in sc.plan.missions
-                        if m.type == "reorganize" and m.start.t is not None)
+        planned = getattr(domains.of(sc), "org_changes", None)   # a domain with a changing hierarchy
+        reorgs = planned(sc) if planned else []
         out = []
         for ev, x, y in zip(evs, xs.tolist(), ys.tolist()):
             while reorgs and reorgs[0][0] <= ev.t:

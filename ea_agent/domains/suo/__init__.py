@@ -27,6 +27,14 @@ def load(path, events: bool = True):
     return _load(path, events=events)
 
 
+def org_changes(sc) -> list[tuple[float, str, str]]:
+    """(t, unit, new parent) of the planned reorganizations, in time order: the replay
+    keys each report by the command path as it will be then."""
+    from .missions import REGISTRY, ReorganizationMission
+    return sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in sc.plan.missions
+                  if issubclass(REGISTRY[m.type], ReorganizationMission) and m.start.t is not None)
+
+
 def default_eas(sc) -> list[str]:
     return list(sc.meta.get("default_eas", DEFAULT_EAS))
 
@@ -42,4 +50,4 @@ def generate(out, seed: int = 7, small: bool = False, sensors: bool = False) -> 
 
 
 __all__ = ["make_ea", "ALERT_TYPES", "CATEGORY", "SuoDomain", "NAME", "load", "default_eas", "mesh_units",
-           "generate"]
+           "generate", "org_changes"]

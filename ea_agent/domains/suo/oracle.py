@@ -17,7 +17,7 @@ import numpy as np
 from shapely.geometry import Point, Polygon, shape
 
 from ea_agent.core.config import load_config
-from .missions import REGISTRY
+from .missions import REGISTRY, ContingentMission, ReorganizationMission
 
 TICK = 5.0
 SLACK = 40.0        # friendly reports may be up to one report interval old
@@ -57,7 +57,7 @@ class Truth:
         self.units = {u["id"]: u for u in plan["task_organization"]}
         self.missions = {m["id"]: m for m in plan["plans"][plan["initial_plan"]]}
         self.reorgs = sorted((m["start"]["t"], m["params"]["subject"], m["params"]["new_parent"])
-                             for m in self.missions.values() if m["type"] == "reorganize")
+                             for m in self.missions.values() if issubclass(REGISTRY[m["type"]], ReorganizationMission))
         self.ticks = np.arange(0.0, sim_duration(sim) + TICK / 2, TICK)
         self.leaves = sorted(u for u, d in self.units.items() if d["entities"])
         self.leaf_xy = {leaf: np.array([sim.leaf_center(leaf, t) for t in self.ticks]) for leaf in self.leaves}
@@ -151,7 +151,7 @@ class Truth:
             cls = REGISTRY[m["type"]]
             p = m["params"]
             cont = p.get("route") or p.get("axis") or p.get("position")
-            if m["type"] in ("branch", "sequel", "reorganize") or mid not in self.started:
+            if issubclass(cls, (ContingentMission, ReorganizationMission)) or mid not in self.started:
                 continue
             thr = self.thr(m, "out_of_position_m")
             s, e = self.started[mid], self.ended.get(mid, math.inf)
@@ -292,7 +292,7 @@ class Truth:
     def contingency(self) -> None:
         self.triggered_areas: dict[str, set[str]] = defaultdict(set)
         for mid, m in self.missions.items():
-            if m["type"] not in ("branch", "sequel"):
+            if not issubclass(REGISTRY[m["type"]], ContingentMission):
                 continue
             owner, tr = m["params"]["owner"], m["params"]["trigger"]
             if owner not in self.owners:

@@ -24,7 +24,7 @@ from ea_agent.core.scenario import (ScenarioError, check_key_chunk, lonlat_geome
                                     number as _number, read_events, read_json as _read_json)
 
 from . import messages as M
-from .missions import REGISTRY
+from .missions import REGISTRY, ContingentMission, ReorganizationMission
 
 ECHELONS = ("battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
 AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
@@ -252,7 +252,7 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
                 raise ScenarioError(f"{where}: field 'type': unknown mission type {typ!r} (see `saim-mesh missions`)")
             params = m.get("params", {})
             _check_params(cls, params, where, "params.", overlay, ids, voi_keys)
-            if typ in ("branch", "sequel"):
+            if issubclass(cls, ContingentMission):
                 _check_trigger(params["trigger"], where, overlay, ids)
                 task = params["task"]
                 if not isinstance(task, str) or task not in REGISTRY:
@@ -260,10 +260,10 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
                 if params.get("task_params") is not None:   # checked as far as given (the task runs when complete)
                     _check_params(REGISTRY[task], params["task_params"], where, "params.task_params.", overlay, ids,
                                   voi_keys, required=False)
-            if typ == "reorganize" and params["subject"] == taskorg.root:
+            if issubclass(cls, ReorganizationMission) and params["subject"] == taskorg.root:
                 raise ScenarioError(f"{where}: field 'params.subject': the top unit {params['subject']!r} "
                                     f"cannot be resubordinated")
-            if typ == "reorganize" and params["subject"] == params["new_parent"]:
+            if issubclass(cls, ReorganizationMission) and params["subject"] == params["new_parent"]:
                 raise ScenarioError(f"{where}: field 'params.new_parent': a unit cannot be put under itself")
             after = m.get("after", [])
             if not isinstance(after, list) or not all(isinstance(a, str) for a in after):
