@@ -27,3 +27,20 @@ def test_battalion_meets_targets_via_cli():
     for k in ("recall", "unwanted_share", "unwanted_flash", "alerts", "naive_alerts"):
         assert k in res
     check(res)
+
+
+UV_TEAM = ROOT / "scenarios" / "uv-team"
+
+
+def test_robot_team_meets_targets_against_the_simulators_truth():
+    """Every incident the independent oracle names is alerted to its owner in time,
+    with no unwanted flash alert and far fewer alerts than the naive detector."""
+    res = evaluate(S.load(UV_TEAM))
+    assert res["incidents"] >= 30
+    assert res["recall"] == 1.0, res["missed"]
+    assert res["unwanted_share"] <= 0.05, res["unwanted_alerts"]
+    assert res["unwanted_flash"] == 0
+    assert res["naive_alerts"] >= 10 * res["alerts"]
+    want = {"at-goal", "stuck", "divergent", "no-status", "target-visible", "lost-target", "target-gone",
+            "collision", "handoff"}
+    assert want <= set(res["by_type"]), res["by_type"]   # every paper alert type happens in the scenario
