@@ -38,8 +38,8 @@ HZ = 2.0
 
 def team_folder(out: Path, n: int = 20, duration_s: float = 600.0) -> Path:
     """A scenario folder: n robots, each patrolling its own 200 m square on a 5-wide grid
-    (neighbours within radio range), reporting state at 2 Hz; one robot stops for a while
-    and one falls silent, so that alerts are raised."""
+    (neighbours within radio range), reporting state at 2 Hz; in each row of five one
+    robot stops for a while and one falls silent, so that alerts are raised."""
     proj = Projection(EPSG)
     x0, y0 = proj.to_xy(LON0, LAT0)
     team = [{"id": "TEAM", "name": "Operator", "kind": "team", "parent": None, "attrs": {}}]
@@ -66,12 +66,12 @@ def team_folder(out: Path, n: int = 20, duration_s: float = 600.0) -> Path:
                                                                           "sector": f"SEC-{rid}"}})
         ang = 2 * math.pi * ts / 400.0 + i   # a circle of 80 m radius at ~1.3 m/s
         xs, ys = cx + 80.0 * np.cos(ang), cy + 80.0 * np.sin(ang)
-        stop = (i == 3) & (ts > 0.3 * duration_s) & (ts < 0.5 * duration_s)
+        stop = (i % 5 == 3) & (ts > 0.3 * duration_s) & (ts < 0.5 * duration_s)
         xs[stop], ys[stop] = xs[np.argmax(stop)], ys[np.argmax(stop)]
         lon, lat = proj.to_lonlat(xs, ys)
         hdg = (np.degrees(np.arctan2(np.cos(ang), -np.sin(ang))) % 360.0).round(1) % 360.0
         for k, t in enumerate(ts.tolist()):
-            if i == 7 and 0.5 * duration_s <= t < 0.6 * duration_s:
+            if i % 5 == 2 and 0.5 * duration_s <= t < 0.6 * duration_s:
                 continue   # a radio gap: no-status
             events.append({"kind": "uv-state", "t": t, "robot": rid, "lon": round(float(lon[k]), 7),
                            "lat": round(float(lat[k]), 7), "speed_mps": 0.0 if stop[k] else 1.26,
