@@ -443,7 +443,7 @@ class Peer:
             by_p[a.priority] = by_p.get(a.priority, 0) + 1
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
                 "late_alerts": self.late, "restarted": bool(self.alog and self.alog.restarted),
-                "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
+                "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
                 "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),
