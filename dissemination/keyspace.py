@@ -22,6 +22,8 @@ SUO's families:
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
   <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing)
   <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
+  <root>/cmd/<unit>/<kind>                     a commander's command to a unit's EA (docs/console.md)
+  <root>/cmdlog/<unit>                         the EA's answer to every command (CmdResult)
   <root>/store/log                             the situation store (queryable)
   <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
 UV (robot team): <root>/st/<block>/<cell>/<robot>, <root>/sgt/<block>/<cell>/<robot>/<target>,
@@ -233,6 +235,14 @@ class KeySpace:
 
     def store(self) -> str:
         return f"{self.root}/store/log"
+
+    def cmd(self, unit: str, kind: str = "*") -> str:
+        """Commands to `unit`'s EA (ack, silence, unsilence, set, confirm, cff)."""
+        return f"{self.root}/cmd/{unit}/{kind}"
+
+    def cmdlog(self, unit: str = "*") -> str:
+        """`unit`'s EA answers every command here."""
+        return f"{self.root}/cmdlog/{unit}"
 
 
 def matcher(exprs: list[str]):

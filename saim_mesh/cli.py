@@ -1,4 +1,6 @@
-"""`saim-mesh` command line: run, evaluate, missions, generate, validate."""
+"""`saim-mesh` command line: run, evaluate, missions, generate, validate, the mesh
+(replay, peer, fusion, mesh up, certs) and a commander's commands (ack, silence, set,
+confirm, cff)."""
 from __future__ import annotations
 
 import argparse
@@ -209,9 +211,54 @@ def cmd_certs(a) -> int:
 
     from .security.pki import make_pki, names_for
     sc = S.load(a.scenario, events=False)
-    made = make_pki(Path(a.out), names_for(sc, a.units or domains.of(sc).mesh_units(sc)))
+    made = make_pki(Path(a.out), names_for(sc, a.units or domains.of(sc).mesh_units(sc), consoles=True))
     print(f"{len(made)} identities in {a.out} (CA: {Path(a.out) / 'ca.pem'}): {', '.join(sorted(made))}")
     return 0
+
+
+def _command_fields(a) -> tuple[str, dict]:
+    if a.cmd == "ack":
+        return "ack", {"alert": a.alert, "by": a.by}
+    if a.cmd == "silence":
+        if a.lift:
+            return "unsilence", {"id": a.id}
+        if a.until is None:
+            raise ValueError("silence: --until T (scenario time) is required, or --lift")
+        return "silence", {"id": a.id, "types": a.types, "subjects": a.subjects, "areas": a.areas,
+                           "until_t": a.until, "comment": a.comment}
+    if a.cmd == "set":
+        try:
+            value = json.loads(a.value)
+        except json.JSONDecodeError:
+            raise ValueError(f"set: --value {a.value!r}: expected a number or a JSON list of numbers") from None
+        return "set", {"key": a.key, "value": value}
+    if a.cmd == "confirm":
+        return "confirm", {"mission": a.mission, "phase": a.phase}
+    return "cff", {"cff": a.cff, "action": a.action}
+
+
+def cmd_command(a) -> int:
+    """Send one command to a unit's EA peer as `console.<unit>` (or --as) and print its
+    answer as JSON; exit 0 if the EA took it, 2 if not (or no answer in time)."""
+    import zenoh
+
+    from dissemination.keyspace import KeySpace
+
+    from . import commands as C
+    from .mesh import mesh_units
+    from .zconf import config
+    sc = S.load(a.scenario, events=False)
+    if a.unit not in sc.taskorg.units:
+        raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
+    kind, fields = _command_fields(a)
+    cmd = C.make(kind, **fields)
+    root = a.root or f"saim/{sc.name}"
+    name = a.as_ or (f"console.{a.unit}" if a.unit in mesh_units(sc) else f"console.{sc.taskorg.root}")
+    conf = config(None, a.connect, a.zenoh_config, a.multicast, a.pki, name, sc, root)
+    with zenoh.open(conf) as session:
+        res = C.send(session, KeySpace.of(sc, root), a.unit, cmd, a.timeout)
+    print(json.dumps(C.to_dict(res)))
+    return 0 if res.ok else 2
 
 
 def _fail(what) -> int:
@@ -318,6 +365,31 @@ def main(argv: list[str] | None = None) -> int:
     ce.add_argument("--out", default="out/pki")
     ce.add_argument("--units", nargs="+", metavar="UNIT", help="EA identities (default: battalion, companies, platoons)")
     ce.set_defaults(fn=cmd_certs)
+    for name, help_, fields in (
+            ("ack", "acknowledge an alert: its repeats stop", [
+                ("--alert", dict(required=True, help="alert id, <owner>/<n>")), ("--by", dict(default=""))]),
+            ("silence", "silence matching alerts until a scenario time (or --lift one)", [
+                ("--id", dict(required=True)), ("--types", dict(nargs="*", default=[])),
+                ("--subjects", dict(nargs="*", default=[])), ("--areas", dict(nargs="*", default=[])),
+                ("--until", dict(type=_seconds, help="scenario time the silence ends")),
+                ("--comment", dict(default="")), ("--lift", dict(action="store_true", help="end silence --id"))]),
+            ("set", "change a voi.* or voa.* threshold of the EA from its next epoch", [
+                ("--key", dict(required=True, help="e.g. voi.out_of_position_m")),
+                ("--value", dict(required=True, help="a number or a JSON list of numbers"))]),
+            ("confirm", "confirm that a mission started or ended", [
+                ("--mission", dict(required=True)), ("--phase", dict(required=True, choices=["start", "end"]))]),
+            ("cff", "confirm or cancel a call for fire the EA has seen", [
+                ("--cff", dict(required=True)), ("--action", dict(required=True, choices=["confirm", "cancel"]))])):
+        c = sub.add_parser(name, help=help_)
+        c.add_argument("--scenario", required=True)
+        c.add_argument("--unit", required=True, help="the unit whose EA takes the command")
+        for flag, kw in fields:
+            c.add_argument(flag, **kw)
+        c.add_argument("--as", dest="as_", metavar="IDENTITY",
+                       help="certificate to act as (default console.<unit>, else the top unit's console)")
+        c.add_argument("--timeout", type=_seconds, default=10.0, help="seconds to wait for the EA's answer")
+        _zenoh_args(c)
+        c.set_defaults(fn=cmd_command)
     a = p.parse_args(argv)
     from ea_agent.core.config import ConfigError
     try:

@@ -17,11 +17,13 @@ import sys
 import time
 from dataclasses import replace
 
+import msgspec
 import zenoh
 
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 
+from . import commands as C
 from . import messages as M
 from . import wire as W
 from .alertlog import AlertLog
@@ -103,6 +105,10 @@ class Peer:
         self.silences = 0
         self.next_health = self.reject_alert
         self.presence: Presence | None = None
+        self.cmdq: queue.SimpleQueue = queue.SimpleQueue()   # (key, payload) of commands, taken between ticks
+        self._wake = lambda: None                           # wakes the clock wait when a command comes
+        self.n_cmds = 0
+        C.tap(self.ea)   # a `cff confirm` needs the call for fire the EA saw
 
     # -- sinks -------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
@@ -295,6 +301,11 @@ class Peer:
             try:
                 raw = [clock.get(timeout=0.5)]
             except queue.Empty:
+                raw = []
+            if None in raw or not raw:   # a command woke us (None), or a quiet half second
+                self._commands()
+                raw = [p for p in raw if p is not None]
+            if not raw:
                 self.presence.take()
                 quiet = time.monotonic() - last
                 if quiet > self.silence_s and not said:
@@ -312,6 +323,8 @@ class Peer:
                     break
             ticks = []
             for payload in raw:
+                if payload is None:
+                    continue
                 tick = self.gate.control(W.Tick, payload, self.ks.clock())
                 if tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n):
                     ticks.append(tick)
@@ -359,6 +372,54 @@ class Peer:
             self.alert_lat += [lat] * (len(self.ea.alerts) - n_alerts)
         return tick.end
 
+    # -- a commander's commands (docs/console.md 1) ---------------------------------------
+    def _on_cmd(self, smp) -> None:
+        """Zenoh's thread: queue the command for the main loop and wake it."""
+        self.cmdq.put((str(smp.key_expr), smp.payload.to_bytes()))
+        self._wake()
+
+    def _commands(self) -> None:
+        """Apply every queued command at our current scenario time and answer each on
+        cmdlog/<unit>. A bad one is counted and answered (when its req can be read)."""
+        while True:
+            try:
+                key, payload = self.cmdq.get_nowait()
+            except queue.Empty:
+                return
+            res = self._command(key, payload)
+            if res is not None and self.session is not None:
+                if res.t > self.sc.duration_s:   # a `set` after the last epoch: the gate bounds t
+                    res = msgspec.structs.replace(res, t=self.sc.duration_s)
+                self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
+                self.log(f"cmd {res.kind} req={res.req} ok={res.ok} t={res.t:.1f}"
+                         + (f" error={res.error}" if res.error else ""), flush=True)
+
+    def _command(self, key: str, payload: bytes) -> W.CmdResult | None:
+        self.n_cmds += 1
+        prefix = f"{self.ks.root}/cmd/"
+        unit, _, kind = key[len(prefix):].partition("/") if key.startswith(prefix) else ("", "", "")
+        cls = W.COMMANDS.get(kind)
+        if unit != self.unit or cls is None:
+            why = f"not a command to {self.unit}" if unit != self.unit else f"unknown command kind {kind[:32]!r}"
+            self._reject("cmd", "(key)", why, key)
+            return self._refusal(payload, kind, why)
+        cmd = self.gate.control(cls, payload, key)
+        if cmd is None:
+            return self._refusal(payload, kind, self.gate.rejects.recent[-1] if self.gate.rejects.recent else "bad")
+        return C.apply(self.ea, cmd, self.t)
+
+    def _refusal(self, payload: bytes, kind: str, why: str) -> W.CmdResult | None:
+        """ok=false for a command we cannot take, if its req can be read (else silence)."""
+        if len(payload) > self.gate.max_bytes:
+            return None
+        try:
+            req = msgspec.msgpack.decode(payload).get("req")
+        except Exception:   # anything undecodable: no req to answer
+            return None
+        if not isinstance(req, str) or not 1 <= len(req) <= 64:
+            return None
+        return W.make(W.CmdResult, req=req, kind=kind[:32], ok=False, error=why[:1000], t=self.t)
+
     def _report_health(self) -> None:
         """Tell our superior (health/<unit>) when rejects pass the next threshold."""
         r = self.gate.rejects
@@ -395,6 +456,8 @@ class Peer:
                 # a callback into our own queue: waiting on it has a timeout (a lost source is
                 # noticed); Zenoh has put every sample before a tick into its channel already
                 clock = s.declare_subscriber(self.ks.clock(), lambda smp: clockq.put(smp.payload.to_bytes()))
+                self._wake = lambda: clockq.put(None)
+                cmds = s.declare_subscriber(self.ks.cmd(self.unit), self._on_cmd)
                 self._check_connected(s)
                 self._resubscribe()
                 self.presence = Presence(self, s)
@@ -425,10 +488,12 @@ class Peer:
                             self._resubscribe(buf)
                             next_interest, last_sig = tick.t + self.interest_s, sig
                     self._report_health()
+                    self._commands()
                     if not done:
                         s.put(ack_key, W.encode(W.make(W.Ack, t=self.t)))   # lets a max-speed replay pace itself
                 s.put(self.ks.bye(self.unit), W.encode(W.make(W.Bye, unit=self.unit)))   # a clean leave is no lost peer
                 token.undeclare()
+                cmds.undeclare()
                 clock.undeclare()
                 self.session = None
         finally:

@@ -3,7 +3,8 @@ where every payload a process receives is checked before use.
 
 Data messages (positions, tracks, orders, alerts...) keep their validating decoder
 in `messages.py`; the control messages that steer the peers (clock, acks, store
-queries and replies, fusion ticks, bye) are here. Both go through `Gate`: a size
+queries and replies, fusion ticks, bye, health) and the commander's commands to an
+EA with its answers (docs/console.md section 1) are here. Both go through `Gate`: a size
 bound before decoding, an exact version, times inside the scenario's clock, and a
 `MessageError` (the project's own rejection) for everything else, so that no
 payload can raise anything a peer does not expect.
@@ -89,7 +90,71 @@ class Health(_Wire, kw_only=True):
     by_kind: Annotated[dict[Annotated[str, msgspec.Meta(max_length=64)], Seq], msgspec.Meta(max_length=64)] = {}
 
 
-CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health)
+# -- the commander's console: commands to one unit's EA and its answer (docs/console.md 1)
+Req = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+Name = Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
+Names = Annotated[list[Name], msgspec.Meta(max_length=64)]
+Comment = Annotated[str, msgspec.Meta(max_length=512)]
+Number = float | int
+
+
+class AckCmd(_Wire, kw_only=True):
+    """Acknowledge an alert (by its id, `<owner>/<n>`): its repeats stop."""
+    req: Req
+    alert: Name
+    by: Annotated[str, msgspec.Meta(max_length=128)] = ""
+
+
+class SilenceCmd(_Wire, kw_only=True):
+    """Mark alerts matching every non-empty list as silenced until scenario time `until_t`."""
+    req: Req
+    id: Name
+    types: Names = []
+    subjects: Names = []
+    areas: Names = []
+    until_t: Time
+    comment: Comment = ""
+
+
+class UnsilenceCmd(_Wire, kw_only=True):
+    req: Req
+    id: Name
+
+
+class SetCmd(_Wire, kw_only=True):
+    """Change a `voi.*` or `voa.*` threshold from the next epoch on."""
+    req: Req
+    key: Name
+    value: Number | Annotated[list[float], msgspec.Meta(max_length=32)]
+
+
+class ConfirmCmd(_Wire, kw_only=True):
+    """The commander confirms that a mission started or ended (a local MissionConfirm)."""
+    req: Req
+    mission: Name
+    phase: Literal["start", "end"]
+
+
+class CffCmd(_Wire, kw_only=True):
+    """Confirm or cancel a call for fire the EA has seen."""
+    req: Req
+    cff: Name
+    action: Literal["confirm", "cancel"]
+
+
+class CmdResult(_Wire, kw_only=True):
+    """The EA's answer to command `req`: `t` is the scenario time it took effect."""
+    req: Req
+    kind: Annotated[str, msgspec.Meta(max_length=32)]
+    ok: bool
+    error: Annotated[str, msgspec.Meta(max_length=1000)] = ""
+    t: Time
+
+
+COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": UnsilenceCmd, "set": SetCmd,
+                             "confirm": ConfirmCmd, "cff": CffCmd}
+CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health,
+           *COMMANDS.values(), CmdResult)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
 KINDS = frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}   # what rejects are counted under
 _ENCODER = msgspec.msgpack.Encoder()

@@ -34,5 +34,5 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None,
         from .mesh import mesh_units
         from .security.acl import secure_config
         groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
-        conf = secure_config(conf, pki, name, root, mesh_units(sc), groups)
+        conf = secure_config(conf, pki, name, root, mesh_units(sc), groups, sc.taskorg)
     return conf

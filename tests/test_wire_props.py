@@ -247,6 +247,14 @@ CONTROL_SAMPLES = [
     W.make(W.FusionReply, entries=[b"abc"]),
     W.make(W.Bye, unit="A1"),
     *([W.make(W.Health, unit="A1", rejects=3, by_kind={"location": 2, "undecodable": 1})] if hasattr(W, "Health") else []),
+    *([W.make(W.AckCmd, req="r1", alert="A2/3", by="cdr"),
+       W.make(W.SilenceCmd, req="r2", id="s1", types=["contact"], subjects=["A2"], areas=[], until_t=600.0,
+              comment="known"),
+       W.make(W.UnsilenceCmd, req="r3", id="s1"),
+       W.make(W.SetCmd, req="r4", key="voi.out_of_position_m", value=500.0),
+       W.make(W.ConfirmCmd, req="r5", mission="m1", phase="start"),
+       W.make(W.CffCmd, req="r6", cff="cff1", action="confirm"),
+       W.make(W.CmdResult, req="r1", kind="ack", ok=True, error="", t=12.0)] if hasattr(W, "CmdResult") else []),
 ]
 
 

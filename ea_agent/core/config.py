@@ -27,6 +27,7 @@ POSITIVE = frozenset({
     "voi.out_of_position_m", "voi.schedule_repeat_s", "voi.unknown_position_s", "voi.weapons_range_m",
     "voi.threat_radius_m", "voi.coordination_radius_m",
     "voa.expiry_s",
+    "notify.repeat_s",
 })
 CHOICES = {"mesh.fsync": ("alert", "urgent", "never")}   # string keys with a closed set of values
 
@@ -72,6 +73,29 @@ def _value(v: Any, default: Any, dotted: str, where: str, name: str) -> Any:
             raise ConfigError(f"{bad}: {v!r:.40} not one of {', '.join(CHOICES[dotted])}")
         return v
     return v
+
+
+def check_setting(cfg: dict, key: str, value: Any, tables: tuple[str, ...] = ("voi", "voa")) -> Any:
+    """`value` for the dotted `key` of `cfg` (one of `tables`), checked as the config file
+    is: a change made at run time obeys the same rules. Raises ConfigError."""
+    where = "set"
+    parts = key.split(".") if isinstance(key, str) else []
+    if len(parts) < 2 or parts[0] not in tables or parts[0] not in cfg:
+        known = ", ".join(t for t in tables if t in cfg)
+        raise ConfigError(f"{where}: field '{key!s:.80}': unknown key (only keys of [{known}] can be set)")
+    node: Any = cfg
+    for i, p in enumerate(parts):
+        if not isinstance(node, dict) or p not in node:
+            at = ".".join(parts[:i]) or parts[0]
+            known = ", ".join(sorted(node)) if isinstance(node, dict) else ""
+            raise ConfigError(f"{where}: field '{key:.80}': unknown key (known in [{at}]: {known})")
+        node = node[p]
+    if isinstance(node, dict):
+        raise ConfigError(f"{where}: field '{key:.80}': is a table; set one of its keys")
+    out = _value(value, node, key, where, key)
+    if isinstance(node, list) and node and not out:
+        raise ConfigError(f"{where}: field '{key:.80}': must not be empty")
+    return out
 
 
 def _merge(base: dict, over: Any, where: str, section: str = "", table: str | None = None) -> dict:

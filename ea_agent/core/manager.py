@@ -18,6 +18,7 @@ from typing import Callable, Iterable, Protocol
 from .alert import Alert
 
 from .alert import Candidate
+from .notify import Notifier, Silence
 from .timed import TimedMonitors
 from .voa import Voa
 
@@ -57,6 +58,9 @@ class ExecutionAssistant:
         self.errors: list[str] = []
         self._next_forget = 60.0
         self.n_in = 0
+        self.now = 0.0                # the latest scenario time seen (commands take effect at it)
+        self.notify = Notifier(owner, cfg)
+        self.changes = self.notify.changes   # threshold changes made at run time, as applied
         self._watch = domain.watch    # bound once: this is the per-message hot path
         domain.bind(self)
 
@@ -69,6 +73,8 @@ class ExecutionAssistant:
         """One incoming message; never raises for bad input (counted and logged instead)."""
         self.n_in += 1
         t = msg.t
+        if t > self.now:
+            self.now = t
         if t >= self.epoch_end:
             self.advance(t)   # finish earlier epochs before the watchman sees later data
         try:
@@ -115,14 +121,16 @@ class ExecutionAssistant:
 
     def advance(self, t: float) -> None:
         """Scenario time reached t: process what is pending and close finished epochs."""
+        if t > self.now:
+            self.now = t
         self.process()
         self._close_until(t)
 
     def _close_until(self, t: float) -> None:
         ep = self.epoch_s
         while self.epoch_end <= t:
-            if not self.posted and not self.domain.busy():
-                nxt = min(self.timers.next_deadline(), self.domain.next_wakeup())
+            if not self.posted and not self.notify.pending and not self.domain.busy():
+                nxt = min(self.timers.next_deadline(), self.domain.next_wakeup(), self.notify.next_due())
                 target = max(self.epoch_end, math.ceil(nxt / ep) * ep) if math.isfinite(nxt) else math.inf
                 if target > t:  # idle until after t: skip the empty epochs
                     self.epoch_end = (math.floor(t / ep) + 1) * ep
@@ -136,6 +144,13 @@ class ExecutionAssistant:
         if end >= self._next_forget:   # keep memory bounded: expired history no longer counts anyway
             self.voa.forget_before(end - self.voa.expiry)   # a margin for late-posted timer candidates
             self._next_forget = end + 60.0
+        if self.notify.pending:   # thresholds changed by a commander count from this epoch on
+            self.stats["settings"] += len(self.notify.apply_pending(end, self.voa))
+        self.notify.expire(end)
+        for r in self.notify.repeats_until(end):
+            self.stats["repeats"] += 1
+            self.stats["escalations"] += r.priority != r.details.get("escalated_from", r.priority)
+            self.notify.chained(r.details["repeat_of"], self.emit(r))
         self.timers.advance(end)
         found = self.domain.detect(end)   # may post more (mission responses)
         cands, self.posted = self.posted + found, []
@@ -146,16 +161,46 @@ class ExecutionAssistant:
         for c in issued:
             self.emit(self.domain.to_alert(c))
 
-    def emit(self, alert: Alert) -> None:
+    def emit(self, alert: Alert) -> Alert:
+        """Give an alert: its id and silence mark first (notify), then the sinks."""
+        alert = self.notify.stamp(alert)
+        if "silenced" in alert.details:
+            self.stats["silenced"] += 1
         self.alerts.append(alert)
         self.stats["alerts"] += 1
         self.voa.remember(alert.t, alert.type, alert.subjects, alert.details.get("places", ()))
         for s in self.sinks:
             s(alert)
+        return alert
+
+    # -- a commander's actions (docs/console.md 1); bad input raises, changing nothing --
+    def arm(self) -> None:
+        """A commander is in the loop: urgent alerts given from now on repeat until acknowledged."""
+        self.notify.armed = True
+
+    def ack(self, alert_id: str, t: float | None = None) -> dict:
+        """Acknowledge an alert (or one of its repeats): its repeats stop. KeyError if unknown."""
+        out = self.notify.ack(alert_id, self.now if t is None else t)
+        self.stats["acks"] += 1
+        return out
+
+    def silence(self, sid: str, types=(), subjects=(), areas=(), until_t: float = 0.0, comment: str = "",
+                t: float | None = None) -> Silence:
+        """Mark matching alerts silenced until scenario time `until_t` (ValueError if malformed)."""
+        s = self.notify.silence(sid, types, subjects, areas, until_t, comment, self.now if t is None else t)
+        self.stats["silences"] += 1
+        return s
+
+    def unsilence(self, sid: str) -> Silence:
+        return self.notify.unsilence(sid)
+
+    def set_param(self, key: str, value, t: float | None = None):
+        """Change a `voi.*`/`voa.*` threshold from the next epoch close on (ConfigError if bad)."""
+        return self.notify.set_param(key, value, self.now if t is None else t)
 
     def finish(self, t: float) -> list[Alert]:
         """End of input at scenario time t: flush everything."""
         self.advance(t)
-        if self.posted or self.domain.busy():
+        if self.posted or self.notify.pending or self.domain.busy():
             self._close_epoch(self.epoch_end)
         return self.alerts

@@ -14,10 +14,11 @@ rules and the keys cannot drift apart.
 | subject | ingress allowed, besides reading |
 |---|---|
 | `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log; query store/**; token alive/replay/* |
-| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>; token alive/<U>/*; query store/** |
+| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>; token alive/<U>/*; query store/** |
 | `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
 | `observer` | reading alert/** and alive/** only |
-| `console` | as observer, plus put cmd/** |
+| `console` | as observer, plus reading cmdlog/**, put cmd/** |
+| `console.<U>` (with a task organization) | put cmd/<V>/* for every mesh unit V in U's subtree; reading what an observer reads plus cmdlog/**, clock and the data families but raw hits; query store/** |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
 (observer and console: on alert/** and alive/** only).
@@ -69,14 +70,18 @@ def data_families() -> list[str]:
     return sorted({template(c).family for c in M.MESSAGE_TYPES.values()} - {template(M.Alert).family})
 
 
-def identities(units, groups) -> list[str]:
-    """Every certificate CN the rules know (one subject each)."""
-    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES]
+def identities(units, groups, taskorg=None) -> list[str]:
+    """Every certificate CN the rules know (one subject each); `console.<U>` per unit
+    when the task organization is known (a commander's console acts for U's subtree)."""
+    consoles = [f"console.{u}" for u in units] if taskorg is not None else []
+    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, *consoles]
 
 
-def access_control(root: str, units, groups) -> dict:
+def access_control(root: str, units, groups, taskorg=None) -> dict:
     """The full `access_control` section for a mesh under ROOT with an EA per unit of
-    UNITS and a fusion node per group of GROUPS (names, or a dict group -> sensors)."""
+    UNITS and a fusion node per group of GROUPS (names, or a dict group -> sensors).
+    With TASKORG, a `console.<U>` identity per unit may command the EAs of U's subtree
+    (as organized at the start: a later reorganization does not widen a console's reach)."""
     ks = KeySpace(root)
     r = ks.root
     units = sorted(dict.fromkeys(_chunk("unit", u) for u in units))
@@ -111,7 +116,8 @@ def access_control(root: str, units, groups) -> dict:
     for u in units:
         subject(f"ea.{u}", [out, read_all, query_store,
                             rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
-                                                          f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u)]),
+                                                          f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
+                                                          ks.cmdlog(u)]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
     for g in groups:
         subject(f"fusion.{g}", [out, read_all, query_store,
@@ -120,7 +126,16 @@ def access_control(root: str, units, groups) -> dict:
                                 rule(f"fusion.{g}.store", ["declare_queryable", "reply"], [ks.fusion_store(g)]),
                                 rule(f"fusion.{g}.token", ["liveliness_token"], [ks.alive(f"fusion-{g}", "*")])])
     subject("observer", [out, read_public])
-    subject("console", [out, read_public, rule("console_put", ["put"], [f"{r}/cmd/**"])])
+    read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**")])
+    subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
+    if taskorg is not None:
+        seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit")]
+        read_seen = rule("read_console", READ, seen)
+        mesh = set(units)
+        for u in units:
+            mine = [v for v in taskorg.subtree(u) if v in mesh] if u in taskorg.units else [u]
+            subject(f"console.{u}", [out, read_public, read_cmdlog, read_seen, query_store,
+                                     rule(f"console.{u}.put", ["put"], [ks.cmd(v, "*") for v in mine])])
     for kind, items in (("rule", rules), ("subject", subjects), ("policy", policies)):
         ids = [x["id"] for x in items]
         if len(ids) != len(set(ids)):
@@ -139,11 +154,12 @@ def _endpoints(conf: zenoh.Config, path: str) -> list[str]:
     return list(v or [])
 
 
-def secure_config(conf: zenoh.Config, pki_dir: str | Path, name: str, root: str, units, groups) -> zenoh.Config:
+def secure_config(conf: zenoh.Config, pki_dir: str | Path, name: str, root: str, units, groups,
+                  taskorg=None) -> zenoh.Config:
     """Insert mTLS as NAME (certificates checked first: Zenoh's connecting side is silent
     about bad files), `transport/link/protocols: ["tls"]` (else a plain-tcp peer found
     by scouting joins) and the access-control rules into CONF; returns CONF."""
-    if name not in identities(units, groups):
+    if name not in identities(units, groups, taskorg):
         raise SecurityError(f"identity {name!r} has no subject in the access-control rules "
                             f"(units: {', '.join(units)}; fusion groups: {', '.join(groups) or 'none'})")
     for path in ("listen/endpoints", "connect/endpoints"):
@@ -151,7 +167,7 @@ def secure_config(conf: zenoh.Config, pki_dir: str | Path, name: str, root: str,
         if plain:
             raise SecurityError(f"{path}: {', '.join(plain)} not TLS (use endpoint_tls(port))")
     link = tls_config(pki_dir, name)
-    acl = access_control(root, units, groups)
+    acl = access_control(root, units, groups, taskorg)
     conf.insert_json5("transport/link/protocols", json.dumps(link["protocols"]))
     for k, v in link["tls"].items():
         conf.insert_json5(f"transport/link/tls/{k}", json.dumps(v))

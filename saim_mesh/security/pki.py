@@ -273,17 +273,18 @@ def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: 
     return out
 
 
-def names_for(sc, units: list[str] | None = None) -> list[str]:
+def names_for(sc, units: list[str] | None = None, consoles: bool = False) -> list[str]:
     """The identities of a scenario's mesh: replay, ea.<unit> for each unit (default:
     every unit that gets an EA peer), fusion.<group> for each fusion group, observer
-    and console."""
+    and console; with `consoles`, console.<unit> for each unit too (a commander's console)."""
     from saim_mesh.mesh import mesh_units
     units = list(units) if units is not None else mesh_units(sc)
     unknown = [u for u in units if u not in sc.taskorg.units]
     if unknown:
         raise SecurityError(f"units not in the scenario's task organization: {', '.join(unknown)}")
     groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
-    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), "observer", "console"]
+    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), "observer", "console",
+            *(f"console.{u}" for u in units if consoles)]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -293,11 +294,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out_dir", help="where ca.pem/ca.key and NAME.pem/NAME.key go")
     ap.add_argument("--units", nargs="+", help="units that get an EA identity (default: every mesh unit)")
     ap.add_argument("--days", type=int, default=30, help="validity of the leaf certificates (default 30)")
+    ap.add_argument("--no-consoles", action="store_true", help="no console.<unit> identities")
     a = ap.parse_args(argv)
     from saim_mesh import scenario as S
     try:
         sc = S.load(a.scenario, events=False)
-        made = make_pki(a.out_dir, names_for(sc, a.units), a.days, echo=print)
+        made = make_pki(a.out_dir, names_for(sc, a.units, consoles=not a.no_consoles), a.days, echo=print)
     except (SecurityError, S.ScenarioError) as e:
         print(f"make-certs: {e}", file=sys.stderr)
         return 2

@@ -1,0 +1,168 @@
+"""A commander's commands to an EA (docs/console.md section 1): built and checked
+(`make`), applied in process (`apply`), or sent over the mesh to a unit's EA peer and
+answered on its command log (`send`). The console and the CLI share all three, so a
+command means the same whichever way it reaches the EA."""
+from __future__ import annotations
+
+import queue
+import time
+import uuid
+import weakref
+from collections import OrderedDict
+
+import msgspec
+import zenoh
+
+from . import messages as M
+from . import wire as W
+
+KIND_OF = {cls: kind for kind, cls in W.COMMANDS.items()}
+CFF_BOOK = 1000   # calls for fire remembered per EA (the newest)
+_BOOKS: "weakref.WeakKeyDictionary[object, OrderedDict]" = weakref.WeakKeyDictionary()
+
+
+def new_req() -> str:
+    return uuid.uuid4().hex[:16]
+
+
+def make(kind: str, **fields) -> msgspec.Struct:
+    """A command of `kind`, checked as the EA's gate checks it (ValueError naming the field).
+    `req` is made up when not given."""
+    cls = W.COMMANDS.get(kind)
+    if cls is None:
+        raise ValueError(f"unknown command kind {kind!r} (known: {', '.join(W.COMMANDS)})")
+    fields.setdefault("req", new_req())
+    try:
+        cmd = W.make(cls, **fields)
+    except TypeError as e:
+        raise ValueError(f"{kind}: {e}") from None
+    try:   # the constructor does not check types or bounds: the decoder does
+        return W.decode_control(cls, W.encode(cmd), 1 << 20)
+    except M.MessageError as e:
+        raise ValueError(f"{kind}: {e.problem}") from None
+
+
+def result(cmd, ok: bool, t: float, error: str = "") -> W.CmdResult:
+    return W.make(W.CmdResult, req=cmd.req, kind=KIND_OF.get(type(cmd), "?"), ok=ok, error=error[:1000],
+                  t=max(0.0, min(float(t), W.T_LIMIT)))
+
+
+def to_dict(res: W.CmdResult) -> dict:
+    return {f: getattr(res, f) for f in res.__struct_fields__}
+
+
+# -- in process ----------------------------------------------------------------------------
+def tap(ea) -> OrderedDict:
+    """Remember the calls for fire `ea` sees (a `cff confirm` is built from one). Call it
+    before messages arrive (the peer does, at start); idempotent."""
+    book = _BOOKS.get(ea)
+    if book is not None:
+        return book
+    book = _BOOKS[ea] = OrderedDict()
+    inner, cff = ea._watch, M.CallForFire
+
+    def watch(msg):
+        if type(msg) is cff:
+            book[msg.cff] = msg
+            book.move_to_end(msg.cff)
+            if len(book) > CFF_BOOK:
+                book.popitem(last=False)
+        return inner(msg)
+    ea._watch = watch
+    return book
+
+
+def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
+    """Apply one command to an EA at scenario time `t` (default: the EA's latest time).
+    Never raises for bad input: the answer says what was wrong and nothing changed.
+    Any command arms repeats: a commander is in the loop."""
+    t = ea.now if t is None else t
+    book = tap(ea)
+    ea.arm()
+    try:
+        k = type(cmd)
+        if k is W.AckCmd:
+            ea.ack(cmd.alert, t)
+        elif k is W.SilenceCmd:
+            ea.silence(cmd.id, cmd.types, cmd.subjects, cmd.areas, cmd.until_t, cmd.comment, t)
+        elif k is W.UnsilenceCmd:
+            ea.unsilence(cmd.id)
+        elif k is W.SetCmd:
+            ea.set_param(cmd.key, cmd.value, t)
+            t = max(t, ea.epoch_end)   # the next epoch close
+        elif k is W.ConfirmCmd:
+            _confirm(ea, cmd, t)
+        elif k is W.CffCmd:
+            _cff(ea, book, cmd, t)
+        else:
+            raise ValueError(f"not a command: {k.__name__}")
+    except KeyError as e:
+        return result(cmd, False, t, str(e.args[0] if e.args else e))
+    except (ValueError, TypeError) as e:
+        return result(cmd, False, t, str(e))
+    return result(cmd, True, t)
+
+
+def _confirm(ea, cmd: W.ConfirmCmd, t: float) -> None:
+    dom = ea.domain
+    if not hasattr(dom, "on_confirm"):
+        raise ValueError("confirm: this EA's domain takes no mission confirmations")
+    m = getattr(dom, "missions", {}).get(cmd.mission)
+    if m is None:
+        raise KeyError(f"confirm: unknown mission {cmd.mission!r} (not in the EA's plan)")
+    ea.submit(M.MissionConfirm(t, cmd.mission, m.unit, cmd.phase, "local"))
+
+
+def _cff(ea, book: OrderedDict, cmd: W.CffCmd, t: float) -> None:
+    c = book.get(cmd.cff)
+    if c is None:
+        raise KeyError(f"cff: unknown call for fire {cmd.cff!r} (not seen by the EA of {ea.owner}, or cancelled)")
+    if cmd.action == "cancel":
+        del book[cmd.cff]
+        return
+    ea.submit(M.CallForFireConfirm(t, c.cff, c.requester, c.lon, c.lat, c.radius_m))
+
+
+# -- over the mesh ---------------------------------------------------------------------------
+def send(session, ks, unit: str, cmd, timeout: float = 10.0) -> W.CmdResult:
+    """Publish `cmd` to `unit`'s EA and wait for its answer (same `req`). No answer in time
+    (no EA peer, or access control dropped the command) is a failed result, not an error."""
+    kind = KIND_OF[type(cmd)]
+    end = time.monotonic() + timeout
+    answers: queue.SimpleQueue = queue.SimpleQueue()
+    gate = W.Gate(W.T_LIMIT)
+    sub = session.declare_subscriber(ks.cmdlog(unit), lambda s: answers.put(s.payload.to_bytes()))
+    pub = session.declare_publisher(ks.cmd(unit, kind), congestion_control=zenoh.CongestionControl.BLOCK)
+    try:
+        if not _wait_matching(pub, end):
+            return result(cmd, False, 0.0, f"no EA of {unit} listening within {timeout:.0f} s")
+        pub.put(W.encode(cmd))
+        while (left := end - time.monotonic()) > 0:
+            try:
+                payload = answers.get(timeout=left)
+            except queue.Empty:
+                break
+            res = gate.control(W.CmdResult, payload, ks.cmdlog(unit))
+            if res is not None and res.req == cmd.req:
+                return res
+        return result(cmd, False, 0.0, f"no answer from the EA of {unit} within {timeout:.0f} s "
+                                       f"(not running, or access control refused the command)")
+    finally:
+        pub.undeclare()
+        sub.undeclare()
+
+
+def _wait_matching(pub, end: float) -> bool:
+    """Until some subscriber (the EA peer) matches the publisher, or `end`."""
+    changes: queue.SimpleQueue = queue.SimpleQueue()
+    listener = pub.declare_matching_listener(lambda st: changes.put(st.matching))
+    try:
+        ok = pub.matching_status.matching
+        while not ok and (left := end - time.monotonic()) > 0:
+            try:
+                ok = changes.get(timeout=left)
+            except queue.Empty:
+                break
+        return ok
+    finally:
+        listener.undeclare()

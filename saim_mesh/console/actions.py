@@ -1,0 +1,159 @@
+"""The commander's actions: checking what the page asks (so bad input is a clear 400
+and nothing is sent) and turning it into commands (docs/console.md section 1).
+
+`Actions` is anything with `ack/silence/set/confirm/cff` returning a CmdResult-like
+dict `{req, kind, ok, error, t, unit}`; `CommandActions` is the real one, over any
+way of running a command (`commands.send` on the mesh, `commands.apply` in process)."""
+from __future__ import annotations
+
+import itertools
+import math
+import os
+from typing import Any, Callable, Protocol
+
+from ea_agent import domains
+
+PHASES = ("start", "end")
+CFF_ACTIONS = ("confirm", "cancel")
+
+
+class BadRequest(ValueError):
+    """The page asked for something that cannot be done; the text says why."""
+
+
+class Actions(Protocol):
+    def ack(self, unit: str, alert: str) -> dict: ...
+    def silence(self, unit: str, types: list[str], subjects: list[str], areas: list[str], until_t: float,
+                comment: str) -> dict: ...
+    def set(self, unit: str, key: str, value: float | int | list[float]) -> dict: ...
+    def confirm(self, unit: str, mission: str, phase: str) -> dict: ...
+    def cff(self, unit: str, cff: str, action: str) -> dict: ...
+
+
+FIELDS = {"ack": ("unit", "alert"), "silence": ("unit", "types", "subjects", "areas", "for_s", "comment"),
+          "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action")}
+
+
+def _text(body: dict, f: str, choices=None, default: str | None = None) -> str:
+    v = body.get(f, default)
+    if not isinstance(v, str) or not v.strip() and default is None:
+        raise BadRequest(f"field {f!r}: expected a non-empty string, got {json_type(v)}")
+    if len(v) > 512:
+        raise BadRequest(f"field {f!r}: over 512 characters")
+    if choices is not None and v not in choices:
+        raise BadRequest(f"field {f!r}: {v[:60]!r} is not one of {', '.join(choices)}")
+    return v
+
+
+def _texts(body: dict, f: str) -> list[str]:
+    v = body.get(f, [])
+    if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):
+        raise BadRequest(f"field {f!r}: expected a list of non-empty strings")
+    if len(v) > 64:
+        raise BadRequest(f"field {f!r}: over 64 entries")
+    return v
+
+
+def _number(v: Any) -> bool:
+    return type(v) in (int, float) and math.isfinite(v)
+
+
+def json_type(v: Any) -> str:
+    return {bool: "a boolean", int: "a number", float: "a number", str: "a string", list: "a list",
+            dict: "an object", type(None): "nothing"}.get(type(v), type(v).__name__)
+
+
+def validate(kind: str, body: Any, state) -> tuple[str, dict]:
+    """(unit, fields for the Actions method) or BadRequest naming the problem."""
+    if not isinstance(body, dict):
+        raise BadRequest(f"expected a JSON object, got {json_type(body)}")
+    extra = sorted(set(body) - set(FIELDS[kind]))
+    if extra:
+        raise BadRequest(f"unexpected field {extra[0]!r} (a {kind} takes {', '.join(FIELDS[kind])})")
+    unit = _text(body, "unit")
+    if unit not in state.taskorg.units:
+        raise BadRequest(f"unknown unit {unit[:60]!r}: not in the task organization of {state.sc.name}")
+    if unit not in state.actors:
+        raise BadRequest(f"this console does not act for {unit} (it acts for {', '.join(state.actors)})")
+    if kind == "ack":
+        aid = _text(body, "alert")
+        owner = state.known_alert(aid)
+        if owner is None:
+            raise BadRequest(f"unknown alert {aid[:60]!r}: this console has not seen it")
+        if owner != unit:
+            raise BadRequest(f"alert {aid} was raised by the EA of {owner}, not {unit}")
+        return unit, {"alert": aid}
+    if kind == "silence":
+        f = {k: _texts(body, k) for k in ("types", "subjects", "areas")}
+        if not any(f.values()):
+            raise BadRequest("a silence needs at least one of types, subjects, areas (it would silence everything)")
+        known = set(domains.of(state.sc).ALERT_TYPES) | {t for c in state.counts.values() for t in c}
+        bad = [t for t in f["types"] if t not in known]
+        if bad:
+            raise BadRequest(f"unknown alert type {bad[0][:60]!r}")
+        for_s = body.get("for_s")
+        if not _number(for_s) or not 0 < for_s <= 7 * 86400:
+            raise BadRequest(f"field 'for_s': expected seconds of scenario time in (0, 604800], got {for_s!r:.60}")
+        return unit, {**f, "until_t": state.t + float(for_s), "comment": _text(body, "comment", default="")}
+    if kind == "set":
+        key = _text(body, "key")
+        if not key.startswith(("voi.", "voa.")):
+            raise BadRequest(f"field 'key': {key[:60]!r} is not a [voi] or [voa] setting (e.g. voi.out_of_position_m)")
+        v = body.get("value")
+        ok = _number(v) or isinstance(v, list) and 0 < len(v) <= 64 and all(_number(x) for x in v)
+        if not ok:
+            raise BadRequest(f"field 'value': expected a number or a list of numbers, got {json_type(v)}")
+        return unit, {"key": key, "value": v}
+    if kind == "confirm":
+        mid = _text(body, "mission")
+        if mid not in state.missions.specs:
+            raise BadRequest(f"unknown mission {mid[:60]!r}: in no plan of {state.sc.name}")
+        return unit, {"mission": mid, "phase": _text(body, "phase", PHASES)}
+    return unit, {"cff": _text(body, "cff"), "action": _text(body, "action", CFF_ACTIONS)}
+
+
+def result_dict(res: Any, unit: str | None = None) -> dict:
+    """A CmdResult (msgspec struct or dict) as the JSON the page gets."""
+    if isinstance(res, dict):
+        d = dict(res)
+    else:
+        d = {f: getattr(res, f, None) for f in ("req", "kind", "ok", "error", "t")}
+    d.pop("v", None)
+    if unit is not None:
+        d.setdefault("unit", unit)
+    return d
+
+
+class CommandActions:
+    """Actions as commands: built by `commands.make`, run by `run(unit, cmd)`; with
+    `push`, results go to the state's event stream too (in process: no cmdlog to hear)."""
+
+    def __init__(self, run: Callable[[str, Any], Any], state=None, push: bool = False):
+        self.run, self.state, self.push = run, state, push
+        self._n = itertools.count(1)
+        self._tag = f"console-{os.getpid()}"
+
+    def _do(self, unit: str, kind: str, **fields) -> dict:
+        from .. import commands   # the EA side's module (docs/console.md section 1)
+        cmd = commands.make(kind, req=f"{self._tag}-{next(self._n)}", **fields)
+        d = result_dict(self.run(unit, cmd), unit)
+        if self.push and self.state is not None:
+            self.state.result(d)
+        return d
+
+    def ack(self, unit, alert):
+        return self._do(unit, "ack", alert=alert, by=f"console.{self.state.unit if self.state else unit}")
+
+    def silence(self, unit, types, subjects, areas, until_t, comment):
+        sid = f"{self._tag}-s{next(self._n)}"
+        return self._do(unit, "silence", id=sid, types=types, subjects=subjects, areas=areas, until_t=until_t,
+                        comment=comment)
+
+    def set(self, unit, key, value):
+        return self._do(unit, "set", key=key, value=value)
+
+    def confirm(self, unit, mission, phase):
+        return self._do(unit, "confirm", mission=mission, phase=phase)
+
+    def cff(self, unit, cff, action):
+        return self._do(unit, "cff", cff=cff, action=action)

@@ -1,0 +1,171 @@
+"""The console's model of the battle: what the commander's page shows, fed from the
+mesh (feed.py) or from in-process EAs, read by the web server (server.py).
+
+Pure Python (no Zenoh, no asyncio): every input is a decoded message or alert, so it
+is unit-testable. Thread-safe: the feed thread writes, the server's loop reads. High-rate
+inputs (positions, tracks, the clock) only mark the model dirty; `drain()` (called at
+most every 100 ms by the server) turns what changed into events, so 2,500 location
+reports a second cost a dict update each, not a browser update each.
+"""
+from __future__ import annotations
+
+import threading
+from collections import deque
+from typing import Any
+
+from .missions import Missions
+from .overlay import overlay_geojson
+
+MAX_ALERTS = 5000          # alerts kept for the snapshot (ids are kept for all)
+MAX_OUTBOX = 10_000        # alerts/results waiting for the next drain (no server running)
+TRACK_TTL_S = 600.0        # a track not reported for this long leaves the picture
+
+
+class State:
+    def __init__(self, sc, unit: str | None = None, actors: list[str] | None = None):
+        self.sc = sc
+        self.taskorg = sc.taskorg.copy()
+        self.unit = unit or self.taskorg.root
+        if self.unit not in self.taskorg.units:
+            raise KeyError(f"unknown unit {self.unit!r}: not in the task organization of {sc.name}")
+        self.actors = sorted(actors) if actors is not None else list(self.taskorg.subtree(self.unit))
+        self.lock = threading.Lock()
+        self.t = 0.0
+        self.ended = False
+        self.alerts: deque[dict] = deque(maxlen=MAX_ALERTS)
+        self.alert_owner: dict[str, str] = {}       # alert id -> owner (every alert seen)
+        self.counts: dict[str, dict[str, int]] = {}
+        self.entity_pos: dict[str, tuple[float, float]] = {}
+        self.tracks: dict[str, tuple[float, float, int, float]] = {}   # id -> lon, lat, strength, t
+        self.cffs: set[str] = set()
+        self.missions = Missions(sc, self.taskorg)
+        self.overlay = overlay_geojson(sc)
+        self._outbox: deque[tuple[str, Any]] = deque(maxlen=MAX_OUTBOX)
+        self._dirty: set[str] = set()
+        self._sent_missions: dict | None = None
+
+    # -- inputs (any thread) ----------------------------------------------------------
+    def clock(self, t: float, end: bool = False) -> None:
+        with self.lock:
+            if t > self.t:
+                self.t = t
+                self._dirty.add("clock")
+            self.ended = self.ended or end
+
+    def alert(self, a) -> None:
+        """One alert (an `Alert`): pushed individually, counted per owner and type."""
+        d = a.to_json_dict()
+        with self.lock:
+            self.alerts.append(d)
+            aid = a.details.get("id")
+            if isinstance(aid, str):
+                self.alert_owner[aid] = a.owner
+            c = self.counts.setdefault(a.owner, {})
+            c[a.type] = c.get(a.type, 0) + 1
+            self._outbox.append(("alert", d))
+            self._dirty.add("counts")
+
+    def result(self, res: dict) -> None:
+        """A command's result (CmdResult as a dict), pushed individually."""
+        with self.lock:
+            self._outbox.append(("result", res))
+
+    def message(self, m) -> None:
+        """One data message (decoded, checked): positions, tracks, confirmations, orders."""
+        kind = m.KIND
+        with self.lock:
+            if kind == "location":
+                self.entity_pos[m.entity] = (m.lon, m.lat)
+                self._dirty.add("positions")
+            elif kind == "uv-state":
+                self.entity_pos[m.robot] = (m.lon, m.lat)
+                self._dirty.add("positions")
+            elif kind == "track":
+                self.tracks[m.track] = (m.lon, m.lat, m.strength, m.t)
+                self._dirty.add("tracks")
+            elif kind == "uv-sighting":
+                self.tracks[m.target] = (m.lon, m.lat, 1, m.t)
+                self._dirty.add("tracks")
+            elif kind in ("cff", "cff-confirm"):
+                self.cffs.add(m.cff)
+            elif kind == "reorg":
+                try:
+                    self.taskorg.resubordinate(m.unit, m.new_parent)
+                except (KeyError, ValueError):
+                    return
+                self._dirty.add("positions")
+            elif self.missions.take(m):
+                self._dirty.add("missions")
+
+    # -- outputs ------------------------------------------------------------------------
+    def known_alert(self, aid: str) -> str | None:
+        """The owner of alert `aid`, or None when the console never saw it."""
+        with self.lock:
+            return self.alert_owner.get(aid)
+
+    def known_cff(self, cff: str) -> bool:
+        with self.lock:
+            return cff in self.cffs
+
+    def _positions(self) -> dict[str, list[float]]:
+        """Each unit's centroid: the mean of the latest positions of every entity in its subtree."""
+        to = self.taskorg
+        sums: dict[str, list[float]] = {}
+        for e, (lon, lat) in self.entity_pos.items():
+            u = to.entity_unit.get(e)
+            if u is None:
+                continue
+            for v in (u, *to.ancestors(u)):
+                s = sums.get(v)
+                if s is None:
+                    sums[v] = [lon, lat, 1]
+                else:
+                    s[0] += lon
+                    s[1] += lat
+                    s[2] += 1
+        return {u: [round(s[0] / s[2], 6), round(s[1] / s[2], 6)] for u, s in sorted(sums.items())}
+
+    def _tracks(self) -> dict[str, list]:
+        old = self.t - TRACK_TTL_S
+        for k in [k for k, v in self.tracks.items() if v[3] < old]:
+            del self.tracks[k]
+        return {k: [round(v[0], 6), round(v[1], 6), v[2]] for k, v in sorted(self.tracks.items())}
+
+    def _units(self) -> dict[str, dict]:
+        to, ms = self.taskorg, self.missions.current(self.t)
+        return {u.id: {"name": u.name, "kind": u.kind, "parent": to.parent.get(u.id),
+                       **ms.get(u.id, {"mission": None, "mission_type": None, "state": None})}
+                for u in to.units.values()}
+
+    def snapshot(self) -> dict:
+        """GET /api/state."""
+        with self.lock:
+            return {"scenario": self.sc.name, "unit": self.unit, "units": self._units(),
+                    "overlay": self.overlay, "positions": self._positions(), "tracks": self._tracks(),
+                    "alerts": list(self.alerts), "counts": {o: dict(c) for o, c in sorted(self.counts.items())},
+                    "t": self.t, "actors": list(self.actors)}
+
+    def drain(self) -> list[tuple[str, Any]]:
+        """Events since the last drain: alerts and results one by one, then one
+        clock/positions/tracks/missions/counts each when they changed."""
+        with self.lock:
+            out = list(self._outbox)
+            self._outbox.clear()
+            dirty, self._dirty = self._dirty, set()
+            if "clock" in dirty:
+                out.append(("clock", {"t": self.t}))
+            if "positions" in dirty:
+                out.append(("positions", self._positions()))
+            if "tracks" in dirty or "clock" in dirty and self.tracks:
+                n = len(self.tracks)
+                tr = self._tracks()   # expires old ones: a change to send too
+                if "tracks" in dirty or len(tr) != n:
+                    out.append(("tracks", tr))
+            if dirty & {"clock", "missions"}:
+                ms = self.missions.current(self.t)
+                if ms != self._sent_missions:
+                    self._sent_missions = ms
+                    out.append(("missions", ms))
+            if "counts" in dirty:
+                out.append(("counts", {o: dict(c) for o, c in sorted(self.counts.items())}))
+            return out
