@@ -84,12 +84,26 @@ def cmd_run(a) -> int:
     if out:
         sinks.append(JsonlSink(out))
     try:
-        eas = run(sc, owners, sinks, voa=not a.no_voa, config_path=a.config, speed=a.speed, progress=_progress)
+        consoles: list = []
+        if a.console is not None:
+            from .console.main import start_inprocess
+            consoles.append(lambda eas: start_inprocess(sc, eas, a.console)[1])
+        stops: list = []
+        eas = run(sc, owners, sinks, voa=not a.no_voa, config_path=a.config, speed=a.speed, progress=_progress,
+                  on_made=(lambda eas: stops.append(consoles[0](eas))) if consoles else None)
     finally:
         if out:
             out.close()
     print()
     print(table(eas, tuple(domains.of(sc).ALERT_TYPES)))
+    if stops:
+        import time
+        print(f"console: serving for {a.linger:.0f} s more (Ctrl-C to stop)", flush=True)
+        try:
+            time.sleep(a.linger)
+        except KeyboardInterrupt:
+            pass
+        stops[0]()
     errs = sum(ea.stats["errors"] for ea in eas)
     if errs:
         print(f"\n{errs} bad inputs were counted and dropped; last: {eas[0].errors[-1:] or '-'}")
@@ -202,7 +216,8 @@ def cmd_fusion(a) -> int:
 def cmd_mesh(a) -> int:
     from .mesh import up
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
-             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root)
+             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
+             console=a.console, console_linger=a.console_linger)
     return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
 
 
@@ -261,6 +276,23 @@ def cmd_command(a) -> int:
     return 0 if res.ok else 2
 
 
+def cmd_console(a) -> int:
+    from .console.main import main_console
+    from .zconf import config
+    sc = S.load(a.scenario, events=False)
+    unit = a.unit or sc.taskorg.root
+    if unit not in sc.taskorg.units:
+        raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
+    root = a.root or f"saim/{sc.name}"
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"console.{unit}", sc, root)
+    return main_console(sc, conf, root, unit, a.port, a.linger)
+
+
+def cmd_report(a) -> int:
+    from .report import main_report
+    return main_report(a.out, a.alerts, a.title)
+
+
 def _fail(what) -> int:
     """One line on stderr and exit code 2 (SAIM_MESH_DEBUG=1 re-raises for the traceback)."""
     if os.environ.get("SAIM_MESH_DEBUG"):
@@ -298,6 +330,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--config", metavar="TOML", help="EA parameters (default configs/ea.toml)")
     r.add_argument("--no-voa", action="store_true", help="naive baseline: every candidate is an alert")
     r.add_argument("--quiet", action="store_true", help="do not print alerts as they come")
+    r.add_argument("--console", type=int, default=None, metavar="PORT",
+                   help="serve the commander's console on 127.0.0.1:PORT (0: a free port) during the run")
+    r.add_argument("--linger", type=_seconds, default=30.0, help="seconds the console stays up after the run")
     r.set_defaults(fn=cmd_run)
     e = sub.add_parser("evaluate", help="score alerts against the scenario's ground truth")
     e.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
@@ -359,6 +394,10 @@ def main(argv: list[str] | None = None) -> int:
     me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
     me.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
     me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
+    me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
+                    help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
+    me.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
+                    help="seconds the console stays up after the scenario's end")
     me.set_defaults(fn=cmd_mesh)
     ce = sub.add_parser("certs", help="make a test CA and a certificate per identity of a scenario's mesh")
     ce.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
@@ -390,6 +429,18 @@ def main(argv: list[str] | None = None) -> int:
         c.add_argument("--timeout", type=_seconds, default=10.0, help="seconds to wait for the EA's answer")
         _zenoh_args(c)
         c.set_defaults(fn=cmd_command)
+    co = sub.add_parser("console", help="the commander's console: a mesh peer serving a web page on 127.0.0.1")
+    co.add_argument("scenario")
+    co.add_argument("--unit", help="whose commander (default: the top unit); acts for the unit's subtree")
+    co.add_argument("--port", type=int, default=8470, help="HTTP port on 127.0.0.1 (0: a free port)")
+    co.add_argument("--linger", type=_seconds, default=30.0, help="seconds to stay up after the scenario's end")
+    _zenoh_args(co)
+    co.set_defaults(fn=cmd_console)
+    rep = sub.add_parser("report", help="a PNG of alerts by type per EA and a timeline by priority")
+    rep.add_argument("out", help="the PNG to write")
+    rep.add_argument("alerts", nargs="+", help="alert files (JSON lines) or folders of them (a mesh's out dir)")
+    rep.add_argument("--title", default="")
+    rep.set_defaults(fn=cmd_report)
     a = p.parse_args(argv)
     from ea_agent.core.config import ConfigError
     try:

@@ -105,7 +105,8 @@ class Supervisor:
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 900.0,
        root: str | None = None, echo=print, window: float = 20.0, insecure: bool = False,
-       pki: Path | None = None, max_restarts: int = 10) -> dict:
+       pki: Path | None = None, max_restarts: int = 10, console: int | None = None,
+       console_linger: float = 30.0) -> dict:
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
@@ -123,13 +124,14 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     else:
         from .security.pki import make_pki, names_for
         pki = Path(pki or out_dir / "pki")
-        make_pki(pki, names_for(sc))
+        make_pki(pki, names_for(sc, consoles=True))
         endpoint = f"tls/127.0.0.1:{free_port()}"
     state = out_dir / "replay.state"
     state.unlink(missing_ok=True)
     sup = Supervisor(echo, max_restarts, pids_path=out_dir / "pids.json")
     t0 = time.monotonic()
     summaries: dict[str, dict] = {}
+    con: Proc | None = None
     try:
         replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
                                       window=window, pki=pki, log_dir=logs, state=state))
@@ -139,6 +141,11 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         for u in units:
             (out_dir / f"{u}.jsonl").unlink(missing_ok=True)
             sup.add(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl", pki=pki, log_dir=logs))
+        if console is not None:   # the top unit's commander's console (not supervised: it ends after its linger)
+            con = Proc("console", [*py(), "console", scenario, "--connect", endpoint, "--root", root,
+                                   "--port", str(console), "--linger", str(console_linger), *_sec(pki)],
+                       env=clean_env(), log_dir=logs)
+            echo(con.wait_for("console http", 60).split(" ", 1)[1] + "  <- the commander's console", flush=True)
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             sup.check()
@@ -155,7 +162,11 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         while time.monotonic() < deadline and not sup.finished(replay) and replay.exited() is None:
             time.sleep(0.05)
         wall = time.monotonic() - t0
+        if con is not None:   # the console stays up for its linger after the end
+            con.p.wait(console_linger + 60)
     finally:
+        if con is not None:
+            con.stop()
         sup.stop()
     echo(f"{'peer':>6} {'alerts':>7} {'flash':>6} {'late':>5} {'facts':>7} {'subs':>5} {'rss MB':>7} {'wall s':>7}")
     for u, s in summaries.items():

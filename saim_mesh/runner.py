@@ -57,7 +57,8 @@ class Fusion:
 
 def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bool = True,
         config_path=None, speed: float | None = None,
-        progress: Callable[[float], None] | None = None, overrides: dict | None = None) -> list[ExecutionAssistant]:
+        progress: Callable[[float], None] | None = None, overrides: dict | None = None,
+        on_made: Callable[[list], None] | None = None) -> list[ExecutionAssistant]:
     """Feed every event to every EA in scenario-time order. speed=None runs as fast as
     possible; otherwise scenario time is paced at `speed` x wall-clock time."""
     sinks = list(sinks)
@@ -66,6 +67,8 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
         if o not in sc.taskorg.units:
             raise KeyError(f"unknown unit {o!r}: not in the task organization of {sc.name}")
         eas.append(make_ea(sc, o, config_for(sc, o, config_path, overrides), sinks, voa=voa))
+    if on_made is not None:   # e.g. a console hooks the EAs before they start
+        on_made(eas)
     for ea in eas:
         ea.start(0.0)
     fusion = Fusion.of(sc)
