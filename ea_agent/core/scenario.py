@@ -9,6 +9,7 @@ import math
 import re
 import warnings
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -17,8 +18,11 @@ import shapely
 from shapely.geometry import shape
 
 from . import messages as M
+from .geo import Projection
+from .plan import PlanSpec, TaskOrg
 
 _NOT_IN_CHUNK = re.compile(r"[/*#?$\s]")
+MAX_DURATION_S = 7 * 86400.0   # a week of scenario time: far more than an operation, bounded so nothing spins
 
 
 class ScenarioError(ValueError):
@@ -142,3 +146,29 @@ def lonlat_geometry(g: dict, where: str):
                 else f"lon {lon} is not a WGS84 longitude in [-180, 180]")
         raise ScenarioError(f"{where}: field 'geometry': point ({lon}, {lat}): {what}")
     return geom
+
+
+@dataclass
+class ScenarioBase:
+    """What every domain's loaded scenario has; a domain adds its places (SUO's
+    overlay, UV's world)."""
+    name: str
+    root: Path
+    projection: Projection
+    duration_s: float
+    taskorg: TaskOrg
+    plans: dict[str, PlanSpec]
+    initial_plan: str
+    events: list
+    meta: dict
+
+    @property
+    def plan(self) -> PlanSpec:
+        return self.plans[self.initial_plan]
+
+    def truth(self) -> dict:
+        """The ground truth the generator's oracle wrote (truth.json)."""
+        p = self.root / "truth.json"
+        if not p.exists():
+            raise ScenarioError(f"{p}: no ground-truth file in this scenario")
+        return json.loads(p.read_text())

@@ -5,7 +5,6 @@ scenario is fixed in one look.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,7 @@ from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, T
 
 from ea_agent.core.alert import Alert
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import (ScenarioError, check_key_chunk, lonlat_geometry, need as _need,  # noqa: F401
+from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need as _need,  # noqa: F401
                                     number as _number, read_events, read_json as _read_json)
 
 from . import messages as M
@@ -31,7 +30,6 @@ AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "enga
 LINE_KINDS = {"route", "phase-line", "avenue-of-approach"}
 POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon
 KINDS = AREA_KINDS | LINE_KINDS | POINT_KINDS
-MAX_DURATION_S = 7 * 86400.0   # a week of scenario time: far more than an operation, bounded so nothing spins
 
 
 @dataclass(slots=True)
@@ -46,27 +44,8 @@ class ControlMeasure:
 
 
 @dataclass
-class Scenario:
-    name: str
-    root: Path
-    projection: Projection
-    duration_s: float
-    taskorg: TaskOrg
-    plans: dict[str, PlanSpec]
-    initial_plan: str
-    overlay: dict[str, ControlMeasure]
-    events: list
-    meta: dict
-
-    @property
-    def plan(self) -> PlanSpec:
-        return self.plans[self.initial_plan]
-
-    def truth(self) -> dict:
-        p = self.root / "truth.json"
-        if not p.exists():
-            raise ScenarioError(f"{p}: no ground-truth file in this scenario")
-        return json.loads(p.read_text())
+class Scenario(ScenarioBase):
+    overlay: dict[str, ControlMeasure] = field(default_factory=dict)
 
 
 def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
@@ -471,4 +450,4 @@ def load(path: str | Path, events: bool = True) -> Scenario:
         cx = EventContext(duration, taskorg, plans,
                           None if groups is None else {sid for sids in groups.values() for sid in sids})
         evs = _guarded("events", load_events, root, cx)
-    return Scenario(name, root, proj, duration, taskorg, plans, initial, overlay, evs, meta)
+    return Scenario(name, root, proj, duration, taskorg, plans, initial, evs, meta, overlay=overlay)

@@ -6,8 +6,7 @@ and the field, so that a broken scenario is fixed in one look.
 """
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +15,7 @@ import shapely
 
 from ea_agent.core.geo import Projection
 from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, TimeConstraint, Unit
-from ea_agent.core.scenario import (ScenarioError, check_key_chunk, lonlat_geometry, need, number, read_events,
+from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need, number, read_events,
                                     read_json)
 
 from . import messages as M   # registers the uv-* message kinds with the core codec
@@ -27,35 +26,15 @@ UNIT_KINDS = ("team", "ugv", "uav", "operator")
 ROBOT_KINDS = ("ugv", "uav")
 ROBOT_ATTRS = ("max_speed_mps", "turn_rate_dps", "sensor_range_m", "comm_range_m", "radius_m")
 GEOM = {"obstacle": "Polygon", "waypoint": "Point", "patrol-area": "Polygon", "sector": "Polygon", "base": "Point"}
-MAX_DURATION_S = 7 * 86400.0
 
 
 @dataclass
-class UvScenario:
-    name: str
-    root: Path
-    projection: Projection
-    duration_s: float
-    taskorg: TaskOrg
-    plans: dict[str, PlanSpec]
-    initial_plan: str
-    world: dict[str, Place]
-    events: list
-    meta: dict
-
-    @property
-    def plan(self) -> PlanSpec:
-        return self.plans[self.initial_plan]
+class UvScenario(ScenarioBase):
+    world: dict[str, Place] = field(default_factory=dict)
 
     @property
     def robots(self) -> list[str]:
         return sorted(u.id for u in self.taskorg.units.values() if u.kind in ROBOT_KINDS)
-
-    def truth(self) -> dict:
-        p = self.root / "truth.json"
-        if not p.exists():
-            raise ScenarioError(f"{p}: no ground-truth file in this scenario")
-        return json.loads(p.read_text())
 
 
 def _load_meta(root: Path) -> tuple[dict, str, Projection, float]:
@@ -303,4 +282,4 @@ def load(path: str | Path, events: bool = True) -> UvScenario:
             if not isinstance(u, str) or u not in taskorg.units:
                 raise ScenarioError(f"scenario.json: field 'default_eas': unknown unit {u!r:.40}")
     evs = _guarded("events", load_events, root, duration, taskorg, targets) if events else []
-    return UvScenario(name, root, proj, duration, taskorg, plans, initial, world, evs, meta)
+    return UvScenario(name, root, proj, duration, taskorg, plans, initial, evs, meta, world=world)
