@@ -79,6 +79,8 @@ def cmd_run(a) -> int:
             raise KeyError(f"--ea {o}: unknown unit {o!r}: not in the task organization of {sc.name} "
                            f"({sc.root / 'plan.json'})")
         config_for(sc, o, a.config)
+    from .cmdlog import read as read_commands
+    cmds = read_commands(a.commands, set(sc.taskorg.units)) if a.commands else None
     sinks = [] if a.quiet else [TerminalSink()]
     out = open(a.out, "w", buffering=1) if a.out else None   # line-buffered; JsonlSink flushes each alert
     if out:
@@ -90,7 +92,8 @@ def cmd_run(a) -> int:
             consoles.append(lambda eas: start_inprocess(sc, eas, a.console)[1])
         stops: list = []
         eas = run(sc, owners, sinks, voa=not a.no_voa, config_path=a.config, speed=a.speed, progress=_progress,
-                  on_made=(lambda eas: stops.append(consoles[0](eas))) if consoles else None)
+                  on_made=(lambda eas: stops.append(consoles[0](eas))) if consoles else None,
+                  commands=cmds, armed=a.armed or a.console is not None)
     finally:
         if out:
             out.close()
@@ -199,7 +202,7 @@ def cmd_peer(a) -> int:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc,
-                                        root), root, a.out, a.config, a.radius, a.deadline, a.connect)
+                                        root), root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed)
 
 
 def cmd_fusion(a) -> int:
@@ -214,7 +217,10 @@ def cmd_fusion(a) -> int:
 
 
 def cmd_mesh(a) -> int:
+    import signal
+
     from .mesh import up
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
              console=a.console, console_linger=a.console_linger)
@@ -333,6 +339,12 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--console", type=int, default=None, metavar="PORT",
                    help="serve the commander's console on 127.0.0.1:PORT (0: a free port) during the run")
     r.add_argument("--linger", type=_seconds, default=30.0, help="seconds the console stays up after the run")
+    r.add_argument("--commands", nargs="+", metavar="CMDLOG",
+                   help="apply a commander's commands as logged by mesh peers (<unit>.cmdlog): replays a run "
+                        "with a console in the loop to the same alerts")
+    r.add_argument("--armed", action="store_true",
+                   help="flash and immediate alerts repeat until acknowledged from the start (as under "
+                        "`mesh up --console`); --console implies it")
     r.set_defaults(fn=cmd_run)
     e = sub.add_parser("evaluate", help="score alerts against the scenario's ground truth")
     e.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
@@ -369,6 +381,8 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--unit", required=True)
     pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
     pe.add_argument("--config", metavar="TOML")
+    pe.add_argument("--armed", action="store_true",
+                    help="a console watches: flash and immediate alerts repeat until acknowledged")
     pe.add_argument("--radius", type=_seconds, default=None,
                     help="geographic interest radius around our units (m); default: [dissemination] in the config")
     pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",

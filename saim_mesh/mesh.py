@@ -140,7 +140,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
             sup.add(start_fusion(scenario, g, endpoint, root, pki=pki, log_dir=logs))
         for u in units:
             (out_dir / f"{u}.jsonl").unlink(missing_ok=True)
-            sup.add(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl", pki=pki, log_dir=logs))
+            (out_dir / f"{u}.cmdlog").unlink(missing_ok=True)
+            armed = ["--armed"] if console is not None else []   # the console watches: urgent alerts repeat until acked
+            sup.add(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl", extra=armed, pki=pki, log_dir=logs))
         if console is not None:   # the top unit's commander's console (not supervised: it ends after its linger)
             con = Proc("console", [*py(), "console", scenario, "--connect", endpoint, "--root", root,
                                    "--port", str(console), "--linger", str(console_linger), *_sec(pki)],

@@ -23,10 +23,12 @@ import zenoh
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 
+from . import cmdlog
 from . import commands as C
 from . import messages as M
 from . import wire as W
 from .alertlog import AlertLog
+from .cmdlog import CommandLog
 from .fusion.barrier import TrackBarrier
 from .presence import Presence
 from .runner import config_for, make_ea
@@ -63,7 +65,7 @@ class SourceLost(RuntimeError):
 class Peer:
     def __init__(self, sc: Scenario, unit: str, conf: zenoh.Config, root: str, out_path: str | None = None,
                  config_path=None, radius_m: float | None = None, log=print, deadline_s: float | None = None,
-                 connect: list[str] | None = None):
+                 connect: list[str] | None = None, armed: bool = False):
         self.sc, self.unit, self.conf = sc, unit, conf
         self.ks = KeySpace.of(sc, root)
         self.cfg = config_for(sc, unit, config_path)
@@ -74,6 +76,9 @@ class Peer:
         self.max_ahead, self.silence_s = float(mesh["max_ahead_s"]), float(mesh["clock_silence_s"])
         self.reject_alert = int(mesh["reject_alert"])
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
+        self.clog = CommandLog(cmdlog.path_for(out_path)) if out_path else None   # for a deterministic replay
+        if armed:   # a commander's console watches this EA: urgent alerts repeat until acknowledged
+            self.ea.arm()
         self.deadline_s, self.connect = deadline_s, connect or []
         self.log = log
         self.session = None
@@ -163,10 +168,11 @@ class Peer:
                 heapq.heappush(buf, (seq, m))
 
     def _plan_signature(self) -> tuple:
-        """Changes when a reorganization or a mission transition may change our interest."""
+        """Changes when a reorganization, a mission transition or a threshold set by the
+        commander may change our interest."""
         dom = self.ea.domain
         states = tuple(sorted(dom.plan.state.items())) if getattr(dom, "plan", None) else ()
-        return dom.taskorg.version, hash(states)
+        return dom.taskorg.version, hash(states), len(self.ea.changes)   # a threshold may widen what we need
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
         req = W.encode(W.make(W.StoreQuery, since=since, keys=keys))
@@ -406,7 +412,10 @@ class Peer:
         cmd = self.gate.control(cls, payload, key)
         if cmd is None:
             return self._refusal(payload, kind, self.gate.rejects.recent[-1] if self.gate.rejects.recent else "bad")
-        return C.apply(self.ea, cmd, self.t)
+        res = C.apply(self.ea, cmd, self.t)
+        if self.clog is not None:   # applied after the tick at self.t: `run --commands` does the same
+            self.clog.write(self.unit, self.t, cmd, res)
+        return res
 
     def _refusal(self, payload: bytes, kind: str, why: str) -> W.CmdResult | None:
         """ok=false for a command we cannot take, if its req can be read (else silence)."""
@@ -499,6 +508,8 @@ class Peer:
         finally:
             if self.alog:
                 self.alog.close()
+            if self.clog:
+                self.clog.close()
         return self.summary(t_wall, t_first)
 
     def summary(self, t_wall: float, t_first: float | None) -> dict:
@@ -550,9 +561,10 @@ def _pcts(xs: list[float]) -> dict:
 
 
 def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None,
-              radius_m: float | None = None, deadline_s: float | None = None, connect: list[str] | None = None) -> int:
+              radius_m: float | None = None, deadline_s: float | None = None, connect: list[str] | None = None,
+              armed: bool = False) -> int:
     p = Peer(sc, unit, conf, root, out, config_path, radius_m, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
-             deadline_s=deadline_s, connect=connect)
+             deadline_s=deadline_s, connect=connect, armed=armed)
     try:
         summary = p.run()
     except SourceLost as e:

@@ -8,6 +8,7 @@ from ea_agent import domains
 from ea_agent.core.config import load_config
 from ea_agent.core.manager import ExecutionAssistant, Sink
 
+from .commands import apply, tap
 from .fusion import FusionNode
 from .messages import SensorHit
 from .scenario import Scenario
@@ -58,9 +59,13 @@ class Fusion:
 def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bool = True,
         config_path=None, speed: float | None = None,
         progress: Callable[[float], None] | None = None, overrides: dict | None = None,
-        on_made: Callable[[list], None] | None = None) -> list[ExecutionAssistant]:
+        on_made: Callable[[list], None] | None = None, commands: list | None = None,
+        armed: bool = False) -> list[ExecutionAssistant]:
     """Feed every event to every EA in scenario-time order. speed=None runs as fast as
-    possible; otherwise scenario time is paced at `speed` x wall-clock time."""
+    possible; otherwise scenario time is paced at `speed` x wall-clock time.
+    `commands`: a commander's commands (`cmdlog.Logged`, in time order), each applied
+    after the EA reached its time, as the peer applied it after that clock tick;
+    `armed`: urgent alerts repeat until acknowledged from the start (a console watching)."""
     sinks = list(sinks)
     eas = []
     for o in owners:
@@ -70,13 +75,28 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
     if on_made is not None:   # e.g. a console hooks the EAs before they start
         on_made(eas)
     for ea in eas:
+        if armed:
+            ea.arm()
+        if commands:
+            tap(ea)   # a `cff confirm` needs the calls for fire seen before it (the peer taps at start too)
         ea.start(0.0)
+    by_owner = {ea.owner: ea for ea in eas}
+    cmds = [c for c in commands or () if c.unit in by_owner]
+
+    def command_until(t: float) -> None:   # commands due before events at time >= their t
+        while cmds and cmds[0].t <= t:
+            c = cmds.pop(0)
+            ea = by_owner[c.unit]
+            ea.advance(c.t)
+            apply(ea, c.cmd, c.t)
     fusion = Fusion.of(sc)
     evs = sc.events
     n = len(evs)
     step = max(1, n // 200)
     t0 = time.monotonic()
     for i, ev in enumerate(evs):
+        if cmds:
+            command_until(ev.t)
         if speed:
             wait = t0 + ev.t / speed - time.monotonic()
             if wait > 0:
@@ -97,6 +117,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
         for tr in fusion.flush(sc.duration_s):
             for ea in eas:
                 ea.submit(tr)
+    command_until(sc.duration_s)
     for ea in eas:
         ea.finish(sc.duration_s)
     if progress:

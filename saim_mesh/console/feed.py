@@ -87,7 +87,7 @@ class MeshFeed:
                 if not self.caught_up:
                     self.caught_up = True
                     self.catch_up()
-                st.clock(tick.t, tick.end)
+                st.clock(tick.t, tick.end, tick.w)
             return
         if fam == "cmdlog":
             cls = getattr(W, "CmdResult", None)

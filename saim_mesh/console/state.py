@@ -43,13 +43,18 @@ class State:
         self._outbox: deque[tuple[str, Any]] = deque(maxlen=MAX_OUTBOX)
         self._dirty: set[str] = set()
         self._sent_missions: dict | None = None
+        self._ticks: deque[tuple[float, float]] = deque(maxlen=MAX_OUTBOX)   # (t, wall) since the last drain
 
     # -- inputs (any thread) ----------------------------------------------------------
-    def clock(self, t: float, end: bool = False) -> None:
+    def clock(self, t: float, end: bool = False, w: float | None = None) -> None:
+        """The mesh clock reached `t`; `w`: the wall time the replay published that tick
+        (passed on to the page, which measures raise-to-render latency against it)."""
         with self.lock:
             if t > self.t:
                 self.t = t
                 self._dirty.add("clock")
+                if w is not None:
+                    self._ticks.append((t, w))
             self.ended = self.ended or end
 
     def alert(self, a) -> None:
@@ -153,7 +158,8 @@ class State:
             self._outbox.clear()
             dirty, self._dirty = self._dirty, set()
             if "clock" in dirty:
-                out.append(("clock", {"t": self.t}))
+                out.append(("clock", {"t": self.t, "ticks": [[t, round(w, 4)] for t, w in self._ticks]}))
+                self._ticks.clear()
             if "positions" in dirty:
                 out.append(("positions", self._positions()))
             if "tracks" in dirty or "clock" in dirty and self.tracks:

@@ -9,6 +9,7 @@ from ea_agent.core.needs import Needs
 from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import ContingentMission
 
+ENVELOPE_MARGIN_M = 1000.0   # a unit's spread around its centroid, and a track's move between re-registrations
 TEMPLATES = tuple(c.KEY for c in (LocationReport, SensorTrack, MissionConfirm, Order, CallForFire, Reorganization))
 
 
@@ -21,6 +22,9 @@ def needs(dom, radius_m: float) -> Needs:
             units.update(m.params[p] for p in type(m).UNIT_PARAMS if m.params.get(p))
         elif isinstance(m, ContingentMission) and m.params.get("owner") == dom.owner:   # ours, for another unit
             units.add(m.unit)
+    # never narrower than the threat envelope: a commander who widens it at run time
+    # (`set voi.threat_radius_m`) must hear the tracks it now takes in
+    radius_m = max(radius_m, float(dom.voi_cfg["threat_radius_m"]) + ENVELOPE_MARGIN_M)
     circles = []
     for u in sorted(dom.own_units):
         p = dom.unit_pos.get(u)

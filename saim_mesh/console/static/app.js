@@ -12,6 +12,21 @@
 
   window.__renderLog = [];
   window.__alertsSeen = 0;
+  // The mesh clock: [scenario t, wall ms the replay published that tick], in order. An
+  // alert raised at t is due on the mesh at the first tick at or after t; its latency is
+  // from that tick's publication to the alert's row on screen (same machine, same clock).
+  const TICK_LOG_CAP = 400000;
+  window.__ticks = [];
+  window.__latencies = function () {
+    const ticks = window.__ticks, out = [];
+    for (const e of window.__renderLog) {
+      let lo = 0, hi = ticks.length;   // first tick with t >= the alert's t
+      while (lo < hi) { const mid = (lo + hi) >> 1; if (ticks[mid][0] < e.t_alert) lo = mid + 1; else hi = mid; }
+      const due = lo < ticks.length ? ticks[lo][1] : null;
+      out.push(Object.assign({}, e, { due_ms: due, latency_ms: due === null ? null : e.rendered_ms - due }));
+    }
+    return out;
+  };
 
   // ---------------------------------------------------------------- state
   const S = {
@@ -395,6 +410,8 @@
     li.dataset.type = a.type || "";
     li.dataset.owner = a.owner || "";
     li.dataset.priority = a.priority || "";
+    li.dataset.t = String(a.t);
+    if (typeof d.repeat_of === "string") li.dataset.repeatOf = d.repeat_of;
     if (S.selected && alertId(S.selected) === id) li.classList.add("selected");
     const head = el("span", "a-head");
     head.appendChild(el("span", "a-t", hms(a.t)));
@@ -474,7 +491,10 @@
     for (const a of batch) {   // arrival order
       if (!passes(a)) continue;
       if (log.length >= RENDER_LOG_CAP) break;
-      log.push({ id: alertId(a), t_alert: a.t, rendered_ms: now });
+      const d = a.details || {};
+      log.push({ id: alertId(a), t_alert: a.t, rendered_ms: now, owner: a.owner, type: a.type,
+                 priority: a.priority, message: a.message, repeat_of: d.repeat_of || null,
+                 escalated_from: d.escalated_from || null });
     }
     scheduleCounts();
   }
@@ -883,7 +903,17 @@
   const HANDLERS = {
     alert: (d) => { if (Array.isArray(d)) addAlerts(d, true); else addAlerts([d], true); },
     alerts: (d) => addAlerts(Array.isArray(d) ? d : [d], true),
-    clock: (d) => setClock(typeof d === "number" ? d : d && d.t),
+    clock: (d) => {
+      if (d && Array.isArray(d.ticks)) {
+        const log = window.__ticks;
+        for (const tw of d.ticks) {
+          if (Array.isArray(tw) && typeof tw[0] === "number" && typeof tw[1] === "number"
+              && (!log.length || tw[0] > log[log.length - 1][0])) log.push([tw[0], tw[1] * 1000]);
+        }
+        if (log.length > TICK_LOG_CAP) log.splice(0, log.length - TICK_LOG_CAP);
+      }
+      setClock(typeof d === "number" ? d : d && d.t);
+    },
     tracks: (d) => updateTracks(d, true),     // the server sends every current track
     positions: (d) => updatePositions(d, true),
     missions: (d) => mergeMissions(d),

@@ -1,0 +1,98 @@
+"""A peer's commands as a JSON-lines log, and reading it back for a replay.
+
+Why: acknowledgements, silences, thresholds and confirmations change what an EA
+raises, and they arrive on the wall clock. The peer applies each one after a clock
+tick and writes down that tick's scenario time; `saim-mesh run --commands FILE`
+applies the same commands after the same tick, so a run with a commander in the
+loop replays to the same alerts.
+
+One line per command the EA took (decoded and applied, good or refused by the EA):
+`{"unit", "t", "kind", "cmd": {...the struct's fields}, "ok", "error"}`.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgspec
+
+from . import wire as W
+
+SUFFIX = ".cmdlog"
+
+
+def path_for(alerts_path: str | Path) -> Path:
+    """Beside the peer's alert log: A2.jsonl -> A2.cmdlog (not *.jsonl: reports read those)."""
+    p = Path(alerts_path)
+    return p.with_suffix(SUFFIX)
+
+
+class CommandLog:
+    """Append-only; each line flushed and fsynced (commands are rare, each one matters)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.f = open(self.path, "a", encoding="utf-8")
+
+    def write(self, unit: str, t: float, cmd: msgspec.Struct, res: W.CmdResult) -> None:
+        kind = next(k for k, c in W.COMMANDS.items() if c is type(cmd))
+        line = {"unit": unit, "t": t, "kind": kind, "cmd": msgspec.to_builtins(cmd), "ok": res.ok,
+                "error": res.error}
+        self.f.write(json.dumps(line, sort_keys=True) + "\n")
+        self.f.flush()
+        os.fsync(self.f.fileno())
+
+    def close(self) -> None:
+        self.f.close()
+
+
+@dataclass(frozen=True, slots=True)
+class Logged:
+    unit: str
+    t: float
+    cmd: msgspec.Struct
+
+
+def read(paths: list[str | Path], units: set[str] | None = None) -> list[Logged]:
+    """Every command in the logs, in scenario-time order (stable within a file). A bad
+    line raises ValueError naming the file, the line and what was wrong."""
+    out: list[tuple[float, int, Logged]] = []
+    n = 0
+    for path in paths:
+        try:
+            lines = Path(path).read_text(encoding="utf-8").splitlines()
+        except OSError as e:
+            raise ValueError(f"{path}: cannot read the command log ({e.strerror or e})") from None
+        for i, raw in enumerate(lines, 1):
+            if not raw.strip():
+                continue
+            where = f"{path} line {i}"
+            try:
+                d = json.loads(raw)
+            except json.JSONDecodeError as e:
+                if i == len(lines):   # a half-written last line (killed mid-write): the command never took
+                    continue
+                raise ValueError(f"{where}: not JSON ({e.msg})") from None
+            if not isinstance(d, dict):
+                raise ValueError(f"{where}: not an object")
+            unit, t, kind = d.get("unit"), d.get("t"), d.get("kind")
+            if not isinstance(unit, str) or not unit:
+                raise ValueError(f"{where}: unit missing")
+            if units is not None and unit not in units:
+                raise ValueError(f"{where}: unknown unit {unit!r}")
+            if type(t) not in (int, float) or not math.isfinite(t) or not 0 <= t <= W.T_LIMIT:
+                raise ValueError(f"{where}: t must be a scenario time in seconds (got {t!r})")
+            cls = W.COMMANDS.get(kind) if isinstance(kind, str) else None
+            if cls is None:
+                raise ValueError(f"{where}: unknown command kind {kind!r} (one of {', '.join(W.COMMANDS)})")
+            try:
+                cmd = msgspec.convert(d.get("cmd"), cls)
+            except msgspec.ValidationError as e:
+                raise ValueError(f"{where}: bad {kind} command: {e}") from None
+            n += 1
+            out.append((float(t), n, Logged(unit, float(t), cmd)))
+    out.sort(key=lambda x: (x[0], x[1]))
+    return [x[2] for x in out]
