@@ -240,6 +240,11 @@ class KeySpace:
         """Commands to `unit`'s EA (ack, silence, unsilence, set, confirm, cff)."""
         return f"{self.root}/cmd/{unit}/{kind}"
 
+    def ingest(self, source: str = "*") -> str:
+        """Live reports from outside the script (a TAK gateway's PLI): the replay, which
+        orders every event, takes them into its stream."""
+        return f"{self.root}/ingest/{source}"
+
     def cmdlog(self, unit: str = "*") -> str:
         """`unit`'s EA answers every command here."""
         return f"{self.root}/cmdlog/{unit}"

@@ -43,6 +43,7 @@ def run(scenario: Path, out_dir: Path, speed: str = "max", screenshot: Path | No
         timeout_s: float = 1200.0) -> dict:
     from selenium.webdriver.common.by import By  # noqa: F401  (selenium is a test extra)
     from tests.browser import chromium
+    t_start = time.monotonic()
     proc = Proc("mesh-up", [*py(), "mesh", "up", str(scenario), "--speed", speed, "--out-dir", str(out_dir),
                             "--console", "0", "--console-linger", "600"], env=clean_env(), log_dir=out_dir)
     try:
@@ -54,16 +55,17 @@ def run(scenario: Path, out_dir: Path, speed: str = "max", screenshot: Path | No
             opened_ms = d.execute_script("return Date.now()")
             rtt: list[float] = []
             end = time.monotonic() + timeout_s
-            peers_done = lambda: all("summary " in p.read_text(errors="replace")   # noqa: E731
-                                     for p in (out_dir / "logs").glob("*.log")
-                                     if p.stem not in ("replay", "console") and not p.stem.startswith("fusion"))
+            def peers_done() -> bool:   # every EA peer said its summary (the run is over)
+                logs = [p for p in (out_dir / "logs").glob("*.log")
+                        if p.stem not in ("replay", "console", "tak") and not p.stem.startswith("fusion")]
+                return bool(logs) and all("summary " in p.read_text(errors="replace") for p in logs)
             while time.monotonic() < end:
                 t0 = time.perf_counter()
                 d.execute_script("return document.querySelectorAll('li.alert').length")
                 rtt.append(1000 * (time.perf_counter() - t0))
                 if proc.p.poll() is not None:
                     raise RuntimeError(f"mesh up exited early: {proc.tail()}")
-                if d.find_element(By.ID, "clock").get_attribute("textContent") and peers_done():
+                if peers_done():
                     break
                 time.sleep(0.25)   # a sampling period, not a synchronisation
             lat = d.execute_script("return window.__latencies()")
@@ -82,12 +84,15 @@ def run(scenario: Path, out_dir: Path, speed: str = "max", screenshot: Path | No
     for p in sorted(out_dir.glob("logs/*.log")):
         for line in p.read_text(errors="replace").splitlines():
             if line.startswith("summary "):
-                peers[p.stem] = json.loads(line[len("summary "):])
+                s = json.loads(line[len("summary "):])
+                if isinstance(s, dict) and "alerts" in s:   # an EA peer's (not another process's)
+                    peers[p.stem] = s
     mesh_alerts = sum(s["alerts"] for s in peers.values())
     peer_p99 = max((s.get("alert_latency_ms", {}).get("p99", 0.0) for s in peers.values()), default=None)
     span_s = (max(drawn) - min(drawn)) / 1000 if len(drawn) > 1 else 0.0
     return {
         "scenario": scenario.name, "speed": speed, "peers": len(peers),
+        "wall_s": round(time.monotonic() - t_start, 1),
         "alerts_mesh": mesh_alerts, "alerts_page": seen, "alerts_live": len(live),
         "alerts_per_s_pushed": round(seen / span_s, 1) if span_s else None,
         "render_latency_ms": _pcts([e["latency_ms"] for e in live]),

@@ -223,8 +223,24 @@ def cmd_mesh(a) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
-             console=a.console, console_linger=a.console_linger)
+             console=a.console, console_linger=a.console_linger, tak=_tak_args(a))
     return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
+
+
+def _tak_args(a) -> list[str] | None:
+    """`mesh up --tak URL... [--tak-in URL...] [--tak-uids FILE]`: the gateway's own options."""
+    if not a.tak:
+        return None
+    out = [x for u in a.tak for x in ("--cot-url", u)] + [x for u in a.tak_in or () for x in ("--listen-cot", u)]
+    return out + (["--uids", a.tak_uids] if a.tak_uids else [])
+
+
+def cmd_tak(a) -> int:
+    from .tak.gateway import main_tak
+    from .zconf import config
+    sc = S.load(a.scenario, events=False)
+    root = a.root or f"saim/{sc.name}"
+    return main_tak(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root), root, a)
 
 
 def cmd_certs(a) -> int:
@@ -410,6 +426,12 @@ def main(argv: list[str] | None = None) -> int:
     me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
     me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
                     help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
+    me.add_argument("--tak", nargs="+", metavar="URL",
+                    help="also start the Cursor-on-Target gateway sending to these URLs "
+                         "(udp://239.2.3.1:6969 for TAK clients on the LAN, tcp://HOST:8087 for a TAK server)")
+    me.add_argument("--tak-in", nargs="+", metavar="URL", help="the gateway listens for TAK PLI here (e.g. "
+                    "udp://239.2.3.1:6969, tcp://127.0.0.1:PORT)")
+    me.add_argument("--tak-uids", metavar="FILE", help="TAK uid -> entity map (configs/tak-uids.example.toml)")
     me.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
                     help="seconds the console stays up after the scenario's end")
     me.set_defaults(fn=cmd_mesh)
@@ -450,6 +472,13 @@ def main(argv: list[str] | None = None) -> int:
     co.add_argument("--linger", type=_seconds, default=30.0, help="seconds to stay up after the scenario's end")
     _zenoh_args(co)
     co.set_defaults(fn=cmd_console)
+    from .tak.gateway import add_arguments as tak_arguments
+    tk = sub.add_parser("tak", help="the Cursor-on-Target gateway: the mesh's picture and alerts to TAK, "
+                                    "TAK PLI in as location reports (docs/tak.md)")
+    tk.add_argument("scenario")
+    tak_arguments(tk)
+    _zenoh_args(tk)
+    tk.set_defaults(fn=cmd_tak)
     rep = sub.add_parser("report", help="a PNG of alerts by type per EA and a timeline by priority")
     rep.add_argument("out", help="the PNG to write")
     rep.add_argument("alerts", nargs="+", help="alert files (JSON lines) or folders of them (a mesh's out dir)")

@@ -68,7 +68,7 @@ class Supervisor:
 
     def finished(self, p: Proc) -> bool:
         """Exited on its own after saying its summary (or, for the replay, its end)."""
-        return p.exited() == 0 and (p.find("summary ") is not None or p.find("end ") is not None)
+        return p.exited() == 0 and any(p.find(x) is not None for x in ("summary ", "end ", "tak done"))
 
     def check(self) -> None:
         now = time.monotonic()
@@ -106,7 +106,7 @@ class Supervisor:
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 900.0,
        root: str | None = None, echo=print, window: float = 20.0, insecure: bool = False,
        pki: Path | None = None, max_restarts: int = 10, console: int | None = None,
-       console_linger: float = 30.0) -> dict:
+       console_linger: float = 30.0, tak: list[str] | None = None) -> dict:
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
@@ -136,6 +136,10 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
                                       window=window, pki=pki, log_dir=logs, state=state))
         replay.wait_for("ready", 60)
+        if tak is not None:   # before the EA peers: it must hear their first alerts (supervised: restarted)
+            sup.add(Proc("tak", [*py(), "tak", scenario, "--connect", endpoint, "--listen", _listen(endpoint),
+                                 "--root", root, *_sec(pki), *tak], env=clean_env(), log_dir=logs))
+            sup.procs["tak"].wait_for("tak ready", 60)
         for g in groups:
             sup.add(start_fusion(scenario, g, endpoint, root, pki=pki, log_dir=logs))
         for u in units:

@@ -13,6 +13,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from bisect import bisect_right
 from collections import Counter
@@ -57,6 +58,8 @@ class Replay:
         self.fusion_t: dict[str, float] = {}   # group -> clock time its tracks are out to
         self.state_path = Path(state_path) if state_path else None
         self.resumed_from: dict | None = None
+        self.ingested = 0   # live reports taken in from ingest/** (a TAK gateway)
+        self.entity_unit = {e: u.id for u in sc.taskorg.units.values() for e in u.entities}
 
     def _serve(self, q) -> None:
         """Answer store queries: entries after `since` whose key matches one of `keys`
@@ -116,6 +119,28 @@ class Replay:
                                        "fusion": self.fusion_t}))
             os.replace(tmp, self.state_path)
 
+    def _ingest(self, s, sub, now: float) -> None:
+        """Live reports from the TAK gateway (ingest/tak), into the ordered stream at
+        scenario time `now`: checked, only friendly positions of known entities, keyed
+        and stored like a scripted event (so a replay of the store is the same run)."""
+        while (smp := sub.try_recv()) is not None:
+            key = str(smp.key_expr)
+            m = self.gate.data(smp.payload.to_bytes(), key)
+            if m is None:
+                continue
+            why = (f"{m.KIND} is not taken from {key}" if key != self.ks.ingest("tak") or type(m) is not M.LocationReport
+                   else None if m.entity in self.entity_unit else f"unknown entity {m.entity!r}")
+            if why is not None:
+                self.gate.rejects.add(M.MessageError(m.KIND, "entity" if "entity" in why else "(key)", why), key)
+                continue
+            m = replace(m, t=now)
+            x, y = self.sc.projection.to_xy(m.lon, m.lat)
+            k = self.ks.key(m, self.sc.taskorg, self.sc.projection, (float(x), float(y)))
+            self.entries.append((len(self.entries) + 1, M.encode(m)))
+            self.by_key.setdefault(k, []).append(len(self.entries))
+            s.put(k, self.entries[-1][1], attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
+            self.ingested += 1
+
     def _prepare(self, end_t: float) -> list[tuple[object, str, bytes]]:
         """Keys and payloads for the whole script, before the clock starts: one bulk
         projection, and the task organization as it will be at each event's time."""
@@ -145,6 +170,7 @@ class Replay:
         with zenoh.open(self.conf) as s:
             q = s.declare_queryable(self.ks.store(), zenoh.handlers.FifoChannel(64))
             fticks = s.declare_subscriber(self.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
+            ingest = s.declare_subscriber(self.ks.ingest("*"), zenoh.handlers.FifoChannel(10_000))
             serve = lambda: (self._take_fusion_ticks(fticks), self._serve(q))
             # one declared publisher per key: a put then skips parsing and resolving the key
             pubs = {k: s.declare_publisher(k, congestion_control=BLOCK) for k in sorted({k for _, k, _ in script})}
@@ -172,7 +198,9 @@ class Replay:
                 if self.speed:
                     while (wait := t0 + ev.t / self.speed - time.monotonic()) > 0:
                         serve()
+                        self._ingest(s, ingest, self.t)   # a live report while the script is quiet
                         time.sleep(min(wait, 0.005))
+                self._ingest(s, ingest, max(self.t, min(ev.t, next_tick)))
                 if radios is not None and radios.silent(ev):
                     continue
                 self.entries.append((len(self.entries) + 1, payload))
@@ -187,6 +215,7 @@ class Replay:
                     serve()
                     time.sleep(0.002)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors,
+                    "ingested": self.ingested,
                     "silenced": radios.silenced if radios else 0}
 
     def _resume(self, script) -> int:

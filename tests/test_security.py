@@ -56,11 +56,11 @@ def spki(pub):
 
 def test_names_for_scenario(small_sc):
     names = names_for(small_sc)
-    assert names[0] == "replay" and names[-2:] == ["observer", "console"]
+    assert names[0] == "replay" and names[-3:] == ["observer", "console", "tak"]
     assert [n[3:] for n in names if n.startswith("ea.")] == mesh_units(small_sc)
-    assert names_for(small_sc, ["A2", "C"]) == ["replay", "ea.A2", "ea.C", "observer", "console"]
+    assert names_for(small_sc, ["A2", "C"]) == ["replay", "ea.A2", "ea.C", "observer", "console", "tak"]
     fused = names_for(S.load(SENSORS, events=False), ["BN"])
-    assert fused == ["replay", "ea.BN", "fusion.F", "fusion.N", "observer", "console"]
+    assert fused == ["replay", "ea.BN", "fusion.F", "fusion.N", "observer", "console", "tak"]
     with pytest.raises(SecurityError, match="ZZ"):
         names_for(small_sc, ["ZZ"])
 
@@ -203,6 +203,11 @@ def test_access_control_is_well_formed(small_sc, pki):
         ("observer", "put", f"{r}/alert/A2/x", False), ("console", "put", f"{r}/cmd/A2", True),
         ("console", "declare_subscriber", f"{r}/clock", False), ("mallory", "declare_subscriber", f"{r}/**", False),
         ("ea.C", "put", f"{r}/health/C", True), ("ea.C", "put", f"{r}/health/A2", False),
+        # the TAK gateway: PLI only to the replay's ingest key, never a position, order or command
+        ("tak", "put", f"{r}/ingest/tak", True), ("tak", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2-1", False),
+        ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack", False),
+        ("tak", "put", f"{r}/alert/A2/x", False), ("tak", "declare_subscriber", f"{r}/clock", True),
+        ("ea.A2", "put", f"{r}/ingest/tak", False), ("replay", "declare_subscriber", f"{r}/ingest/**", True),
     ]:
         assert allowed(acl, cn, "ingress", msg, key) is ok, (cn, msg, key)
     assert allowed(acl, "observer", "egress", "put", f"{r}/ord/BN")   # reads are cut on ingress
@@ -221,7 +226,7 @@ def test_access_control_for_any_task_organization(units, groups):
     ids = [r["id"] for r in acl["rules"]]
     assert len(ids) == len(set(ids))
     cns = [cn for s in acl["subjects"] for cn in s["cert_common_names"]]
-    assert len(cns) == len(set(cns)) == len(units) + len(groups) + 3
+    assert len(cns) == len(set(cns)) == len(units) + len(groups) + 4   # replay, observer, console, tak
     for u in units:   # each EA puts its own alerts, and no one else's
         assert allowed(acl, f"ea.{u}", "ingress", "put", f"saim/h/alert/{u}/t")
         assert all(not allowed(acl, f"ea.{v}", "ingress", "put", f"saim/h/alert/{u}/t") for v in units - {u})

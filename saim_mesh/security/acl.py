@@ -18,6 +18,7 @@ rules and the keys cannot drift apart.
 | `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/**, put cmd/** |
+| `tak` | reading as `console.<U>`, put ingest/tak (PLI for the replay to sequence); query store/** |
 | `console.<U>` (with a task organization) | put cmd/<V>/* for every mesh unit V in U's subtree; reading what an observer reads plus cmdlog/**, clock and the data families but raw hits; query store/** |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
@@ -74,7 +75,8 @@ def identities(units, groups, taskorg=None) -> list[str]:
     """Every certificate CN the rules know (one subject each); `console.<U>` per unit
     when the task organization is known (a commander's console acts for U's subtree)."""
     consoles = [f"console.{u}" for u in units] if taskorg is not None else []
-    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, *consoles]
+    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, "tak",
+            *consoles]
 
 
 def access_control(root: str, units, groups, taskorg=None) -> dict:
@@ -128,9 +130,12 @@ def access_control(root: str, units, groups, taskorg=None) -> dict:
     subject("observer", [out, read_public])
     read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**")])
     subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
+    seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit")]
+    read_seen = rule("read_console", READ, seen)
+    # the TAK gateway: reads what a console reads, but no commands; its PLI go to the
+    # replay's ingest key, never straight to the EAs
+    subject("tak", [out, read_public, read_seen, query_store, rule("tak_put", ["put"], [ks.ingest("tak")])])
     if taskorg is not None:
-        seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit")]
-        read_seen = rule("read_console", READ, seen)
         mesh = set(units)
         for u in units:
             mine = [v for v in taskorg.subtree(u) if v in mesh] if u in taskorg.units else [u]

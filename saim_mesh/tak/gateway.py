@@ -1,0 +1,329 @@
+"""`saim-mesh tak`: the Cursor-on-Target gateway as a Zenoh peer (identity `tak`).
+
+Out: subscribes to the clock, alerts, friendly positions, tracks and reorganizations
+(as the console does: one queue, one thread, every payload through `wire.Gate` and
+checked against its key), keeps the picture (`picture.Picture`) and sends CoT through
+`transports.Network`. In: CoT PLI heard on the listen URLs becomes a LocationReport
+(`pli.PliIn`) published on `<root>/ingest/tak`; the replay sequences it into the mesh.
+
+No liveliness token, for the console's reason: the replay's pacer would wait for it."""
+from __future__ import annotations
+
+import argparse
+import queue
+import signal
+import sys
+import threading
+import time
+from datetime import datetime, timezone
+from typing import Callable
+
+from dissemination.keyspace import KeySpace
+from ea_agent import domains
+
+from .. import messages as M
+from .. import wire as W
+from .picture import Options, Picture
+from .pli import PliIn, load_uids
+from .transports import Network, TlsOptions, check_url
+
+DEFAULT_COT_URL = "udp://239.2.3.1:6969"      # TAK clients' situational-awareness multicast group
+IDENTITY = "tak"
+CLASSES = {"suo": (M.LocationReport, M.SensorTrack, M.Reorganization),
+           "uv": (M.UvState, M.UvSighting)}
+
+
+def _epoch(v: str) -> datetime:
+    if v == "now":
+        return datetime.now(timezone.utc)
+    try:
+        t = datetime.fromisoformat(v[:-1] + "+00:00" if v.endswith("Z") else v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{v!r}: 'now' or an ISO 8601 time like 2026-05-01T06:00:00Z") from None
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def _positive(v: str) -> float:
+    try:
+        x = float(v)
+    except ValueError:
+        x = -1.0
+    if not x > 0 or x != x or x == float("inf"):
+        raise argparse.ArgumentTypeError(f"{v!r}: expected a positive number of seconds")
+    return x
+
+
+def _url(listen: bool):
+    def check(v: str) -> str:
+        try:
+            return check_url(v, listen)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    return check
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The gateway's own options (docs/tak.md); the CLI adds the scenario and Zenoh's."""
+    g = p.add_argument_group("Cursor on Target")
+    g.add_argument("--cot-url", action="append", type=_url(False), metavar="URL",
+                   help=f"where CoT goes, repeatable: udp://GROUP:PORT (multicast SA), tcp://HOST:PORT "
+                        f"(a TAK server's stream port), tls://HOST:PORT (with --tls-cert); default {DEFAULT_COT_URL}")
+    g.add_argument("--listen-cot", dest="listen_cot", action="append", type=_url(True), default=[], metavar="URL",
+                   help="where TAK clients' position reports (PLI) come in, repeatable: udp://GROUP:PORT "
+                        "(multicast), udp://HOST:PORT, tcp://HOST:PORT (a listening port)")
+    g.add_argument("--proto", choices=["xml", "1"], default="xml",
+                   help="xml (CoT XML) or 1 (TAK protocol version 1, protobuf; mesh framing on UDP, "
+                        "stream framing on TCP/TLS)")
+    g.add_argument("--mcast-if", default="0.0.0.0", metavar="ADDR",
+                   help="local interface address for multicast (127.0.0.1: this machine only)")
+    g.add_argument("--mcast-ttl", type=int, default=1, metavar="N", help="multicast TTL (0: this host only)")
+    g.add_argument("--uids", metavar="FILE", help="uid -> entity map for PLI in (TOML or JSON, "
+                                                   "configs/tak-uids.example.toml)")
+    g.add_argument("--uid-rule", metavar="RULE",
+                   help="uids not in the map: 'uid' (the uid is an entity id), 'callsign' (the callsign is), "
+                        "or 'regex:PATTERN' (its 'entity' group, or first group, of the uid)")
+    g.add_argument("--period", type=_positive, default=10.0, metavar="S",
+                   help="scenario seconds between position updates (only what moved is sent)")
+    g.add_argument("--refresh", type=_positive, default=60.0, metavar="S",
+                   help="scenario seconds after which an unmoved unit or track is sent again")
+    g.add_argument("--entities", action="store_true", help="also send every entity's own position")
+    g.add_argument("--no-overlay", action="store_true", help="do not send the scenario's control measures")
+    g.add_argument("--overlay-every", type=_positive, default=300.0, metavar="S",
+                   help="scenario seconds between re-sending the overlay (late joiners get it)")
+    g.add_argument("--epoch", type=_epoch, default="now", metavar="TIME",
+                   help="the UTC time of scenario time 0: 'now' (the gateway's start) or ISO 8601")
+    g.add_argument("--stale", type=_positive, default=300.0, metavar="S",
+                   help="seconds a position stays valid on a TAK client after its time")
+    g.add_argument("--alert-stale", type=_positive, default=1800.0, metavar="S",
+                   help="seconds an alert stays on a TAK client after its time")
+    g.add_argument("--uid-prefix", metavar="P", help="prefix of every uid we send (default saim.<scenario>)")
+    g.add_argument("--linger", type=float, default=10.0, metavar="S",
+                   help="wall seconds to stay up after the scenario's end (PLI in, last events out)")
+    t = p.add_argument_group("TLS to a TAK server (tls:// URLs)")
+    t.add_argument("--tls-cert", metavar="PEM|P12", help="client certificate (PEM, or PKCS#12 .p12)")
+    t.add_argument("--tls-key", metavar="PEM", help="client key (PEM)")
+    t.add_argument("--tls-ca", metavar="PEM", help="CA to verify the TAK server with")
+    t.add_argument("--tls-password", metavar="PW", help="password of the key or .p12")
+    t.add_argument("--tls-no-verify", action="store_true", help="do not verify the server (tests only)")
+    t.add_argument("--tls-server-name", metavar="NAME", help="server name expected in its certificate")
+
+
+class TakFeed:
+    """The mesh side: subscriptions into one queue taken by one thread; each payload
+    checked by the gate, then into the picture; the events it yields go to the network."""
+
+    def __init__(self, sc, conf, root: str, picture: Picture, send: Callable[[bytes], None],
+                 overlay_every: float | None = 300.0, log: Callable = print):
+        self.sc, self.conf, self.picture, self.send, self.log = sc, conf, picture, send, log
+        self.ks = KeySpace.of(sc, root)
+        self.gate = W.Gate(sc.duration_s, log=log)
+        self.classes = CLASSES.get(domains.of(sc).NAME, ())
+        self.overlay_every = overlay_every
+        self._overlay_next = 0.0
+        self.alerts = 0
+        self.q: queue.SimpleQueue = queue.SimpleQueue()
+        self.lock = threading.Lock()
+        self.session = self.publisher = None
+        self.caught_up = False
+        self.subs: list = []
+        self.thread = threading.Thread(target=self._loop, name="tak-feed", daemon=True)
+
+    def keys(self) -> list[str]:
+        data = sorted({self.ks.data(c) for c in self.classes})
+        return [self.ks.clock(), f"{self.ks.root}/alert/**", *data]
+
+    def ingest_key(self) -> str:
+        f = getattr(self.ks, "ingest", None)   # KeySpace.ingest(source), once the replay takes ingest/**
+        return f(IDENTITY) if callable(f) else f"{self.ks.root}/ingest/{IDENTITY}"
+
+    def open(self) -> None:
+        import zenoh
+        self.session = s = zenoh.open(self.conf)
+        self.publisher = s.declare_publisher(self.ingest_key(), congestion_control=zenoh.CongestionControl.BLOCK)
+        put = self.q.put
+        for k in self.keys():
+            self.subs.append(s.declare_subscriber(k, lambda smp: put((str(smp.key_expr), smp.payload.to_bytes()))))
+        self.thread.start()
+
+    def publish(self, rep) -> None:
+        """A checked LocationReport from a TAK client into the mesh (any thread)."""
+        if self.publisher is not None:
+            self.publisher.put(M.encode(rep))
+
+    def close(self) -> None:
+        self.q.put(None)
+        if self.thread.is_alive():
+            self.thread.join(5.0)
+        for sub in self.subs:
+            sub.undeclare()
+        if self.publisher is not None:
+            self.publisher.undeclare()
+            self.publisher = None
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+
+    def _loop(self) -> None:
+        while True:
+            try:
+                item = self.q.get(timeout=2.0)
+            except queue.Empty:
+                if not self.caught_up and self.session is not None:
+                    self.caught_up = self.catch_up(timeout=2.0)
+                continue
+            if item is None:
+                return
+            try:
+                self.take(*item)
+            except Exception as e:   # a bug here must not end the feed: said, counted, skipped
+                self.gate.rejects.add(M.MessageError("?", "(tak)", f"{type(e).__name__}: {e}"[:200]), item[0])
+
+    def _emit(self, events: list[bytes]) -> None:
+        for b in events:
+            self.send(b)
+
+    def take(self, key: str, payload: bytes) -> None:
+        """One payload from the mesh, checked, into the picture; what is due goes out."""
+        ks, gate, pic = self.ks, self.gate, self.picture
+        fam = ks.family(key)
+        if fam == "clock":
+            tick = gate.control(W.Tick, payload, key)
+            if tick is None or (tick.end and tick.t < self.sc.duration_s):
+                return
+            if not self.caught_up and self.session is not None:
+                self.caught_up = True
+                self.catch_up()
+            with self.lock:
+                pic.clock(tick.t, tick.end)
+                if self.overlay_every is not None and pic.t >= self._overlay_next:
+                    self._overlay_next = pic.t + self.overlay_every
+                    self._emit(pic.overlay_events())
+                self._emit(pic.due(force=tick.end))
+            return
+        m = gate.data(payload, key)
+        if m is None:
+            return
+        ok = type(m) is M.Alert if fam == "alert" else type(m) in self.classes
+        why = ks.mismatch(key, m) if ok else f"a {m.KIND} message on {fam}/ keys"
+        if why is not None:
+            gate.rejects.add(M.MessageError(m.KIND, "(key)", why), key)
+            return
+        with self.lock:
+            if fam == "alert":
+                self.alerts += 1
+                self._emit([pic.alert_event(m)])
+            else:
+                pic.message(m)
+
+    def catch_up(self, timeout: float = 10.0) -> bool:
+        """Positions and tracks so far from the situation store (a gateway started late)."""
+        keys = sorted({self.ks.data(c) for c in self.classes})
+        req = W.encode(W.make(W.StoreQuery, since=0, keys=keys))
+        try:
+            replies = list(self.session.get(self.ks.store(), payload=req, timeout=timeout))
+        except Exception as e:   # no store reachable (access control, no replay): live data only
+            self.log(f"tak: no catch-up from the store ({type(e).__name__})", flush=True)
+            return False
+        for r in replies:
+            if r.ok is None:
+                continue
+            rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
+            if rep is None:
+                continue
+            with self.lock:
+                for _, p in rep.entries:
+                    m = self.gate.data(p, "store")
+                    if m is not None and type(m) in self.classes:
+                        self.picture.message(m)
+            return True
+        return False
+
+
+def picture_options(sc, opts) -> Options:
+    return Options(period_s=opts.period, refresh_s=opts.refresh, entities=opts.entities, pos_stale_s=opts.stale,
+                   alert_stale_s=opts.alert_stale, uid_prefix=opts.uid_prefix,
+                   epoch=opts.epoch if isinstance(opts.epoch, datetime) else _epoch(opts.epoch))
+
+
+def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None = None) -> int:
+    """Run the gateway for the mesh at `conf` (zconf.config(..., name="tak") under --pki)
+    until the replay's end tick plus `--linger` wall seconds, SIGTERM or Ctrl-C.
+    Prints `tak ready ...` once it listens and subscribes, `tak done ...` at the end."""
+    log = log or (lambda *a, **k: print(*a, **k, file=sys.stdout))
+    urls = opts.cot_url or [DEFAULT_COT_URL]
+    try:
+        uids = load_uids(opts.uids, opts.uid_rule) if (opts.uids or opts.uid_rule) else None
+        picture = Picture(sc, picture_options(sc, opts))
+        pli = PliIn(sc, uids or load_uids(None, None), own=picture.prefix + ".")
+    except ValueError as e:
+        print(f"saim-mesh tak: {e}", file=sys.stderr, flush=True)
+        return 2
+    if opts.listen_cot and uids is None:
+        log("tak: WARNING: --listen-cot without --uids or --uid-rule: every PLI is an unknown uid", flush=True)
+    feed_box: list[TakFeed] = []
+
+    def on_data(data: bytes, src: str) -> None:
+        rep = pli.take(data, picture.t)
+        if rep is not None and feed_box:
+            feed_box[0].publish(rep)
+
+    tls = TlsOptions(opts.tls_cert, opts.tls_key, opts.tls_ca, opts.tls_password, opts.tls_no_verify,
+                     opts.tls_no_verify, opts.tls_server_name)
+    net = Network(urls, opts.proto, opts.listen_cot, opts.mcast_if, opts.mcast_ttl, tls, on_data, log=log,
+                  hello=picture.presence_event())
+    feed = TakFeed(sc, conf, root, picture, net.send, None if opts.no_overlay else opts.overlay_every, log=log)
+    feed_box.append(feed)
+    stop = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        net.start()
+    except Exception as e:
+        print(f"saim-mesh tak: cannot listen: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+        net.close(0)
+        return 2
+    try:
+        feed.open()
+        log(f"tak ready cot={','.join(urls)} proto={opts.proto} "
+            f"listen={','.join(net.listening.values()) or '-'} ingest={feed.ingest_key()}", flush=True)
+        ended_at = None
+        while not stop.wait(0.2):
+            if picture.ended and ended_at is None:
+                ended_at = time.monotonic()
+                log(f"end of scenario t={picture.t:.0f}: {opts.linger:.0f} s more", flush=True)
+            if ended_at is not None and time.monotonic() - ended_at >= opts.linger:
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        feed.close()
+        net.close(flush_s=10.0)
+    sent = sum(s.n.sent for s in net.senders)
+    dropped = sum(s.n.dropped + s.n.failed for s in net.senders)
+    made = sum(picture.counts.values())
+    by_kind = " ".join(f"{k}={v}" for k, v in sorted(picture.counts.items()))
+    cot_rejects = pli.rejected + net.oversized
+    log(f"tak done t={picture.t:.0f} events={made} ({by_kind}) sent={sent} dropped={dropped} "
+        f"alerts={feed.alerts} pli={pli.accepted} rejects={feed.gate.rejects.total} cot_rejects={cot_rejects}"
+        + (f" ({', '.join(f'{k} {v}' for k, v in sorted(pli.rejects.items()))})" if pli.rejects else ""),
+        flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m saim_mesh.tak SCENARIO ...`: the same gateway before the CLI wires
+    `saim-mesh tak` (no --pki: the `tak` identity's certificate and rules come with it)."""
+    from .. import scenario as S
+    from ..zconf import config
+    ap = argparse.ArgumentParser(prog="python -m saim_mesh.tak", description=__doc__.split("\n")[0])
+    ap.add_argument("scenario")
+    ap.add_argument("--listen", nargs="*", metavar="ENDPOINT")
+    ap.add_argument("--connect", nargs="*", metavar="ENDPOINT")
+    ap.add_argument("--zenoh-config", metavar="JSON5")
+    ap.add_argument("--multicast", action="store_true")
+    ap.add_argument("--root")
+    add_arguments(ap)
+    a = ap.parse_args(argv)
+    sc = S.load(a.scenario, events=False)
+    root = a.root or f"saim/{sc.name}"
+    return main_tak(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast, None, None, sc, root), root, a)
