@@ -52,6 +52,25 @@ class TaskOrg:
     def children(self, unit: str) -> list[str]:
         return sorted(u for u, p in self.parent.items() if p == unit)
 
+    def centroids(self, entity_pos) -> dict[str, tuple[float, float, int]]:
+        """Each unit's centroid: the mean (lon, lat) of the latest positions of every
+        entity in its subtree, with their count. `entity_pos`: entity -> (lon, lat, ...).
+        Entities not in the organization are left out."""
+        sums: dict[str, list[float]] = {}
+        for e, p in entity_pos.items():
+            u = self.entity_unit.get(e)
+            if u is None:
+                continue
+            for v in (u, *self.ancestors(u)):
+                s = sums.get(v)
+                if s is None:
+                    sums[v] = [p[0], p[1], 1]
+                else:
+                    s[0] += p[0]
+                    s[1] += p[1]
+                    s[2] += 1
+        return {u: (s[0] / s[2], s[1] / s[2], int(s[2])) for u, s in sorted(sums.items())}
+
     def ancestors(self, unit: str) -> list[str]:
         out, p = [], self.parent.get(unit)
         while p is not None:

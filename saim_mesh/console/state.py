@@ -114,21 +114,8 @@ class State:
 
     def _positions(self) -> dict[str, list[float]]:
         """Each unit's centroid: the mean of the latest positions of every entity in its subtree."""
-        to = self.taskorg
-        sums: dict[str, list[float]] = {}
-        for e, (lon, lat) in self.entity_pos.items():
-            u = to.entity_unit.get(e)
-            if u is None:
-                continue
-            for v in (u, *to.ancestors(u)):
-                s = sums.get(v)
-                if s is None:
-                    sums[v] = [lon, lat, 1]
-                else:
-                    s[0] += lon
-                    s[1] += lat
-                    s[2] += 1
-        return {u: [round(s[0] / s[2], 6), round(s[1] / s[2], 6)] for u, s in sorted(sums.items())}
+        cs = self.taskorg.centroids(self.entity_pos)
+        return {u: [round(lon, 6), round(lat, 6)] for u, (lon, lat, _) in cs.items()}
 
     def _tracks(self) -> dict[str, list]:
         old = self.t - TRACK_TTL_S

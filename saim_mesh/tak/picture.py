@@ -112,21 +112,7 @@ class Picture:
         """Each unit's centroid over its subtree's entities (as the console computes it)."""
         if self._units is not None:
             return self._units
-        to = self.taskorg
-        sums: dict[str, list[float]] = {}
-        for e, (lon, lat, _) in self.entity_pos.items():
-            u = to.entity_unit.get(e)
-            if u is None:
-                continue
-            for v in (u, *to.ancestors(u)):
-                s = sums.get(v)
-                if s is None:
-                    sums[v] = [lon, lat, 1]
-                else:
-                    s[0] += lon
-                    s[1] += lat
-                    s[2] += 1
-        self._units = {u: (s[0] / s[2], s[1] / s[2], int(s[2])) for u, s in sums.items()}
+        self._units = self.taskorg.centroids(self.entity_pos)
         return self._units
 
     def _changed(self, uid: str, lon: float, lat: float, t: float) -> bool:
