@@ -152,7 +152,7 @@ def test_shapes_have_their_points(emitted, small):
 
 # -- bad input -------------------------------------------------------------------------
 def good(**over) -> bytes:
-    t = over.pop("t", NOW)
+    t = over.pop("t", None) or datetime.now(timezone.utc)   # at call time: a PLI goes stale after 5 min
     ev = C.element("ANDROID-1", "a-f-G-U-C", -116.5, 35.2, t, t + timedelta(minutes=5), callsign="ALPHA")
     for k, v in over.items():
         if k in ("lat", "lon"):
