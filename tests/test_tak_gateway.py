@@ -20,7 +20,6 @@ from urllib.parse import urlparse
 import pytest
 import takproto
 
-from dissemination.keyspace import KeySpace
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
@@ -411,8 +410,6 @@ def test_mesh_alerts_arrive_as_cot_on_multicast_and_tcp(tmp_path):
 
 
 @pytest.mark.timeout(300)
-@pytest.mark.skipif(not hasattr(KeySpace, "ingest"), reason="needs the replay to take <root>/ingest/** "
-                    "(KeySpace.ingest): docs/tak.md, Wiring needed")
 def test_pli_through_the_mesh_makes_the_ea_alert(tmp_path):
     """PLI from pytak into the gateway's TCP port -> ingest/tak -> the replay -> A2's EA."""
     sc = str(SMALL)

@@ -7,17 +7,16 @@ as fusion node or replay, and a console sends no acks, so a token would stall th
 replay for its stall timeout. The console only listens and sends commands."""
 from __future__ import annotations
 
-import queue
 import threading
 from typing import Callable
 
 import zenoh
 
-from dissemination.keyspace import KeySpace
 from ea_agent import domains
 
 from .. import messages as M
 from .. import wire as W
+from ..reader import MeshReader
 from .actions import CommandActions, result_dict
 from .state import State
 
@@ -26,56 +25,18 @@ CLASSES = {"suo": (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForF
            "uv": (M.UvState, M.UvSighting, M.UvAgent)}
 
 
-class MeshFeed:
-    """Subscriptions into one queue, taken by one thread (the gate and the state see
-    one payload at a time, in arrival order)."""
+class MeshFeed(MeshReader):
+    """The console's mesh side (a `MeshReader`): each payload checked, into the state."""
+    NAME = "console"
 
     def __init__(self, sc, conf: zenoh.Config, root: str, state: State, log: Callable = print):
-        self.sc, self.conf, self.state, self.log = sc, conf, state, log
-        self.ks = KeySpace.of(sc, root)
-        self.gate = W.Gate(sc.duration_s, log=log)
-        self.classes = CLASSES.get(domains.of(sc).NAME, ())
-        self.q: queue.SimpleQueue = queue.SimpleQueue()
-        self.session = None
-        self.caught_up = False
-        self.subs: list = []
-        self.thread = threading.Thread(target=self._loop, name="console-feed", daemon=True)
+        super().__init__(sc, conf, root, CLASSES.get(domains.of(sc).NAME, ()), log)
+        self.state = state
 
     def keys(self) -> list[str]:
         r = self.ks.root
         data = sorted({self.ks.data(c) for c in self.classes})
         return [self.ks.clock(), f"{r}/alert/**", f"{r}/cmdlog/**", *data]
-
-    def open(self) -> None:
-        self.session = s = zenoh.open(self.conf)
-        put = self.q.put
-        for k in self.keys():
-            self.subs.append(s.declare_subscriber(k, lambda smp: put((str(smp.key_expr), smp.payload.to_bytes()))))
-        self.thread.start()
-
-    def close(self) -> None:
-        self.q.put(None)
-        self.thread.join(5.0)
-        for sub in self.subs:
-            sub.undeclare()
-        if self.session is not None:
-            self.session.close()
-            self.session = None
-
-    def _loop(self) -> None:
-        while True:
-            try:
-                item = self.q.get(timeout=2.0)
-            except queue.Empty:   # quiet: joined late (or after the end)? ask the store
-                if not self.caught_up:
-                    self.caught_up = self.catch_up(timeout=2.0)
-                continue
-            if item is None:
-                return
-            try:
-                self.take(*item)
-            except Exception as e:   # a bug here must not end the feed: said, counted, skipped
-                self.gate.rejects.add(M.MessageError("?", "(console)", f"{type(e).__name__}: {e}"[:200]), item[0])
 
     def take(self, key: str, payload: bytes) -> None:
         """One payload from the mesh, checked, into the state."""
@@ -84,9 +45,7 @@ class MeshFeed:
         if fam == "clock":
             tick = gate.control(W.Tick, payload, key)
             if tick is not None and not (tick.end and tick.t < self.sc.duration_s):
-                if not self.caught_up:
-                    self.caught_up = True
-                    self.catch_up()
+                self.first_tick()
                 st.clock(tick.t, tick.end, tick.w)
             return
         if fam == "cmdlog":
@@ -108,32 +67,12 @@ class MeshFeed:
             st.message(m)
 
 
-    def catch_up(self, timeout: float = 10.0) -> bool:
-        """The picture so far from the situation store, at the first tick: a console that
-        joins late, or whose subscriptions reached the replay after its first messages,
-        still shows every unit and confirmation (positions: the latest wins anyway)."""
-        if self.session is None:
-            return False
-        keys = sorted({self.ks.data(c) for c in self.classes})
-        req = W.encode(W.make(W.StoreQuery, since=0, keys=keys))
-        try:
-            replies = list(self.session.get(self.ks.store(), payload=req, timeout=timeout))
-        except Exception as e:   # no store reachable (access control, no replay): live data only
-            self.log(f"console: no catch-up from the store ({type(e).__name__})", flush=True)
-            return False
-        for r in replies:
-            if r.ok is None:
-                continue
-            rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
-            for _, p in rep.entries if rep is not None else ():
-                m = self.gate.data(p, "store")
-                if m is not None and type(m) in self.classes:
-                    self.state.message(m)
-            if rep is not None:
-                if rep.t > 0:   # a replay that ended (and lingers) still ends the console
-                    self.state.clock(rep.t, rep.t >= self.sc.duration_s)
-                return True
-        return False
+    def stored(self, messages: list, t: float) -> None:
+        """At the first tick: every unit and confirmation so far (positions: the latest wins)."""
+        for m in messages:
+            self.state.message(m)
+        if t > 0:   # a replay that ended (and lingers) still ends the console
+            self.state.clock(t, t >= self.sc.duration_s)
 
 
 def mesh_actions(feed: MeshFeed, timeout: float = 10.0) -> CommandActions:

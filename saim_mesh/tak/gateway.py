@@ -10,7 +10,6 @@ No liveliness token, for the console's reason: the replay's pacer would wait for
 from __future__ import annotations
 
 import argparse
-import queue
 import signal
 import sys
 import threading
@@ -18,11 +17,11 @@ import time
 from datetime import datetime, timezone
 from typing import Callable
 
-from dissemination.keyspace import KeySpace
 from ea_agent import domains
 
 from .. import messages as M
 from .. import wire as W
+from ..reader import MeshReader
 from .picture import Options, Picture
 from .pli import PliIn, load_uids
 from .transports import Network, TlsOptions, check_url
@@ -108,75 +107,39 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--tls-server-name", metavar="NAME", help="server name expected in its certificate")
 
 
-class TakFeed:
-    """The mesh side: subscriptions into one queue taken by one thread; each payload
-    checked by the gate, then into the picture; the events it yields go to the network."""
+class TakFeed(MeshReader):
+    """The mesh side (a `MeshReader`): each payload checked by the gate, then into the
+    picture; the events it yields go to the network. PLI go out on ingest/tak."""
+    NAME = "tak"
 
     def __init__(self, sc, conf, root: str, picture: Picture, send: Callable[[bytes], None],
                  overlay_every: float | None = 300.0, log: Callable = print):
-        self.sc, self.conf, self.picture, self.send, self.log = sc, conf, picture, send, log
-        self.ks = KeySpace.of(sc, root)
-        self.gate = W.Gate(sc.duration_s, log=log)
-        self.classes = CLASSES.get(domains.of(sc).NAME, ())
+        super().__init__(sc, conf, root, CLASSES.get(domains.of(sc).NAME, ()), log)
+        self.picture, self.send = picture, send
         self.overlay_every = overlay_every
         self._overlay_next = 0.0
         self.alerts = 0
-        self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.Lock()
-        self.session = self.publisher = None
-        self.caught_up = False
-        self.subs: list = []
-        self.thread = threading.Thread(target=self._loop, name="tak-feed", daemon=True)
+        self.publisher = None
 
     def keys(self) -> list[str]:
         data = sorted({self.ks.data(c) for c in self.classes})
         return [self.ks.clock(), f"{self.ks.root}/alert/**", *data]
 
-    def ingest_key(self) -> str:
-        f = getattr(self.ks, "ingest", None)   # KeySpace.ingest(source), once the replay takes ingest/**
-        return f(IDENTITY) if callable(f) else f"{self.ks.root}/ingest/{IDENTITY}"
-
-    def open(self) -> None:
+    def opened(self, session) -> None:
         import zenoh
-        self.session = s = zenoh.open(self.conf)
-        self.publisher = s.declare_publisher(self.ingest_key(), congestion_control=zenoh.CongestionControl.BLOCK)
-        put = self.q.put
-        for k in self.keys():
-            self.subs.append(s.declare_subscriber(k, lambda smp: put((str(smp.key_expr), smp.payload.to_bytes()))))
-        self.thread.start()
+        self.publisher = session.declare_publisher(self.ks.ingest(IDENTITY),
+                                                   congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def closing(self) -> None:
+        if self.publisher is not None:
+            self.publisher.undeclare()
+            self.publisher = None
 
     def publish(self, rep) -> None:
         """A checked LocationReport from a TAK client into the mesh (any thread)."""
         if self.publisher is not None:
             self.publisher.put(M.encode(rep))
-
-    def close(self) -> None:
-        self.q.put(None)
-        if self.thread.is_alive():
-            self.thread.join(5.0)
-        for sub in self.subs:
-            sub.undeclare()
-        if self.publisher is not None:
-            self.publisher.undeclare()
-            self.publisher = None
-        if self.session is not None:
-            self.session.close()
-            self.session = None
-
-    def _loop(self) -> None:
-        while True:
-            try:
-                item = self.q.get(timeout=2.0)
-            except queue.Empty:
-                if not self.caught_up and self.session is not None:
-                    self.caught_up = self.catch_up(timeout=2.0)
-                continue
-            if item is None:
-                return
-            try:
-                self.take(*item)
-            except Exception as e:   # a bug here must not end the feed: said, counted, skipped
-                self.gate.rejects.add(M.MessageError("?", "(tak)", f"{type(e).__name__}: {e}"[:200]), item[0])
 
     def _emit(self, events: list[bytes]) -> None:
         for b in events:
@@ -190,9 +153,7 @@ class TakFeed:
             tick = gate.control(W.Tick, payload, key)
             if tick is None or (tick.end and tick.t < self.sc.duration_s):
                 return
-            if not self.caught_up and self.session is not None:
-                self.caught_up = True
-                self.catch_up()
+            self.first_tick()
             with self.lock:
                 pic.clock(tick.t, tick.end)
                 if self.overlay_every is not None and pic.t >= self._overlay_next:
@@ -215,28 +176,11 @@ class TakFeed:
             else:
                 pic.message(m)
 
-    def catch_up(self, timeout: float = 10.0) -> bool:
-        """Positions and tracks so far from the situation store (a gateway started late)."""
-        keys = sorted({self.ks.data(c) for c in self.classes})
-        req = W.encode(W.make(W.StoreQuery, since=0, keys=keys))
-        try:
-            replies = list(self.session.get(self.ks.store(), payload=req, timeout=timeout))
-        except Exception as e:   # no store reachable (access control, no replay): live data only
-            self.log(f"tak: no catch-up from the store ({type(e).__name__})", flush=True)
-            return False
-        for r in replies:
-            if r.ok is None:
-                continue
-            rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
-            if rep is None:
-                continue
-            with self.lock:
-                for _, p in rep.entries:
-                    m = self.gate.data(p, "store")
-                    if m is not None and type(m) in self.classes:
-                        self.picture.message(m)
-            return True
-        return False
+    def stored(self, messages: list, t: float) -> None:
+        """Positions and tracks so far (a gateway started late)."""
+        with self.lock:
+            for m in messages:
+                self.picture.message(m)
 
 
 def picture_options(sc, opts) -> Options:
@@ -285,7 +229,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
     try:
         feed.open()
         log(f"tak ready cot={','.join(urls)} proto={opts.proto} "
-            f"listen={','.join(net.listening.values()) or '-'} ingest={feed.ingest_key()}", flush=True)
+            f"listen={','.join(net.listening.values()) or '-'} ingest={feed.ks.ingest(IDENTITY)}", flush=True)
         ended_at = None
         while not stop.wait(0.2):
             if picture.ended and ended_at is None:
