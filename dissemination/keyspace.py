@@ -22,7 +22,7 @@ SUO's families:
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
   <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing)
   <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
-  <root>/cmd/<unit>/<kind>                     a commander's command to a unit's EA (docs/console.md)
+  <root>/cmd/<unit>/<kind>/<by>                a command to a unit's EA from the console of unit <by>
   <root>/cmdlog/<unit>                         the EA's answer to every command (CmdResult)
   <root>/store/log                             the situation store (queryable)
   <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
@@ -236,9 +236,11 @@ class KeySpace:
     def store(self) -> str:
         return f"{self.root}/store/log"
 
-    def cmd(self, unit: str, kind: str = "*") -> str:
-        """Commands to `unit`'s EA (ack, silence, unsilence, set, confirm, cff)."""
-        return f"{self.root}/cmd/{unit}/{kind}"
+    def cmd(self, unit: str, kind: str = "*", by: str = "*") -> str:
+        """Commands to `unit`'s EA (ack, silence, unsilence, set, confirm, cff) from the
+        console of unit `by`: access control binds `by` to the sender's certificate, and
+        the EA checks that `by` commands it in the hierarchy as it is now."""
+        return f"{self.root}/cmd/{unit}/{kind}/{by}"
 
     def ingest(self, source: str = "*") -> str:
         """Live reports from outside the script (a TAK gateway's PLI): the replay, which

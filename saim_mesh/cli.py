@@ -293,7 +293,7 @@ def cmd_command(a) -> int:
     name = a.as_ or (f"console.{a.unit}" if a.unit in mesh_units(sc) else f"console.{sc.taskorg.root}")
     conf = config(None, a.connect, a.zenoh_config, a.multicast, a.pki, name, sc, root)
     with zenoh.open(conf) as session:
-        res = C.send(session, KeySpace.of(sc, root), a.unit, cmd, a.timeout)
+        res = C.send(session, KeySpace.of(sc, root), a.unit, cmd, C.by_of(name, a.unit), a.timeout)
     print(json.dumps(C.to_dict(res)))
     return 0 if res.ok else 2
 

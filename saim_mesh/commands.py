@@ -124,15 +124,37 @@ def _cff(ea, book: OrderedDict, cmd: W.CffCmd, t: float) -> None:
 
 
 # -- over the mesh ---------------------------------------------------------------------------
-def send(session, ks, unit: str, cmd, timeout: float = 10.0) -> W.CmdResult:
-    """Publish `cmd` to `unit`'s EA and wait for its answer (same `req`). No answer in time
-    (no EA peer, or access control dropped the command) is a failed result, not an error."""
+def authority(taskorg, by: str, unit: str) -> str | None:
+    """Why the console of `by` may not command `unit`'s EA in the hierarchy as it is now
+    (None: it may). A commander acts for their own unit and its subordinates; after a
+    reorganization, the new superior does and the old one no longer does."""
+    if by == unit:
+        return None
+    if taskorg is None or by not in taskorg.units:
+        return f"the console of {by[:64]!r} does not command {unit} (not a unit above it)"
+    above = taskorg.ancestors(unit)
+    if by not in above:
+        chain = "/".join([*reversed(above), unit])
+        return f"the console of {by} does not command {unit} (its chain of command is now {chain})"
+    return None
+
+
+def by_of(identity: str, unit: str) -> str:
+    """The unit a command is sent for: `console.<U>` sends as U (access control holds it
+    to that); any other identity (the all-units `console`, open mode) as the unit itself."""
+    return identity.removeprefix("console.") if identity.startswith("console.") else unit
+
+
+def send(session, ks, unit: str, cmd, by: str, timeout: float = 10.0) -> W.CmdResult:
+    """Publish `cmd` to `unit`'s EA as the console of unit `by` and wait for its answer
+    (same `req`). No answer in time (no EA peer, or access control dropped the command)
+    is a failed result, not an error."""
     kind = KIND_OF[type(cmd)]
     end = time.monotonic() + timeout
     answers: queue.SimpleQueue = queue.SimpleQueue()
     gate = W.Gate(W.T_LIMIT)
     sub = session.declare_subscriber(ks.cmdlog(unit), lambda s: answers.put(s.payload.to_bytes()))
-    pub = session.declare_publisher(ks.cmd(unit, kind), congestion_control=zenoh.CongestionControl.BLOCK)
+    pub = session.declare_publisher(ks.cmd(unit, kind, by), congestion_control=zenoh.CongestionControl.BLOCK)
     try:
         if not _wait_matching(pub, end):
             return result(cmd, False, 0.0, f"no EA of {unit} listening within {timeout:.0f} s")

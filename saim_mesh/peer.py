@@ -403,15 +403,20 @@ class Peer:
     def _command(self, key: str, payload: bytes) -> W.CmdResult | None:
         self.n_cmds += 1
         prefix = f"{self.ks.root}/cmd/"
-        unit, _, kind = key[len(prefix):].partition("/") if key.startswith(prefix) else ("", "", "")
+        unit, kind, by = (key[len(prefix):].split("/") + ["", "", ""])[:3] if key.startswith(prefix) else ("", "", "")
         cls = W.COMMANDS.get(kind)
-        if unit != self.unit or cls is None:
-            why = f"not a command to {self.unit}" if unit != self.unit else f"unknown command kind {kind[:32]!r}"
+        if unit != self.unit or cls is None or not by:
+            why = (f"not a command to {self.unit}" if unit != self.unit else
+                   f"unknown command kind {kind[:32]!r}" if cls is None else "no sender unit in the key")
             self._reject("cmd", "(key)", why, key)
             return self._refusal(payload, kind, why)
         cmd = self.gate.control(cls, payload, key)
         if cmd is None:
             return self._refusal(payload, kind, self.gate.rejects.recent[-1] if self.gate.rejects.recent else "bad")
+        refused = C.authority(getattr(self.ea.domain, "taskorg", None), by, self.unit)
+        if refused is not None:   # the hierarchy as this EA knows it now (reorganizations included)
+            self._reject("cmd", "(authority)", refused, key)
+            return C.result(cmd, False, self.t, refused)
         res = C.apply(self.ea, cmd, self.t)
         if self.clog is not None:   # applied after the tick at self.t: `run --commands` does the same
             self.clog.write(self.unit, self.t, cmd, res)
@@ -466,7 +471,7 @@ class Peer:
                 # noticed); Zenoh has put every sample before a tick into its channel already
                 clock = s.declare_subscriber(self.ks.clock(), lambda smp: clockq.put(smp.payload.to_bytes()))
                 self._wake = lambda: clockq.put(None)
-                cmds = s.declare_subscriber(self.ks.cmd(self.unit), self._on_cmd)
+                cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"), self._on_cmd)
                 self._check_connected(s)
                 self._resubscribe()
                 self.presence = Presence(self, s)

@@ -1,7 +1,8 @@
 """A commander's commands over the mesh (docs/console.md 1): a replay and A2's EA peer on
 the small scenario, loopback, free ports, every child reaped; commands given with the CLI
 (`python -m saim_mesh ack|set|...`) and answered on cmdlog/A2. In secure mode, access
-control lets `console.<U>` command the EAs of U's subtree and nobody else. Waits are on
+control lets `console.<U>` send only as U, and each EA takes commands from the consoles of
+its own unit and the units above it as organized now (reorganizations included). Waits are on
 what the processes print or write, bounded, never sleeps for synchronisation."""
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import pytest
 import zenoh
 
 from dissemination.keyspace import KeySpace
+from saim_mesh import commands as C
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
 from saim_mesh.mesh import start_peer
@@ -47,19 +49,21 @@ def alerts_in(path):
         return []
 
 
-def start(tmp, pki=None):
-    """A replay up to UNTIL and A2's peer; returns (endpoint, root, procs, alert log)."""
+def start(tmp, pki=None, more=()):
+    """A replay up to UNTIL, A2's peer and the peers of units MORE; returns (endpoint,
+    root, procs, A2's alert log)."""
     ep = endpoint_tls(free_port()) if pki else f"tcp/127.0.0.1:{free_port()}"
     root = f"test/{uuid.uuid4().hex[:8]}"
     sec = ["--pki", str(pki)] if pki else []
     replay = Proc("replay", [*py(), "replay", SC, "--listen", ep, "--root", root, "--speed", "max",
-                             "--until", str(UNTIL), "--linger", "600", *sec, "--wait-peers", "A2"],
+                             "--until", str(UNTIL), "--linger", "600", *sec, "--wait-peers", "A2", *more],
                   env=clean_env(), log_dir=tmp)
     procs = [replay]
     try:
         replay.wait_for("ready", 60)
         out = tmp / "A2.jsonl"
         procs.append(start_peer(SC, "A2", ep, root, out, pki=pki, log_dir=tmp))
+        procs += [start_peer(SC, u, ep, root, tmp / f"{u}.jsonl", pki=pki, log_dir=tmp) for u in more]
         replay.wait_for("end ", 120)
         wait_until(lambda: any(a["details"].get("id") == "A2/1" for a in alerts_in(out)), 60, "first alert")
     except BaseException:
@@ -74,14 +78,25 @@ def reap(procs):
     assert all(p.p.poll() is not None for p in procs)
 
 
-def cli(kind, ep, root, *args, pki=None, timeout=10.0):
+def cli(kind, ep, root, *args, pki=None, timeout=10.0, unit="A2"):
     """Run `python -m saim_mesh KIND ...`: (exit code, the printed CmdResult)."""
     sec = ["--pki", str(pki)] if pki else []
-    r = subprocess.run([*py(), kind, "--scenario", SC, "--unit", "A2", "--connect", ep, "--root", root,
+    r = subprocess.run([*py(), kind, "--scenario", SC, "--unit", unit, "--connect", ep, "--root", root,
                         "--timeout", str(timeout), *sec, *args],
                        capture_output=True, text=True, cwd=ROOT, timeout=60 + timeout, env=clean_env())
     assert r.stdout.strip(), r.stderr
     return r.returncode, json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_authority_follows_the_task_organization():
+    to = S.load(SMALL, events=False).taskorg.copy()
+    assert C.authority(to, "A", "R") is None and C.authority(to, "BN", "R") is None
+    assert C.authority(to, "R", "R") is None and "does not command A" in C.authority(to, "A2", "A")
+    to.resubordinate("R", "BN")   # the small plan's reorganization at 600 s
+    assert C.authority(to, "A", "R") == "the console of A does not command R (its chain of command is now BN/R)"
+    assert C.authority(to, "BN", "R") is None
+    assert "not a unit above it" in C.authority(to, "ZZ", "R") and "not a unit" in C.authority(None, "A", "R")
+    assert C.by_of("console.A", "R") == "A" and C.by_of("console", "R") == "R" and C.by_of("ea.C", "A2") == "A2"
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +140,7 @@ def test_malformed_commands_are_counted_and_answered(plain):
     answers: queue.Queue = queue.Queue()
     with zenoh.open(config(connect=[ep])) as s:
         sub = s.declare_subscriber(ks.cmdlog("A2"), lambda smp: answers.put(smp.payload.to_bytes()))
-        pub = s.declare_publisher(ks.cmd("A2", "ack"))
+        pub = s.declare_publisher(ks.cmd("A2", "ack", "A2"))
         changes: queue.Queue = queue.Queue()
         with pub.declare_matching_listener(lambda st: changes.put(st.matching)):
             if not pub.matching_status.matching:
@@ -150,11 +165,24 @@ def test_access_control_limits_commands_to_the_subtree(tmp_path):
     sc = S.load(SMALL, events=False)
     pki = tmp_path / "pki"
     make_pki(pki, names_for(sc, consoles=True))
-    ep, root, procs, _ = start(tmp_path, pki)
+    ep, root, procs, _ = start(tmp_path, pki, more=["R"])
     try:
-        for who in ("console.C", "ea.C", "ea.A2"):   # outside A's subtree, or not a console
+        # R went from A to BN at 600 s; the peers are at 1000 s: R's EA refuses A's console
+        # and says why, and takes BN's; no console can claim another unit in the key
+        code, res = cli("set", ep, root, "--key", "voi.out_of_position_m", "--value", "400", "--as", "console.A",
+                        pki=pki, unit="R")
+        assert code == 2 and res["error"] == "the console of A does not command R (its chain of command is now BN/R)"
+        assert 600 < res["t"] <= UNTIL
+        for who in ("console.BN", "console.R"):
+            code, res = cli("set", ep, root, "--key", "voi.out_of_position_m", "--value", "400", "--as", who,
+                            pki=pki, unit="R")
+            assert code == 0 and res["ok"], (who, res)
+        assert forged(ep, root, pki, "console.A", C.make("ack", alert="R/1"), "R", by="BN") is None
+        for who in ("ea.C", "ea.A2"):   # not a console: access control drops it
             code, res = cli("ack", ep, root, "--alert", "A2/1", "--as", who, pki=pki, timeout=4.0)
             assert code == 2 and not res["ok"] and "no answer" in res["error"], who
+        code, res = cli("ack", ep, root, "--alert", "A2/1", "--as", "console.C", pki=pki)   # not above A2
+        assert code == 2 and res["error"] == "the console of C does not command A2 (its chain of command is now BN/A/A2)"
         for who in ("console.A2", "console.A", "console.BN"):
             code, res = cli("ack", ep, root, "--alert", "A2/1", "--as", who, pki=pki)
             assert code == 0 and res["ok"], (who, res)
@@ -162,6 +190,30 @@ def test_access_control_limits_commands_to_the_subtree(tmp_path):
         assert code == 0 and res["ok"]
         procs[1].wait_for("cmd ack", 10)
         answered = [ln for ln in procs[1].tail(10_000) if ln.startswith("cmd ")]
-        assert len(answered) == 4 and all("ok=True" in ln for ln in answered)   # refused ones never arrived
+        assert len(answered) == 5 and sum("ok=True" in ln for ln in answered) == 4   # ea.* never arrived
+        by_r = [ln for ln in procs[2].tail(10_000) if ln.startswith("cmd ")]
+        assert len(by_r) == 3 and sum("ok=True" in ln for ln in by_r) == 2   # the forged one never arrived
     finally:
         reap(procs)
+
+
+def forged(ep, root, pki, who, cmd, unit, by, wait=4.0):
+    """Publish `cmd` to `unit` as identity `who` under a key naming `by`'s console; the
+    EA's answer, or None when none came (access control dropped it)."""
+    sc = S.load(SMALL, events=False)
+    ks = KeySpace(root)
+    answers: queue.Queue = queue.Queue()
+    with zenoh.open(config(None, [ep], None, False, pki, who, sc, root)) as s:
+        sub = s.declare_subscriber(ks.cmdlog(unit), lambda smp: answers.put(smp.payload.to_bytes()))
+        s.put(ks.cmd(unit, "ack", by), W.encode(cmd))
+        end = time.monotonic() + wait
+        try:
+            while (left := end - time.monotonic()) > 0:
+                r = msgspec.msgpack.decode(answers.get(timeout=left), type=W.CmdResult)
+                if r.req == cmd.req:
+                    return r
+        except queue.Empty:
+            return None
+        finally:
+            sub.undeclare()
+    return None

@@ -59,3 +59,31 @@ def test_the_page_shows_alerts_and_acts_on_them(console):
         wait(d, lambda d: "> 0" in status())
         bad = [e for e in js_errors(d) if "400" not in e]   # Chromium logs every 4xx response
         assert bad == [], bad
+
+
+def test_a_silence_by_area_is_listed_and_lifted_from_the_page(console):
+    """Silence by a control measure's name (offered from the overlay), see it in force with
+    its area, lift it with its button: each step answered by the EA."""
+    from selenium.webdriver.common.by import By
+    with chromium() as d:
+        d.get(console)
+        wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#overlay-ids option[value='OBJ-A']"))
+        d.find_element(By.ID, "silence-area").send_keys("OBJ-A")
+        d.find_element(By.ID, "silence-comment").send_keys("assault expected")
+        d.find_element(By.ID, "silence-btn").click()
+        rows = lambda d: d.find_elements(By.CSS_SELECTOR, "#silences li.silence")   # noqa: E731
+        wait(d, lambda d: len(rows(d)) == 1)
+        text = rows(d)[0].text
+        assert "areas OBJ-A" in text and "assault expected" in text and text.startswith("BN:"), text
+        status = lambda: d.find_element(By.ID, "status").get_attribute("textContent")   # noqa: E731
+        assert "silence" in status() and ": ok" in status(), status()
+        rows(d)[0].find_element(By.CSS_SELECTOR, "button.lift").click()
+        wait(d, lambda d: len(rows(d)) == 0)
+        wait(d, lambda d: "unsilence" in status() and ": ok" in status())
+        d.find_element(By.ID, "silence-area").clear()
+        d.find_element(By.ID, "silence-area").send_keys("NOWHERE")
+        d.find_element(By.ID, "silence-btn").click()
+        wait(d, lambda d: "unknown area 'NOWHERE'" in status())
+        assert len(rows(d)) == 0
+        bad = [e for e in js_errors(d) if "400" not in e]
+        assert bad == [], bad

@@ -19,7 +19,9 @@ with warnings.catch_warnings():   # starlette's notice about httpx2 is not ours 
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
+from saim_mesh.console.actions import CommandActions
 from saim_mesh.console.feed import MeshFeed, hook_inprocess
+from saim_mesh.mesh import mesh_units
 from saim_mesh.console.server import Server, make_app
 from saim_mesh.console.state import State
 
@@ -81,7 +83,7 @@ def test_state_shape_small(small):
     st.alert(alert())
     body = TestClient(make_app(st, FakeActions())).get("/api/state").json()
     assert set(body) == {"scenario", "unit", "units", "overlay", "positions", "tracks", "alerts", "counts", "t",
-                         "actors"}
+                         "actors", "silences"}
     assert body["scenario"] == small.name and body["unit"] == "BN" and "A2" in body["actors"]
     assert set(body["units"]) == set(small.taskorg.units)
     assert set(body["units"]["A1"]) == {"name", "kind", "parent", "mission", "mission_type", "state"}
@@ -170,6 +172,8 @@ def test_actions_call_the_actions_object(client):
     ("/api/silence", {"unit": "A", "types": "out-of-position", "for_s": 10}, "field 'types'"),
     ("/api/silence", {"unit": "A", "for_s": 10}, "at least one of"),
     ("/api/silence", {"unit": "A", "types": ["no-such-type"], "for_s": 10}, "unknown alert type"),
+    ("/api/silence", {"unit": "A", "areas": ["NO-SUCH-OBJ"], "for_s": 10}, "unknown area 'NO-SUCH-OBJ'"),
+    ("/api/unsilence", {"unit": "A", "id": "s9"}, "unknown silence 's9'"),
     ("/api/set", {"unit": "A", "key": "voi.x", "value": "high"}, "field 'value'"),
     ("/api/set", {"unit": "A", "key": "voi.x", "value": True}, "field 'value'"),
     ("/api/set", {"unit": "A", "key": "manager.epoch_s", "value": 1}, "not a [voi] or [voa] setting"),
@@ -293,3 +297,68 @@ def test_inprocess_hook_feeds_the_state(small):
         assert ("result", r.json()["result"]) in st.drain()
     r = c.post("/api/set", json={"unit": "A", "key": "voi.no_such_key", "value": 1})
     assert r.status_code == 400 and r.json()["error"]
+
+
+def test_reach_follows_a_planned_reorganization(small):
+    """R leaves A for BN at 600 s (the small plan's reorganization): A's console acts for R
+    before, not after, and the page is told; BN's acts for R throughout."""
+    a, bn = State(small, "A", eligible=mesh_units(small)), State(small, "BN", eligible=mesh_units(small))
+    assert a.actors == ["A", "A1", "A2", "A3", "R"] and "R" in bn.actors and "A1S1" not in a.actors
+    for st in (a, bn):
+        st.clock(599.0)
+        st.drain()
+    assert "R" in a.actors
+    a.clock(600.0)
+    bn.clock(600.0)
+    assert a.actors == ["A", "A1", "A2", "A3"] and "R" in bn.actors
+    org = dict(a.drain())["org"]
+    assert org["parents"]["R"] == "BN" and org["actors"] == ["A", "A1", "A2", "A3"]
+    assert a.snapshot()["units"]["R"]["parent"] == "BN"
+    fake = FakeActions()
+    r = TestClient(make_app(a, fake)).post("/api/set", json={"unit": "R", "key": "voi.x", "value": 1})
+    assert r.status_code == 400 and "does not act for R" in r.json()["error"] and fake.calls == []
+    r = TestClient(make_app(bn, fake)).post("/api/set", json={"unit": "R", "key": "voi.x", "value": 1})
+    assert r.status_code == 200 and fake.calls[-1][:2] == ("set", "R")
+
+
+def test_an_unplanned_reorganization_message_moves_the_reach(small):
+    a = State(small, "A", eligible=mesh_units(small))
+    a.message(M.Reorganization(50.0, "A3", "B"))
+    assert "A3" not in a.actors and a.snapshot()["units"]["A3"]["parent"] == "B"
+    a.message(M.Reorganization(60.0, "A3", "A3S1"))   # under its own subordinate: ignored, no crash
+    assert a.snapshot()["units"]["A3"]["parent"] == "B"
+
+
+def test_silences_are_listed_with_areas_lifted_and_expire(small):
+    st = fed(small, 500)
+    sent: list = []
+
+    def run(unit, cmd):   # an EA that takes every command
+        sent.append((unit, cmd))
+        return {"req": cmd.req, "kind": type(cmd).__name__, "ok": True, "error": "", "t": st.t}
+    c = TestClient(make_app(st, CommandActions(run, st)))
+    r = c.post("/api/silence", json={"unit": "A2", "types": [], "subjects": [], "areas": ["OBJ-A"],
+                                     "for_s": 300, "comment": "expected"})
+    assert r.status_code == 200, r.text
+    assert sent[-1][1].areas == ["OBJ-A"] and sent[-1][1].until_t == st.t + 300
+    [s1] = c.get("/api/state").json()["silences"]
+    assert s1["unit"] == "A2" and s1["areas"] == ["OBJ-A"] and s1["comment"] == "expected"
+    assert dict(st.drain())["silences"] == [s1]
+    r = c.post("/api/unsilence", json={"unit": "A2", "id": "nope"})
+    assert r.status_code == 400 and "unknown silence 'nope'" in r.json()["error"]
+    r = c.post("/api/unsilence", json={"unit": "A", "id": s1["id"]})
+    assert r.status_code == 400 and "on the EA of A2" in r.json()["error"]
+    n = len(sent)
+    assert c.post("/api/unsilence", json={"unit": "A2", "id": s1["id"]}).status_code == 200
+    assert len(sent) == n + 1 and type(sent[-1][1]) is W.UnsilenceCmd and sent[-1][1].id == s1["id"]
+    assert c.get("/api/state").json()["silences"] == [] and dict(st.drain())["silences"] == []
+    # a refused silence is not listed; an accepted one drops out when it expires
+    refuse = CommandActions(lambda u, cmd: {"req": cmd.req, "kind": "silence", "ok": False, "error": "no",
+                                            "t": st.t}, st)
+    assert TestClient(make_app(st, refuse)).post(
+        "/api/silence", json={"unit": "A2", "types": ["contact"], "for_s": 10}).status_code == 400
+    assert st.silences == {}
+    assert c.post("/api/silence", json={"unit": "A2", "types": ["contact"], "for_s": 10}).status_code == 200
+    st.drain()
+    st.clock(st.t + 10.0)
+    assert dict(st.drain())["silences"] == [] and st.snapshot()["silences"] == []

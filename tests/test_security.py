@@ -205,13 +205,26 @@ def test_access_control_is_well_formed(small_sc, pki):
         ("ea.C", "put", f"{r}/health/C", True), ("ea.C", "put", f"{r}/health/A2", False),
         # the TAK gateway: PLI only to the replay's ingest key, never a position, order or command
         ("tak", "put", f"{r}/ingest/tak", True), ("tak", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2-1", False),
-        ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack", False),
+        ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack/A2", False),
         ("tak", "put", f"{r}/alert/A2/x", False), ("tak", "declare_subscriber", f"{r}/clock", True),
         ("ea.A2", "put", f"{r}/ingest/tak", False), ("replay", "declare_subscriber", f"{r}/ingest/**", True),
     ]:
         assert allowed(acl, cn, "ingress", msg, key) is ok, (cn, msg, key)
     assert allowed(acl, "observer", "egress", "put", f"{r}/ord/BN")   # reads are cut on ingress
     assert not allowed(acl, "ea.C", "egress", "delete", f"{r}/ord/C")
+
+
+def test_a_console_sends_only_as_its_own_unit():
+    """`console.A` may put commands to any EA but only under its own unit's chunk: the EA
+    then decides from the hierarchy of the moment (tests/test_commands.py)."""
+    sc = S.load(SENSORS, events=False)
+    r = "saim/test"
+    acl = access_control(r, mesh_units(sc), [], sc.taskorg)
+    for cn, key, ok in [("console.A", f"{r}/cmd/R/ack/A", True), ("console.A", f"{r}/cmd/A2/set/A", True),
+                        ("console.A", f"{r}/cmd/R/ack/BN", False), ("console.A", f"{r}/cmd/A2/ack", False),
+                        ("console.BN", f"{r}/cmd/R/ack/BN", True), ("console.R", f"{r}/cmd/R/ack/A", False),
+                        ("ea.A", f"{r}/cmd/A2/ack/A", False), ("tak", f"{r}/cmd/A2/ack/A", False)]:
+        assert allowed(acl, cn, "ingress", "put", key) is ok, (cn, key)
 
 
 _chunk = st.text(alphabet=string.ascii_letters + string.digits + "_-.", min_size=1, max_size=8)

@@ -1,7 +1,7 @@
 """The commander's actions: checking what the page asks (so bad input is a clear 400
 and nothing is sent) and turning it into commands (docs/console.md section 1).
 
-`Actions` is anything with `ack/silence/set/confirm/cff` returning a CmdResult-like
+`Actions` is anything with `ack/silence/unsilence/set/confirm/cff` returning a CmdResult-like
 dict `{req, kind, ok, error, t, unit}`; `CommandActions` is the real one, over any
 way of running a command (`commands.send` on the mesh, `commands.apply` in process)."""
 from __future__ import annotations
@@ -25,13 +25,14 @@ class Actions(Protocol):
     def ack(self, unit: str, alert: str) -> dict: ...
     def silence(self, unit: str, types: list[str], subjects: list[str], areas: list[str], until_t: float,
                 comment: str) -> dict: ...
+    def unsilence(self, unit: str, id: str) -> dict: ...
     def set(self, unit: str, key: str, value: float | int | list[float]) -> dict: ...
     def confirm(self, unit: str, mission: str, phase: str) -> dict: ...
     def cff(self, unit: str, cff: str, action: str) -> dict: ...
 
 
 FIELDS = {"ack": ("unit", "alert"), "silence": ("unit", "types", "subjects", "areas", "for_s", "comment"),
-          "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action")}
+          "unsilence": ("unit", "id"), "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action")}
 
 
 def _text(body: dict, f: str, choices=None, default: str | None = None) -> str:
@@ -91,10 +92,21 @@ def validate(kind: str, body: Any, state) -> tuple[str, dict]:
         bad = [t for t in f["types"] if t not in known]
         if bad:
             raise BadRequest(f"unknown alert type {bad[0][:60]!r}")
+        places = {(x.get("properties") or {}).get("id") for x in state.overlay.get("features", ())}
+        bad = [a for a in f["areas"] if a not in places]
+        if bad:
+            raise BadRequest(f"unknown area {bad[0][:60]!r}: not a control measure of {state.sc.name}")
         for_s = body.get("for_s")
         if not _number(for_s) or not 0 < for_s <= 7 * 86400:
             raise BadRequest(f"field 'for_s': expected seconds of scenario time in (0, 604800], got {for_s!r:.60}")
         return unit, {**f, "until_t": state.t + float(for_s), "comment": _text(body, "comment", default="")}
+    if kind == "unsilence":
+        sid = _text(body, "id")
+        if sid not in state.silences:
+            raise BadRequest(f"unknown silence {sid[:60]!r}: not one in force that this console made")
+        if state.silences[sid]["unit"] != unit:
+            raise BadRequest(f"silence {sid} is on the EA of {state.silences[sid]['unit']}, not {unit}")
+        return unit, {"id": sid}
     if kind == "set":
         key = _text(body, "key")
         if not key.startswith(("voi.", "voa.")):
@@ -137,8 +149,11 @@ class CommandActions:
         from .. import commands   # the EA side's module (docs/console.md section 1)
         cmd = commands.make(kind, req=f"{self._tag}-{next(self._n)}", **fields)
         d = result_dict(self.run(unit, cmd), unit)
-        if self.push and self.state is not None:
-            self.state.result(d)
+        if self.state is not None:
+            if kind in ("silence", "unsilence"):
+                self.state.silenced(unit, cmd, bool(d.get("ok")))
+            if self.push:
+                self.state.result(d)
         return d
 
     def ack(self, unit, alert):
@@ -148,6 +163,9 @@ class CommandActions:
         sid = f"{self._tag}-s{next(self._n)}"
         return self._do(unit, "silence", id=sid, types=types, subjects=subjects, areas=areas, until_t=until_t,
                         comment=comment)
+
+    def unsilence(self, unit, id):
+        return self._do(unit, "unsilence", id=id)
 
     def set(self, unit, key, value):
         return self._do(unit, "set", key=key, value=value)

@@ -76,10 +76,11 @@ class MeshFeed(MeshReader):
 
 
 def mesh_actions(feed: MeshFeed, timeout: float = 10.0) -> CommandActions:
-    """Commands on the mesh; their results come back on cmdlog/** to every console."""
+    """Commands on the mesh, sent as this console's unit (the EA checks it commands it);
+    their results come back on cmdlog/** to every console."""
     def run(unit: str, cmd):
         from .. import commands
-        return commands.send(feed.session, feed.ks, unit, cmd, timeout)
+        return commands.send(feed.session, feed.ks, unit, cmd, feed.state.unit, timeout)
     return CommandActions(run, feed.state, push=False)
 
 

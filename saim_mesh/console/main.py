@@ -13,13 +13,6 @@ from .server import Server, make_app
 from .state import State
 
 
-def _actors(sc, unit: str) -> list[str]:
-    """The units whose EA peers this console may command: its own and its subordinates'."""
-    from ..mesh import mesh_units
-    sub = set(sc.taskorg.subtree(unit))
-    return [u for u in mesh_units(sc) if u in sub]
-
-
 def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, linger_s: float = 30.0) -> int:
     """Serve the console for the mesh at `conf` until the replay's end tick plus `linger_s`
     (wall seconds), SIGTERM or Ctrl-C. `conf`: a zenoh.Config (zconf.config(...,
@@ -30,7 +23,8 @@ def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, li
               file=sys.stderr, flush=True)
         return 2
     log = lambda *a, **k: print(*a, **k, file=sys.stdout)   # noqa: E731
-    state = State(sc, unit, actors=_actors(sc, unit))
+    from ..mesh import mesh_units
+    state = State(sc, unit, eligible=mesh_units(sc))   # acts for the EA peers under it, as organised now
     feed = MeshFeed(sc, conf, root, state, log=log)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():

@@ -13,6 +13,8 @@ import threading
 from collections import deque
 from typing import Any
 
+from ea_agent import domains
+
 from .missions import Missions
 from .overlay import overlay_geojson
 
@@ -22,13 +24,21 @@ TRACK_TTL_S = 600.0        # a track not reported for this long leaves the pictu
 
 
 class State:
-    def __init__(self, sc, unit: str | None = None, actors: list[str] | None = None):
+    def __init__(self, sc, unit: str | None = None, actors: list[str] | None = None,
+                 eligible: list[str] | None = None):
+        """`actors`: the units this console acts for, fixed (in process: every EA run);
+        else `eligible` (the units with an EA peer; default all) under `unit` in the task
+        organization as it is now, following reorganizations as their EAs do."""
         self.sc = sc
         self.taskorg = sc.taskorg.copy()
         self.unit = unit or self.taskorg.root
         if self.unit not in self.taskorg.units:
             raise KeyError(f"unknown unit {self.unit!r}: not in the task organization of {sc.name}")
-        self.actors = sorted(actors) if actors is not None else list(self.taskorg.subtree(self.unit))
+        self._fixed = sorted(actors) if actors is not None else None
+        self._eligible = set(eligible) if eligible is not None else set(self.taskorg.units)
+        planned = getattr(domains.of(sc), "org_changes", None)
+        self._planned = deque(planned(sc) if planned else [])   # (t, unit, new parent), in time order
+        self.silences: dict[str, dict] = {}   # silences this console made that the EA took, by id
         self.lock = threading.Lock()
         self.t = 0.0
         self.ended = False
@@ -55,6 +65,9 @@ class State:
                 self._dirty.add("clock")
                 if w is not None:
                     self._ticks.append((t, w))
+                while self._planned and self._planned[0][0] <= t:   # as the EAs execute them
+                    _, u, parent = self._planned.popleft()
+                    self._resubordinate(u, parent)
             self.ended = self.ended or end
 
     def alert(self, a) -> None:
@@ -94,13 +107,42 @@ class State:
             elif kind in ("cff", "cff-confirm"):
                 self.cffs.add(m.cff)
             elif kind == "reorg":
-                try:
-                    self.taskorg.resubordinate(m.unit, m.new_parent)
-                except (KeyError, ValueError):
-                    return
-                self._dirty.add("positions")
+                self._resubordinate(m.unit, m.new_parent)
             elif self.missions.take(m):
                 self._dirty.add("missions")
+
+    def _resubordinate(self, unit: str, parent: str) -> None:
+        try:
+            self.taskorg.resubordinate(unit, parent)
+        except (KeyError, ValueError):
+            return
+        self._dirty |= {"positions", "org"}
+
+    def silenced(self, unit: str, cmd, ok: bool) -> None:
+        """A silence (or unsilence) command this console sent and its answer: the page
+        lists the silences in force, to lift them."""
+        with self.lock:
+            if not ok:
+                return
+            if hasattr(cmd, "until_t"):
+                self.silences[cmd.id] = {"id": cmd.id, "unit": unit, "types": list(cmd.types),
+                                         "subjects": list(cmd.subjects), "areas": list(cmd.areas),
+                                         "until_t": cmd.until_t, "comment": cmd.comment}
+            else:
+                self.silences.pop(cmd.id, None)
+            self._dirty.add("silences")
+
+    @property
+    def actors(self) -> list[str]:
+        """The units whose EAs this console may command now."""
+        if self._fixed is not None:
+            return list(self._fixed)
+        return sorted(u for u in self.taskorg.subtree(self.unit) if u in self._eligible)
+
+    def _silences(self) -> list[dict]:
+        for k in [k for k, v in self.silences.items() if v["until_t"] <= self.t]:
+            del self.silences[k]   # expired: the EA no longer applies it either
+        return sorted(self.silences.values(), key=lambda v: v["until_t"])
 
     # -- outputs ------------------------------------------------------------------------
     def known_alert(self, aid: str) -> str | None:
@@ -135,7 +177,7 @@ class State:
             return {"scenario": self.sc.name, "unit": self.unit, "units": self._units(),
                     "overlay": self.overlay, "positions": self._positions(), "tracks": self._tracks(),
                     "alerts": list(self.alerts), "counts": {o: dict(c) for o, c in sorted(self.counts.items())},
-                    "t": self.t, "actors": list(self.actors)}
+                    "t": self.t, "actors": self.actors, "silences": self._silences()}
 
     def drain(self) -> list[tuple[str, Any]]:
         """Events since the last drain: alerts and results one by one, then one
@@ -159,6 +201,13 @@ class State:
                 if ms != self._sent_missions:
                     self._sent_missions = ms
                     out.append(("missions", ms))
+            if "org" in dirty:
+                out.append(("org", {"parents": dict(self.taskorg.parent), "actors": self.actors}))
+            if "silences" in dirty or "clock" in dirty and self.silences:
+                n = len(self.silences)
+                ss = self._silences()
+                if "silences" in dirty or len(ss) != n:
+                    out.append(("silences", ss))
             if "counts" in dirty:
                 out.append(("counts", {o: dict(c) for o, c in sorted(self.counts.items())}))
             return out

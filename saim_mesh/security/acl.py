@@ -19,7 +19,7 @@ rules and the keys cannot drift apart.
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/**, put cmd/** |
 | `tak` | reading as `console.<U>`, put ingest/tak (PLI for the replay to sequence); query store/** |
-| `console.<U>` (with a task organization) | put cmd/<V>/* for every mesh unit V in U's subtree; reading what an observer reads plus cmdlog/**, clock and the data families but raw hits; query store/** |
+| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now); reading what an observer reads plus cmdlog/**, clock and the data families but raw hits; query store/** |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
 (observer and console: on alert/** and alive/** only).
@@ -82,8 +82,8 @@ def identities(units, groups, taskorg=None) -> list[str]:
 def access_control(root: str, units, groups, taskorg=None) -> dict:
     """The full `access_control` section for a mesh under ROOT with an EA per unit of
     UNITS and a fusion node per group of GROUPS (names, or a dict group -> sensors).
-    With TASKORG, a `console.<U>` identity per unit may command the EAs of U's subtree
-    (as organized at the start: a later reorganization does not widen a console's reach)."""
+    With TASKORG, a `console.<U>` identity per unit may send commands as U's console; the
+    EAs take them from U only while U commands them (reorganizations included)."""
     ks = KeySpace(root)
     r = ks.root
     units = sorted(dict.fromkeys(_chunk("unit", u) for u in units))
@@ -136,11 +136,12 @@ def access_control(root: str, units, groups, taskorg=None) -> dict:
     # replay's ingest key, never straight to the EAs
     subject("tak", [out, read_public, read_seen, query_store, rule("tak_put", ["put"], [ks.ingest("tak")])])
     if taskorg is not None:
-        mesh = set(units)
+        # the last chunk of a command's key names the console's unit: the certificate holds
+        # it to that; the receiving EA decides whether that unit commands it at that moment
+        # (its subtree changes with reorganizations, which access control cannot follow)
         for u in units:
-            mine = [v for v in taskorg.subtree(u) if v in mesh] if u in taskorg.units else [u]
             subject(f"console.{u}", [out, read_public, read_cmdlog, read_seen, query_store,
-                                     rule(f"console.{u}.put", ["put"], [ks.cmd(v, "*") for v in mine])])
+                                     rule(f"console.{u}.put", ["put"], [ks.cmd("*", "*", u)])])
     for kind, items in (("rule", rules), ("subject", subjects), ("policy", policies)):
         ids = [x["id"] for x in items]
         if len(ids) != len(set(ids)):

@@ -165,7 +165,10 @@
       onEachFeature: (f, lyr) => {
         const p = f.properties || {};
         const kind = p.kind || "";
-        if (p.id) overlayById.set(p.id, { layer: lyr, kind, style: overlayStyle(kind) });
+        if (p.id) {
+          overlayById.set(p.id, { layer: lyr, kind, style: overlayStyle(kind) });
+          addOption($("overlay-ids"), p.id);   // silences by area name places
+        }
         const label = p.id || p.name || kind;
         if (label) {
           const always = LABEL_ALWAYS.has(kind);
@@ -813,7 +816,7 @@
       ev.preventDefault();
       const forS = Number($("silence-for").value);
       post("silence", { unit: actor(), types: splitList($("silence-type").value),
-        subjects: splitList($("silence-subject").value), areas: [],
+        subjects: splitList($("silence-subject").value), areas: splitList($("silence-area").value),
         for_s: Number.isFinite(forS) ? forS : $("silence-for").value, comment: $("silence-comment").value || "" });
     });
     $("set-key").addEventListener("change", () => {
@@ -847,6 +850,36 @@
   }
 
   const reported = new Set();   // request ids whose answer the POST already put in #status
+  /** The silences in force that this console made, each with a button that lifts it. */
+  function renderSilences(list) {
+    const ul = $("silences");
+    ul.textContent = "";
+    for (const v of Array.isArray(list) ? list : []) {
+      if (!v || typeof v !== "object") continue;
+      const what = [["types", v.types], ["subjects", v.subjects], ["areas", v.areas]]
+        .filter(([, x]) => Array.isArray(x) && x.length).map(([k, x]) => `${k} ${x.join(", ")}`).join("; ");
+      const li = el("li", "silence", `${v.unit}: ${what} until ${hms(v.until_t)}${v.comment ? " — " + v.comment : ""} `);
+      li.dataset.id = v.id;
+      const b = el("button", "lift", "Lift");
+      b.type = "button";
+      b.addEventListener("click", () => post("unsilence", { unit: v.unit, id: v.id }));
+      li.appendChild(b);
+      ul.appendChild(li);
+    }
+  }
+
+  /** A reorganization: new parents, and the units this console now acts for. */
+  function applyOrg(d) {
+    if (!d || typeof d !== "object") return;
+    for (const [id, parent] of Object.entries(d.parents || {})) {
+      if (S.units[id]) S.units[id].parent = parent;
+    }
+    if (Array.isArray(d.actors)) S.actors = d.actors;
+    renderTaskorg();
+    fillUnitSelect();
+    updateActorLabel();
+  }
+
   function onResult(r) {
     if (!r || typeof r !== "object") return;
     const ok = r.ok !== false;
@@ -880,6 +913,7 @@
     S.unit = st.unit || null;
     S.units = st.units || {};
     S.actors = Array.isArray(st.actors) ? st.actors : [];
+    renderSilences(st.silences);
     $("scenario").textContent = S.scenario;
     document.title = `console ${S.unit || ""} — ${S.scenario}`;
     if (S.filter === "all" && S.unit && !applyState.done) S.filter = S.unit;
@@ -919,6 +953,8 @@
     missions: (d) => mergeMissions(d),
     counts: (d) => mergeCounts(d),
     result: (d) => onResult(d),
+    org: (d) => applyOrg(d),
+    silences: (d) => renderSilences(d),
   };
 
   let ready = false;
