@@ -42,9 +42,14 @@ def make(kind: str, **fields) -> msgspec.Struct:
         raise ValueError(f"{kind}: {e.problem}") from None
 
 
+REF_FIELD = {W.AckCmd: "alert", W.SilenceCmd: "id", W.UnsilenceCmd: "id", W.SetCmd: "key", W.ConfirmCmd: "mission",
+             W.CffCmd: "cff"}
+
+
 def result(cmd, ok: bool, t: float, error: str = "") -> W.CmdResult:
+    ref = getattr(cmd, REF_FIELD.get(type(cmd), ""), "")
     return W.make(W.CmdResult, req=cmd.req, kind=KIND_OF.get(type(cmd), "?"), ok=ok, error=error[:1000],
-                  t=max(0.0, min(float(t), W.T_LIMIT)))
+                  t=max(0.0, min(float(t), W.T_LIMIT)), ref=ref[:128] if isinstance(ref, str) else "")
 
 
 def to_dict(res: W.CmdResult) -> dict:

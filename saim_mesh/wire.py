@@ -143,12 +143,15 @@ class CffCmd(_Wire, kw_only=True):
 
 
 class CmdResult(_Wire, kw_only=True):
-    """The EA's answer to command `req`: `t` is the scenario time it took effect."""
+    """The EA's answer to command `req`: `t` is the scenario time it took effect; `ref`
+    what it was about (the alert acknowledged, the silence, mission, call for fire or
+    setting), so a listener that did not send it (the TAK gateway) can act on it."""
     req: Req
     kind: Annotated[str, msgspec.Meta(max_length=32)]
     ok: bool
     error: Annotated[str, msgspec.Meta(max_length=1000)] = ""
     t: Time
+    ref: Annotated[str, msgspec.Meta(max_length=128)] = ""
 
 
 COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": UnsilenceCmd, "set": SetCmd,

@@ -207,7 +207,8 @@ def test_access_control_is_well_formed(small_sc, pki):
         ("tak", "put", f"{r}/ingest/tak", True), ("tak", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2-1", False),
         ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack/A2", False),
         ("tak", "put", f"{r}/alert/A2/x", False), ("tak", "declare_subscriber", f"{r}/clock", True),
-        ("ea.A2", "put", f"{r}/ingest/tak", False), ("replay", "declare_subscriber", f"{r}/ingest/**", True),
+        ("ea.A2", "put", f"{r}/ingest/tak", False),
+        ("tak", "declare_subscriber", f"{r}/cmdlog/A2", True), ("tak", "put", f"{r}/cmdlog/A2", False), ("replay", "declare_subscriber", f"{r}/ingest/**", True),
     ]:
         assert allowed(acl, cn, "ingress", msg, key) is ok, (cn, msg, key)
     assert allowed(acl, "observer", "egress", "put", f"{r}/ord/BN")   # reads are cut on ingress

@@ -88,6 +88,40 @@ def test_feed_checks_every_payload_and_sends_alerts_at_once(small):
     assert all(u.type == T.FRIENDLY_UNIT and (u.lat, u.lon) == (round(ev.lat, 7), round(ev.lon, 7)) for u in units)
 
 
+def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
+    """A flash alert is an emergency on TAK; once its EA takes an acknowledgement (heard on
+    cmdlog/<owner>), the gateway cancels it and its repeats (b-a-o-can, same uid) and
+    nothing else; a refused ack, an ack of a marker alert or of another EA's alert cancels nothing."""
+    sent: list[bytes] = []
+    pic = Picture(small, Options(epoch=EPOCH))
+    feed = TakFeed(small, None, "saim", pic, sent.append, overlay_every=None, log=lambda *a, **k: None)
+    flash = M.Alert(100.0, "A", "fratricide", "friendly-activity", "flash", ("A1", "B1"), "A1 and B1 close",
+                    {"id": "A/1"})
+    rep = M.Alert(130.0, "A", "fratricide", "friendly-activity", "flash", ("A1", "B1"), "A1 and B1 close",
+                  {"id": "A/2", "repeat_of": "A/1", "repeats": 1})
+    other = M.Alert(110.0, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A2",), "A2 off",
+                    {"id": "A/3"})
+    for a in (flash, rep, other):
+        feed.take(f"saim/alert/A/{a.type}", M.encode(a))
+    uids = [C.parse(b).uid for b in sent]
+    assert [C.parse(b).type for b in sent] == [T.EMERGENCY, T.EMERGENCY, T.MARKER]
+    ack = lambda ref, ok=True, unit="A": W.encode(W.make(W.CmdResult, req="r", kind="ack", ok=ok, t=140.0,  # noqa: E731
+                                                          ref=ref))
+    for payload, key in [(ack("A/1", ok=False), "saim/cmdlog/A"), (ack("A/3"), "saim/cmdlog/A"),
+                         (ack("A/1"), "saim/cmdlog/B"), (b"\x00junk", "saim/cmdlog/A")]:
+        feed.take(key, payload)
+    assert len(sent) == 3 and feed.gate.rejects.total == 2   # another EA's alert; junk
+    feed.take("saim/cmdlog/A", ack("A/1"))
+    cancels = [C.parse(b) for b in sent[3:]]
+    assert [c.type for c in cancels] == [T.CANCEL, T.CANCEL] and [c.uid for c in cancels] == uids[:2]
+    for c, b in zip(cancels, sent[3:]):
+        assert c.detail["emergency"]["cancel"] == "true" and c.detail["__saim"]["id"] == "A/1"
+        assert c.time == EPOCH + timedelta(seconds=140.0) and c.stale > c.start >= c.time
+        assert takproto.parse_proto(takproto.xml2proto(b)) is not None
+    feed.take("saim/cmdlog/A", ack("A/1"))   # once only
+    assert len(sent) == 5 and pic.counts["cancel"] == 2
+
+
 def test_positions_go_out_per_period_and_only_when_changed(small):
     pic = Picture(small, Options(period_s=10.0, refresh_s=60.0, epoch=EPOCH))
     reps = [e for e in small.events if type(e) is M.LocationReport][:50]

@@ -18,7 +18,7 @@ rules and the keys cannot drift apart.
 | `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/**, put cmd/** |
-| `tak` | reading as `console.<U>`, put ingest/tak (PLI for the replay to sequence); query store/** |
+| `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put ingest/tak (PLI for the replay to sequence); query store/** |
 | `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now); reading what an observer reads plus cmdlog/**, clock and the data families but raw hits; query store/** |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
@@ -134,7 +134,8 @@ def access_control(root: str, units, groups, taskorg=None) -> dict:
     read_seen = rule("read_console", READ, seen)
     # the TAK gateway: reads what a console reads, but no commands; its PLI go to the
     # replay's ingest key, never straight to the EAs
-    subject("tak", [out, read_public, read_seen, query_store, rule("tak_put", ["put"], [ks.ingest("tak")])])
+    subject("tak", [out, read_public, read_seen, read_cmdlog, query_store,
+                    rule("tak_put", ["put"], [ks.ingest("tak")])])
     if taskorg is not None:
         # the last chunk of a command's key names the console's unit: the certificate holds
         # it to that; the receiving EA decides whether that unit commands it at that moment

@@ -124,7 +124,7 @@ class TakFeed(MeshReader):
 
     def keys(self) -> list[str]:
         data = sorted({self.ks.data(c) for c in self.classes})
-        return [self.ks.clock(), f"{self.ks.root}/alert/**", *data]
+        return [self.ks.clock(), f"{self.ks.root}/alert/**", self.ks.cmdlog("*"), *data]
 
     def opened(self, session) -> None:
         import zenoh
@@ -160,6 +160,16 @@ class TakFeed(MeshReader):
                     self._overlay_next = pic.t + self.overlay_every
                     self._emit(pic.overlay_events())
                 self._emit(pic.due(force=tick.end))
+            return
+        if fam == "cmdlog":   # an EA took an acknowledgement: its emergencies end on TAK too
+            res = gate.control(W.CmdResult, payload, key)
+            if res is not None and res.ok and res.kind == "ack":
+                owner = ks.last(key)[0]
+                if not res.ref.startswith(f"{owner}/"):   # an EA acknowledges only its own alerts
+                    gate.rejects.add(M.MessageError("cmdlog", "ref", f"alert {res.ref[:60]!r} is not {owner}'s"), key)
+                    return
+                with self.lock:
+                    self._emit(pic.acknowledged(res.ref, owner, res.t))
             return
         m = gate.data(payload, key)
         if m is None:

@@ -15,12 +15,14 @@ What a TAK user sees (docs/tak.md):
   else `b-a-o-tbl` 911 Alert); an alert about a control measure -> `b-a-g` geofence
   breached, linked to the shape; others -> a spot marker `b-m-p-s-m` coloured by
   priority. Remarks carry priority, owner, time and message; `__saim` carries every field;
+  an emergency whose alert its EA took an acknowledgement for is cancelled (`b-a-o-can`);
 - overlay: areas as closed `u-d-f` polygons, lines as open `u-d-f` polylines, points
   with a radius as `u-d-c-c` circles, coloured by kind."""
 from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 
@@ -31,6 +33,7 @@ from . import cot as C
 from . import types as T
 
 TRACK_TTL_S = 600.0     # a track not reported for this long is no longer sent (as the console)
+MAX_EMERGENCIES = 10_000   # alerts whose emergencies an acknowledgement can still cancel (the newest)
 
 
 @dataclass
@@ -65,6 +68,7 @@ class Picture:
         self._next = 0.0
         self._n_alert = 0
         self._units: dict | None = None        # unit centroids, until the next position or reorganization
+        self.emergencies: OrderedDict[str, list[tuple]] = OrderedDict()   # alert id -> its emergencies on TAK
         self.overlay = {f["id"]: f for f in overlay_geojson(sc)["features"]}
         self.places = {}
         for fid, f in self.overlay.items():
@@ -232,6 +236,12 @@ class Picture:
                                      "category": a.category, "priority": a.priority,
                                      "subjects": json.dumps(list(a.subjects)), "t": f"{a.t:.3f}"})]
         if typ in T.EMERGENCY_NAMES:
+            root = a.details.get("repeat_of") or aid   # an ack of the first cancels its repeats too
+            if isinstance(root, str) and root:
+                self.emergencies.setdefault(root, []).append((self.uid("alert", ident), lon, lat, callsign))
+                self.emergencies.move_to_end(root)
+                if len(self.emergencies) > MAX_EMERGENCIES:
+                    self.emergencies.popitem(last=False)
             em = ET.Element("emergency", {"type": T.EMERGENCY_NAMES[typ]})
             em.text = callsign
             det.append(em)
@@ -246,6 +256,23 @@ class Picture:
         return C.event(self.uid("alert", ident), typ, lon, lat, tm, tm + timedelta(seconds=self.o.alert_stale_s),
                        how=T.HOW_FUSED, callsign=callsign, detail=det,
                        remarks=f"[{a.priority.upper()}] {a.owner} {hms(a.t)} {a.type}: {a.message}")
+
+    def acknowledged(self, alert_id: str, owner: str, t: float) -> list[bytes]:
+        """An alert its EA took an acknowledgement for: cancel the TAK emergencies it (and
+        its repeats) raised, as ATAK cancels one (`b-a-o-can`, same uid, `cancel="true"`),
+        so the banner goes from every TAK user's screen. Other alerts: nothing."""
+        out = []
+        for uid, lon, lat, callsign in self.emergencies.pop(alert_id, ()):
+            tm = self.when(max(t, self.t))
+            em = ET.Element("emergency", {"cancel": "true"})
+            em.text = callsign
+            det = [em, ET.Element("__saim", {"kind": "alert-cancel", "id": alert_id, "owner": owner,
+                                             "t": f"{max(t, self.t):.3f}"})]
+            out.append(C.event(uid, T.CANCEL, lon, lat, tm, tm + timedelta(seconds=self.o.pos_stale_s),
+                               how=T.HOW_FUSED, callsign=callsign, detail=det,
+                               remarks=f"[ACKNOWLEDGED] {owner} {hms(max(t, self.t))} {alert_id}"))
+            self._count("cancel")
+        return out
 
     def presence_event(self) -> bytes:
         """Who we are, first on every stream to a TAK server: a server registers a client by

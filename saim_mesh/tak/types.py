@@ -14,6 +14,7 @@ HOSTILE_TRACK = "a-h-G-U-C"          # hostile ground combat unit (a fused track
 
 EMERGENCY = "b-a-o-tbl"              # ATAK "911 Alert": the red emergency banner and sound
 CONTACT = "b-a-o-opn"                # ATAK "Troops In Contact" emergency
+CANCEL = "b-a-o-can"                 # ATAK "cancel alert": the emergency with the same uid is over
 GEOFENCE = "b-a-g"                   # geofence breached (linked to the shape it is about)
 MARKER = "b-m-p-s-m"                 # a spot map marker with a colour and remarks
 SHAPE = "u-d-f"                      # freehand line / closed polygon (<link point=.../>)
