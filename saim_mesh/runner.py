@@ -9,7 +9,7 @@ from ea_agent.core.config import load_config
 from ea_agent.core.manager import ExecutionAssistant, Sink
 
 from .commands import apply, tap
-from .fusion import FusionNode
+from .fusion import make_node
 from .messages import SensorHit
 from .scenario import Scenario
 
@@ -31,7 +31,7 @@ class Fusion:
     """The scenario's fusion nodes (one per sensor group), run in process."""
 
     def __init__(self, sc: Scenario, groups: dict[str, list[str]]):
-        self.nodes = {g: FusionNode(g, sc.projection) for g in sorted(groups)}
+        self.nodes = {g: make_node(sc, g) for g in sorted(groups)}
         self.group_of = {sid: g for g, sids in groups.items() for sid in sids}
         self.next_t = min(n.window_end for n in self.nodes.values())
 

@@ -21,7 +21,8 @@ from saim_mesh import messages as M
 from saim_mesh import wire as W
 from saim_mesh.scenario import Scenario
 
-from .node import FusionNode
+from . import make_node
+
 
 BLOCK = zenoh.CongestionControl.BLOCK
 
@@ -38,7 +39,7 @@ class FusionPeer:
                  linger_s: float = 30.0, log=print, max_bytes: int = 65536):
         self.sc, self.group, self.conf, self.linger_s, self.log = sc, group, conf, linger_s, log
         self.ks = KeySpace.of(sc, root)
-        self.node = FusionNode(group, sc.projection)
+        self.node = make_node(sc, group)
         self.rnd = random.Random(shuffle) if shuffle is not None else None
         self.gate = W.Gate(sc.duration_s, max_bytes, log=log)
         self.sent = 0

@@ -416,6 +416,14 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list
                 if sid in owner:
                     raise ScenarioError(f"{fw}.groups.{g}: field 'sensor': {sid!r} is already in group {owner[sid]!r}")
                 owner[sid] = g
+        sensors = meta["fusion"].get("sensors", [])
+        for i, sn in enumerate(sensors if isinstance(sensors, list) else [None]):
+            if not isinstance(sn, dict):
+                raise ScenarioError(f"{fw}.sensors[{i}]: expected an object")
+            sg = sn.get("sigma_m", 30.0)
+            if type(sg) not in (int, float) or not math.isfinite(sg) or sg <= 0:
+                raise ScenarioError(f"{fw}.sensors[{i}] ({str(sn.get('id'))[:40]}): field 'sigma_m': expected a "
+                                    f"finite number > 0 (the sensor's position noise), got {sg!r:.40}")
     return meta, name, proj, duration, groups
 
 

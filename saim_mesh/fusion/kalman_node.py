@@ -1,0 +1,64 @@
+"""A fusion node on the Kalman tracker (tracker.py): the same interface as `FusionNode`
+(hits in, `SensorTrack` reports out at each window's close), so the runner and the
+fusion peer can use either. Hits are projected once per window (one pyproj call) and
+fed to the tracker scan by scan, each at its own time; a report carries the time it
+describes, heading and speed."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ea_agent.core.geo import Projection
+from saim_mesh.messages import SensorHit, SensorTrack
+
+from .tracker import KalmanTracker
+
+
+class KalmanNode:
+    def __init__(self, node_id: str, proj: Projection, sigma: dict[str, float] | float = 30.0,
+                 window_s: float = 5.0, **tracker):
+        self.id, self.proj, self.window_s = node_id, proj, window_s
+        self.tracker = KalmanTracker(node_id, sigma, window_s=window_s, **tracker)
+        self.pending: list[SensorHit] = []
+        self.window_end = window_s
+        self.stats = {"hits_in": 0, "tracks_out": 0, "windows": 0}
+
+    def add(self, hit: SensorHit) -> list[SensorTrack]:
+        """Take one hit (time-ordered); returns the track reports of any window it closed."""
+        out: list[SensorTrack] = []
+        while hit.t >= self.window_end:
+            out += self._close(self.window_end)
+            self.window_end += self.window_s
+        self.pending.append(hit)
+        self.stats["hits_in"] += 1
+        return out
+
+    def flush(self, t: float) -> list[SensorTrack]:
+        out: list[SensorTrack] = []
+        while self.window_end <= t:
+            out += self._close(self.window_end)
+            self.window_end += self.window_s
+        return out
+
+    def _close(self, t: float) -> list[SensorTrack]:
+        self.stats["windows"] += 1
+        hits, self.pending = self.pending, []
+        if hits:
+            x, y = self.proj.to_xy(np.array([h.lon for h in hits]), np.array([h.lat for h in hits]))
+            xy = np.column_stack([np.atleast_1d(x), np.atleast_1d(y)])
+            start = 0
+            for i in range(1, len(hits) + 1):   # one scan: one sensor's hits at one time
+                if i == len(hits) or (hits[i].t, hits[i].sensor) != (hits[start].t, hits[start].sensor):
+                    self.tracker.scan(hits[start].t, hits[start].sensor, xy[start:i])
+                    start = i
+        out = [self._track(r, t) for r in self.tracker.close_window(t)]
+        out.sort(key=lambda r: (r.t, r.track))
+        self.stats["tracks_out"] += len(out)
+        return out
+
+    def _track(self, r, t: float) -> SensorTrack:
+        lon, lat = self.proj.to_lonlat(r.x, r.y)
+        heading = (math.degrees(math.atan2(r.vx, r.vy)) + 360.0) % 360.0
+        return SensorTrack(t if r.strength == 0 else r.t, r.track, round(float(lon), 7), round(float(lat), 7),
+                           r.strength, round(heading, 1) % 360.0, round(math.hypot(r.vx, r.vy), 2), self.id)

@@ -1,0 +1,210 @@
+"""A constant-velocity Kalman multi-target tracker for forward fusion, in local metres.
+
+Why not the scan-window averager (node.py): it confirms a track only with two hits per
+sensor in a cluster, so a lone vehicle is never tracked; it averages a window's hits
+and stamps them at the window's end, so fast movers lag and split; its gates are fixed
+metres. Here each sensor scan is used at its own time; gates come from each track's
+covariance (a 300 m/s target and a parked truck get the gates they need); a track is
+confirmed when it was updated in M of its last N windows, whatever its size; and a
+report describes the track at its last update, with velocity.
+
+A track is a group of entities seen together (a hostile unit) or a lone one: the hits
+of one scan that fall in a track's gate all update it, their count is its strength,
+and their spread its extent (which widens the gate for its members, not for others).
+Association per scan, confirmed tracks before tentative ones: one hit per track
+(nearest by Mahalanobis distance first), then further hits of the scan join the track
+whose gate, widened by its extent, holds them; what is left starts tentative tracks (hits within `birth_m` of each
+other: one new track). numpy throughout; the tracks of one node are few."""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+I4 = np.eye(4)
+
+
+@dataclass
+class Track:
+    id: str
+    x: np.ndarray                    # [x, y, vx, vy] at time t
+    P: np.ndarray                    # 4 x 4 covariance
+    t: float                         # the time x and P describe (the last prediction)
+    t_upd: float                     # the last update (what a report describes)
+    x_upd: np.ndarray                # the state then
+    ext: float = 0.0                 # extent of the group (variance of its members' offsets, m^2)
+    counts: deque = field(default_factory=lambda: deque(maxlen=4))   # hits per update (strength)
+    seen: deque = field(default_factory=deque)                        # per window: updated or not
+    hit_window: bool = False
+    confirmed: bool = False
+
+
+@dataclass
+class Report:
+    """What the tracker says of one track: its state at its last update."""
+    t: float
+    track: str
+    x: float
+    y: float
+    vx: float
+    vy: float
+    strength: int
+
+
+class KalmanTracker:
+    def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.5,
+                 q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
+                 max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
+                 window_s: float = 5.0):
+        if not (math.isfinite(q) and q > 0 and math.isfinite(q_fast) and q_fast > 0):
+            raise ValueError(f"process noise must be finite and > 0 (q={q!r}, q_fast={q_fast!r})")
+        if not 1 <= m <= n:
+            raise ValueError(f"confirmation M-of-N needs 1 <= M <= N, got M={m}, N={n}")
+        self.name, self.sigma = name, sigma
+        self.q, self.q_fast, self.fast = q, q_fast, fast_mps
+        self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
+        self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
+        self.tracks: list[Track] = []
+        self.seq = 0
+
+    def sigma_of(self, sensor: str) -> float:
+        s = self.sigma.get(sensor, 30.0) if isinstance(self.sigma, dict) else self.sigma
+        if not (math.isfinite(s) and s > 0):
+            raise ValueError(f"sensor {sensor!r}: position sigma must be finite and > 0, got {s!r}")
+        return float(s)
+
+    # -- one sensor scan ----------------------------------------------------------------
+    def scan(self, t: float, sensor: str, z: np.ndarray) -> None:
+        """The hits `z` (k x 2, metres) one sensor saw at time `t` (not before the last scan)."""
+        r2 = self.sigma_of(sensor) ** 2
+        self._predict(t)
+        k = len(z)
+        if k == 0:
+            return
+        owner = -np.ones(k, dtype=int)
+        if self.tracks:
+            d2 = self._d2(z, r2, with_ext=False)
+            d2g = self._d2(z, r2, with_ext=True)
+            taken: set[int] = set()
+            for tier in (True, False):   # confirmed tracks and their members first, then tentative ones
+                mine = np.array([tr.confirmed is tier for tr in self.tracks])
+                i, j = np.nonzero((d2 <= self.gate) & mine[:, None] & (owner < 0)[None, :])
+                now: list[int] = []
+                for o in np.argsort(d2[i, j], kind="stable"):   # one hit per track, nearest first
+                    ti, hj = int(i[o]), int(j[o])
+                    if ti in taken or owner[hj] >= 0:
+                        continue
+                    taken.add(ti)
+                    now.append(ti)
+                    owner[hj] = ti
+                if now and (owner < 0).any():   # the groups' other members join them
+                    free = np.nonzero(owner < 0)[0]
+                    g = d2g[np.ix_(now, free)]
+                    best = g.argmin(axis=0)
+                    ok = g[best, np.arange(len(free))] <= self.gate
+                    owner[free[ok]] = np.array(now)[best[ok]]
+            for ti in sorted(taken):
+                self._update(self.tracks[ti], z[owner == ti], r2, t)
+        self._birth(z[owner < 0], r2, t)
+
+    def _predict(self, t: float) -> None:
+        for tr in self.tracks:
+            dt = t - tr.t
+            if dt <= 0:
+                continue
+            F = I4.copy()
+            F[0, 2] = F[1, 3] = dt
+            q = self.q_fast if math.hypot(tr.x[2], tr.x[3]) > self.fast or not tr.confirmed else self.q
+            d3, d2_, d1 = dt ** 3 / 3, dt ** 2 / 2, dt
+            Q = q * np.array([[d3, 0, d2_, 0], [0, d3, 0, d2_], [d2_, 0, d1, 0], [0, d2_, 0, d1]])
+            tr.x = F @ tr.x
+            tr.P = F @ tr.P @ F.T + Q
+            tr.t = t
+
+    def _d2(self, z: np.ndarray, r2: float, with_ext: bool) -> np.ndarray:
+        """Squared Mahalanobis distance of every hit to every track's predicted position."""
+        X = np.array([tr.x[:2] for tr in self.tracks])
+        S = np.array([tr.P[:2, :2] for tr in self.tracks]).copy()
+        add = r2 + (np.array([tr.ext for tr in self.tracks]) if with_ext else 0.0)
+        S[:, 0, 0] += add
+        S[:, 1, 1] += add
+        det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+        v = z[None, :, :] - X[:, None, :]                      # tracks x hits x 2
+        a, b, c = S[:, 1, 1, None], -S[:, 0, 1, None], S[:, 0, 0, None]
+        return (a * v[..., 0] ** 2 + 2 * b * v[..., 0] * v[..., 1] + c * v[..., 1] ** 2) / det[:, None]
+
+    def _update(self, tr: Track, zs: np.ndarray, r2: float, t: float) -> None:
+        n = len(zs)
+        zc = zs.mean(axis=0)
+        if n >= 2:   # the members' spread, beyond the sensor's noise
+            spread = float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0)
+            tr.ext = 0.7 * tr.ext + 0.3 * max(spread - r2, 0.0)
+        R = np.eye(2) * (r2 + tr.ext) / n
+        S = tr.P[:2, :2] + R
+        K = tr.P[:, :2] @ np.linalg.inv(S)
+        tr.x = tr.x + K @ (zc - tr.x[:2])
+        tr.P = (I4 - K @ np.eye(2, 4)) @ tr.P
+        tr.P = (tr.P + tr.P.T) / 2.0
+        tr.t = tr.t_upd = t
+        tr.x_upd = tr.x.copy()
+        tr.counts.append(n)
+        tr.hit_window = True
+
+    def _birth(self, z: np.ndarray, r2: float, t: float) -> None:
+        if not len(z):
+            return
+        d = np.hypot(z[:, None, 0] - z[None, :, 0], z[:, None, 1] - z[None, :, 1])
+        label = -np.ones(len(z), dtype=int)
+        for s in range(len(z)):                    # connected components within birth_m
+            if label[s] >= 0:
+                continue
+            label[s], stack = s, [s]
+            while stack:
+                i = stack.pop()
+                for j in np.nonzero((d[i] <= self.birth_m) & (label < 0))[0]:
+                    label[j] = s
+                    stack.append(int(j))
+        for lab in np.unique(label):
+            zs = z[label == lab]
+            zc = zs.mean(axis=0)
+            ext = max(float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0) - r2, 0.0) if len(zs) > 1 else 0.0
+            pv = r2 + ext
+            self.seq += 1
+            x = np.array([zc[0], zc[1], 0.0, 0.0])
+            tr = Track(f"{self.name}-{self.seq}", x, np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2]), t, t, x.copy(),
+                       ext)
+            tr.counts.append(len(zs))
+            tr.hit_window = True
+            self.tracks.append(tr)
+
+    # -- window close: confirmation, deletion, reports -----------------------------------
+    def close_window(self, t: float) -> list[Report]:
+        """Confirm (M of N windows), drop, and report each confirmed track updated in this
+        window (strength 0 for a confirmed track dropped: the mesh forgets it)."""
+        out: list[Report] = []
+        keep = []
+        for tr in self.tracks:
+            tr.seen.append(tr.hit_window)
+            if len(tr.seen) > self.n:
+                tr.seen.popleft()
+            hit, tr.hit_window = tr.seen[-1], False
+            if not tr.confirmed and sum(tr.seen) >= self.m:
+                tr.confirmed = True
+            stale = t - tr.t_upd > self.drop_s
+            hopeless = not tr.confirmed and len(tr.seen) >= self.n and sum(tr.seen) < self.m
+            if stale or hopeless:
+                if tr.confirmed:
+                    out.append(self._report(tr, 0))
+                continue
+            keep.append(tr)
+            if tr.confirmed and hit:
+                out.append(self._report(tr))
+        self.tracks = keep
+        return out
+
+    def _report(self, tr: Track, strength: int | None = None) -> Report:
+        x = tr.x_upd
+        return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), float(x[2]), float(x[3]),
+                      max(tr.counts) if strength is None else strength)

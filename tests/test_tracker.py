@@ -1,0 +1,137 @@
+"""The Kalman tracker (saim_mesh/fusion/tracker.py) on what the window averager could not
+track: a lone vehicle, a 250 m/s target, two vehicles whose paths cross; reports carry
+the time they describe and the velocity; bad parameters are refused by name."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from saim_mesh import scenario as S
+from saim_mesh.fusion.kalman_node import KalmanNode
+from saim_mesh.fusion.node import FusionNode
+from saim_mesh.fusion.tracker import KalmanTracker
+from saim_mesh.messages import SensorHit
+
+from .conftest import SMALL
+
+
+def run(paths, sigma=25.0, pd=1.0, period=5.0, duration=300.0, seed=0, fa=0.0, **kw):
+    """Feed one sensor's scans of true paths (callables t -> (x, y)); returns (tracker, reports)."""
+    rng = np.random.default_rng(seed)
+    tr = KalmanTracker("T", sigma, **kw)
+    reports, t, end = [], 1.0, period
+    while t < duration:
+        while t >= end:
+            reports += tr.close_window(end)
+            end += period
+        z = [np.add(p(t), rng.normal(0, sigma, 2)) for p in paths if rng.random() < pd]
+        z += [rng.uniform(-5000, 5000, 2) for _ in range(rng.poisson(fa))]
+        tr.scan(t, "s", np.array(z).reshape(-1, 2))
+        t += period
+    return tr, reports
+
+
+def err(reports, truth):
+    return [math.hypot(r.x - truth(r.t)[0], r.y - truth(r.t)[1]) for r in reports if r.strength > 0]
+
+
+def test_a_lone_vehicle_is_one_confirmed_track_with_its_velocity():
+    truth = lambda t: (5.0 * t, 1000.0)   # noqa: E731
+    tr, reps = run([truth], pd=0.85, fa=0.3, seed=1)
+    mine = [r for r in reps if r.strength > 0 and abs(r.y - 1000) < 300]
+    assert mine and len({r.track for r in mine}) == 1
+    assert mine[0].t <= 25.0   # confirmed within a few scans
+    assert float(np.sqrt(np.mean(np.square(err(mine, truth))))) < 30.0   # raw hits: 35 m radial RMS
+    vx, vy = np.mean([r.vx for r in mine[5:]]), np.mean([r.vy for r in mine[5:]])
+    assert abs(vx - 5.0) < 0.7 and abs(vy) < 0.7
+    assert all((r.t - 1.0) % 5.0 == 0 for r in mine)   # stamped at the scan it describes, not the window end
+
+
+@pytest.mark.parametrize("speed", [100.0, 250.0, 300.0])
+def test_a_fast_mover_keeps_one_track(speed):
+    truth = lambda t: (speed * t, 0.3 * speed * t)   # noqa: E731
+    _, reps = run([truth], sigma=50.0, duration=200.0)
+    live = [r for r in reps if r.strength > 0]
+    assert len({r.track for r in live}) == 1 and len(live) >= 30
+    assert max(err(live[3:], truth)) < 150.0
+    assert abs(math.hypot(live[-1].vx, live[-1].vy) - speed * math.hypot(1, 0.3)) < 10.0
+
+
+def test_crossing_vehicles_keep_their_identities():
+    a = lambda t: (10.0 * t, 10.0 * t)            # noqa: E731
+    b = lambda t: (10.0 * t, 3000.0 - 10.0 * t)   # noqa: E731   cross at t = 150 s
+    _, reps = run([a, b], duration=300.0)
+    live = [r for r in reps if r.strength > 0]
+    owner = {}
+    for r in live:
+        near = "a" if math.hypot(r.x - a(r.t)[0], r.y - a(r.t)[1]) < math.hypot(r.x - b(r.t)[0], r.y - b(r.t)[1]) else "b"
+        if abs(r.t - 150.0) > 30.0:   # away from the crossing: each track follows one vehicle
+            owner.setdefault(r.track, set()).add(near)
+    assert len(owner) == 2 and all(len(v) == 1 for v in owner.values()), owner
+    assert {next(iter(v)) for v in owner.values()} == {"a", "b"}
+
+
+def test_a_group_is_one_track_with_its_strength():
+    offs = [(0, 0), (40, -30), (-50, 20), (20, 55)]
+    paths = [lambda t, o=o: (4.0 * t + o[0], 2000.0 + o[1]) for o in offs]
+    _, reps = run(paths, duration=200.0)
+    live = [r for r in reps if r.strength > 0]
+    assert len({r.track for r in live}) == 1 and max(r.strength for r in live) == 4
+
+
+def test_false_alarms_alone_confirm_nothing():
+    _, reps = run([], fa=0.5, duration=600.0, seed=3)
+    assert len({r.track for r in reps}) <= 1   # 60 false alarms in 10 km x 10 km
+
+
+def test_bad_parameters_are_refused_by_name():
+    with pytest.raises(ValueError, match="sensor 'X': position sigma must be finite"):
+        KalmanTracker("T", {"X": float("nan")}).scan(1.0, "X", np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="M-of-N"):
+        KalmanTracker("T", m=4, n=3)
+    with pytest.raises(ValueError, match="process noise"):
+        KalmanTracker("T", q=float("inf"))
+
+
+def test_the_node_tracks_a_lone_vehicle_the_window_averager_never_reports():
+    """1 vehicle at 5 m/s seen by one sensor: the Kalman node reports it (time of the
+    scan, heading, speed); the window node confirms nothing (it needs 2 hits per sensor)."""
+    sc = S.load(SMALL, events=False)
+    ox, oy = sc.projection.to_xy(*sc.projection.to_lonlat(0.0, 0.0))
+    x0, y0 = sc.projection.to_xy(-116.56, 35.30)
+    rng = np.random.default_rng(4)
+    hits = []
+    for k in range(60):
+        t = 2.0 + 5.0 * k
+        x, y = x0 + 5.0 * t + rng.normal(0, 20), y0 + rng.normal(0, 20)
+        lon, lat = sc.projection.to_lonlat(x, y)
+        hits.append(SensorHit(t, "G1", float(lon), float(lat)))
+    kal, win = KalmanNode("N", sc.projection, {"G1": 20.0}), FusionNode("N", sc.projection)
+    got = {"kal": [], "win": []}
+    for h in hits:
+        got["kal"] += kal.add(h)
+        got["win"] += win.add(h)
+    got["kal"] += kal.flush(400.0)
+    got["win"] += win.flush(400.0)
+    assert got["win"] == []
+    live = [r for r in got["kal"] if r.strength > 0]
+    assert len(live) >= 50 and len({r.track for r in live}) == 1
+    assert all((r.t - 2.0) % 5.0 == 0 for r in live)
+    assert abs(np.mean([r.speed for r in live[10:]]) - 5.0) < 1.0
+    assert abs(np.mean([r.heading for r in live[10:]]) - 90.0) < 10.0
+
+
+def test_the_scenario_chooses_the_tracker():
+    """`fusion.tracker` in scenario.json: the runner and the fusion peer build the same
+    kind of node (make_node); an unknown tracker is refused by name."""
+    from saim_mesh.fusion import make_node
+    sc = S.load(SMALL.parent / "small-sensors", events=False)
+    assert type(make_node(sc, "N")) is FusionNode
+    sc.meta["fusion"] = {**sc.meta["fusion"], "tracker": "kalman"}
+    node = make_node(sc, "N")
+    assert type(node) is KalmanNode and node.tracker.sigma_of("UAV1") == 40.0
+    sc.meta["fusion"]["tracker"] = "magic"
+    with pytest.raises(ValueError, match="fusion.tracker 'magic' is not one of window, kalman"):
+        make_node(sc, "N")
