@@ -12,7 +12,7 @@ from saim_mesh import scenario as S
 from saim_mesh.fusion.kalman_node import KalmanNode
 from saim_mesh.fusion.node import FusionNode
 from saim_mesh.fusion.tracker import KalmanTracker
-from saim_mesh.messages import SensorHit
+from saim_mesh.messages import SensorHit, SensorTrack
 
 from .conftest import SMALL
 
@@ -135,3 +135,36 @@ def test_the_scenario_chooses_the_tracker():
     sc.meta["fusion"]["tracker"] = "magic"
     with pytest.raises(ValueError, match="fusion.tracker 'magic' is not one of window, kalman"):
         make_node(sc, "N")
+
+
+def test_an_aircraft_is_an_air_track_and_no_ground_threat():
+    """A slow aircraft at 2,100 m (7,000 ft) over a company: an air track (by height), and
+    the SUO picture keeps no hostile for it; a fast one with no height is air by speed."""
+    from ea_agent.domains.suo.picture import Picture
+    sc = S.load(SMALL, events=False)
+    x0, y0 = sc.projection.to_xy(-116.58, 35.29)
+    node = KalmanNode("N", sc.projection, {"G1": 20.0})
+    reps = []
+    for k in range(40):
+        t = 1.0 + 5.0 * k
+        lon, lat = sc.projection.to_lonlat(x0 + 40.0 * t, y0)
+        reps += node.add(SensorHit(t, "G1", float(lon), float(lat), 2100.0 + (k % 3)))
+    reps += node.flush(300.0)
+    live = [r for r in reps if r.strength > 0]
+    assert live and {r.domain for r in live} == {"air"} and abs(live[-1].alt - 2101.0) < 5
+    pic = Picture(sc.taskorg, sc.projection)
+    pic.apply_tracks(live)
+    assert pic.tracks == {}
+    ground = [SensorTrack(r.t, r.track, r.lon, r.lat, r.strength, r.heading, r.speed, r.source) for r in live]
+    pic.apply_tracks(ground)
+    assert len(pic.tracks) == 1                        # the same reports on the ground: a hostile
+    _, fast = run([lambda t: (200.0 * t, 0.0)], sigma=50.0, duration=100.0)
+    assert {r.domain for r in fast if r.strength > 0} == {"air"}
+    _, slow = run([lambda t: (8.0 * t, 0.0)], duration=100.0)
+    assert {r.domain for r in slow if r.strength > 0} == {"ground"}
+    assert SensorTrack.from_dict({"t": 1, "track": "k", "lon": 1, "lat": 2, "strength": 1, "domain": "air",
+                                  "alt": 2100}).domain == "air"
+    with pytest.raises(ValueError, match="field 'domain'"):
+        SensorTrack.from_dict({"t": 1, "track": "k", "lon": 1, "lat": 2, "strength": 1, "domain": "space"})
+    with pytest.raises(ValueError, match="field 'alt'"):
+        SensorHit.from_dict({"t": 1, "sensor": "G1", "lon": 1, "lat": 2, "alt": float("nan")})

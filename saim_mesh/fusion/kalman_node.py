@@ -47,10 +47,13 @@ class KalmanNode:
         if hits:
             x, y = self.proj.to_xy(np.array([h.lon for h in hits]), np.array([h.lat for h in hits]))
             xy = np.column_stack([np.atleast_1d(x), np.atleast_1d(y)])
+            alt = np.array([np.nan if h.alt is None else h.alt for h in hits])
             start = 0
             for i in range(1, len(hits) + 1):   # one scan: one sensor's hits at one time
                 if i == len(hits) or (hits[i].t, hits[i].sensor) != (hits[start].t, hits[start].sensor):
-                    self.tracker.scan(hits[start].t, hits[start].sensor, xy[start:i])
+                    a = alt[start:i]
+                    self.tracker.scan(hits[start].t, hits[start].sensor, xy[start:i],
+                                      a if np.isfinite(a).any() else None)
                     start = i
         out = [self._track(r, t) for r in self.tracker.close_window(t)]
         out.sort(key=lambda r: (r.t, r.track))
@@ -61,4 +64,5 @@ class KalmanNode:
         lon, lat = self.proj.to_lonlat(r.x, r.y)
         heading = (math.degrees(math.atan2(r.vx, r.vy)) + 360.0) % 360.0
         return SensorTrack(t if r.strength == 0 else r.t, r.track, round(float(lon), 7), round(float(lat), 7),
-                           r.strength, round(heading, 1) % 360.0, round(math.hypot(r.vx, r.vy), 2), self.id)
+                           r.strength, round(heading, 1) % 360.0, round(math.hypot(r.vx, r.vy), 2), self.id,
+                           r.alt, r.domain)

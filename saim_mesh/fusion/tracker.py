@@ -39,6 +39,7 @@ class Track:
     seen: deque = field(default_factory=deque)                        # per window: updated or not
     hit_window: bool = False
     confirmed: bool = False
+    alt: float | None = None         # metres above ground (mean of its hits' altitudes), if measured
 
 
 @dataclass
@@ -51,13 +52,15 @@ class Report:
     vx: float
     vy: float
     strength: int
+    alt: float | None = None
+    domain: str = "ground"
 
 
 class KalmanTracker:
     def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.5,
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
-                 window_s: float = 5.0):
+                 window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0):
         if not (math.isfinite(q) and q > 0 and math.isfinite(q_fast) and q_fast > 0):
             raise ValueError(f"process noise must be finite and > 0 (q={q!r}, q_fast={q_fast!r})")
         if not 1 <= m <= n:
@@ -66,6 +69,7 @@ class KalmanTracker:
         self.q, self.q_fast, self.fast = q, q_fast, fast_mps
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
+        self.air_agl_m, self.air_mps = air_agl_m, air_mps
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -76,8 +80,9 @@ class KalmanTracker:
         return float(s)
 
     # -- one sensor scan ----------------------------------------------------------------
-    def scan(self, t: float, sensor: str, z: np.ndarray) -> None:
-        """The hits `z` (k x 2, metres) one sensor saw at time `t` (not before the last scan)."""
+    def scan(self, t: float, sensor: str, z: np.ndarray, alt: np.ndarray | None = None) -> None:
+        """The hits `z` (k x 2, metres) one sensor saw at time `t` (not before the last scan);
+        `alt`: their heights above ground (k, NaN where unknown), if the sensor gives them."""
         r2 = self.sigma_of(sensor) ** 2
         self._predict(t)
         k = len(z)
@@ -107,7 +112,19 @@ class KalmanTracker:
                     owner[free[ok]] = np.array(now)[best[ok]]
             for ti in sorted(taken):
                 self._update(self.tracks[ti], z[owner == ti], r2, t)
-        self._birth(z[owner < 0], r2, t)
+                self._height(self.tracks[ti], alt, owner == ti)
+        free = owner < 0
+        self._birth(z[free], None if alt is None else alt[free], r2, t)
+
+    @staticmethod
+    def _height(tr: Track, alt: np.ndarray | None, mine: np.ndarray) -> None:
+        if alt is None:
+            return
+        a = alt[mine]
+        a = a[np.isfinite(a)]
+        if len(a):
+            m = float(a.mean())
+            tr.alt = m if tr.alt is None else 0.5 * tr.alt + 0.5 * m
 
     def _predict(self, t: float) -> None:
         for tr in self.tracks:
@@ -152,7 +169,7 @@ class KalmanTracker:
         tr.counts.append(n)
         tr.hit_window = True
 
-    def _birth(self, z: np.ndarray, r2: float, t: float) -> None:
+    def _birth(self, z: np.ndarray, alt: np.ndarray | None, r2: float, t: float) -> None:
         if not len(z):
             return
         d = np.hypot(z[:, None, 0] - z[None, :, 0], z[:, None, 1] - z[None, :, 1])
@@ -167,7 +184,8 @@ class KalmanTracker:
                     label[j] = s
                     stack.append(int(j))
         for lab in np.unique(label):
-            zs = z[label == lab]
+            mine = label == lab
+            zs = z[mine]
             zc = zs.mean(axis=0)
             ext = max(float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0) - r2, 0.0) if len(zs) > 1 else 0.0
             pv = r2 + ext
@@ -177,6 +195,7 @@ class KalmanTracker:
                        ext)
             tr.counts.append(len(zs))
             tr.hit_window = True
+            self._height(tr, alt, mine)
             self.tracks.append(tr)
 
     # -- window close: confirmation, deletion, reports -----------------------------------
@@ -204,7 +223,14 @@ class KalmanTracker:
         self.tracks = keep
         return out
 
+    def domain(self, tr: Track) -> str:
+        """Air when it flies (height above `air_agl_m`) or moves faster than any ground
+        vehicle (`air_mps`); else ground."""
+        fast = math.hypot(tr.x_upd[2], tr.x_upd[3]) > self.air_mps
+        return "air" if fast or (tr.alt is not None and tr.alt > self.air_agl_m) else "ground"
+
     def _report(self, tr: Track, strength: int | None = None) -> Report:
         x = tr.x_upd
         return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), float(x[2]), float(x[3]),
-                      max(tr.counts) if strength is None else strength)
+                      max(tr.counts) if strength is None else strength,
+                      None if tr.alt is None else round(tr.alt, 1), self.domain(tr))

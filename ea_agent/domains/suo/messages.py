@@ -7,6 +7,19 @@ from typing import ClassVar
 
 from ea_agent.core.messages import integer, lonlat, NUMERIC, number, text, time_of, register
 
+DOMAINS = ("ground", "air")
+
+
+def _drop_defaults(msg, names: tuple[str, ...], defaults: tuple) -> dict:
+    """The message's fields, without optional ones at their default (older peers' and
+    files' form: a track without altitude is encoded as before)."""
+    d = {f: getattr(msg, f) for f in msg.__dataclass_fields__}
+    for n, v in zip(names, defaults):
+        if d[n] == v:
+            del d[n]
+    return d
+
+
 @dataclass(slots=True, frozen=True)
 class LocationReport:
     """A friendly entity's GPS position (from SAIM's network)."""
@@ -43,6 +56,8 @@ class SensorTrack:
     heading: float | None = None
     speed: float | None = None
     source: str = "fusion"
+    alt: float | None = None      # metres above ground, when the sensors give it
+    domain: str = "ground"        # "ground" | "air": ground-only rules ignore air tracks
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorTrack":
@@ -50,7 +65,11 @@ class SensorTrack:
         lon, lat = lonlat(d, k)
         return cls(time_of(d, k), text(d, k, "track"), lon, lat, integer(d, k, "strength", 0),
                    number(d, k, "heading", 0.0, 360.0, default=None),
-                   number(d, k, "speed", 0.0, default=None), text(d, k, "source", default="fusion"))
+                   number(d, k, "speed", 0.0, default=None), text(d, k, "source", default="fusion"),
+                   number(d, k, "alt", -500.0, 30000.0, default=None), text(d, k, "domain", DOMAINS, "ground"))
+
+    def to_json_dict(self) -> dict:
+        return _drop_defaults(self, ("alt", "domain"), (None, "ground"))
 
 
 @dataclass(slots=True, frozen=True)
@@ -62,12 +81,16 @@ class SensorHit:
     sensor: str
     lon: float
     lat: float
+    alt: float | None = None      # metres above ground, when the sensor measures it
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorHit":
         k = cls.KIND
         lon, lat = lonlat(d, k)
-        return cls(time_of(d, k), text(d, k, "sensor"), lon, lat)
+        return cls(time_of(d, k), text(d, k, "sensor"), lon, lat, number(d, k, "alt", -500.0, 30000.0, default=None))
+
+    def to_json_dict(self) -> dict:
+        return _drop_defaults(self, ("alt",), (None,))
 
 
 @dataclass(slots=True, frozen=True)

@@ -93,7 +93,9 @@ class Picture:
         x, y = self.proj.to_xy(np.array([t.lon for t in tracks]), np.array([t.lat for t in tracks]))
         kept = False
         for t, tx, ty in zip(tracks, np.atleast_1d(x), np.atleast_1d(y)):
-            kept |= self.adj.update(Report(t.t, t.source, t.track, float(tx), float(ty), t.strength, t.lon, t.lat))
+            # an air track is no ground threat (contact, envelopes, areas): as gone for this picture
+            strength = 0 if t.domain == "air" else t.strength
+            kept |= self.adj.update(Report(t.t, t.source, t.track, float(tx), float(ty), strength, t.lon, t.lat))
         if not kept:
             return set()
         new = self.adj.picture()
