@@ -38,9 +38,16 @@ def test_fratricide_same_for_battalion_and_company(small_run):
 
 
 def test_out_of_position(small_run):
+    """A2 drifts off its route from about 930 s: it is told first as a projection, and the
+    actual violation, once it is twice the threshold, at its own priority (one story)."""
     for owner in ("BN", "A", "A2"):
-        first = alerts_of(small_run, owner, "out-of-position")[0]
-        assert first.subjects == ("A2",) and 900 <= first.t <= 1000 and first.priority == "immediate"
+        story = alerts_of(small_run, owner, "projected-out-of-position") + alerts_of(small_run, owner, "out-of-position")
+        first = min(story, key=lambda a: a.t)
+        assert first.type == "projected-out-of-position" and first.subjects == ("A2",) and 900 <= first.t <= 1000
+        assert first.category == "constraint-violation-projected" and 0 < first.details["lead_s"] <= 300
+        actual = alerts_of(small_run, owner, "out-of-position")[0]
+        assert actual.t > first.t and actual.priority == "immediate" and actual.details["projected_at_t"] == first.t
+        assert actual.details["distance_m"] >= 2 * actual.details["threshold_m"]
     assert all(a.subjects == ("A2",) for a in alerts_of(small_run, "BN", "out-of-position"))
     assert not alerts_of(small_run, "B", "out-of-position") and not alerts_of(small_run, "C", "out-of-position")
 
@@ -73,7 +80,9 @@ def test_schedule(small_run):
     def sched(owner):
         return [(a.t, a.subjects[0], a.details["how"]) for a in alerts_of(small_run, owner, "schedule")]
     assert (330.0, "B3", "late") in sched("B") and (330.0, "B3", "late") in sched("BN")
-    assert (2190.0, "C3", "late") in sched("C") and (2250.0, "C1", "early") in sched("C")
+    # C3's 30 s lateness at 2190 s was projected at 1860 s (one story): told when it doubled
+    assert (2280.0, "C3", "late") in sched("C") and (2250.0, "C1", "early") in sched("C")
+    assert (2190.0, "C3", "late") not in sched("C")
     assert not sched("A") and not sched("A2")   # A CO ran on time; the auto-run reorganization is never late
 
 
@@ -147,3 +156,15 @@ def test_call_for_fire(small_run):
         assert not alerts_of(small_run, owner, "call-for-fire")
     # CFF-2 has nobody near its target: no warning at all
     assert not any(a.details.get("cff") == "CFF-2" for ea in small_run.values() for a in ea.alerts)
+
+
+def test_projected_late_comes_before_the_late_arrival(small_run):
+    """C3 reaches its battle position after its END-NLT (36 min): projected from its rate of
+    closing 300 s before the deadline; the actual lateness is told only once it doubled."""
+    for owner in ("BN", "C"):
+        proj = [a for a in alerts_of(small_run, owner, "projected-late") if a.details["mission"] == "C3-move"]
+        assert len(proj) == 1 and proj[0].t < proj[0].details["nlt_t"] == 2160.0 and proj[0].details["late_s"] > 60
+        late = [a for a in alerts_of(small_run, owner, "schedule") if a.details["mission"] == "C3-move"]
+        assert late and late[0].t > 2160.0 and late[0].details["projected_at_t"] == proj[0].t
+    for owner in ("A", "B", "A2"):   # no other unit is projected late: they all arrive in time
+        assert not alerts_of(small_run, owner, "projected-late")

@@ -44,3 +44,22 @@ def test_robot_team_meets_targets_against_the_simulators_truth():
     want = {"at-goal", "stuck", "divergent", "no-status", "target-visible", "lost-target", "target-gone",
             "collision", "handoff"}
     assert want <= set(res["by_type"]), res["by_type"]   # every paper alert type happens in the scenario
+
+
+def test_a_projection_is_scored_by_lead_time_or_as_false():
+    from ea_agent.core.alert import Alert
+    from saim_mesh.evaluate import score
+    inc = {"owner": "A", "type": "out-of-position", "accept": ["out-of-position"], "subjects": ["A2"],
+           "t0": 1000.0, "t1": 1100.0, "label": "A2 off route"}
+    truth = {"incidents": [inc], "situations": []}
+    early = Alert(700.0, "A", "projected-out-of-position", "constraint-violation-projected", "priority", ("A2",),
+                  "A2 will leave its route", {"projects": "out-of-position"})
+    r = score([early], truth)
+    assert r["recall"] == 1.0 and r["projections"] == {"alerts": 1, "false": 0, "lead_s": [300.0], "lead_s_median": 300.0}
+    too_early = Alert(300.0, "A", "projected-out-of-position", "constraint-violation-projected", "priority", ("A2",),
+                      "A2 will leave its route", {"projects": "out-of-position"})
+    r = score([too_early], truth)   # 700 s ahead: foretold nothing that came within the window
+    assert r["recall"] == 0.0 and r["projections"]["false"] == 1 and r["unwanted"] == 1
+    wrong = Alert(900.0, "A", "projected-late", "constraint-violation-projected", "priority", ("A2",), "late",
+                  {"projects": "schedule"})
+    assert score([wrong], truth)["projections"]["false"] == 1

@@ -90,3 +90,20 @@ def test_per_ea_override(tmp_path):
     p.write_text(base + "\n[ea.A2.voi]\nout_of_position_m = 90.0\n")
     assert load_config(p, "A2")["voi"]["out_of_position_m"] == 90.0
     assert load_config(p, "A1")["voi"]["out_of_position_m"] == 150.0
+
+
+def test_a_projection_and_its_violation_are_one_story():
+    """A projected violation sets the actual alert's history: the actual is dropped unless
+    the repeat ratio is crossed, and then told at its own priority with when it was foretold."""
+    v = voa()
+    p = Candidate(100, "projected-out-of-position", "priority", ("A1",), "will leave", key=("p", "A1"),
+                  measure=50.0, also=((("oop", "A1"), 150.0),), projection=True)
+    assert len(v.judge([p])) == 1
+    assert v.judge([cand(130, 200)]) == [] and v.stats["suppressed-projected"] == 1   # within ratio 2 x 150
+    [late] = v.judge([cand(140, 320)])                      # twice the threshold: told, not as a repeat
+    assert late.priority == "immediate" and not late.repeat and late.details["projected_at_t"] == 100
+    assert v.judge([cand(400, 500)]) == []                  # now an ordinary history: 2 x 320 needed
+    w = voa()   # without the projection flag the same `also` is an ordinary baseline (a repeat, lowered)
+    w.judge([Candidate(100, "contact", "flash", ("A1",), "c", key=("c",), also=((("oop", "A1"), 150.0),))])
+    [rep] = w.judge([cand(400, 320)])
+    assert rep.repeat and rep.priority == "priority"

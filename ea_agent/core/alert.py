@@ -53,6 +53,7 @@ class Candidate:
     friendly: bool = True               # friendly (120 s) or hostile (90 s) suppression
     repeat: bool = False                 # set by VOA when this is a progressive repeat
     also: tuple = ()                     # ((key, measure), ...) histories this alert also updates
+    projection: bool = False             # a projected violation: `also` names the actual alert's key
 
 
 

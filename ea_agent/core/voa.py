@@ -5,7 +5,10 @@ propose. A candidate is judged against the last alert given on its `key`:
  - no unexpired alert on that key: give it;
  - a similar alert inside the suppression interval (90 s hostile, 120 s friendly): drop;
  - otherwise give it only if its measure crossed the repeat ratio (progressive
-   repeat), at one priority lower: the user already knows the gist.
+   repeat), at one priority lower: the user already knows the gist;
+ - after a projection of the same violation (`Candidate.projection` set the key's
+   history), the actual violation is the same story: dropped, unless its measure crossed
+   the repeat ratio, and then given at its own priority (the projection came true, worse).
 """
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ class Record:
     t: float
     measure: float | None
     priority: str
+    projected: bool = False   # set by a projection of the violation this key stands for
 
 
 MergeFn = Callable[[Hashable, list[Candidate]], Candidate]
@@ -62,7 +66,7 @@ class Voa:
                 continue
             self.history[c.key] = Record(c.t, c.measure, c.priority)
             for k, measure in c.also:  # e.g. a contact sets the baseline for later distance alerts
-                self.history[k] = Record(c.t, measure, c.priority)
+                self.history[k] = Record(c.t, measure, c.priority, c.projection)
             out.append(c)
         return out
 
@@ -70,9 +74,14 @@ class Voa:
         rec = self.last(c.key, c.t)
         if rec is None:
             return None
+        ratio = self.repeat.get(c.type, 0.0)
+        if rec.projected:   # the violation a projection told: the same story, unless much worse
+            if ratio > 0.0 and c.measure is not None and rec.measure is not None and c.measure >= rec.measure * ratio:
+                c.details["projected_at_t"] = rec.t   # it came, and worse: told at its own priority
+                return None
+            return "projected"
         if c.t - rec.t < (self.suppress_friendly if c.friendly else self.suppress_hostile):
             return "time"
-        ratio = self.repeat.get(c.type, 0.0)
         if ratio <= 0.0:
             return "once"
         if c.measure is None or rec.measure is None or c.measure < rec.measure * ratio:

@@ -15,17 +15,19 @@ from .coordination import Coordination
 from .fires import CallsForFire
 from .fratricide import Fratricide
 from .location import LocationMonitors
+from .projection import Projections
 from .schedule import ScheduleMonitors
 from .threats import ThreatEnvelopes
 from .unknown import UnknownPositions
 
 DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
-    Contingencies, Areas, ThreatEnvelopes,
+    Contingencies, Areas, ThreatEnvelopes, Projections,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
-ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4
+PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-projected")   # beyond the paper
+ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, and the projections
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "CallsForFire",
            "Contingencies", "Coordination", "Fratricide", "LocationMonitors", "ScheduleMonitors",

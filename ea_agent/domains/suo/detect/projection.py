@@ -1,0 +1,160 @@
+"""Constraint violations projected (Fig. 1's category; beyond the paper's EA): before a
+unit leaves its route or axis, or arrives after its mission's END-NLT, from how it has
+been moving.
+
+Why trends and not straight-line extrapolation: a unit that follows a bending route
+would be projected off it at every bend. What is extrapolated is the measure the
+actual alert judges: the distance to the route (growing, it will cross the threshold
+at ...), and the distance still to go to the destination (shrinking at this rate, it
+arrives at ...). A projection and the later actual alert are one story for VOA: the
+projection sets the history of the actual alert's key, so the actual violation is not
+told again unless it is much worse (the type's repeat ratio)."""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import shapely
+
+from ea_agent.core.alert import Candidate, hms
+
+from ..missions import Mission
+from ..render import km
+from .base import Changes, Detector
+
+KEEP_S = 300.0   # history kept per mission
+MARGIN = 2.0     # a late arrival is projected only this many schedule thresholds late
+
+
+class Projections(Detector):
+    TYPES = {"projected-out-of-position": "constraint-violation-projected",
+             "projected-late": "constraint-violation-projected"}
+
+    def reset(self) -> None:
+        self.hist: dict[str, deque] = {}   # unit -> (t, route distances {mission: d}, to-go {mission: d})
+
+    def observe(self, t: float, ch: Changes) -> None:
+        dom = self.dom
+        if dom.plan is None:
+            return
+        for m in self._watched(ch):
+            pos = dom.unit_pos.get(m.unit)
+            if pos is None:
+                continue
+            h = self.hist.setdefault(m.id, deque())
+            if h and h[-1][0] >= t:
+                continue
+            h.append((t, self._off_route(m, pos), self._to_go(m, pos)))
+            while h and h[0][0] < t - KEEP_S:
+                h.popleft()
+
+    def _watched(self, ch: Changes) -> list[Mission]:
+        dom = self.dom
+        out = []
+        for mid, state in dom.plan.state.items():
+            m = dom.missions.get(mid)
+            if state != "active" or m is None or not dom.in_plan(m):
+                continue
+            if m.unit in ch.units or ch.rescan:
+                out.append(m)
+        return out
+
+    def _route(self, m: Mission) -> tuple[str, str] | None:
+        """The route or axis whose centroid monitor the mission posted (geometry id, which)."""
+        for _, geom, rule, what in self.dom.location.monitors.get(m.id, ()):
+            if what in ("route", "axis") and rule == "centroid":
+                return geom, what
+        return None
+
+    def _off_route(self, m: Mission, pos) -> float | None:
+        r = self._route(m)
+        return None if r is None else float(shapely.distance(self.dom.overlay[r[0]].geom, shapely.Point(pos)))
+
+    def _destination(self, m: Mission) -> str | None:
+        dest = m.params.get("destination") or m.params.get("objective")
+        end = m.spec.end
+        if dest not in self.dom.overlay or end.type not in ("END-NLT", "END-AT") or end.t is None:
+            return None
+        return dest
+
+    def _to_go(self, m: Mission, pos) -> float | None:
+        dest = self._destination(m)
+        if dest is None:
+            return None
+        p = shapely.Point(pos)
+        r = self._route(m)
+        if r is not None:   # along the route, then on to the destination
+            line = self.dom.overlay[r[0]].geom
+            along = line.length - line.project(p)
+            return along + float(shapely.distance(self.dom.overlay[dest].area, shapely.Point(line.coords[-1])))
+        return float(shapely.distance(self.dom.overlay[dest].area, p))
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        if dom.plan is None:
+            return
+        horizon = float(dom.voi_cfg["projection_horizon_s"])
+        span = float(dom.voi_cfg["projection_trend_s"])
+        for m in self._watched(ch):
+            h = self.hist.get(m.id)
+            if not h:
+                continue
+            old = next((x for x in h if x[0] <= t - span), None)
+            now = h[-1]
+            if old is None or now[0] < t:
+                continue
+            dt = now[0] - old[0]
+            self._off_route_ahead(m, t, old, now, dt, horizon, cands)
+            self._late_ahead(m, t, old, now, dt, horizon, cands)
+
+    def _off_route_ahead(self, m, t, old, now, dt, horizon, cands) -> None:
+        d0, d1 = old[1], now[1]
+        if d0 is None or d1 is None:
+            return
+        thr = self.dom.voi(m, "out_of_position_m")
+        rate = (d1 - d0) / dt
+        if d1 > thr or rate <= 0.1:   # already out (the actual alert's business) or not drifting away
+            return
+        ahead = (thr - d1) / rate
+        if ahead > horizon:
+            return
+        r = self._route(m)
+        geom, what = r
+        name = self.dom.name(m.unit)
+        cands.append(Candidate(
+            t, "projected-out-of-position", m.compute_priority("projected-out-of-position"), (m.unit,),
+            f"{name} projected to leave {geom} in {ahead:.0f} s (at {hms(t + ahead)}): {km(d1)} off it now, "
+            f"drifting {rate:.1f} m/s",
+            key=("projected-out-of-position", m.id, what), measure=horizon - ahead,
+            details={"mission": m.id, "projects": "out-of-position", "control_measure": geom, "check": what,
+                     "projected_t": round(t + ahead, 1),
+                     "lead_s": round(ahead, 1), "distance_m": round(d1, 1), "rate_mps": round(rate, 2),
+                     "threshold_m": thr, "places": [geom]},
+            also=((("out-of-position", m.id, what), thr),), projection=True))
+
+    def _late_ahead(self, m, t, old, now, dt, horizon, cands) -> None:
+        g0, g1 = old[2], now[2]
+        if g0 is None or g1 is None:
+            return
+        dom = self.dom
+        thr_m, thr_s = dom.voi(m, "out_of_position_m"), dom.voi(m, "schedule_s")
+        end = m.spec.end.t
+        if g1 <= thr_m or t >= end + thr_s or end - t > horizon:
+            return   # there already, the actual late alert is due, or the deadline too far to judge by a trend
+        closing = (g0 - g1) / dt
+        eta = t + g1 / closing if closing > 0.05 else math.inf
+        late = eta - end
+        if late <= MARGIN * thr_s:   # a clear miss: the trend is a noisy guess of the arrival
+            return
+        dest = self._destination(m)
+        when = "never at this rate" if math.isinf(eta) else f"at {hms(eta)}, {late:.0f} s late"
+        cands.append(Candidate(
+            t, "projected-late", m.compute_priority("projected-late"), (m.unit,),
+            f"{dom.name(m.unit)} projected to reach {dest} {when} (NLT {hms(end)}): {km(g1)} to go at "
+            f"{max(closing, 0.0):.1f} m/s",
+            key=("projected-late", m.id), measure=min(late, 86400.0),
+            details={"mission": m.id, "projects": "schedule", "control_measure": dest,
+                     "projected_t": None if math.isinf(eta) else round(eta, 1),
+                     "nlt_t": end, "late_s": None if math.isinf(late) else round(late, 1), "to_go_m": round(g1, 1),
+                     "closing_mps": round(closing, 2), "threshold_s": thr_s, "places": [dest]},
+            also=((("schedule", m.id, "end"), thr_s),), projection=True))
