@@ -18,8 +18,12 @@ OWNER = "A2"
 
 def run_a2(small, actions=(), armed=True, until=None):
     """A2's EA over the small scenario; `actions` are (t, fn(ea)) done when scenario time
-    reaches t (before the first event at or after t)."""
-    ea = make_ea(small, OWNER, config_for(small, OWNER))
+    reaches t (before the first event at or after t). Projections are off: these tests
+    follow A2's out-of-position alerts as the paper's EA raises them (the projection of
+    the same story is tested in test_alert_types)."""
+    cfg = config_for(small, OWNER)
+    cfg["voi"]["projection_horizon_s"] = 0.0
+    ea = make_ea(small, OWNER, cfg)
     C.tap(ea)
     if armed:
         ea.arm()

@@ -95,6 +95,8 @@ class Projections(Detector):
             return
         horizon = float(dom.voi_cfg["projection_horizon_s"])
         span = float(dom.voi_cfg["projection_trend_s"])
+        if horizon <= 0.0:   # projections switched off
+            return
         for m in self._watched(ch):
             h = self.hist.get(m.id)
             if not h:
@@ -104,6 +106,8 @@ class Projections(Detector):
             if old is None or now[0] < t:
                 continue
             dt = now[0] - old[0]
+            if dt <= 0.0:
+                continue
             self._off_route_ahead(m, t, old, now, dt, horizon, cands)
             self._late_ahead(m, t, old, now, dt, horizon, cands)
 
