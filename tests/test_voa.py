@@ -112,6 +112,6 @@ def test_a_projection_and_its_violation_are_one_story():
 def test_projection_settings_are_checked():
     import pytest
     from ea_agent.core.config import ConfigError
-    with pytest.raises(ConfigError, match="voi.projection_trend_s: must be > 0"):
+    with pytest.raises(ConfigError, match="field 'projection_trend_s': must be > 0"):
         load_config(overrides={"voi": {"projection_trend_s": 0}})
     assert load_config(overrides={"voi": {"projection_horizon_s": 0}})["voi"]["projection_horizon_s"] == 0   # off
