@@ -23,6 +23,7 @@ from ..render import km
 from .base import Changes, Detector
 
 KEEP_S = 300.0   # history kept per mission
+SAMPLE_S = 10.0  # scenario seconds between samples of the trends
 MARGIN = 2.0     # a late arrival is projected only this many schedule thresholds late
 
 
@@ -31,13 +32,20 @@ class Projections(Detector):
              "projected-late": "constraint-violation-projected"}
 
     def reset(self) -> None:
-        self.hist: dict[str, deque] = {}   # unit -> (t, route distances {mission: d}, to-go {mission: d})
+        self.hist: dict[str, deque] = {}   # mission -> (t, distance off its route, distance to go)
+        self.next_t = 0.0
+        self.due: list[Mission] = []
 
     def observe(self, t: float, ch: Changes) -> None:
+        """Every SAMPLE_S of scenario time (a trend over minutes needs no finer samples),
+        each active mission's distance off its route and still to go."""
         dom = self.dom
-        if dom.plan is None:
+        self.due = []
+        if dom.plan is None or t < self.next_t or float(dom.voi_cfg["projection_horizon_s"]) <= 0.0:
             return
-        for m in self._watched(ch):
+        self.next_t = t + SAMPLE_S
+        self.due = self._watched()
+        for m in self.due:
             pos = dom.unit_pos.get(m.unit)
             if pos is None:
                 continue
@@ -48,14 +56,14 @@ class Projections(Detector):
             while h and h[0][0] < t - KEEP_S:
                 h.popleft()
 
-    def _watched(self, ch: Changes) -> list[Mission]:
+    def _watched(self) -> list[Mission]:
+        """Active missions of ours that have a route or axis, or a destination and a deadline."""
         dom = self.dom
         out = []
         for mid, state in dom.plan.state.items():
             m = dom.missions.get(mid)
-            if state != "active" or m is None or not dom.in_plan(m):
-                continue
-            if m.unit in ch.units or ch.rescan:
+            if state == "active" and m is not None and dom.in_plan(m) and (
+                    self._route(m) is not None or self._destination(m) is not None):
                 out.append(m)
         return out
 
@@ -95,9 +103,7 @@ class Projections(Detector):
             return
         horizon = float(dom.voi_cfg["projection_horizon_s"])
         span = float(dom.voi_cfg["projection_trend_s"])
-        if horizon <= 0.0:   # projections switched off
-            return
-        for m in self._watched(ch):
+        for m in self.due:   # sampled this epoch
             h = self.hist.get(m.id)
             if not h:
                 continue
