@@ -118,7 +118,7 @@ def test_the_node_tracks_a_lone_vehicle_the_window_averager_never_reports():
     assert got["win"] == []
     live = [r for r in got["kal"] if r.strength > 0]
     assert len(live) >= 50 and len({r.track for r in live}) == 1
-    assert all((r.t - 2.0) % 5.0 == 0 for r in live)
+    assert all((r.at - 2.0) % 5.0 == 0 and r.at <= r.t and r.t % 5.0 == 0 for r in live)   # described / issued
     assert abs(np.mean([r.speed for r in live[10:]]) - 5.0) < 1.0
     assert abs(np.mean([r.heading for r in live[10:]]) - 90.0) < 10.0
 
@@ -128,10 +128,10 @@ def test_the_scenario_chooses_the_tracker():
     kind of node (make_node); an unknown tracker is refused by name."""
     from saim_mesh.fusion import make_node
     sc = S.load(SMALL.parent / "small-sensors", events=False)
-    assert type(make_node(sc, "N")) is FusionNode
-    sc.meta["fusion"] = {**sc.meta["fusion"], "tracker": "kalman"}
-    node = make_node(sc, "N")
+    node = make_node(sc, "N")   # the default
     assert type(node) is KalmanNode and node.tracker.sigma_of("UAV1") == 40.0
+    sc.meta["fusion"] = {**sc.meta["fusion"], "tracker": "window"}
+    assert type(make_node(sc, "N")) is FusionNode
     sc.meta["fusion"]["tracker"] = "magic"
     with pytest.raises(ValueError, match="fusion.tracker 'magic' is not one of window, kalman"):
         make_node(sc, "N")

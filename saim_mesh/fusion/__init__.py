@@ -6,12 +6,12 @@ TRACKERS = ("window", "kalman")
 
 
 def make_node(sc, group: str):
-    """The fusion node of `group` for scenario `sc`: the scan-window averager (default)
-    or the Kalman tracker (`"tracker": "kalman"` in scenario.json's `fusion`, which then
-    takes each sensor's `sigma_m`). The runner and the fusion peer both build theirs
-    here, so a mesh run and an in-process run fuse alike."""
+    """The fusion node of `group` for scenario `sc`: the Kalman tracker (default; each
+    sensor's `sigma_m` is its noise) or the scan-window averager (`"tracker": "window"` in
+    scenario.json's `fusion`; it never tracks a lone entity). The runner and the fusion
+    peer both build theirs here, so a mesh run and an in-process run fuse alike."""
     f = sc.meta.get("fusion") or {}
-    kind = f.get("tracker", "window")
+    kind = f.get("tracker", "kalman")
     if kind not in TRACKERS:
         raise ValueError(f"scenario {sc.name}: fusion.tracker {str(kind)[:40]!r} is not one of {', '.join(TRACKERS)}")
     if kind == "window":

@@ -1,8 +1,9 @@
 """A fusion node on the Kalman tracker (tracker.py): the same interface as `FusionNode`
 (hits in, `SensorTrack` reports out at each window's close), so the runner and the
 fusion peer can use either. Hits are projected once per window (one pyproj call) and
-fed to the tracker scan by scan, each at its own time; a report carries the time it
-describes, heading and speed."""
+fed to the tracker scan by scan, each at its own time. A report is issued at the
+window's close (`t`: so an in-process run and a mesh peer apply it in the same epoch)
+and carries the time its position describes (`at`: its last hit), heading and speed."""
 from __future__ import annotations
 
 import math
@@ -23,6 +24,11 @@ class KalmanNode:
         self.pending: list[SensorHit] = []
         self.window_end = window_s
         self.stats = {"hits_in": 0, "tracks_out": 0, "windows": 0}
+
+    @property
+    def seq(self) -> int:
+        """The highest track number given so far (the fusion peer's tick carries it)."""
+        return self.tracker.seq
 
     def add(self, hit: SensorHit) -> list[SensorTrack]:
         """Take one hit (time-ordered); returns the track reports of any window it closed."""
@@ -56,13 +62,13 @@ class KalmanNode:
                                       a if np.isfinite(a).any() else None)
                     start = i
         out = [self._track(r, t) for r in self.tracker.close_window(t)]
-        out.sort(key=lambda r: (r.t, r.track))
+        out.sort(key=lambda r: r.track)
         self.stats["tracks_out"] += len(out)
         return out
 
     def _track(self, r, t: float) -> SensorTrack:
         lon, lat = self.proj.to_lonlat(r.x, r.y)
         heading = (math.degrees(math.atan2(r.vx, r.vy)) + 360.0) % 360.0
-        return SensorTrack(t if r.strength == 0 else r.t, r.track, round(float(lon), 7), round(float(lat), 7),
-                           r.strength, round(heading, 1) % 360.0, round(math.hypot(r.vx, r.vy), 2), self.id,
-                           r.alt, r.domain)
+        return SensorTrack(t, r.track, round(float(lon), 7), round(float(lat), 7), r.strength,
+                           round(heading, 1) % 360.0, round(math.hypot(r.vx, r.vy), 2), self.id, r.alt, r.domain,
+                           round(r.t, 3))

@@ -58,18 +58,22 @@ class SensorTrack:
     source: str = "fusion"
     alt: float | None = None      # metres above ground, when the sensors give it
     domain: str = "ground"        # "ground" | "air": ground-only rules ignore air tracks
+    at: float | None = None       # the time the position describes (its last hit), at or before t;
+    #                               t is when the report was issued (a fusion window's close)
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorTrack":
         k = cls.KIND
         lon, lat = lonlat(d, k)
-        return cls(time_of(d, k), text(d, k, "track"), lon, lat, integer(d, k, "strength", 0),
+        t = time_of(d, k)
+        at = number(d, k, "at", 0.0, t, default=None)
+        return cls(t, text(d, k, "track"), lon, lat, integer(d, k, "strength", 0),
                    number(d, k, "heading", 0.0, 360.0, default=None),
                    number(d, k, "speed", 0.0, default=None), text(d, k, "source", default="fusion"),
-                   number(d, k, "alt", -500.0, 30000.0, default=None), text(d, k, "domain", DOMAINS, "ground"))
+                   number(d, k, "alt", -500.0, 30000.0, default=None), text(d, k, "domain", DOMAINS, "ground"), at)
 
     def to_json_dict(self) -> dict:
-        return _drop_defaults(self, ("alt", "domain"), (None, "ground"))
+        return _drop_defaults(self, ("alt", "domain", "at"), (None, "ground", None))
 
 
 @dataclass(slots=True, frozen=True)
