@@ -13,39 +13,20 @@ import numpy as np
 from ea_agent.core.geo import Projection
 from saim_mesh.messages import SensorHit, SensorTrack
 
+from .node import Windowed
 from .tracker import KalmanTracker
 
 
-class KalmanNode:
+class KalmanNode(Windowed):
     def __init__(self, node_id: str, proj: Projection, sigma: dict[str, float] | float = 30.0,
                  window_s: float = 5.0, **tracker):
-        self.id, self.proj, self.window_s = node_id, proj, window_s
+        super().__init__(node_id, proj, window_s)
         self.tracker = KalmanTracker(node_id, sigma, window_s=window_s, **tracker)
-        self.pending: list[SensorHit] = []
-        self.window_end = window_s
-        self.stats = {"hits_in": 0, "tracks_out": 0, "windows": 0}
 
     @property
     def seq(self) -> int:
         """The highest track number given so far (the fusion peer's tick carries it)."""
         return self.tracker.seq
-
-    def add(self, hit: SensorHit) -> list[SensorTrack]:
-        """Take one hit (time-ordered); returns the track reports of any window it closed."""
-        out: list[SensorTrack] = []
-        while hit.t >= self.window_end:
-            out += self._close(self.window_end)
-            self.window_end += self.window_s
-        self.pending.append(hit)
-        self.stats["hits_in"] += 1
-        return out
-
-    def flush(self, t: float) -> list[SensorTrack]:
-        out: list[SensorTrack] = []
-        while self.window_end <= t:
-            out += self._close(self.window_end)
-            self.window_end += self.window_s
-        return out
 
     def _close(self, t: float) -> list[SensorTrack]:
         self.stats["windows"] += 1

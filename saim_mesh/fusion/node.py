@@ -35,35 +35,44 @@ class _Track:
     confirmed: bool = False
 
 
-class FusionNode:
-    def __init__(self, node_id: str, proj: Projection, window_s: float = 5.0, cluster_m: float = 250.0,
-                 gate_m: float = 400.0, confirm_n: int = 3, drop_s: float = 35.0, alpha: float = 0.6,
-                 beta: float = 0.2):
-        self.id, self.proj = node_id, proj
-        self.window_s, self.cluster_m, self.gate_m = window_s, cluster_m, gate_m
-        self.confirm_n, self.drop_s, self.alpha, self.beta = confirm_n, drop_s, alpha, beta
-        self.tracks: list[_Track] = []
+class Windowed:
+    """Hits in, time-ordered; every `window_s` of scenario time the window's hits go to
+    `_close(t)`, which returns the window's track reports. Both fusion nodes are this."""
+
+    def __init__(self, node_id: str, proj: Projection, window_s: float):
+        self.id, self.proj, self.window_s = node_id, proj, window_s
         self.pending: list[SensorHit] = []
         self.window_end = window_s
-        self.seq = 0
         self.stats = {"hits_in": 0, "tracks_out": 0, "windows": 0}
 
     def add(self, hit: SensorHit) -> list[SensorTrack]:
         """Take one hit (time-ordered); returns the track reports of any window it closed."""
-        out: list[SensorTrack] = []
-        while hit.t >= self.window_end:
-            out += self._close(self.window_end)
-            self.window_end += self.window_s
+        out = self.flush(hit.t)   # a hit at a window's end belongs to the next one
         self.pending.append(hit)
         self.stats["hits_in"] += 1
         return out
 
     def flush(self, t: float) -> list[SensorTrack]:
+        """Close every window that ends at or before `t`."""
         out: list[SensorTrack] = []
         while self.window_end <= t:
             out += self._close(self.window_end)
             self.window_end += self.window_s
         return out
+
+    def _close(self, t: float) -> list[SensorTrack]:
+        raise NotImplementedError
+
+
+class FusionNode(Windowed):
+    def __init__(self, node_id: str, proj: Projection, window_s: float = 5.0, cluster_m: float = 250.0,
+                 gate_m: float = 400.0, confirm_n: int = 3, drop_s: float = 35.0, alpha: float = 0.6,
+                 beta: float = 0.2):
+        super().__init__(node_id, proj, window_s)
+        self.cluster_m, self.gate_m = cluster_m, gate_m
+        self.confirm_n, self.drop_s, self.alpha, self.beta = confirm_n, drop_s, alpha, beta
+        self.tracks: list[_Track] = []
+        self.seq = 0
 
     # -- one scan window ----------------------------------------------------------------------
     def _clusters(self, xy: np.ndarray, sensors: list[str]) -> list[tuple[float, float, int]]:
