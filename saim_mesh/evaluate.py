@@ -40,11 +40,54 @@ def _projections(alerts: list[Alert], incidents: list[dict]) -> dict:
             "lead_s_median": leads[len(leads) // 2] if leads else None}
 
 
+# What makes a later alert about the same story news: its severity (a detail of the alert)
+# changed by at least STEP in the worse direction since the last one the user was given.
+# Fixed here, apart from the EAs' VOA ratios; a type not listed is news once per story.
+STEP = 1.25
+# sign +1: bigger is worse; -1: smaller is worse; 0: a count, every increase is news.
+SEVERITY = {  # SUO
+            "out-of-position": ("distance_m", +1), "schedule": ("off_s", +1), "unknown-position": ("silent_s", +1),
+            "fratricide": ("min_distance_m", -1), "distance": ("distance_m", -1), "strength": ("strength", +1),
+            "monitored": ("strength", +1), "ave-of-approach": ("strength", +1), "projected-late": ("late_s", +1),
+            # robot teams
+            "stuck": ("still_s", +1), "divergent": ("distance_m", +1), "no-status": ("silent_s", +1),
+            "lost-target": ("unseen_s", +1), "collision": ("clearance_m", -1), "target-visible": ("acquisition", 0)}
+
+
+def _no_news(alerts: list[Alert], items: list[dict]) -> list[Alert]:
+    """Alerts that repeat what their owner was already told about the same story (the same
+    type about the same truth item) with no material change in severity."""
+    told: dict[tuple, float | None] = {}
+    out = []
+    for a in sorted(alerts, key=lambda a: a.t):
+        item = next((k for k, i in enumerate(items) if _matches(a, i)), None)
+        if item is None:
+            continue   # unwanted anyway: it matches nothing
+        story = (a.owner, a.type, item, frozenset(a.subjects))
+        key, sign = SEVERITY.get(a.type, (None, 0))
+        v = a.details.get(key) if key else None
+        v = float(v) if isinstance(v, (int, float)) and v > 0 else None
+        if story not in told:
+            told[story] = v
+            continue
+        last = told[story]
+        worse = v is not None and last is not None and (
+            v > last if sign == 0 else v >= last * STEP if sign > 0 else v <= last / STEP)
+        if worse:
+            told[story] = v
+        else:
+            out.append(a)
+    return out
+
+
 def score(alerts: list[Alert], truth: dict) -> dict:
     incidents, situations = truth["incidents"], truth["situations"]
     missed = [i for i in incidents if not any(_matches(a, i) for a in alerts)]
-    unwanted = [a for a in alerts if not any(_matches(a, s) for s in situations + incidents)]
+    unmatched = [a for a in alerts if not any(_matches(a, s) for s in situations + incidents)]
+    repeats = _no_news(alerts, incidents + situations)
+    unwanted = unmatched + repeats
     return {
+        "unwanted_repeats": len(repeats),
         "projections": _projections(alerts, incidents),
         "incidents": len(incidents),
         "recall": round(1 - len(missed) / len(incidents), 4) if incidents else 1.0,
@@ -66,6 +109,8 @@ def evaluate(sc, config_path=None) -> dict:
     naive = run(sc, owners, config_path=config_path, voa=False)
     res = score(alerts, truth)
     res["naive_alerts"] = sum(len(ea.alerts) for ea in naive)
+    nv = score([a for ea in naive for a in ea.alerts], truth)
+    res["naive"] = {k: nv[k] for k in ("recall", "unwanted", "unwanted_share", "unwanted_repeats", "unwanted_flash")}
     res["reduction"] = round(res["naive_alerts"] / max(1, res["alerts"]), 1)
     res["owners"] = owners
     res["events"] = len(sc.events)

@@ -14,6 +14,8 @@ def check(res):
     assert res["unwanted_share"] <= 0.05, res["unwanted_alerts"]
     assert res["unwanted_flash"] == 0
     assert res["naive_alerts"] >= 50 * res["alerts"]
+    # the measure can fail: with VOA off, most alerts repeat what was told with no material change
+    assert res["naive"]["unwanted_share"] >= 0.5 and res["naive"]["unwanted_flash"] > 0, res["naive"]
 
 
 def test_small_scenario_meets_targets():
@@ -41,6 +43,7 @@ def test_robot_team_meets_targets_against_the_simulators_truth():
     assert res["unwanted_share"] <= 0.05, res["unwanted_alerts"]
     assert res["unwanted_flash"] == 0
     assert res["naive_alerts"] >= 10 * res["alerts"]
+    assert res["naive"]["unwanted_share"] >= 0.5, res["naive"]
     want = {"at-goal", "stuck", "divergent", "no-status", "target-visible", "lost-target", "target-gone",
             "collision", "handoff"}
     assert want <= set(res["by_type"]), res["by_type"]   # every paper alert type happens in the scenario
@@ -63,3 +66,26 @@ def test_a_projection_is_scored_by_lead_time_or_as_false():
     wrong = Alert(900.0, "A", "projected-late", "constraint-violation-projected", "priority", ("A2",), "late",
                   {"projects": "schedule"})
     assert score([wrong], truth)["projections"]["false"] == 1
+
+
+def test_a_repeat_is_wanted_only_with_a_material_change():
+    """The same story (owner, type, truth item, subjects): the first alert is news, a later one
+    only when its severity moved by the fixed step (1.25x) the worse way; a count type at any rise."""
+    from ea_agent.core.alert import Alert
+    from saim_mesh.evaluate import score
+    inc = {"owner": "A", "type": "out-of-position", "accept": ["out-of-position"], "subjects": ["A2"],
+           "t0": 0.0, "t1": 1000.0, "label": "A2 off"}
+    oop = lambda t, d: Alert(t, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A2",),  # noqa: E731
+                             "off", {"distance_m": d})
+    r = score([oop(10, 200), oop(20, 210), oop(30, 260), oop(40, 240), oop(50, 330)], {"incidents": [inc],
+                                                                                     "situations": []})
+    assert r["unwanted_repeats"] == 2 and r["unwanted"] == 2   # 210 and 240: no material change
+    assert [a["details"]["distance_m"] for a in r["unwanted_alerts"]] == [210, 240]
+    near = lambda t, d: Alert(t, "A", "fratricide", "friendly-activity", "flash", ("A2",), "near",  # noqa: E731
+                              {"min_distance_m": d})
+    inc2 = {**inc, "type": "fratricide", "accept": ["fratricide"]}
+    r = score([near(10, 500), near(20, 450), near(30, 390)], {"incidents": [inc2], "situations": []})
+    assert r["unwanted_repeats"] == 1 and r["unwanted_flash"] == 1   # 450 is not 1.25x closer than 500
+    other = Alert(20, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A3",), "off", {})
+    assert score([oop(10, 200), other], {"incidents": [inc, {**inc, "subjects": ["A3"]}],
+                                         "situations": []})["unwanted_repeats"] == 0   # another story
