@@ -52,7 +52,7 @@ def test_a_lone_vehicle_is_one_confirmed_track_with_its_velocity():
 @pytest.mark.parametrize("speed", [100.0, 250.0, 300.0])
 def test_a_fast_mover_keeps_one_track(speed):
     truth = lambda t: (speed * t, 0.3 * speed * t)   # noqa: E731
-    _, reps = run([truth], sigma=50.0, duration=200.0)
+    _, reps = run([truth], sigma=50.0, duration=200.0, dr_m=None)   # every update reported
     live = [r for r in reps if r.strength > 0]
     assert len({r.track for r in live}) == 1 and len(live) >= 30
     assert max(err(live[3:], truth)) < 150.0
@@ -108,7 +108,7 @@ def test_the_node_tracks_a_lone_vehicle_the_window_averager_never_reports():
         x, y = x0 + 5.0 * t + rng.normal(0, 20), y0 + rng.normal(0, 20)
         lon, lat = sc.projection.to_lonlat(x, y)
         hits.append(SensorHit(t, "G1", float(lon), float(lat)))
-    kal, win = KalmanNode("N", sc.projection, {"G1": 20.0}), FusionNode("N", sc.projection)
+    kal, win = KalmanNode("N", sc.projection, {"G1": 20.0}, dr_m=None), FusionNode("N", sc.projection)
     got = {"kal": [], "win": []}
     for h in hits:
         got["kal"] += kal.add(h)
@@ -168,3 +168,21 @@ def test_an_aircraft_is_an_air_track_and_no_ground_threat():
         SensorTrack.from_dict({"t": 1, "track": "k", "lon": 1, "lat": 2, "strength": 1, "domain": "space"})
     with pytest.raises(ValueError, match="field 'alt'"):
         SensorHit.from_dict({"t": 1, "sensor": "G1", "lon": 1, "lat": 2, "alt": float("nan")})
+
+
+def test_dead_reckoning_sends_few_reports_and_keeps_the_receivers_close():
+    """A vehicle at 10 m/s that turns once: with dead reckoning the receivers get a report
+    only when their extrapolation of the last one errs by more than 50 m and twice the
+    track's own position sigma (or every 30 s), yet at every scan their extrapolation
+    stays within that of the estimate."""
+    def truth(t):
+        return (10.0 * t, 0.0) if t < 150 else (1500.0, 10.0 * (t - 150))
+    every = [r for r in run([truth], duration=300.0, dr_m=None)[1] if r.strength > 0]
+    few = [r for r in run([truth], duration=300.0)[1] if r.strength > 0]
+    assert len(few) * 3 <= len(every) and len({r.track for r in few}) == 1
+    assert any(abs(r.t - 150) <= 20 for r in few)               # the turn is told at once
+    assert max(b.t - a.t for a, b in zip(few, few[1:])) <= 30.0  # heartbeat
+    for r in every:   # what a receiver extrapolates at each update's time, against the estimate then
+        last = max((x for x in few if x.t <= r.t), key=lambda x: x.t)
+        dx, dy = last.x + last.vx * (r.t - last.t) - r.x, last.y + last.vy * (r.t - last.t) - r.y
+        assert math.hypot(dx, dy) <= 50.0 + 1e-6, (r.t, last.t)

@@ -8,6 +8,9 @@ The picture is a pure function of the latest report per (source, track):
  3. its identity is the smallest "source/track" name in it (stable while that
     report lives), its position that of its newest report (ties: smallest name),
     its strength the largest reported.
+A report with a velocity (a dead-reckoned track: its node reports only when the
+extrapolation errs) is extrapolated to the picture's time, from the time it describes,
+for at most `extrapolate_s`; reports without one stay where they were seen.
 """
 from __future__ import annotations
 
@@ -26,6 +29,9 @@ class Report:
     strength: int
     lon: float
     lat: float
+    vx: float = 0.0
+    vy: float = 0.0
+    at: float | None = None   # the time x, y describe (default t)
 
     @property
     def name(self) -> str:
@@ -48,9 +54,13 @@ class Entity:
 
 
 class Adjudicator:
-    def __init__(self, merge_m: float = 500.0):
-        self.merge_m = merge_m
+    def __init__(self, merge_m: float = 500.0, extrapolate_s: float = 60.0):
+        self.merge_m, self.extrapolate_s = merge_m, extrapolate_s
         self.latest: dict[tuple[str, str], Report] = {}
+
+    def moving(self) -> bool:
+        """Whether a live report has a velocity (the picture changes with time alone)."""
+        return any(r.strength > 0 and (r.vx or r.vy) for r in self.latest.values())
 
     def update(self, r: Report) -> bool:
         """Keep r if it is newer than what we hold for its (source, track); True if kept."""
@@ -61,12 +71,13 @@ class Adjudicator:
         self.latest[k] = r
         return True
 
-    def picture(self) -> dict[str, Entity]:
+    def picture(self, now: float | None = None) -> dict[str, Entity]:
+        """The entities, positions extrapolated to `now` (None: as reported)."""
         live = sorted((r for r in self.latest.values() if r.strength > 0), key=lambda r: r.name)
         n = len(live)
         if n == 0:
             return {}
-        xy = np.array([(r.x, r.y) for r in live])
+        xy = np.array([self._at(r, now) for r in live])
         d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
         src = np.array([r.source for r in live])
         link = (d <= self.merge_m) & (src[:, None] != src[None, :])
@@ -88,6 +99,13 @@ class Adjudicator:
         for members in groups.values():
             best = max(members, key=lambda r: (r.t, tuple(-ord(c) for c in r.name)))
             ident = min((r.track, r.source) for r in members)[0]   # fusion nodes prefix their track ids
-            out[ident] = Entity(ident, best.x, best.y, max(r.strength for r in members), best.t, best.lon, best.lat,
+            bx, by = self._at(best, now)
+            out[ident] = Entity(ident, bx, by, max(r.strength for r in members), best.t, best.lon, best.lat,
                                 tuple(sorted(r.name for r in members)))
         return out
+
+    def _at(self, r: Report, now: float | None) -> tuple[float, float]:
+        if now is None or not (r.vx or r.vy):
+            return r.x, r.y
+        dt = min(max(now - (r.t if r.at is None else r.at), 0.0), self.extrapolate_s)
+        return r.x + r.vx * dt, r.y + r.vy * dt

@@ -6,7 +6,9 @@ and stamps them at the window's end, so fast movers lag and split; its gates are
 metres. Here each sensor scan is used at its own time; gates come from each track's
 covariance (a 300 m/s target and a parked truck get the gates they need); a track is
 confirmed when it was updated in M of its last N windows, whatever its size; and a
-report describes the track at its last update, with velocity.
+report describes the track at its last update, with velocity, and is sent only when the
+receivers' extrapolation of the last one would be off by more than `dr_m` (or the
+strength or domain changed, or on a heartbeat): dead reckoning, as DIS does.
 
 A track is a group of entities seen together (a hostile unit) or a lone one: the hits
 of one scan that fall in a track's gate all update it, their count is its strength,
@@ -40,6 +42,7 @@ class Track:
     hit_window: bool = False
     confirmed: bool = False
     alt: float | None = None         # metres above ground (mean of its hits' altitudes), if measured
+    told: "Report | None" = None     # the last report of it (what receivers extrapolate from)
 
 
 @dataclass
@@ -60,7 +63,8 @@ class KalmanTracker:
     def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.5,
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
-                 window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0):
+                 window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
+                 dr_m: float | None = 50.0, dr_k: float = 2.0, heartbeat_s: float = 30.0):
         if not (math.isfinite(q) and q > 0 and math.isfinite(q_fast) and q_fast > 0):
             raise ValueError(f"process noise must be finite and > 0 (q={q!r}, q_fast={q_fast!r})")
         if not 1 <= m <= n:
@@ -70,6 +74,7 @@ class KalmanTracker:
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
+        self.dr_m, self.dr_k, self.heartbeat_s = dr_m, dr_k, heartbeat_s
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -219,9 +224,25 @@ class KalmanTracker:
                 continue
             keep.append(tr)
             if tr.confirmed and hit:
-                out.append(self._report(tr))
+                r = self._report(tr)
+                if self._news(tr, r):
+                    tr.told = r
+                    out.append(r)
         self.tracks = keep
         return out
+
+    def _news(self, tr: Track, r: "Report") -> bool:
+        """Whether receivers need this report: the first one, a new strength or domain, the
+        heartbeat, or their extrapolation of the last one (position + velocity x time) now
+        off by more than `dr_m` (dead reckoning; `dr_m` None: every update is sent)."""
+        last = tr.told
+        if self.dr_m is None or last is None or (r.strength, r.domain) != (last.strength, last.domain):
+            return True
+        if r.t - last.t >= self.heartbeat_s:
+            return True
+        dt = r.t - last.t
+        own = self.dr_k * math.sqrt(max(float(tr.P[0, 0]), float(tr.P[1, 1])))   # its own noise is no news
+        return math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > max(self.dr_m, own)
 
     def domain(self, tr: Track) -> str:
         """Air when it flies (height above `air_agl_m`) or moves faster than any ground

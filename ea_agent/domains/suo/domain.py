@@ -240,7 +240,7 @@ class SuoDomain:
 
     # -- watchman and facts ----------------------------------------------------------------
     def busy(self) -> bool:
-        return bool(self.dirty_leaves or self.dirty_tracks or self.watchman.quiet)
+        return bool(self.dirty_leaves or self.dirty_tracks or self.watchman.quiet or self.pic.adj.moving())
 
     def next_wakeup(self) -> float:
         return min(self.next_scan, self.auto[0][0] if self.auto else math.inf)
@@ -283,6 +283,7 @@ class SuoDomain:
     # -- detection at the end of each epoch ------------------------------------------
     def detect(self, t: float) -> list[Candidate]:
         self.flush_quiet()
+        self.dirty_tracks |= self.pic.advance_tracks(t)
         dirty_units: set[str] = set()
         if self.dirty_leaves:
             for leaf in self.dirty_leaves:

@@ -95,10 +95,23 @@ class Picture:
         for t, tx, ty in zip(tracks, np.atleast_1d(x), np.atleast_1d(y)):
             # an air track is no ground threat (contact, envelopes, areas): as gone for this picture
             strength = 0 if t.domain == "air" else t.strength
-            kept |= self.adj.update(Report(t.t, t.source, t.track, float(tx), float(ty), strength, t.lon, t.lat))
+            vx = vy = 0.0
+            if t.at is not None and t.speed and t.heading is not None:   # dead-reckoned: extrapolate it
+                h = math.radians(t.heading)
+                vx, vy = t.speed * math.sin(h), t.speed * math.cos(h)
+            kept |= self.adj.update(Report(t.t, t.source, t.track, float(tx), float(ty), strength, t.lon, t.lat,
+                                           vx, vy, t.at))
         if not kept:
             return set()
-        new = self.adj.picture()
+        return self._picture(max(t.t for t in tracks))
+
+    def advance_tracks(self, now: float) -> set[str]:
+        """Dead-reckoned tracks moved on to `now` (each epoch's close): the entities whose
+        position changed; nothing when no track has a velocity."""
+        return self._picture(now) if self.adj.moving() else set()
+
+    def _picture(self, now: float) -> set[str]:
+        new = self.adj.picture(now)
         changed = {k for k, v in new.items() if self.tracks.get(k) != v} | (self.tracks.keys() - new.keys())
         self.tracks = new
         return changed
