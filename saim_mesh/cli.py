@@ -147,7 +147,7 @@ def cmd_missions(a) -> int:
 def cmd_generate(a) -> int:
     from ea_agent import domains
     dom = domains.get(a.domain)
-    extra = {"small": a.small, "sensors": a.sensors} if a.domain == "suo" else {}
+    extra = {"small": a.small, "sensors": a.sensors, "incidents": a.incidents} if a.domain == "suo" else {}
     print(json.dumps(dom.generate(Path(a.out), seed=a.seed, **extra)))
     return 0
 
@@ -376,6 +376,8 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--small", action="store_true", help="small fast variant for tests")
     g.add_argument("--seed", type=int, default=7)
     g.add_argument("--sensors", action="store_true", help="raw sensor hits instead of ready-made tracks")
+    g.add_argument("--incidents", default="scripted", choices=["scripted", "random"],
+                   help="suo: the labelled scripted battle, or one drawn at random from the seed")
     g.set_defaults(fn=cmd_generate)
     v = sub.add_parser("validate", help="load a scenario and report what is wrong")
     v.add_argument("scenario")

@@ -1,6 +1,7 @@
 """Scoring alerts against a scenario's ground truth (truth.json)."""
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 from .messages import Alert
@@ -80,17 +81,57 @@ def _no_news(alerts: list[Alert], items: list[dict]) -> list[Alert]:
     return out
 
 
+LOW = ("priority", "routine")
+
+
+def _wrong_priority(alerts: list[Alert], incidents: list[dict]) -> list[Alert]:
+    """Alerts at the wrong priority, by the paper's rule (6.8: flash is for what threatens
+    lives, first contact and fratricide; the rest only threatens the plan): a flash alert
+    that matches no life-threatening incident, and the first alert an owner gets of a
+    life-threatening incident when it is below immediate. Only where the oracle says which
+    incidents threaten lives (`life`; the robot-team oracle does not)."""
+    out, first = [], {}
+    if not any("life" in i for i in incidents):
+        return out
+    for a in sorted(alerts, key=lambda a: a.t):
+        hit = [k for k, i in enumerate(incidents) if _matches(a, i)]
+        life = [k for k in hit if incidents[k].get("life")]
+        if a.priority == "flash" and hit and not life:
+            out.append(a)
+        for k in life:
+            first.setdefault(k, a)
+    out += [a for a in first.values() if a.priority in LOW]
+    return out
+
+
+def _pct(xs: list[float], q: float) -> float | None:
+    if not xs:
+        return None
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(math.ceil(q * len(xs))) - 1)]
+
+
 def score(alerts: list[Alert], truth: dict) -> dict:
     incidents, situations = truth["incidents"], truth["situations"]
-    missed = [i for i in incidents if not any(_matches(a, i) for a in alerts)]
+    delays, missed = [], []
+    for i in incidents:
+        ts = [a.t for a in alerts if _matches(a, i)]
+        if ts:
+            delays.append(round(max(0.0, min(ts) - i.get("at", i["t0"])), 1))
+        else:
+            missed.append(i)
     unmatched = [a for a in alerts if not any(_matches(a, s) for s in situations + incidents)]
     repeats = _no_news(alerts, incidents + situations)
-    unwanted = unmatched + repeats
+    wrong = _wrong_priority(alerts, incidents)
+    unwanted = list({id(a): a for a in unmatched + repeats + wrong}.values())
     return {
         "unwanted_repeats": len(repeats),
+        "wrong_priority": len(wrong),
         "projections": _projections(alerts, incidents),
         "incidents": len(incidents),
         "recall": round(1 - len(missed) / len(incidents), 4) if incidents else 1.0,
+        "delay_s_median": _pct(delays, 0.5),
+        "delay_s_p95": _pct(delays, 0.95),
         "alerts": len(alerts),
         "unwanted": len(unwanted),
         "unwanted_share": round(len(unwanted) / len(alerts), 4) if alerts else 0.0,
@@ -110,7 +151,8 @@ def evaluate(sc, config_path=None) -> dict:
     res = score(alerts, truth)
     res["naive_alerts"] = sum(len(ea.alerts) for ea in naive)
     nv = score([a for ea in naive for a in ea.alerts], truth)
-    res["naive"] = {k: nv[k] for k in ("recall", "unwanted", "unwanted_share", "unwanted_repeats", "unwanted_flash")}
+    res["naive"] = {k: nv[k] for k in ("recall", "unwanted", "unwanted_share", "unwanted_repeats", "wrong_priority",
+                                       "unwanted_flash")}
     res["reduction"] = round(res["naive_alerts"] / max(1, res["alerts"]), 1)
     res["owners"] = owners
     res["events"] = len(sc.events)

@@ -83,7 +83,7 @@ def test_a_repeat_is_wanted_only_with_a_material_change():
     assert [a["details"]["distance_m"] for a in r["unwanted_alerts"]] == [210, 240]
     near = lambda t, d: Alert(t, "A", "fratricide", "friendly-activity", "flash", ("A2",), "near",  # noqa: E731
                               {"min_distance_m": d})
-    inc2 = {**inc, "type": "fratricide", "accept": ["fratricide"]}
+    inc2 = {**inc, "type": "fratricide", "accept": ["fratricide"], "life": True}
     r = score([near(10, 500), near(20, 450), near(30, 390)], {"incidents": [inc2], "situations": []})
     assert r["unwanted_repeats"] == 1 and r["unwanted_flash"] == 1   # 450 is not 1.25x closer than 500
     other = Alert(20, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A3",), "off", {})

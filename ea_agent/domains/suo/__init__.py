@@ -44,9 +44,9 @@ def mesh_units(sc) -> list[str]:
     return sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("battalion", "company", "platoon"))
 
 
-def generate(out, seed: int = 7, small: bool = False, sensors: bool = False) -> dict:
+def generate(out, seed: int = 7, small: bool = False, sensors: bool = False, incidents: str = "scripted") -> dict:
     from .generator import write
-    return write(out, small=small, seed=seed, sensors=sensors)
+    return write(out, small=small, seed=seed, sensors=sensors, incidents=incidents)
 
 
 __all__ = ["make_ea", "ALERT_TYPES", "CATEGORY", "SuoDomain", "NAME", "load", "default_eas", "mesh_units",

@@ -78,6 +78,7 @@ class Sim:
     """The true state of the world over time (what really happened)."""
     small: bool = False
     seed: int = 7
+    duration: float = DURATION
     units: list[dict] = field(default_factory=list)
     entity_leaf: dict[str, str] = field(default_factory=dict)
     entity_off: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -87,9 +88,17 @@ class Sim:
     cffs: list[dict] = field(default_factory=list)
     report_s: float = 30.0
     report_phase: dict[str, float] = field(default_factory=dict)
+    incidents: str = "scripted"                                          # or "random"
+    paths: dict[str, tuple[list, list]] = field(default_factory=dict)    # platoon -> (ts, ys), drawn
+    strays: dict[str, tuple[list, list]] = field(default_factory=dict)   # platoon -> (ts, dxs) off its lane
+    detours: dict[str, tuple[list, list]] = field(default_factory=dict)  # squad -> (ts, dxs)
+    reorg_t: float = 600
+    drawn: list[dict] = field(default_factory=list)                      # what was drawn, for truth.json
 
     # -- friendly movement ---------------------------------------------------------
     def platoon_y_path(self, p: str):
+        if p in self.paths:
+            return self.paths[p]
         if p == "B3":
             return [0, 480, 2100, 2400, 3600], [0, 0, 7000, 7000, 11000]
         if p == "C3":
@@ -101,8 +110,8 @@ class Sim:
     def platoon_center(self, p: str, t: float):
         ts, ys = self.platoon_y_path(p)
         x = LANE_X[p]
-        if p == "A2":
-            x += _interp(t, [900, 1200, 1400, 1700], [0, 2300, 2300, 0])
+        if p in self.strays:
+            x += _interp(t, *self.strays[p])
         return x, _interp(t, ts, ys)
 
     def leaf_center(self, leaf: str, t: float):
@@ -119,12 +128,10 @@ class Sim:
         p, s = leaf[:2], int(leaf[3]) - 1
         x, y = self.platoon_center(p, t)
         x, y = x + SQUAD_DX[s], y + SQUAD_DY[s]
-        if leaf == "B1S4":
+        if leaf == "B1S4" and leaf in self.detours:   # to the link-up point and back
             x += _interp(t, [2800, 2980, 3100, 3300], [0, 4060 - x, 4060 - x, 0]) if 2800 < t < 3300 else 0
-        if leaf == "C2S4":
-            x += _interp(t, [3800, 3980, 4100, 4300], [0, 440, 440, 0])
-        if leaf == "C3S4":
-            x += _interp(t, [3800, 3980, 4100, 4300], [0, -740, -740, 0])
+        elif leaf in self.detours:
+            x += _interp(t, *self.detours[leaf])
         return x, y
 
     def entity_pos(self, e: str, t: float):
@@ -160,9 +167,12 @@ def _units(small: bool) -> list[dict]:
     return u
 
 
-def build_sim(small: bool = False, seed: int = 7) -> Sim:
+def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -> Sim:
+    """The true battle. `incidents`: "scripted" (the labelled INCIDENTS, the same for
+    every seed: the seed moves offsets and noise) or "random" (draw_battle: each seed a
+    different battle)."""
     rng = np.random.default_rng(seed)
-    sim = Sim(small=small, seed=seed, report_s=60.0 if small else 30.0)
+    sim = Sim(small=small, seed=seed, report_s=60.0 if small else 30.0, incidents=incidents)
     sim.units = _units(small)
     for u in sim.units:
         for k in range(u.get("n", 0)):
@@ -171,17 +181,25 @@ def build_sim(small: bool = False, seed: int = 7) -> Sim:
             sim.entity_off[e] = (float(rng.uniform(-25, 25)), float(rng.uniform(-25, 25)))
     for e in sorted(sim.entity_leaf):
         sim.report_phase[e] = float(rng.uniform(0, sim.report_s))
-    H = Hostile
-    sim.hostiles = {
-        "H1": H("H1", [600, 5400], [-3000, -2500], [25000, 24000], 4, 600),
-        "H2": H("H2", [1400, 2500, 3500, 4600], [2000] * 4, [19500, 16200, 16200, 19500], 5, 1400, 4600),
-        "H3": H("H3", [2500, 4333], [6000, 6000], [20000, 14500], 8, 2500),
-        "H4": H("H4", [3800, 5233], [1500, 1500], [16500, 12200], 6, 3800),
-        "H4B": H("H4B", [3800, 5233], [1600, 1600], [16600, 12300], 6, 5100),
-        "H5": H("H5", [3000, 4563], [10650, 10650], [20000, 12500], 7, 3000),
-        "H5B": H("H5B", [3000, 4563], [10700, 10700], [20050, 12550], 7, 4700),
-    }
-    sim.outages = {"A1S3": (1500.0, 1800.0)}
+    if incidents == "random":
+        draw_battle(sim, np.random.default_rng([seed, 11]))
+    elif incidents == "scripted":
+        sim.strays = {"A2": ([900, 1200, 1400, 1700], [0, 2300, 2300, 0])}
+        sim.detours = {"B1S4": ([], []), "C2S4": ([3800, 3980, 4100, 4300], [0, 440, 440, 0]),
+                       "C3S4": ([3800, 3980, 4100, 4300], [0, -740, -740, 0])}
+        H = Hostile
+        sim.hostiles = {
+            "H1": H("H1", [600, 5400], [-3000, -2500], [25000, 24000], 4, 600),
+            "H2": H("H2", [1400, 2500, 3500, 4600], [2000] * 4, [19500, 16200, 16200, 19500], 5, 1400, 4600),
+            "H3": H("H3", [2500, 4333], [6000, 6000], [20000, 14500], 8, 2500),
+            "H4": H("H4", [3800, 5233], [1500, 1500], [16500, 12200], 6, 3800),
+            "H4B": H("H4B", [3800, 5233], [1600, 1600], [16600, 12300], 6, 5100),
+            "H5": H("H5", [3000, 4563], [10650, 10650], [20000, 12500], 7, 3000),
+            "H5B": H("H5B", [3000, 4563], [10700, 10700], [20050, 12550], 7, 4700),
+        }
+        sim.outages = {"A1S3": (1500.0, 1800.0)}
+    else:
+        raise ValueError(f"incidents must be 'scripted' or 'random', not {incidents!r}")
     c = sim.confirmations
     for p in LANE_X:
         ts, ys = sim.platoon_y_path(p)
@@ -191,7 +209,7 @@ def build_sim(small: bool = False, seed: int = 7) -> Sim:
         atk_end = ts[-1]
         c += [(move_start, f"{p}-move", p, "start"), (move_end, f"{p}-move", p, "end"),
               (atk_start, f"{p}-attack", p, "start"), (atk_end, f"{p}-attack", p, "end"),
-              (3700.0, f"{p}-defend", p, "start")]
+              (max(3700.0, atk_end + 30.0), f"{p}-defend", p, "start")]
     for co in COMPANIES:
         c += [(300.0, f"{co}-mtc", co, "start"), (2400.0 if co == "C" else 2100.0, f"{co}-mtc", co, "end"),
               (2400.0, f"{co}-attack", co, "start"), (3600.0, f"{co}-attack", co, "end"), (3700.0, f"{co}-defend", co, "start")]
@@ -200,12 +218,87 @@ def build_sim(small: bool = False, seed: int = 7) -> Sim:
           (0.0, "BNHQ-occupy", "BNHQ", "start"), (2800.0, "A3-linkup", "A3", "start"),
           (3800.0, "C2-passage", "C2", "start")]
     c.sort()
+    if incidents == "random":
+        return sim
     sim.cffs = [
         {"t": 3900.0, "kind": "cff", "cff": "CFF-1", "requester": "A2", "x": 3000.0, "y": 11500.0, "radius_m": 600.0},
         {"t": 3960.0, "kind": "cff-confirm", "cff": "CFF-1", "requester": "A2", "x": 3000.0, "y": 11500.0, "radius_m": 600.0},
         {"t": 5000.0, "kind": "cff", "cff": "CFF-2", "requester": "A2", "x": 2000.0, "y": 16000.0, "radius_m": 600.0},
     ]
     return sim
+
+
+def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
+    """A battle of its own per seed: which platoons start or arrive late, attack early or
+    finish late, which stray off their lane (how far, how long), which squads lose their
+    radios, whether the link-up and the passage partners turn up, when R is
+    resubordinated, and the enemy: how many groups, down which avenue or across
+    country, when, how fast, how strong, reinforced or not; calls for fire near friendly
+    units or not, confirmed or not. Every draw is recorded in `sim.drawn`."""
+    d = sim.drawn
+    u = lambda a, b: float(round(rng.uniform(a, b)))   # noqa: E731  whole seconds / metres
+    for p in LANE_X:
+        start = 300.0 + (u(0, 300) if rng.random() < 0.2 else 0.0)
+        arrive = 2100.0 + (start - 300.0) + (u(0, 400) if rng.random() < 0.2 else u(-60, 20))
+        attack = 2400.0 - (u(0, 250) if p == "C1" and rng.random() < 0.5 else 0.0)
+        attack = max(attack, arrive + 60.0)
+        end = max(3600.0 + (u(0, 300) if rng.random() < 0.15 else 0.0), attack + 600.0)
+        sim.paths[p] = ([0.0, start, arrive, attack, end], [0, 0, 7000, 7000, 11000])
+        if (start, arrive, attack, end) != (300.0, 2100.0, 2400.0, 3600.0):
+            d.append({"kind": "timing", "unit": p, "move_start": start, "move_end": arrive, "attack_start": attack,
+                      "attack_end": end})
+    for p in rng.choice(sorted(LANE_X), size=int(rng.integers(0, 3)), replace=False):
+        t0, ramp, hold = u(700, 1600), u(200, 400), u(60, 500)
+        dx = u(300, 2600) * (1 if rng.random() < 0.5 else -1)
+        sim.strays[str(p)] = ([t0, t0 + ramp, t0 + ramp + hold, t0 + 2 * ramp + hold], [0, dx, dx, 0])
+        d.append({"kind": "stray", "unit": str(p), "t": t0, "dx_m": dx, "hold_s": hold})
+    if rng.random() < 0.5:
+        sim.detours["B1S4"] = ([], [])
+    if rng.random() < 0.6:
+        sim.detours["C2S4"] = ([3800, 3980, 4100, 4300], [0, 440, 440, 0])
+        sim.detours["C3S4"] = ([3800, 3980, 4100, 4300], [0, -740, -740, 0])
+    d.append({"kind": "coordination", "link_up_partner_comes": "B1S4" in sim.detours,
+              "passage_partners_come": "C2S4" in sim.detours})
+    leaves = sorted(x["id"] for x in sim.units if x.get("n") and x["id"][0] in "ABC" and "HQ" not in x["id"])
+    for leaf in rng.choice(leaves, size=int(rng.integers(0, 4)), replace=False):
+        t0 = u(300, 5000)
+        sim.outages[str(leaf)] = (t0, t0 + u(60, 600))
+        d.append({"kind": "radio-outage", "unit": str(leaf), "from": t0, "to": sim.outages[str(leaf)][1]})
+    sim.reorg_t = u(300, 1500)
+    d.append({"kind": "reorganization", "unit": "R", "new_parent": "BN", "t": sim.reorg_t})
+    for k in range(int(rng.integers(4, 9))):
+        x = (float(rng.choice([2000.0, 6000.0, 10650.0])) + u(-300, 300) if rng.random() < 0.7 else u(0, 12000))
+        y0, y1 = u(18500, 21000), u(11500, 17000)
+        appear, speed = u(400, 4600), float(rng.uniform(2.0, 6.0))
+        t1 = appear + round((y0 - y1) / speed)
+        vanish = t1 + u(0, 600) if rng.random() < 0.3 else DURATION + 1
+        x1 = x + u(-500, 500)
+        hid, strength = f"H{k + 1}", int(rng.integers(2, 10))
+        sim.hostiles[hid] = Hostile(hid, [appear, t1], [x, x1], [y0, y1], strength, appear, vanish)
+        d.append({"kind": "hostile", "id": hid, "from": [x, y0], "to": [x1, y1], "appear": appear, "arrive": t1,
+                  "vanish": vanish if vanish <= DURATION else None, "strength": strength})
+        late = appear + u(300, 1200)
+        if rng.random() < 0.3 and late < vanish - 60:
+            sim.hostiles[hid + "B"] = Hostile(hid + "B", [appear, t1], [x + 50, x1 + 50], [y0 + 50, y1 + 50],
+                                              int(rng.integers(2, 8)), late, vanish)
+            d.append({"kind": "hostile", "id": hid + "B", "reinforces": hid, "appear": late,
+                      "strength": sim.hostiles[hid + "B"].strength})
+    plts = sorted(LANE_X)
+    for k in range(int(rng.integers(1, 4))):
+        req, t = str(rng.choice(plts)), u(2500, 5200)
+        if rng.random() < 0.6:   # near another platoon
+            q = str(rng.choice([p for p in plts if p != req]))
+            cx, cy = sim.platoon_center(q, t)
+            x, y = cx + u(-500, 500), cy + u(-500, 500)
+        else:
+            x, y = u(0, 12000), u(15000, 19000)
+        c = {"t": t, "kind": "cff", "cff": f"CFF-{k + 1}", "requester": req, "x": x, "y": y, "radius_m": 600.0}
+        sim.cffs.append(c)
+        if rng.random() < 0.5:
+            sim.cffs.append({**c, "kind": "cff-confirm", "t": t + u(30, 90)})
+        d.append({"kind": "call-for-fire", **{k_: v for k_, v in c.items() if k_ != "kind"},
+                  "confirmed": sim.cffs[-1]["kind"] == "cff-confirm"})
+    sim.cffs.sort(key=lambda c: (c["t"], c["cff"]))
 
 
 # ------------------------------------------------------------------ sensors (forward fusion)
@@ -353,7 +446,7 @@ def plan_doc(sim: Sim) -> dict:
       route="RTE-M", destination="BP-M2")
     m("M-sbf", "M", "support-by-fire", ("START-NLT", 2900), None, after=["M-march"], position="BP-M2")
     m("BNHQ-occupy", "BNHQ", "occupy", ("START-AT", 0), None, position="AA-BN")
-    m("BN-reorg-R", "BN", "reorganize", ("START-AT", 600), None, subject="R", new_parent="BN")
+    m("BN-reorg-R", "BN", "reorganize", ("START-AT", sim.reorg_t), None, subject="R", new_parent="BN")
     m("A3-linkup", "A3", "link-up", None, None, partner="B1", point="CP-LINK", at=3000)
     m("C2-passage", "C2", "passage-of-lines", None, None, partner="C3", point="CP-C", at=4000)
     m("BN-branch-ABF", "M", "branch", None, None, owner="BN", task="attack-by-fire",
@@ -404,7 +497,7 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
             ev.append((round(t, 2), seq, {"kind": "track", "t": round(t, 2), "track": h.id, "lon": lon, "lat": lat,
                                            "strength": h.strength, "source": "fusion"}))
             t += 10.0
-        if h.vanish < DURATION:
+        if h.appear < h.vanish < DURATION:
             x, y = h.pos(h.vanish - 1e-6)
             lon, lat = ll(x, y)
             seq += 1
@@ -422,13 +515,13 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
     return [e[2] for e in ev]
 
 
-def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False) -> dict:
+def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False, incidents: str = "scripted") -> dict:
     """Generate the scenario folder `out`; returns a summary."""
     from . import oracle
     out.mkdir(parents=True, exist_ok=True)
     proj = Projection(EPSG)
     ox, oy = proj.to_xy(*ORIGIN_LONLAT)
-    sim = build_sim(small, seed)
+    sim = build_sim(small, seed, incidents)
 
     def to_ll(coords):
         if isinstance(coords[0], (int, float)):
@@ -438,9 +531,10 @@ def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False) 
     feats = overlay_features()
     ll_feats = [{**f, "geometry": {"type": f["geometry"]["type"], "coordinates": to_ll(f["geometry"]["coordinates"])}}
                 for f in feats]
-    meta = {"name": ("battalion-small" if small else "battalion") + ("-sensors" if sensors else ""),
+    meta = {"name": ("battalion-small" if small else "battalion") + ("-sensors" if sensors else "")
+            + (f"-random-{seed}" if incidents == "random" else ""),
             "epsg": EPSG, "duration_s": DURATION,
-            "generator": {"seed": seed, "small": small, "sensors": sensors}, "default_eas": ["BN", "A", "B", "C", "A2"],
+            "generator": {"seed": seed, "small": small, "sensors": sensors, "incidents": incidents}, "default_eas": ["BN", "A", "B", "C", "A2"],
             "description": "1st BN moves to PL BLUE, attacks OBJ A/B/C and defends (Fort Irwin, UTM 11N)"}
     if sensors:
         meta["fusion"] = {"groups": {g: sorted(sid for sid, grp, *_ in SENSORS if grp == g) for g in ("F", "N")},
@@ -460,7 +554,7 @@ def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False) 
         (out / stale).unlink(missing_ok=True)
     (out / "events.jsonl.gz").write_bytes(buf.getvalue())
     truth = oracle.ground_truth(sim, feats, plan, meta["default_eas"])
-    truth["incidents_injected"] = INCIDENTS
+    truth["incidents_injected"] = INCIDENTS if incidents == "scripted" else sim.drawn
     (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
     return {"events": len(evs), "entities": len(sim.entity_leaf), "incidents": len(truth["incidents"]),
             "situations": len(truth["situations"])}

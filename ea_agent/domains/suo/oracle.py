@@ -2,11 +2,17 @@
 
 It samples the true world every TICK seconds (no report staleness, no GPS noise)
 and says, per EA owner:
- - incidents: what the EA must alert, of which type(s), within which window;
+ - incidents: what happened that the owner must be told of, of which type(s), within
+   which window (what happened, not what our VOA would say);
  - situations: when an alert of a type is justified at all (a real situation
    exists), so that any alert outside every situation counts as unwanted.
-VOI thresholds come from the same config file the EAs use (they are the user's
-statement of what is worth knowing); clear incidents need a margin beyond them.
+
+It is a specification, not a second copy of the EA: it imports nothing from
+`ea_agent` (no mission classes, no config, no VOA policy). Thresholds are the
+scenario's statement of what is worth knowing (SPEC, the figures the paper's
+scenario uses); how each mission type is judged comes from the paper's definitions
+(section 6.5, written out below); a threat's later incidents are labelled by fixed
+severity steps of its own (CLOSER, STRONGER, EPISODE_S), not by the EA's repeat ratios.
 """
 from __future__ import annotations
 
@@ -16,8 +22,45 @@ from collections import defaultdict
 import numpy as np
 from shapely.geometry import Point, Polygon, shape
 
-from ea_agent.core.config import load_config
-from .missions import REGISTRY, ContingentMission, ReorganizationMission
+# What the commander said is worth knowing (the paper's scenario, 6.8); plans may
+# override per mission (params.voi). Fixed here: the EAs read theirs from their config.
+SPEC = {"out_of_position_m": 150.0, "schedule_s": 30.0, "unknown_position_s": 120.0,
+        "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0}
+EPISODE_S = 600.0   # a threat near a platoon after this long with none near is a new contact
+CLOSER = 2.0        # the nearest threat at half the distance of the last incident: a new one
+STRONGER = 2.0      # the threats near a platoon twice as strong as at the last incident
+MATERIAL = 1.25     # an alert counts for such an incident once the change reached this step
+
+# How the paper judges a unit on each mission type (6.5): where its members must be
+# (the rule: its centroid, any member, or all of them) and by which geometry.
+ANY_RULE = {"area-reconnaissance", "guard", "link-up", "observe", "overwatch", "passage-of-lines",
+            "relief-in-place", "route-reconnaissance", "screen", "zone-reconnaissance"}
+FINAL_RULE = {"attack": "all", "clear": "all", "secure": "all", "seize": "all", "breach": "any",
+              "destroy": "centroid", "fix": "centroid", "hasty-attack": "centroid", "isolate": "centroid"}
+OBJECTIVE = {"attack", "breach", "clear", "destroy", "fix", "hasty-attack", "isolate", "secure", "seize"}
+ROUTE = {"bypass", "delay", "follow-and-assume", "follow-and-support", "move", "movement-to-contact",
+         "route-reconnaissance", "tactical-road-march", "withdraw"}
+AREA = {"area-reconnaissance", "guard", "observe", "screen", "zone-reconnaissance"}   # position + area
+COORDINATION = {"link-up", "passage-of-lines", "relief-in-place"}
+CONTINGENT = {"branch", "sequel"}
+REORGANIZATION = {"reorganize"}
+AUTO_START = REORGANIZATION   # the EA executes it itself at its start time
+LIFE = {"contact", "fratricide", "call-for-fire"}   # life-threatening: the paper's flash alerts
+
+
+def geometry_params(typ: str) -> tuple[str, ...]:
+    if typ in OBJECTIVE:
+        return ("objective", "axis")
+    if typ in ROUTE:
+        return ("route", "destination")
+    if typ in AREA:
+        return ("position", "area")
+    if typ in COORDINATION:
+        return ("point",)
+    if typ in CONTINGENT | REORGANIZATION:
+        return ()
+    return ("position", "engagement_area")
+
 
 TICK = 5.0
 SLACK = 40.0        # friendly reports may be up to one report interval old
@@ -38,8 +81,7 @@ def _runs(ts: list[float]) -> list[tuple[float, float]]:
 class Truth:
     def __init__(self, sim, feats: list[dict], plan: dict, owners: list[str]):
         self.sim, self.owners = sim, owners
-        self.cfg = load_config()
-        self.voi = self.cfg["voi"]
+        self.voi = SPEC
         self.geom: dict[str, object] = {}
         self.area: dict[str, object] = {}
         self.props: dict[str, dict] = {}
@@ -57,8 +99,8 @@ class Truth:
         self.units = {u["id"]: u for u in plan["task_organization"]}
         self.missions = {m["id"]: m for m in plan["plans"][plan["initial_plan"]]}
         self.reorgs = sorted((m["start"]["t"], m["params"]["subject"], m["params"]["new_parent"])
-                             for m in self.missions.values() if issubclass(REGISTRY[m["type"]], ReorganizationMission))
-        self.ticks = np.arange(0.0, sim_duration(sim) + TICK / 2, TICK)
+                             for m in self.missions.values() if m["type"] in REORGANIZATION)
+        self.ticks = np.arange(0.0, sim.duration + TICK / 2, TICK)
         self.leaves = sorted(u for u, d in self.units.items() if d["entities"])
         self.leaf_xy = {leaf: np.array([sim.leaf_center(leaf, t) for t in self.ticks]) for leaf in self.leaves}
         self.offsets = {leaf: np.array([sim.entity_off[e] for e in self.units[leaf]["entities"]]) for leaf in self.leaves}
@@ -66,7 +108,7 @@ class Truth:
         self.started = {}
         self.ended = {}
         for m in self.missions.values():   # executed by the EA itself at its start time
-            if REGISTRY[m["type"]].AUTO_START and m.get("start", {}).get("t") is not None:
+            if m["type"] in AUTO_START and m.get("start", {}).get("t") is not None:
                 self.started[m["id"]] = self.ended[m["id"]] = m["start"]["t"]
         for t, mid, _unit, ph in sim.confirmations:
             (self.started if ph == "start" else self.ended).setdefault(mid, t)
@@ -132,10 +174,13 @@ class Truth:
         return [o for o in self.owners if unit in self.subtree(o, t)]
 
     # -- recording ----------------------------------------------------------------------
-    def must(self, owner, typ, accept, subjects, t0, t1, label=""):
+    def must(self, owner, typ, accept, subjects, t0, t1, label="", at=None):
+        """An incident: `at` when it happened (detection delay is counted from it), t0..t1
+        the window an alert about it is accepted in; `life`: it threatens lives (the paper's
+        flash: first contact with the enemy, fratricide, fire called near friendlies)."""
         self.incidents.append({"owner": owner, "type": typ, "accept": sorted(set(accept) | {typ}),
                                "subjects": sorted(set(subjects)), "t0": round(t0, 1), "t1": round(t1, 1),
-                               "label": label})
+                               "at": round(t0 if at is None else at, 1), "life": typ in LIFE, "label": label})
         self.may(owner, accept + [typ], subjects, t0, t1)
 
     def may(self, owner, accept, subjects, t0, t1):
@@ -148,10 +193,11 @@ class Truth:
 
     def out_of_position(self) -> None:
         for mid, m in self.missions.items():
-            cls = REGISTRY[m["type"]]
+            typ = m["type"]
+            rule = "any" if typ in ANY_RULE else "centroid"
             p = m["params"]
             cont = p.get("route") or p.get("axis") or p.get("position")
-            if issubclass(cls, (ContingentMission, ReorganizationMission)) or mid not in self.started:
+            if typ in CONTINGENT | REORGANIZATION or mid not in self.started:
                 continue
             thr = self.thr(m, "out_of_position_m")
             s, e = self.started[mid], self.ended.get(mid, math.inf)
@@ -160,24 +206,24 @@ class Truth:
                 hits, peak = [], 0.0
                 for k, t in enumerate(self.ticks):
                     if s <= t < e:
-                        d = self.judged(geom, m["unit"], k, cls.LOCATION_RULE)
+                        d = self.judged(geom, m["unit"], k, rule)
                         if d > thr:
                             hits.append(t)
                             peak = max(peak, d)
                 for a, b in _runs(hits):
                     for o in self.owners_of(m["unit"], a):
                         if peak > 1.5 * thr and b - a >= 30:
-                            self.must(o, "out-of-position", [], [m["unit"]], a - SLACK, a + 60, f"{mid} off {cont}")
+                            self.must(o, "out-of-position", [], [m["unit"]], a - SLACK, a + 60, f"{mid} off {cont}", at=a)
                         self.may(o, ["out-of-position"], [m["unit"]], a - SLACK, b + SLACK)
             dest = p.get("destination") or p.get("objective")
-            if dest and math.isfinite(e) and dest in self.area and "destination" in cls.GEOMETRY_PARAMS or (
-                    dest and math.isfinite(e) and "objective" in cls.GEOMETRY_PARAMS):
+            geo = geometry_params(typ)
+            if dest and math.isfinite(e) and dest in self.area and "destination" in geo or (
+                    dest and math.isfinite(e) and "objective" in geo):
                 k = int(round(e / TICK))
-                rule = getattr(cls, "FINAL_RULE", cls.LOCATION_RULE)
-                d = self.judged(self.area[dest], m["unit"], k, rule)
+                d = self.judged(self.area[dest], m["unit"], k, FINAL_RULE.get(typ, rule))
                 if d > thr:
                     for o in self.owners_of(m["unit"], e):
-                        self.must(o, "out-of-position", [], [m["unit"]], e - 1, e + 5, f"{mid} not at {dest}")
+                        self.must(o, "out-of-position", [], [m["unit"]], e - 1, e + 5, f"{mid} not at {dest}", at=e)
 
     def fratricide(self) -> None:
         hits: dict[tuple[str, str, str], list[float]] = defaultdict(list)
@@ -218,7 +264,7 @@ class Truth:
         for (o, pla, plb), ts in hits.items():
             for a, b in _runs(ts):
                 if b - a >= 30:
-                    self.must(o, "fratricide", [], [pla, plb], a - SLACK, a + 60, f"{pla} and {plb}")
+                    self.must(o, "fratricide", [], [pla, plb], a - SLACK, a + 60, f"{pla} and {plb}", at=a)
                 self.may(o, ["fratricide"], [pla, plb], a - SLACK, b + SLACK)
 
     def _range(self, unit, par) -> float:
@@ -249,7 +295,7 @@ class Truth:
             for a, b in _runs(silent):
                 par = self.parent_at(a)
                 for o in self.owners_of(leaf, a):
-                    self.must(o, "unknown-position", [], [leaf, par[leaf]], a - 1, a + 30, f"{leaf} silent")
+                    self.must(o, "unknown-position", [], [leaf, par[leaf]], a - 1, a + 30, f"{leaf} silent", at=a)
                     self.may(o, ["unknown-position"], [leaf, par[leaf]], a - 1, b + 10)
 
     def schedule(self) -> None:
@@ -265,15 +311,15 @@ class Truth:
                 if kind in ("NLT", "AT") and act > when + thr:
                     t = when + thr
                     for o in self.owners_of(m["unit"], t):
-                        self.must(o, "schedule", [], [m["unit"]], t - 1, t + 5, f"{mid} {phase} late")
+                        self.must(o, "schedule", [], [m["unit"]], t - 1, t + 5, f"{mid} {phase} late", at=t)
                         self.may(o, ["schedule"], [m["unit"]], t - 1, min(act, 1e9) + 1)
                 if kind in ("NET", "AT") and act < when - thr:
                     for o in self.owners_of(m["unit"], act):
-                        self.must(o, "schedule", [], [m["unit"]], act - 1, act + 5, f"{mid} {phase} early")
+                        self.must(o, "schedule", [], [m["unit"]], act - 1, act + 5, f"{mid} {phase} early", at=act)
 
     def coordination(self) -> None:
         for mid, m in self.missions.items():
-            if m["type"] not in ("link-up", "relief-in-place", "passage-of-lines"):
+            if m["type"] not in COORDINATION:
                 continue
             p = m["params"]
             dl = float(p["at"]) + float(p.get("fuzz_s", self.voi["schedule_s"]))
@@ -287,12 +333,12 @@ class Truth:
                     break
             if not ok:
                 for o in self.owners_of(m["unit"], dl):
-                    self.must(o, "coordination", [], [m["unit"], p["partner"]], dl - 1, dl + 5, f"{mid} failed")
+                    self.must(o, "coordination", [], [m["unit"], p["partner"]], dl - 1, dl + 5, f"{mid} failed", at=dl)
 
     def contingency(self) -> None:
         self.triggered_areas: dict[str, set[str]] = defaultdict(set)
         for mid, m in self.missions.items():
-            if not issubclass(REGISTRY[m["type"]], ContingentMission):
+            if m["type"] not in CONTINGENT:
                 continue
             owner, tr = m["params"]["owner"], m["params"]["trigger"]
             if owner not in self.owners:
@@ -305,7 +351,7 @@ class Truth:
                     c = self.member_points(tr["unit"], k).mean(axis=0)
                     hit, slack = self.area[tr["area"]].distance(Point(c)) <= tr.get("within_m", 0.0), SLACK
                 if hit:
-                    self.must(owner, "contingency", [], [m["unit"]], t - slack, t + 40, f"{mid} triggered")
+                    self.must(owner, "contingency", [], [m["unit"]], t - slack, t + 40, f"{mid} triggered", at=t)
                     self.triggered_areas[owner].add(tr["area"])
                     break
 
@@ -324,10 +370,10 @@ class Truth:
                 elif p.get("owner") == o and p["kind"] == "avenue-of-approach":
                     watch.append((fid, "ave-of-approach", None))
             for mid, m in self.missions.items():
-                cls = REGISTRY[m["type"]]
+                geo = geometry_params(m["type"])
                 for key in ("engagement_area", "area"):
                     a = m["params"].get(key)
-                    if a and key in cls.GEOMETRY_PARAMS:
+                    if a and key in geo:
                         watch.append((a, "monitored", mid))
             for area, typ, mid in watch:
                 present = []
@@ -344,7 +390,7 @@ class Truth:
                 for i, (a, b) in enumerate(_runs(present)):
                     self.may(o, [typ], sorted(who) + [area], a - 15, b + 30)
                     if not (i == 0 and mid is None and area in getattr(self, "triggered_areas", {}).get(o, ())):
-                        self.must(o, typ, [], sorted(who) + [area], a - 15, a + 45, f"hostiles at {area}")
+                        self.must(o, typ, [], sorted(who) + [area], a - 15, a + 45, f"hostiles at {area}", at=a)
             for mid, m in self.missions.items():
                 by = m["params"].get("expect_hostile_by")
                 if by is None:
@@ -353,18 +399,19 @@ class Truth:
                 seen = any(self.area[m["params"]["engagement_area"]].contains(Point(x, y))
                            for t in self.ticks if r0 <= t <= by for x, y, s in self.hostiles_at(t).values())
                 if not seen and m["unit"] in self.subtree(o, by):
-                    self.must(o, "hostile-expected", [], [m["unit"]], by - 1, by + 5, f"{mid}: nobody came")
+                    self.must(o, "hostile-expected", [], [m["unit"]], by - 1, by + 5, f"{mid}: nobody came", at=by)
 
     def proximity(self) -> None:
+        """A threat within the threat radius of a platoon is contact (a new episode after
+        EPISODE_S with none near); within an episode, the nearest threat at 1/CLOSER of
+        the distance of the last incident, or the threats near it STRONGER times as
+        strong, is a new incident. An alert counts for it from when the change reached
+        the MATERIAL step (it is news by then), to a minute after."""
         radius = float(self.voi["threat_radius_m"])
-        expiry = float(self.cfg["voa"]["expiry_s"])
-        gap = float(self.cfg["voa"]["suppress_hostile_s"])
-        rd = float(self.cfg["voa"]["repeat"]["distance"])
-        rs = float(self.cfg["voa"]["repeat"]["strength"])
         for o in self.owners:
             plts = sorted(u for u, d in self.units.items() if d["echelon"] == "platoon")
             for u in plts:
-                state = {"prev": set(), "contact_t": -1e9, "dist_t": -1e9, "dist": math.inf, "str_t": -1e9, "str": 0}
+                last_near, dist, dist_t0, strength, str_t0 = -1e9, math.inf, None, 0, None
                 present = []
                 for k, t in enumerate(self.ticks):
                     st = self.subtree(o, t)
@@ -374,21 +421,25 @@ class Truth:
                     near = {h: (float(np.hypot(x - c[0], y - c[1])), s) for h, (x, y, s) in self.hostiles_at(t).items()}
                     near = {h: v for h, v in near.items() if v[0] <= radius}
                     if not near:
-                        state["prev"] = set()
                         continue
                     present.append(t)
                     nearest = min(v[0] for v in near.values())
-                    strength = sum(v[1] for v in near.values())
-                    if t - state["contact_t"] >= expiry:   # first contact, or the last one forgotten
-                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 50, f"{sorted(near)} near {u}")
-                        state.update(contact_t=t, dist_t=t, dist=nearest, str_t=t, str=strength)
-                    elif nearest * rd * 1.03 <= state["dist"] and t - state["dist_t"] >= gap + TICK:
-                        self.must(o, "distance", PROX, [u], t - 45, t + 60, f"threat closer to {u}")
-                        state.update(dist_t=t, dist=nearest)
-                    if strength >= rs * state["str"] and state["str"] > 0 and t - state["str_t"] >= gap + TICK:
-                        self.must(o, "strength", PROX, [u], t - 15, t + 40, f"threat near {u} stronger")
-                        state.update(str_t=t, str=strength)
-                    state["prev"] = set(near)
+                    total = sum(v[1] for v in near.values())
+                    if t - last_near >= EPISODE_S:   # first contact, or back after a long quiet
+                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 50, f"{sorted(near)} near {u}", at=t)
+                        dist, dist_t0, strength, str_t0 = nearest, None, total, None
+                    else:
+                        if dist_t0 is None and nearest * MATERIAL <= dist:
+                            dist_t0 = t
+                        if nearest * CLOSER <= dist:
+                            self.must(o, "distance", PROX, [u], dist_t0 - 15, t + 60, f"threat closer to {u}", at=dist_t0)
+                            dist, dist_t0 = nearest, None
+                        if str_t0 is None and total >= MATERIAL * strength:
+                            str_t0 = t
+                        if total >= STRONGER * strength:
+                            self.must(o, "strength", PROX, [u], str_t0 - 15, t + 40, f"threat near {u} stronger", at=str_t0)
+                            strength, str_t0 = total, None
+                    last_near = t
                 for a, b in _runs(present):
                     self.may(o, PROX, [u], a - 15, b + 30)
 
@@ -405,18 +456,13 @@ class Truth:
                 others = near_leaves - self.subtree(c["requester"], t)
                 if others and c["requester"] in self.owners:
                     self.must(c["requester"], "call-for-fire", [], [self.platoon_of(x, t) for x in others], t - 1, t + 2,
-                              f"{c['cff']} near friendlies")
+                              f"{c['cff']} near friendlies", at=t)
             else:
                 for o in self.owners:
                     mine = near_leaves & self.subtree(o, t)
                     if mine:
                         self.must(o, "call-for-fire", [], [self.platoon_of(x, t) for x in mine], t - 1, t + 2,
-                                  f"{c['cff']} confirmed near {o}'s units")
-
-
-def sim_duration(sim) -> float:
-    from .generator import DURATION
-    return DURATION
+                                  f"{c['cff']} confirmed near {o}'s units", at=t)
 
 
 def ground_truth(sim, feats: list[dict], plan: dict, owners: list[str]) -> dict:

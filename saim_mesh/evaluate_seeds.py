@@ -1,0 +1,88 @@
+"""The alert-value score on battles nobody tuned for: for each seed, a battle drawn at
+random (`generate --incidents random`), its truth from the independent oracle, the EAs
+and the naive detector (VOA off) scored against it. Writes the per-seed rows and the
+summary (mean and worst recall, unwanted share, unwanted flash, detection delay p95,
+reduction against the naive detector) as JSON."""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import tempfile
+import time
+from pathlib import Path
+
+TARGETS = {"recall": 1.0, "unwanted_share_max": 0.05, "unwanted_flash": 0, "reduction_min": 50.0}
+
+
+def one(args: tuple[int, bool]) -> dict:
+    seed, small = args
+    from ea_agent.domains.suo.generator import write
+
+    from . import scenario as S
+    from .evaluate import evaluate
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix=f"seed{seed}-") as d:
+        gen = write(Path(d) / "sc", small=small, seed=seed, incidents="random")
+        res = evaluate(S.load(Path(d) / "sc"))
+    keep = ("recall", "incidents", "alerts", "unwanted", "unwanted_share", "unwanted_flash", "unwanted_repeats",
+            "wrong_priority", "delay_s_median", "delay_s_p95", "naive_alerts", "reduction")
+    row = {"seed": seed, **{k: res[k] for k in keep}, "naive_unwanted_share": res["naive"]["unwanted_share"],
+           "events": gen["events"], "wall_s": round(time.perf_counter() - t0, 1),
+           "missed": [f"{m['owner']} {m['type']} {m['subjects']} t={m['at']}: {m['label']}" for m in res["missed"]],
+           "unwanted_alerts": [f"{a['owner']} t={a['t']} {a['priority']} {a['type']} {a['subjects']}"
+                               for a in res["unwanted_alerts"]]}
+    print(json.dumps({k: row[k] for k in ("seed", "recall", "incidents", "alerts", "unwanted_share", "unwanted_flash",
+                                          "delay_s_p95", "reduction", "wall_s")}), flush=True)
+    return row
+
+
+def summarize(rows: list[dict]) -> dict:
+    def col(k):
+        return [r[k] for r in rows if r[k] is not None]
+    s = {"seeds": len(rows),
+         "recall_mean": round(sum(col("recall")) / len(rows), 4), "recall_worst": min(col("recall")),
+         "unwanted_share_mean": round(sum(col("unwanted_share")) / len(rows), 4),
+         "unwanted_share_worst": max(col("unwanted_share")),
+         "unwanted_flash_total": sum(col("unwanted_flash")),
+         "delay_s_p95_worst": max(col("delay_s_p95"), default=None),
+         "delay_s_p95_mean": round(sum(col("delay_s_p95")) / max(1, len(col("delay_s_p95"))), 1),
+         "reduction_mean": round(sum(col("reduction")) / len(rows), 1), "reduction_worst": min(col("reduction")),
+         "naive_unwanted_share_mean": round(sum(col("naive_unwanted_share")) / len(rows), 4),
+         "incidents_total": sum(col("incidents")), "alerts_total": sum(col("alerts"))}
+    s["targets"] = TARGETS
+    s["met"] = {"recall": s["recall_worst"] >= TARGETS["recall"],
+                "unwanted_share": s["unwanted_share_worst"] <= TARGETS["unwanted_share_max"],
+                "unwanted_flash": s["unwanted_flash_total"] == TARGETS["unwanted_flash"],
+                "reduction": s["reduction_worst"] >= TARGETS["reduction_min"]}
+    return s
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="evaluate_seeds", description=__doc__)
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first", type=int, default=1)
+    ap.add_argument("--full", action="store_true", help="full-size battalion (default: the small variant)")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default="bench/results/alert_value.json")
+    a = ap.parse_args(argv)
+    if a.seeds < 1 or a.jobs < 1:
+        ap.error("--seeds and --jobs must be at least 1")
+    work = [(s, not a.full) for s in range(a.first, a.first + a.seeds)]
+    t0 = time.perf_counter()
+    with mp.get_context("spawn").Pool(a.jobs) as pool:
+        rows = pool.map(one, work, chunksize=1)
+    out = {"summary": summarize(rows), "size": "full" if a.full else "small", "wall_s": round(time.perf_counter() - t0),
+           "note": ("each seed is a battle drawn at random (ea_agent/domains/suo/generator.py draw_battle); truth from "
+                    "the oracle (ea_agent/domains/suo/oracle.py, which imports nothing from ea_agent); scored by "
+                    "saim_mesh/evaluate.py: recall per incident in its window, delay from when it happened, unwanted = "
+                    "matches nothing, repeats the same story without a 1.25x severity change, or wrong priority"),
+           "rows": rows}
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
+    print(json.dumps(out["summary"], indent=1))
+    return 0 if all(out["summary"]["met"].values()) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
