@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     with mp.get_context("spawn").Pool(a.jobs) as pool:
         rows = pool.map(one, work, chunksize=1)
     out = {"summary": summarize(rows), "size": "full" if a.full else "small", "wall_s": round(time.perf_counter() - t0),
-           "note": ("each seed is a battle drawn at random (ea_agent/domains/suo/generator.py draw_battle); truth from "
+           "note": ("each seed is a battle drawn at random (ea_agent/domains/suo/random_battle.py); truth from "
                     "the oracle (ea_agent/domains/suo/oracle.py, which imports nothing from ea_agent); scored by "
                     "saim_mesh/evaluate.py: recall per incident in its window, delay from when it happened, unwanted = "
                     "matches nothing, repeats the same story without a 1.25x severity change, or wrong priority"),

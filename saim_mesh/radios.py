@@ -23,10 +23,9 @@ class Radios:
     def __init__(self, s, ks, source_of: Callable[[object], str | None], log=print):
         self.s, self.ks, self.source_of, self.log = s, ks, source_of, log
         self.sub = s.liveliness().declare_subscriber(ks.alive("*", "*"), zenoh.handlers.FifoChannel(4096))
-        self.keys: set[tuple[str, str]] = set()   # (unit, zid) of every live token
         self.dead: set[str] = set()
         self.silenced = 0
-        self.keys = self._query("*") or set()
+        self.keys: set[tuple[str, str]] = self._query("*") or set()   # (unit, zid) of every live token
         self.next_sync = RESYNC_S
 
     def _query(self, unit: str) -> set[tuple[str, str]] | None:

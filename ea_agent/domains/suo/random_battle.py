@@ -1,0 +1,80 @@
+"""A battle drawn at random from a seed (`generate --incidents random`), so that the
+alert score is measured on battles nobody tuned for (`scripts/evaluate_seeds`)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .generator import DURATION, LANE_X, Hostile, Sim
+
+
+def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
+    """A battle of its own per seed: which platoons start or arrive late, attack early or
+    finish late, which stray off their lane (how far, how long), which squads lose their
+    radios, whether the link-up and the passage partners turn up, when R is
+    resubordinated, and the enemy: how many groups, down which avenue or across
+    country, when, how fast, how strong, reinforced or not; calls for fire near friendly
+    units or not, confirmed or not. Every draw is recorded in `sim.drawn`."""
+    d = sim.drawn
+    u = lambda a, b: float(round(rng.uniform(a, b)))   # noqa: E731  whole seconds / metres
+    for p in LANE_X:
+        start = 300.0 + (u(0, 300) if rng.random() < 0.2 else 0.0)
+        arrive = 2100.0 + (start - 300.0) + (u(0, 400) if rng.random() < 0.2 else u(-60, 20))
+        attack = 2400.0 - (u(0, 250) if p == "C1" and rng.random() < 0.5 else 0.0)
+        attack = max(attack, arrive + 60.0)
+        end = max(3600.0 + (u(0, 300) if rng.random() < 0.15 else 0.0), attack + 600.0)
+        sim.paths[p] = ([0.0, start, arrive, attack, end], [0, 0, 7000, 7000, 11000])
+        if (start, arrive, attack, end) != (300.0, 2100.0, 2400.0, 3600.0):
+            d.append({"kind": "timing", "unit": p, "move_start": start, "move_end": arrive, "attack_start": attack,
+                      "attack_end": end})
+    for p in rng.choice(sorted(LANE_X), size=int(rng.integers(0, 3)), replace=False):
+        t0, ramp, hold = u(700, 1600), u(200, 400), u(60, 500)
+        dx = u(300, 2600) * (1 if rng.random() < 0.5 else -1)
+        sim.strays[str(p)] = ([t0, t0 + ramp, t0 + ramp + hold, t0 + 2 * ramp + hold], [0, dx, dx, 0])
+        d.append({"kind": "stray", "unit": str(p), "t": t0, "dx_m": dx, "hold_s": hold})
+    if rng.random() < 0.5:
+        sim.detours["B1S4"] = ([], [])
+    if rng.random() < 0.6:
+        sim.detours["C2S4"] = ([3800, 3980, 4100, 4300], [0, 440, 440, 0])
+        sim.detours["C3S4"] = ([3800, 3980, 4100, 4300], [0, -740, -740, 0])
+    d.append({"kind": "coordination", "link_up_partner_comes": "B1S4" in sim.detours,
+              "passage_partners_come": "C2S4" in sim.detours})
+    leaves = sorted(x["id"] for x in sim.units if x.get("n") and x["id"][0] in "ABC" and "HQ" not in x["id"])
+    for leaf in rng.choice(leaves, size=int(rng.integers(0, 4)), replace=False):
+        t0 = u(300, 5000)
+        sim.outages[str(leaf)] = (t0, t0 + u(60, 600))
+        d.append({"kind": "radio-outage", "unit": str(leaf), "from": t0, "to": sim.outages[str(leaf)][1]})
+    sim.reorg_t = u(300, 1500)
+    d.append({"kind": "reorganization", "unit": "R", "new_parent": "BN", "t": sim.reorg_t})
+    for k in range(int(rng.integers(4, 9))):
+        x = (float(rng.choice([2000.0, 6000.0, 10650.0])) + u(-300, 300) if rng.random() < 0.7 else u(0, 12000))
+        y0, y1 = u(18500, 21000), u(11500, 17000)
+        appear, speed = u(400, 4600), float(rng.uniform(2.0, 6.0))
+        t1 = appear + round((y0 - y1) / speed)
+        vanish = t1 + u(0, 600) if rng.random() < 0.3 else DURATION + 1
+        x1 = x + u(-500, 500)
+        hid, strength = f"H{k + 1}", int(rng.integers(2, 10))
+        sim.hostiles[hid] = Hostile(hid, [appear, t1], [x, x1], [y0, y1], strength, appear, vanish)
+        d.append({"kind": "hostile", "id": hid, "from": [x, y0], "to": [x1, y1], "appear": appear, "arrive": t1,
+                  "vanish": vanish if vanish <= DURATION else None, "strength": strength})
+        late = appear + u(300, 1200)
+        if rng.random() < 0.3 and late < vanish - 60:
+            sim.hostiles[hid + "B"] = Hostile(hid + "B", [appear, t1], [x + 50, x1 + 50], [y0 + 50, y1 + 50],
+                                              int(rng.integers(2, 8)), late, vanish)
+            d.append({"kind": "hostile", "id": hid + "B", "reinforces": hid, "appear": late,
+                      "strength": sim.hostiles[hid + "B"].strength})
+    plts = sorted(LANE_X)
+    for k in range(int(rng.integers(1, 4))):
+        req, t = str(rng.choice(plts)), u(2500, 5200)
+        if rng.random() < 0.6:   # near another platoon
+            q = str(rng.choice([p for p in plts if p != req]))
+            cx, cy = sim.platoon_center(q, t)
+            x, y = cx + u(-500, 500), cy + u(-500, 500)
+        else:
+            x, y = u(0, 12000), u(15000, 19000)
+        c = {"t": t, "kind": "cff", "cff": f"CFF-{k + 1}", "requester": req, "x": x, "y": y, "radius_m": 600.0}
+        sim.cffs.append(c)
+        if rng.random() < 0.5:
+            sim.cffs.append({**c, "kind": "cff-confirm", "t": t + u(30, 90)})
+        d.append({"kind": "call-for-fire", **{k_: v for k_, v in c.items() if k_ != "kind"},
+                  "confirmed": sim.cffs[-1]["kind"] == "cff-confirm"})
+    sim.cffs.sort(key=lambda c: (c["t"], c["cff"]))
