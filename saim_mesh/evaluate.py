@@ -13,7 +13,8 @@ PROJECTION_WINDOW_S = 600.0   # a projection counts for a violation that begins 
 
 def _matches(a: Alert, item: dict) -> bool:
     """Same owner, an accepted type, in the window, and about the same things: a unit,
-    a true hostile, or the named place (fused tracks have names of their own). A
+    a true hostile, or the named place (fused tracks have names of their own); where
+    the incident says what an alert must be `about` (a threatened unit), about that. A
     projection (`details.projects`: the type of the violation it foretells) matches what
     that type would, from PROJECTION_WINDOW_S before the window."""
     about = set(a.subjects) | set(a.details.get("places", ()))
@@ -22,7 +23,7 @@ def _matches(a: Alert, item: dict) -> bool:
         ok = projects in item["accept"] and item["t0"] - PROJECTION_WINDOW_S <= a.t <= item["t1"]
     else:
         ok = a.type in item["accept"] and item["t0"] <= a.t <= item["t1"]
-    return ok and a.owner == item["owner"] and not set(item["subjects"]).isdisjoint(about)
+    return ok and a.owner == item["owner"] and not set(item.get("about") or item["subjects"]).isdisjoint(about)
 
 
 def _projections(alerts: list[Alert], incidents: list[dict]) -> dict:

@@ -4,8 +4,10 @@ from ea_agent.core.config import load_config
 from ea_agent.core.voa import Voa
 
 
-def cand(t, measure=None, typ="out-of-position", key=("oop", "A1"), friendly=True, group=None, prio="immediate"):
-    return Candidate(t, typ, prio, ("A1",), "m", key=key, measure=measure, friendly=friendly, merge_group=group)
+def cand(t, measure=None, typ="out-of-position", key=("oop", "A1"), friendly=True, group=None, prio="immediate",
+         news=False):
+    return Candidate(t, typ, prio, ("A1",), "m", key=key, measure=measure, friendly=friendly, merge_group=group,
+                     news=news)
 
 
 def voa(**kw):
@@ -37,15 +39,38 @@ def test_once_types_never_repeat_until_expiry():
     v = voa()
     c = lambda t: cand(t, None, typ="contingency", key=("c", 1))
     assert len(v.judge([c(0)])) == 1
-    assert v.judge([c(500)]) == []
-    assert len(v.judge([c(720)])) == 1                            # expired after 12 min: told again
+    assert len(v.judge([c(720)])) == 1                            # quiet for 12 min: expired, told again
+    assert v.judge([c(1000)]) == []
+
+
+def test_a_story_that_goes_on_does_not_expire():
+    """A candidate on the key, suppressed or not, or a touch, says the story is still
+    going on: it is not told again as if the user had forgotten it."""
+    v = voa()
+    c = lambda t: cand(t, None, typ="contingency", key=("c", 1))
+    assert len(v.judge([c(0)])) == 1
+    assert v.judge([c(500)]) == []                                # suppressed, but the story is active at 500
+    assert v.judge([c(1000)]) == []                               # 1000 s after the alert, 500 after the story
+    v.touch(("c", 1), 1600)
+    assert v.judge([c(2000)]) == []
+    assert len(v.judge([c(2800)])) == 1                           # 800 s with nothing: forgotten
+    assert v.last(("c", 1), 2800).t == 2800
+
+
+def test_news_is_given_whatever_the_history():
+    v = voa()
+    c = lambda t, news: cand(t, 5.0, typ="monitored", key=("m", "NAI-1"), news=news)
+    assert len(v.judge([c(0, False)])) == 1
+    assert v.judge([c(10, False)]) == []                          # same group, inside the suppression interval
+    assert len(v.judge([c(20, True)])) == 1                       # a new group in the area
 
 
 def test_expiry_is_configurable():
     v = voa(expiry_s=100.0, suppress_friendly_s=10.0)
     v.judge([cand(0, 200)])
     assert v.judge([cand(50, 210)]) == []
-    out = v.judge([cand(101, 210)])
+    assert v.judge([cand(149, 210)]) == []                        # the story was active at 50
+    out = v.judge([cand(250, 210)])
     assert len(out) == 1 and not out[0].repeat
 
 

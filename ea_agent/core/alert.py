@@ -54,6 +54,7 @@ class Candidate:
     repeat: bool = False                 # set by VOA when this is a progressive repeat
     also: tuple = ()                     # ((key, measure), ...) histories this alert also updates
     projection: bool = False             # a projected violation: `also` names the actual alert's key
+    news: bool = False                   # about subjects never told on this key: given whatever its history
 
 
 

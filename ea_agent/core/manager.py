@@ -130,8 +130,12 @@ class ExecutionAssistant:
         ep = self.epoch_s
         while self.epoch_end <= t:
             if not self.posted and not self.notify.pending and not self.domain.busy():
-                nxt = min(self.timers.next_deadline(), self.domain.next_wakeup(), self.notify.next_due())
-                target = max(self.epoch_end, math.ceil(nxt / ep) * ep) if math.isfinite(nxt) else math.inf
+                # the first epoch end after a timer's deadline (it fires once its time has
+                # passed), at or after the domain's and the notifier's next due time
+                dl = self.timers.next_deadline()
+                nxt = min((math.floor(dl / ep) + 1) * ep if math.isfinite(dl) else math.inf,
+                          math.ceil(min(self.domain.next_wakeup(), self.notify.next_due()) / ep) * ep)
+                target = max(self.epoch_end, nxt) if math.isfinite(nxt) else math.inf
                 if target > t:  # idle until after t: skip the empty epochs
                     self.epoch_end = (math.floor(t / ep) + 1) * ep
                     break

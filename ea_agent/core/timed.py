@@ -83,6 +83,9 @@ class TimedMonitors:
             if t < m.lo:
                 m.fails += 1
                 m.on_fail(t, m, "early")
+            elif t > m.deadline:   # it came after a deadline that had not fired yet (same epoch)
+                m.fails += 1
+                m.on_fail(m.deadline, m, "late")
 
     def next_deadline(self) -> float:
         while self._heap and not self._heap[0][2].active:
@@ -90,9 +93,11 @@ class TimedMonitors:
         return self._heap[0][0] if self._heap else math.inf
 
     def advance(self, now: float) -> int:
-        """Fire every timer due at or before `now`, in deadline order; returns how many failed."""
+        """Fire every timer due before `now`, in deadline order; returns how many failed. A
+        deadline at exactly `now` waits: an event at that very time (applied after the epoch
+        that ends at `now` closes) still meets it, as "within fuzz seconds" says."""
         fired = 0
-        while self._heap and self._heap[0][0] <= now:
+        while self._heap and self._heap[0][0] < now:
             deadline, _, m = heapq.heappop(self._heap)
             if not m.active or deadline != m.deadline:
                 continue

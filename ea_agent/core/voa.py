@@ -2,7 +2,11 @@
 
 Like Alertmanager's inhibit/silence stages, VOA only decides; detectors only
 propose. A candidate is judged against the last alert given on its `key`:
- - no unexpired alert on that key: give it;
+ - no unexpired alert on that key: give it (an alert expires `expiry_s` after its story
+   was last active: a candidate on the key, or `touch`; a situation that goes on is
+   not told again because the user might have forgotten it);
+ - a candidate with `news` (subjects the user was never told of on that key, e.g. a
+   new group in a watched area): give it;
  - a similar alert inside the suppression interval (90 s hostile, 120 s friendly): drop;
  - otherwise give it only if its measure crossed the repeat ratio (progressive
    repeat), at one priority lower: the user already knows the gist;
@@ -25,6 +29,7 @@ class Record:
     measure: float | None
     priority: str
     projected: bool = False   # set by a projection of the violation this key stands for
+    seen: float = 0.0         # when the story was last active (a candidate on the key, or touch)
 
 
 MergeFn = Callable[[Hashable, list[Candidate]], Candidate]
@@ -48,9 +53,16 @@ class Voa:
     def last(self, key: Hashable, now: float) -> Record | None:
         """The unexpired alert on `key`, if any (expired alerts no longer count)."""
         rec = self.history.get(key)
-        if rec is not None and now - rec.t >= self.expiry:
+        if rec is not None and now - max(rec.t, rec.seen) >= self.expiry:
             return None
         return rec
+
+    def touch(self, key: Hashable, now: float) -> None:
+        """The story behind `key` is still going on (a detector saw it with nothing new
+        to say): its alert is not forgotten while it lasts."""
+        rec = self.last(key, now)
+        if rec is not None:
+            rec.seen = max(rec.seen, now)
 
     def judge(self, cands: Iterable[Candidate]) -> list[Candidate]:
         """Issue or suppress each candidate; returns the issued ones (in input order)."""
@@ -62,6 +74,7 @@ class Voa:
                 continue
             verdict = self._verdict(c)
             if verdict is not None:
+                self.touch(c.key, c.t)
                 self.stats["suppressed-" + verdict] += 1
                 continue
             self.history[c.key] = Record(c.t, c.measure, c.priority)
@@ -72,7 +85,7 @@ class Voa:
 
     def _verdict(self, c: Candidate) -> str | None:
         rec = self.last(c.key, c.t)
-        if rec is None:
+        if rec is None or c.news:
             return None
         ratio = self.repeat.get(c.type, 0.0)
         if rec.projected:   # the violation a projection told: the same story, unless much worse
@@ -130,7 +143,7 @@ class Voa:
     def forget_before(self, now: float) -> None:
         """Drop expired history so memory stays bounded on long runs."""
         cutoff = now - self.expiry
-        for k in [k for k, r in self.history.items() if r.t < cutoff]:
+        for k in [k for k, r in self.history.items() if max(r.t, r.seen) < cutoff]:
             del self.history[k]
         for k in list(self.by_scope):
             v = [e for e in self.by_scope[k] if e[0] >= cutoff]

@@ -180,6 +180,10 @@ class SuoDomain:
         if c.phase == "start":
             if self.plan.state[m.id] == "dormant":
                 self.plan.state[m.id] = "ready"
+            elif self.plan.state[m.id] == "pending":   # started before its predecessors were confirmed
+                self.plan.state[m.id] = "ready"         # done: monitored from now, as if it were ready
+                if self.in_plan(m):
+                    m.post_execution_constraints(self)
             self.plan.start(m.id, c.t)
             self.timers.occurred(("start", m.id), c.t)
             if self.in_plan(m):

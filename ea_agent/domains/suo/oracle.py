@@ -26,10 +26,13 @@ from shapely.geometry import Point, Polygon, shape
 # override per mission (params.voi). Fixed here: the EAs read theirs from their config.
 SPEC = {"out_of_position_m": 150.0, "schedule_s": 30.0, "unknown_position_s": 120.0,
         "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0}
-EPISODE_S = 600.0   # a threat near a platoon after this long with none near is a new contact
+EPISODE_S = 720.0   # the paper's alert expiry (12 min): a threat back near a platoon, or a group back
+                    # in a watched area, after this long away is news again
 CLOSER = 2.0        # the nearest threat at half the distance of the last incident: a new one
 STRONGER = 2.0      # the threats near a platoon twice as strong as at the last incident
 MATERIAL = 1.25     # an alert counts for such an incident once the change reached this step
+NO_VALUE_S = 90.0   # the paper (5): a hostile alert of the same type about the same unit has no
+                    # value this long after the last; a change inside it is told when it ends
 
 # How the paper judges a unit on each mission type (6.5): where its members must be
 # (the rule: its centroid, any member, or all of them) and by which geometry.
@@ -63,7 +66,7 @@ def geometry_params(typ: str) -> tuple[str, ...]:
 
 
 TICK = 5.0
-SLACK = 40.0        # friendly reports may be up to one report interval old
+TRACK_S = 10.0      # and one hostile track period: the slack of friendly-position incidents
 PROX = ["contact", "distance", "strength", "proximity"]
 
 
@@ -81,6 +84,8 @@ def _runs(ts: list[float]) -> list[tuple[float, float]]:
 class Truth:
     def __init__(self, sim, feats: list[dict], plan: dict, owners: list[str]):
         self.sim, self.owners = sim, owners
+        # friendly reports may be up to one report interval old (plus a track period)
+        self.slack = float(sim.report_s) + TRACK_S
         self.voi = SPEC
         self.geom: dict[str, object] = {}
         self.area: dict[str, object] = {}
@@ -174,13 +179,15 @@ class Truth:
         return [o for o in self.owners if unit in self.subtree(o, t)]
 
     # -- recording ----------------------------------------------------------------------
-    def must(self, owner, typ, accept, subjects, t0, t1, label="", at=None):
+    def must(self, owner, typ, accept, subjects, t0, t1, label="", at=None, about=None):
         """An incident: `at` when it happened (detection delay is counted from it), t0..t1
         the window an alert about it is accepted in; `life`: it threatens lives (the paper's
-        flash: first contact with the enemy, fratricide, fire called near friendlies)."""
+        flash: first contact with the enemy, fratricide, fire called near friendlies);
+        `about`: the subjects an alert must name to be about it (default: any of them)."""
         self.incidents.append({"owner": owner, "type": typ, "accept": sorted(set(accept) | {typ}),
                                "subjects": sorted(set(subjects)), "t0": round(t0, 1), "t1": round(t1, 1),
-                               "at": round(t0 if at is None else at, 1), "life": typ in LIFE, "label": label})
+                               "at": round(t0 if at is None else at, 1), "life": typ in LIFE, "label": label,
+                               **({"about": sorted(set(about))} if about else {})})
         self.may(owner, accept + [typ], subjects, t0, t1)
 
     def may(self, owner, accept, subjects, t0, t1):
@@ -213,17 +220,21 @@ class Truth:
                 for a, b in _runs(hits):
                     for o in self.owners_of(m["unit"], a):
                         if peak > 1.5 * thr and b - a >= 30:
-                            self.must(o, "out-of-position", [], [m["unit"]], a - SLACK, a + 60, f"{mid} off {cont}", at=a)
-                        self.may(o, ["out-of-position"], [m["unit"]], a - SLACK, b + SLACK)
+                            self.must(o, "out-of-position", [], [m["unit"]], a - self.slack, a + 60, f"{mid} off {cont}", at=a)
+                        self.may(o, ["out-of-position"], [m["unit"]], a - self.slack, b + self.slack)
             dest = p.get("destination") or p.get("objective")
             geo = geometry_params(typ)
             if dest and math.isfinite(e) and dest in self.area and "destination" in geo or (
                     dest and math.isfinite(e) and "objective" in geo):
                 k = int(round(e / TICK))
                 d = self.judged(self.area[dest], m["unit"], k, FINAL_RULE.get(typ, rule))
-                if d > thr:
-                    for o in self.owners_of(m["unit"], e):
+                # within a MATERIAL step of the threshold either answer is fair (reports
+                # are up to a report interval old when the end is confirmed)
+                for o in self.owners_of(m["unit"], e) if d > thr / MATERIAL else ():
+                    if d > thr * MATERIAL:
                         self.must(o, "out-of-position", [], [m["unit"]], e - 1, e + 5, f"{mid} not at {dest}", at=e)
+                    else:
+                        self.may(o, ["out-of-position"], [m["unit"]], e - 1, e + 5)
 
     def fratricide(self) -> None:
         hits: dict[tuple[str, str, str], list[float]] = defaultdict(list)
@@ -264,8 +275,8 @@ class Truth:
         for (o, pla, plb), ts in hits.items():
             for a, b in _runs(ts):
                 if b - a >= 30:
-                    self.must(o, "fratricide", [], [pla, plb], a - SLACK, a + 60, f"{pla} and {plb}", at=a)
-                self.may(o, ["fratricide"], [pla, plb], a - SLACK, b + SLACK)
+                    self.must(o, "fratricide", [], [pla, plb], a - self.slack, a + 60, f"{pla} and {plb}", at=a)
+                self.may(o, ["fratricide"], [pla, plb], a - self.slack, b + self.slack)
 
     def _range(self, unit, par) -> float:
         u = unit
@@ -280,7 +291,7 @@ class Truth:
         rs = self.sim.report_s
         for leaf in self.leaves:
             ents = self.units[leaf]["entities"]
-            silent = []
+            silent, since = [], {}
             for t in self.ticks:
                 last = 0.0
                 for e in ents:
@@ -292,11 +303,15 @@ class Truth:
                         last = max(last, ph + k * rs)
                 if t - last > thr:
                     silent.append(t)
+                    since.setdefault(last, t)
             for a, b in _runs(silent):
                 par = self.parent_at(a)
+                # it happened when the silence passed the threshold, between two ticks
+                crossed = max((lst + thr for lst, t in since.items() if t == a), default=a)
                 for o in self.owners_of(leaf, a):
-                    self.must(o, "unknown-position", [], [leaf, par[leaf]], a - 1, a + 30, f"{leaf} silent", at=a)
-                    self.may(o, ["unknown-position"], [leaf, par[leaf]], a - 1, b + 10)
+                    self.must(o, "unknown-position", [], [leaf, par[leaf]], crossed - 1, crossed + 30,
+                              f"{leaf} silent", at=crossed)
+                    self.may(o, ["unknown-position"], [leaf, par[leaf]], crossed - 1, b + 10)
 
     def schedule(self) -> None:
         thr_default = float(self.voi["schedule_s"])
@@ -349,7 +364,7 @@ class Truth:
                     hit, slack = s >= tr.get("min_strength", 1), 15
                 else:
                     c = self.member_points(tr["unit"], k).mean(axis=0)
-                    hit, slack = self.area[tr["area"]].distance(Point(c)) <= tr.get("within_m", 0.0), SLACK
+                    hit, slack = self.area[tr["area"]].distance(Point(c)) <= tr.get("within_m", 0.0), self.slack
                 if hit:
                     self.must(owner, "contingency", [], [m["unit"]], t - slack, t + 40, f"{mid} triggered", at=t)
                     self.triggered_areas[owner].add(tr["area"])
@@ -376,21 +391,40 @@ class Truth:
                     if a and key in geo:
                         watch.append((a, "monitored", mid))
             for area, typ, mid in watch:
-                present = []
-                who: set[str] = set()
+                # An incident per hostile group that enters the area, unless it was in it
+                # less than EPISODE_S before (the user still knows of it).
+                inside_at: dict[float, list[str]] = {}
+                last_in: dict[str, float] = {}
+                entries: list[tuple[float, list[str]]] = []
+                first = True
                 for t in self.ticks:
                     if mid is not None:
                         r0, r1 = self._ready_interval(mid)
                         if not (r0 <= t < r1 and self.missions[mid]["unit"] in self.subtree(o, t)):
                             continue
-                    inside = [h for h, (x, y, s) in self.hostiles_at(t).items() if self.area[area].contains(Point(x, y))]
-                    if inside:
-                        present.append(t)
-                        who.update(inside)
-                for i, (a, b) in enumerate(_runs(present)):
-                    self.may(o, [typ], sorted(who) + [area], a - 15, b + 30)
-                    if not (i == 0 and mid is None and area in getattr(self, "triggered_areas", {}).get(o, ())):
-                        self.must(o, typ, [], sorted(who) + [area], a - 15, a + 45, f"hostiles at {area}", at=a)
+                    inside = sorted(h for h, (x, y, s) in self.hostiles_at(t).items()
+                                    if self.area[area].contains(Point(x, y)))
+                    if not inside:
+                        continue
+                    inside_at[t] = inside
+                    new = [h for h in inside if t - last_in.get(h, -math.inf) >= EPISODE_S]
+                    last_in.update((h, t) for h in inside)
+                    if new:
+                        entries.append((t, new))
+                for t, new in entries:
+                    # a triggered contingency tells the first activity in its trigger area
+                    if first and mid is None and area in getattr(self, "triggered_areas", {}).get(o, ()):
+                        first = False
+                        continue
+                    first = False
+                    # a group that only grazes the area, gone before the next track report,
+                    # may be seen there or not
+                    if any(h in inside_at.get(t + TRACK_S, ()) for h in new):
+                        self.must(o, typ, [], new + [area], t - 15, t + 45, f"{new} enter {area}", at=t,
+                                  about=[area])
+                for a, b in _runs(sorted(inside_at)):
+                    who = sorted({h for t, hs in inside_at.items() if a <= t <= b for h in hs})
+                    self.may(o, [typ], who + [area], a - 15, b + 30)
             for mid, m in self.missions.items():
                 by = m["params"].get("expect_hostile_by")
                 if by is None:
@@ -426,19 +460,25 @@ class Truth:
                     nearest = min(v[0] for v in near.values())
                     total = sum(v[1] for v in near.values())
                     if t - last_near >= EPISODE_S:   # first contact, or back after a long quiet
-                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 50, f"{sorted(near)} near {u}", at=t)
+                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 15 + self.slack, f"{sorted(near)} near {u}", at=t,
+                                  about=[u])
                         dist, dist_t0, strength, str_t0 = nearest, None, total, None
+                        told = {"distance": t, "strength": t}
                     else:
                         if dist_t0 is None and nearest * MATERIAL <= dist:
                             dist_t0 = t
-                        if nearest * CLOSER <= dist:
-                            self.must(o, "distance", PROX, [u], dist_t0 - 15, t + 60, f"threat closer to {u}", at=dist_t0)
+                        if nearest * CLOSER <= dist and t - told["distance"] >= NO_VALUE_S:
+                            self.must(o, "distance", PROX, [u], dist_t0 - 15, t + 60, f"threat closer to {u}", at=dist_t0,
+                                      about=[u])
                             dist, dist_t0 = nearest, None
+                            told["distance"] = t
                         if str_t0 is None and total >= MATERIAL * strength:
                             str_t0 = t
-                        if total >= STRONGER * strength:
-                            self.must(o, "strength", PROX, [u], str_t0 - 15, t + 40, f"threat near {u} stronger", at=str_t0)
+                        if total >= STRONGER * strength and t - told["strength"] >= NO_VALUE_S:
+                            self.must(o, "strength", PROX, [u], str_t0 - 15, t + 40, f"threat near {u} stronger", at=str_t0,
+                                      about=[u])
                             strength, str_t0 = total, None
+                            told["strength"] = t
                     last_near = t
                 for a, b in _runs(present):
                     self.may(o, PROX, [u], a - 15, b + 30)

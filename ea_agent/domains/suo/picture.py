@@ -25,6 +25,8 @@ class Picture:
         self.lat = [math.nan] * n
         self.seen = [0.0] * n              # scenario time of the last report, changed or not
         self.xy = np.full((n, 2), np.nan)
+        self.moved_t = np.full(n, np.nan)  # when xy last changed, and the velocity that change showed
+        self.vel = np.zeros((n, 2))
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
         self.tracks: dict[str, Entity] = {}      # the adjudicated picture of hostile entities
         self.adj = Adjudicator()
@@ -60,6 +62,19 @@ class Picture:
         c = pts.mean(axis=0)
         return float(c[0]), float(c[1])
 
+    def swept(self, unit: str, now: float, horizon_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each member's last reported position and where it is by `now` if it kept its
+        last velocity (at most `horizon_s`; none once it reported standing still): the
+        true position lies between the two when reports are stale."""
+        m = self.members[unit]
+        p0 = self.xy[m]
+        ok = ~np.isnan(p0[:, 0])
+        m, p0 = m[ok], p0[ok]
+        seen = np.array([self.seen[i] for i in m.tolist()])
+        moved = self.moved_t[m]
+        dt = np.where(seen > moved + 0.5, 0.0, np.clip(now - moved, 0.0, horizon_s))
+        return p0, p0 + self.vel[m] * dt[:, None]
+
     def centroids(self) -> tuple[np.ndarray, np.ndarray]:
         """Centroids of every leaf and every unit (NaN where no member position is known),
         in one vectorised pass: bincount per leaf, then a membership matrix product."""
@@ -82,6 +97,13 @@ class Picture:
         idx = np.fromiter((self.eidx[r.entity] for r in reports), dtype=np.intp, count=len(reports))
         x, y = self.proj.to_xy(np.fromiter((r.lon for r in reports), float, len(reports)),
                                np.fromiter((r.lat for r in reports), float, len(reports)))
+        t = np.fromiter((r.t for r in reports), float, len(reports))
+        dt = t - self.moved_t[idx]
+        ok = (dt > 0) & (dt <= 120.0)        # NaN (first report) compares false
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = np.column_stack([(x - self.xy[idx, 0]) / dt, (y - self.xy[idx, 1]) / dt])
+        self.vel[idx] = np.where(ok[:, None], v, 0.0)
+        self.moved_t[idx] = t
         self.xy[idx, 0] = x
         self.xy[idx, 1] = y
         return {self.ent_leaf[i] for i in idx.tolist()}

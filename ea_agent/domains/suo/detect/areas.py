@@ -3,6 +3,7 @@ points, NAIs, avenues of approach), areas missions watch (engagement areas,
 screened areas) and hostiles a mission expects by a time (hostile-expected)."""
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 
 import numpy as np
@@ -27,6 +28,10 @@ class Areas(Detector):
         self.tracks: dict[str, set[str]] = {}     # area -> tracks in it
         self._tids: list[str] = []
         self._members: dict[str, np.ndarray] = {}
+        self.inside_t: dict[tuple[str, str], float] = {}   # (area, track) -> last time seen inside
+        self._new: dict[str, list[str]] = {}               # area -> tracks new to it this epoch
+        self._eligible: set[tuple[str, str]] = set()       # (area, mission) watched now
+        self._stale = True
 
     def reset(self) -> None:
         self.red_monitors: dict[str, list[tuple[Mission, bool]]] = defaultdict(list)  # area -> missions
@@ -36,6 +41,7 @@ class Areas(Detector):
         """The watched areas changed: rebuild the spatial index over all of them."""
         ids = set(self.global_areas) | set(self.red_monitors) | self.dom.contingency.trigger_areas()
         self.index = AreaIndex({a: self.dom.overlay[a].area for a in sorted(ids)})
+        self._stale = True   # tracks already in a newly watched area are found at the next epoch
 
     def post_plan_monitors(self) -> None:
         """Global monitors: decision points, NAIs and avenues of approach in our plan."""
@@ -75,12 +81,15 @@ class Areas(Detector):
         dom.ea.post(Candidate(t, kind, prio, tuple(tracks), f"{label} {area}{where}: {strength} entities in "
                               f"{len(tracks)} track{'s' if len(tracks) > 1 else ''}",
                               key=(kind, area, m.id if m else None), measure=float(strength), friendly=False,
+                              news=bool(self._new.get(area)),
                               details={"place": area, "places": [area], "strength": strength,
-                                       "mission": m.id if m else None, "expected": expected}))
+                                       "mission": m.id if m else None, "expected": expected,
+                                       "new_tracks": self._new.get(area, [])}))
 
     def observe(self, t: float, ch: Changes) -> None:
-        if not ch.tracks:
+        if not ch.tracks and not self._stale:
             return
+        self._stale = False
         pic = self.dom.pic
         tids = sorted(pic.tracks)
         xy = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids]) if tids else np.zeros((0, 2))
@@ -88,22 +97,38 @@ class Areas(Detector):
         self.strength = {a: int(sum(pic.tracks[tids[k]].strength for k in idx)) for a, idx in members.items()}
         self.tracks = {a: {tids[k] for k in idx} for a, idx in members.items()}
         self._tids, self._members = tids, members
+        # A track that enters an area it was not seen in for the alert expiry is news
+        # there (a new group at an NAI), whatever the area's alert history says.
+        forget = float(self.dom.ea.voa.expiry)
+        self._new = {}
+        for a, ids in self.tracks.items():
+            new = sorted(k for k in ids if t - self.inside_t.get((a, k), -math.inf) >= forget)
+            if new:
+                self._new[a] = new
+            for k in ids:
+                self.inside_t[(a, k)] = t
+        if len(self.inside_t) > 4 * max(1, len(tids)) * max(1, len(members)):   # bounded: drop the forgotten
+            self.inside_t = {ak: s for ak, s in self.inside_t.items() if t - s < forget}
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
-        if not ch.tracks:
-            return
         dom = self.dom
+        # a mission whose watch begins (it became ready) is told what is already in its
+        # area, stationary hostiles included: they would never show as a change
+        eligible = {(area, m.id) for area, mons in self.red_monitors.items() for m, _ in mons
+                    if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m)}
+        begun, self._eligible = eligible - self._eligible, eligible
+        if not ch.tracks and not begun:
+            return
         fired = dom.contingency.fired   # a triggered contingency says it already
         tids = self._tids
         for area, idx in self._members.items():
             ids = [tids[k] for k in idx]
-            if not ch.tracks.intersection(ids):
-                continue
+            changed = bool(ch.tracks.intersection(ids))
             strength = self.strength[area]
             for m, expected in self.red_monitors.get(area, ()):
-                if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m):
+                if (area, m.id) in eligible and (changed or (area, m.id) in begun):
                     dom.timers.occurred(("hostile", m.id), t)
                     m.respond_to_monitored_red_activity(dom, area, t, ids, strength)
             kind = self.global_areas.get(area)
-            if kind and area not in fired:
+            if changed and kind and area not in fired:
                 self.monitored_candidate(None, area, t, ids, strength, expected=False, kind=kind)

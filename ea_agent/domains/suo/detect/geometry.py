@@ -44,6 +44,18 @@ def judged_distance(geom, pts: np.ndarray, rule: str, centroid: tuple[float, flo
     return float(ds.min() if rule == "any" else ds.max())
 
 
+def judged_distance_swept(geom, p0: np.ndarray, p1: np.ndarray, rule: str) -> float | None:
+    """As judged_distance, for members known only to lie between p0 and p1 (last report,
+    dead-reckoned position): each member at its best point on that segment, so that a
+    stale report alone never makes a unit out of position."""
+    if len(p0) == 0:
+        return None
+    if rule == "centroid":
+        p0, p1 = p0.mean(axis=0, keepdims=True), p1.mean(axis=0, keepdims=True)
+    ds = shapely.distance(geom, shapely.linestrings(np.stack([p0, p1], axis=1)))
+    return float(ds.min() if rule == "any" else ds.max())
+
+
 class AreaIndex:
     """Which tracks are in which areas, with a bounding-box prefilter."""
 

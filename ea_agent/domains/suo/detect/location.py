@@ -13,7 +13,7 @@ from ea_agent.core.geo import bearing_name
 from ..missions import Mission
 from ..render import km
 from .base import Changes, Detector
-from .geometry import judged_distance
+from .geometry import judged_distance, judged_distance_swept
 
 
 class LocationMonitors(Detector):
@@ -30,9 +30,10 @@ class LocationMonitors(Detector):
 
     def check(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:
         """A one-off check (start or end of a mission), alerted at once."""
-        c = self._oop(m, geom_id, rule, what, t)
-        if c is not None:
-            self.dom.ea.post(c)
+        p0, p1 = self.dom.pic.swept(m.unit, t, float(self.dom.voi_cfg["dead_reckon_s"]))
+        d = judged_distance_swept(self._geom(geom_id, what), p0, p1, rule)
+        if d is not None and d > self.dom.voi(m, "out_of_position_m"):
+            self.dom.ea.post(self._oop(m, geom_id, rule, what, t, d))
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom

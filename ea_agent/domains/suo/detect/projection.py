@@ -38,17 +38,20 @@ class Projections(Detector):
 
     def observe(self, t: float, ch: Changes) -> None:
         """Every SAMPLE_S of scenario time (a trend over minutes needs no finer samples),
-        each active mission's distance off its route and still to go."""
+        each active mission's distance off its route and still to go, from its members'
+        positions dead-reckoned to now (a stale report alone would make it seem behind)."""
         dom = self.dom
         self.due = []
         if dom.plan is None or t < self.next_t or float(dom.voi_cfg["projection_horizon_s"]) <= 0.0:
             return
         self.next_t = t + SAMPLE_S
         self.due = self._watched()
+        reckon = float(dom.voi_cfg["dead_reckon_s"])
         for m in self.due:
-            pos = dom.unit_pos.get(m.unit)
-            if pos is None:
+            _, p1 = dom.pic.swept(m.unit, t, reckon)   # where reports up to a minute old put it now
+            if len(p1) == 0:
                 continue
+            pos = tuple(p1.mean(axis=0).tolist())
             h = self.hist.setdefault(m.id, deque())
             if h and h[-1][0] >= t:
                 continue

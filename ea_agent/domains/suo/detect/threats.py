@@ -35,7 +35,7 @@ class ThreatEnvelopes(Detector):
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
-        rescan = ch.rescan   # periodic: expiry-driven reminders
+        rescan = ch.rescan   # periodic: keeps a continuing contact's story alive
         if not (rescan or ch.tracks or ch.units.intersection(dom.env_units)):
             return
         radius = float(dom.voi_cfg["threat_radius_m"])
@@ -79,16 +79,18 @@ class ThreatEnvelopes(Detector):
             rec = [(("threat", u, "distance"), 1000.0 / max(nearest, 1.0)), (("threat", u, "strength"), float(strength))]
             new = ids - prev[0]
             voa = dom.ea.voa
-            # A contact the user no longer remembers (expired) is told again as a contact;
-            # "closer" and "stronger" only make sense against an alert the user remembers.
-            remembered = voa.enabled and voa.last(("threat", u, "contact"), t) is not None
-            if new or not remembered:
+            ckey = ("threat", u, "contact")
+            # A contact is told when a threat enters an empty envelope; while the envelope
+            # stays occupied the story goes on and the user is not told it again (touch);
+            # after the expiry with none near, a threat back is a new contact.
+            remembered = voa.enabled and voa.last(ckey, t) is not None
+            if remembered:
+                voa.touch(ckey, t)
+            elif new or not voa.enabled:   # VOA off (the naive baseline): every re-evaluation
                 p = m.red_alert_priority("contact", fs, strength, nearest, danger)
-                again = not new
-                cands.append(Candidate(t, "contact", "immediate" if again else p, subj,
-                                       f"{'Contact continues' if again else 'Contact'}: {strength} hostile entities {where}",
-                                       key=("threat", u, "contact"), friendly=False, merge_group=group, also=tuple(rec),
-                                       details={**base, "new_tracks": sorted(new), "reminder": again}))
+                cands.append(Candidate(t, "contact", p, subj, f"Contact: {strength} hostile entities {where}",
+                                       key=ckey, friendly=False, merge_group=group, also=tuple(rec),
+                                       details={**base, "new_tracks": sorted(new)}))
             if remembered or not voa.enabled:
                 # Propose on every re-evaluation; VOA compares with what the user was last told.
                 if not new:
