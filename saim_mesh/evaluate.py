@@ -65,7 +65,7 @@ def _no_news(alerts: list[Alert], items: list[dict]) -> list[Alert]:
         item = next((k for k, i in enumerate(items) if _matches(a, i)), None)
         if item is None:
             continue   # unwanted anyway: it matches nothing
-        story = (a.owner, a.type, item, frozenset(a.subjects))
+        story = (a.owner, a.type, item, frozenset(a.subjects) | frozenset(a.details.get("places", ())))
         key, sign = SEVERITY.get(a.type, (None, 0))
         v = a.details.get(key) if key else None
         v = float(v) if isinstance(v, (int, float)) and v > 0 else None

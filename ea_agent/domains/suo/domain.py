@@ -52,6 +52,8 @@ class SuoDomain:
         self.dirty_leaves: set[str] = set()
         self.dirty_tracks: set[str] = set()
         self.unit_pos: dict[str, tuple[float, float] | None] = {}
+        self.unit_now: dict[str, tuple[float, float] | None] = {}
+        self._reckon_until = -math.inf   # scenario time until which some member is dead-reckoned
         self.detectors: list[Detector] = [cls(self) for cls in DETECTORS]
         # the components the monitoring API routes to
         self.location = self._part(LocationMonitors)
@@ -103,6 +105,7 @@ class SuoDomain:
         env = [u for u in sorted(self.own_units) if to.units[u].kind == "platoon"]
         self.env_units = env or [self.owner]
         self.unit_pos = {u: self.pic.centroid(u) for u in to.units}
+        self.unit_now = {u: self.unit_now.get(u, self.unit_pos[u]) for u in to.units}
         self._up = {leaf: (leaf, *to.ancestors(leaf)) for leaf in self.leaves}
         self.own_rows = np.array([u in self.own_units for u in self.pic.units])
         self.leaf_xy = np.full((len(self.leaves), 2), np.nan)
@@ -292,7 +295,9 @@ class SuoDomain:
         if self.dirty_leaves:
             for leaf in self.dirty_leaves:
                 dirty_units.update(self._up[leaf])
-            self._update_positions()
+            self._update_positions(t)
+        elif t <= self._reckon_until:   # members still dead-reckoned: their estimate moves on
+            self._update_positions(t)
         ch = Changes(self.dirty_leaves, dirty_units, self.dirty_tracks, t >= self.next_scan)
         cands: list[Candidate] = []
         for observe in self._observers:
@@ -306,12 +311,20 @@ class SuoDomain:
         self.dirty_tracks = set()
         return cands
 
-    def _update_positions(self) -> None:
-        """Leaf and unit centroids after movement, and the watchman's area of interest."""
+    def _update_positions(self, t: float) -> None:
+        """Leaf and unit centroids after movement, and the watchman's area of interest;
+        `unit_now`: the centroids of members dead-reckoned to now (threat envelopes: a
+        report up to a minute old puts a moving unit hundreds of metres off)."""
         leaf_c, unit_c = self.pic.centroids()
         self.leaf_xy = leaf_c
         self.unit_pos = {u: (None if x != x else (float(x), float(y)))
                          for u, (x, y) in zip(self.pic.units, unit_c.tolist())}
+        horizon = float(self.voi_cfg["dead_reckon_s"])
+        _, now_c = self.pic.centroids(self.pic.reckoned(t, horizon))
+        moving = self.pic.moved_t[(self.pic.vel != 0.0).any(axis=1)]
+        self._reckon_until = float(moving.max()) + horizon if len(moving) else -math.inf
+        self.unit_now = {u: (None if x != x else (float(x), float(y)))
+                         for u, (x, y) in zip(self.pic.units, now_c.tolist())}
         own = unit_c[self.own_rows]
         own = own[~np.isnan(own[:, 0])]
         self.watchman.set_bbox(own)

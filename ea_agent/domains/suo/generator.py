@@ -22,6 +22,7 @@ from ea_agent.core.geo import Projection
 EPSG = 32611
 ORIGIN_LONLAT = (-116.62, 35.22)   # south-west corner of the battalion sector
 DURATION = 5400.0
+WITHDRAW_Y = 7000.0   # the battle positions on PL BLUE the withdrawal plan falls back to
 COMPANIES = ("A", "B", "C")
 LANE_X = {"A1": 700, "A2": 2000, "A3": 3300, "B1": 4700, "B2": 6000, "B3": 7300,
           "C1": 8700, "C2": 10000, "C3": 11300}
@@ -94,6 +95,9 @@ class Sim:
     detours: dict[str, tuple[list, list]] = field(default_factory=dict)  # squad -> (ts, dxs)
     reorg_t: float = 600
     drawn: list[dict] = field(default_factory=list)                      # what was drawn, for truth.json
+    order: dict | None = None          # the battalion switches plans: {"t", "plan", "issuer"}
+    withdraw: dict[str, tuple[float, float]] = field(default_factory=dict)  # platoon -> (leaves, arrives)
+    sensors: list[tuple[str, float]] = field(default_factory=list)      # (id, range m) when hostiles are sensed
 
     # -- friendly movement ---------------------------------------------------------
     def platoon_y_path(self, p: str):
@@ -112,7 +116,13 @@ class Sim:
         x = LANE_X[p]
         if p in self.strays:
             x += _interp(t, *self.strays[p])
+        w = self.withdraw.get(p)
+        if w is not None and t > w[0]:   # ordered back to its phase-line battle position
+            return x, _interp(t, list(w), [_interp(w[0], ts, ys), WITHDRAW_Y])
         return x, _interp(t, ts, ys)
+
+    def sensor_xy(self, sid: str, t: float) -> tuple[float, float]:
+        return sensor_pos(self, sid, t)
 
     def leaf_center(self, leaf: str, t: float):
         if leaf in ("R1", "R2", "R3"):
@@ -218,6 +228,11 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -
           (2200.0, "M-march", "M", "start"), (2800.0, "M-march", "M", "end"), (2800.0, "M-sbf", "M", "start"),
           (0.0, "BNHQ-occupy", "BNHQ", "start"), (2800.0, "A3-linkup", "A3", "start"),
           (3800.0, "C2-passage", "C2", "start")]
+    if sim.order is not None:   # the main plan ends with the order: its later confirmations never come
+        main = {x["id"] for x in plan_doc(sim)["plans"]["main"]}
+        c[:] = [x for x in c if not (x[1] in main and x[0] > sim.order["t"])]
+        for p, (t0, t1) in sim.withdraw.items():
+            c += [(t0, f"{p}-withdraw", p, "start")] + ([(t1, f"{p}-withdraw", p, "end")] if t1 < DURATION else [])
     c.sort()
     if incidents == "random":
         return sim
@@ -240,6 +255,7 @@ SENSORS = [  # id, fusion group, owner, kind, range m, Pd, sigma m, false alarms
     ("VC2", "F", "C2", "vehicle", 3000.0, 0.85, 30.0, 0.1),
 ]
 SENSOR_PERIOD = 5.0
+MAX_GROUND_MPS = 40.0   # the sensors watch ground units: nothing they track moves faster
 
 
 def sensor_pos(sim: "Sim", sid: str, t: float) -> tuple[float, float]:
@@ -431,6 +447,10 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
             seq += 1
             ev.append((h.vanish, seq, {"kind": "track", "t": h.vanish, "track": h.id, "lon": lon, "lat": lat,
                                         "strength": 0, "source": "fusion"}))
+    if sim.order is not None:
+        seq += 1
+        ev.append((sim.order["t"], seq, {"kind": "order", "t": sim.order["t"], "action": "execute-plan",
+                                         "plan": sim.order["plan"], "issuer": sim.order["issuer"]}))
     for t, mid, unit, phase_ in sim.confirmations:
         seq += 1
         ev.append((t, seq, {"kind": "mission", "t": t, "mission": mid, "unit": unit, "phase": phase_}))
@@ -450,6 +470,8 @@ def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False, 
     proj = Projection(EPSG)
     ox, oy = proj.to_xy(*ORIGIN_LONLAT)
     sim = build_sim(small, seed, incidents)
+    if sensors:   # the oracle holds the EAs to what the sensors could see
+        sim.sensors = [(sid, rng_m) for sid, _g, _o, _k, rng_m, *_ in SENSORS]
 
     def to_ll(coords):
         if isinstance(coords[0], (int, float)):
@@ -466,6 +488,7 @@ def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False, 
             "description": "1st BN moves to PL BLUE, attacks OBJ A/B/C and defends (Fort Irwin, UTM 11N)"}
     if sensors:
         meta["fusion"] = {"groups": {g: sorted(sid for sid, grp, *_ in SENSORS if grp == g) for g in ("F", "N")},
+                          "max_speed_mps": MAX_GROUND_MPS,
                           "sensors": [{"id": sid, "group": g, "owner": o, "kind": k, "range_m": r, "pd": pd,
                                        "sigma_m": sg, "false_alarms_per_scan": fa, "period_s": SENSOR_PERIOD}
                                       for sid, g, o, k, r, pd, sg, fa in SENSORS]}

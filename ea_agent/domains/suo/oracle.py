@@ -31,6 +31,10 @@ EPISODE_S = 720.0   # the paper's alert expiry (12 min): a threat back near a pl
 CLOSER = 2.0        # the nearest threat at half the distance of the last incident: a new one
 STRONGER = 2.0      # the threats near a platoon twice as strong as at the last incident
 MATERIAL = 1.25     # an alert counts for such an incident once the change reached this step
+TOLERANCE_M = 200.0  # how well sensors place a hostile group (5 sigma of the scenario's 25-40 m)
+CONFIRM_S = (0.0, 5.0, 10.0)   # a track is confirmed after 3 sensor scans (5 s apart) of it
+REACH_M = 85.0      # a group's members stand up to this far from its centre (the sensors see members)
+RESOLVE_M = 150.0   # groups nearer than this are one to any sensor of the scenario (sigma 25-40 m)
 NO_VALUE_S = 90.0   # the paper (5): a hostile alert of the same type about the same unit has no
                     # value this long after the last; a change inside it is told when it ends
 
@@ -84,6 +88,7 @@ def _runs(ts: list[float]) -> list[tuple[float, float]]:
 class Truth:
     def __init__(self, sim, feats: list[dict], plan: dict, owners: list[str]):
         self.sim, self.owners = sim, owners
+        self._hostiles: dict[float, dict] = {}
         # friendly reports may be up to one report interval old (plus a track period)
         self.slack = float(sim.report_s) + TRACK_S
         self.voi = SPEC
@@ -103,6 +108,15 @@ class Truth:
                 self.area[p["id"]] = g.buffer(p.get("width_m", 500.0 if p["kind"] == "avenue-of-approach" else 100.0) / 2)
         self.units = {u["id"]: u for u in plan["task_organization"]}
         self.missions = {m["id"]: m for m in plan["plans"][plan["initial_plan"]]}
+        # the plan in force over time: the initial one until an order switches plans (its
+        # missions no longer count from then on), the ordered one from then on
+        order = getattr(sim, "order", None)
+        cut = float(order["t"]) if order else math.inf
+        self.valid = {mid: (0.0, cut) for mid in self.missions}
+        if order:
+            for m in plan["plans"][order["plan"]]:
+                self.missions[m["id"]] = m
+                self.valid[m["id"]] = (cut, math.inf)
         self.reorgs = sorted((m["start"]["t"], m["params"]["subject"], m["params"]["new_parent"])
                              for m in self.missions.values() if m["type"] in REORGANIZATION)
         self.ticks = np.arange(0.0, sim.duration + TICK / 2, TICK)
@@ -168,12 +182,29 @@ class Truth:
         return min(ds) if rule == "any" else max(ds)
 
     def hostiles_at(self, t: float) -> dict[str, tuple[float, float, int]]:
+        """The hostile groups there at `t` that the team could know of: all of them where
+        tracks are reported from true positions, those within some sensor's range where
+        hostiles are sensed (nobody can be told of a group no sensor covers), once some
+        sensor has covered it for the scans a track needs to be confirmed."""
+        out = self._hostiles.get(t)
+        if out is not None:
+            return out
         out = {}
+        sensed = bool(getattr(self.sim, "sensors", ()))
         for h in self.sim.hostiles.values():
             p = h.pos(t)
-            if p is not None:
+            if p is not None and (not sensed or all(self._covered(h, t - dt) for dt in CONFIRM_S)):
                 out[h.id] = (p[0], p[1], h.strength)
+        if len(self._hostiles) > 4096:
+            self._hostiles.clear()
+        self._hostiles[t] = out
         return out
+
+    def _covered(self, h, t: float) -> bool:
+        """Whether hostile group `h` is within some sensor's range at `t`."""
+        p = h.pos(t)
+        return p is not None and any(math.hypot(p[0] - x, p[1] - y) <= r + REACH_M
+                                     for x, y, r in ((*self.sim.sensor_xy(sid, t), r) for sid, r in self.sim.sensors))
 
     def owners_of(self, unit: str, t: float) -> list[str]:
         return [o for o in self.owners if unit in self.subtree(o, t)]
@@ -188,11 +219,13 @@ class Truth:
                                "subjects": sorted(set(subjects)), "t0": round(t0, 1), "t1": round(t1, 1),
                                "at": round(t0 if at is None else at, 1), "life": typ in LIFE, "label": label,
                                **({"about": sorted(set(about))} if about else {})})
-        self.may(owner, accept + [typ], subjects, t0, t1)
+        self.may(owner, accept + [typ], subjects, t0, t1, about=about)
 
-    def may(self, owner, accept, subjects, t0, t1):
+    def may(self, owner, accept, subjects, t0, t1, about=None):
+        """A situation: alerts about it in t0..t1 are wanted but not required (`about`: as
+        for an incident)."""
         self.situations.append({"owner": owner, "accept": sorted(set(accept)), "subjects": sorted(set(subjects)),
-                                "t0": round(t0, 1), "t1": round(t1, 1)})
+                                "t0": round(t0, 1), "t1": round(t1, 1), **({"about": sorted(about)} if about else {})})
 
     # -- per alert type ----------------------------------------------------------------------
     def thr(self, m: dict, key: str) -> float:
@@ -207,7 +240,8 @@ class Truth:
             if typ in CONTINGENT | REORGANIZATION or mid not in self.started:
                 continue
             thr = self.thr(m, "out_of_position_m")
-            s, e = self.started[mid], self.ended.get(mid, math.inf)
+            v0, v1 = self.valid[mid]
+            s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
             if cont:
                 geom = self.geom[cont] if (p.get("route") or p.get("axis")) else self.area[cont]
                 hits, peak = [], 0.0
@@ -323,6 +357,9 @@ class Truth:
                 thr = float(m["params"].get("voi", {}).get("schedule_s", thr_default))
                 when, kind = tc["t"], tc["type"].split("-")[1]
                 act = actual if actual is not None else math.inf
+                v0, v1 = self.valid[mid]
+                if not v0 <= when + thr < v1:   # the plan was changed before it was due
+                    continue
                 if kind in ("NLT", "AT") and act > when + thr:
                     t = when + thr
                     for o in self.owners_of(m["unit"], t):
@@ -338,6 +375,8 @@ class Truth:
                 continue
             p = m["params"]
             dl = float(p["at"]) + float(p.get("fuzz_s", self.voi["schedule_s"]))
+            if not self.valid[mid][0] <= dl < self.valid[mid][1]:
+                continue
             radius = float(self.voi["coordination_radius_m"])
             ok = False
             for k, t in enumerate(self.ticks):
@@ -358,22 +397,40 @@ class Truth:
             owner, tr = m["params"]["owner"], m["params"]["trigger"]
             if owner not in self.owners:
                 continue
+            geom = self.area[tr["area"]]
+            # sensors place hostiles within TOLERANCE_M: the trigger may fire once enough
+            # strength is that near the area, and must once it is that far inside
+            near_g, deep_g = geom.buffer(TOLERANCE_M), geom.buffer(-TOLERANCE_M)
+            deep_g = geom if deep_g.is_empty else deep_g
+            need = tr.get("min_strength", 1)
+            t_near = t_in = None
             for k, t in enumerate(self.ticks):
+                if not self.valid[mid][0] <= t < self.valid[mid][1]:
+                    continue
                 if tr["kind"] == "hostile-in-area":
-                    s = sum(st for x, y, st in self.hostiles_at(t).values() if self.area[tr["area"]].contains(Point(x, y)))
-                    hit, slack = s >= tr.get("min_strength", 1), 15
+                    hs = [(Point(x, y), st) for x, y, st in self.hostiles_at(t).values()]
+                    if t_near is None and sum(st for p, st in hs if near_g.contains(p)) >= need:
+                        t_near = t
+                    if t_in is None and sum(st for p, st in hs if geom.contains(p)) >= need:
+                        t_in = t
+                    hit = sum(st for p, st in hs if deep_g.contains(p)) >= need
+                    t0, at = (t if t_near is None else t_near) - 15, t if t_in is None else t_in
                 else:
                     c = self.member_points(tr["unit"], k).mean(axis=0)
-                    hit, slack = self.area[tr["area"]].distance(Point(c)) <= tr.get("within_m", 0.0), self.slack
+                    hit, t0, at = geom.distance(Point(c)) <= tr.get("within_m", 0.0), t - self.slack, t
                 if hit:
-                    self.must(owner, "contingency", [], [m["unit"]], t - slack, t + 40, f"{mid} triggered", at=t)
+                    self.must(owner, "contingency", [], [m["unit"]], t0, t + 40, f"{mid} triggered", at=at)
                     self.triggered_areas[owner].add(tr["area"])
                     break
+            else:
+                if t_near is not None:   # it came near, never well inside: it may have fired
+                    self.may(owner, ["contingency"], [m["unit"]], t_near - 15, self.ticks[-1])
 
     def _ready_interval(self, mid: str) -> tuple[float, float]:
         m = self.missions[mid]
+        v0, v1 = self.valid[mid]
         ready = max([self.ended.get(a, math.inf) for a in m.get("after", [])], default=0.0)
-        return ready, self.ended.get(mid, math.inf)
+        return max(ready, v0), min(self.ended.get(mid, math.inf), v1)
 
     def areas(self) -> None:
         """monitored / ave-of-approach / hostile-expected from true hostile positions."""
@@ -391,27 +448,43 @@ class Truth:
                     if a and key in geo:
                         watch.append((a, "monitored", mid))
             for area, typ, mid in watch:
-                # An incident per hostile group that enters the area, unless it was in it
-                # less than EPISODE_S before (the user still knows of it).
-                inside_at: dict[float, list[str]] = {}
-                last_in: dict[str, float] = {}
-                entries: list[tuple[float, list[str]]] = []
-                first = True
+                # An incident per hostile group that enters the area, unless it was near it
+                # less than EPISODE_S before (the user still knows of it); sensors place a
+                # group within TOLERANCE_M, so one that comes that far inside must be told,
+                # from when it came that near; one that only grazes the edge may be.
+                geom, near_geom = self.area[area], self.area[area].buffer(TOLERANCE_M)
+                deep = geom.buffer(-TOLERANCE_M)
+                deep = geom if deep.is_empty else deep
+                near_at: dict[float, list[str]] = {}
+                last_near: dict[str, float] = {}
+                entered: dict[str, list] = {}   # group -> [came near, came inside]: not yet deep inside
+                entries: list[tuple[float, float, float, str]] = []
                 for t in self.ticks:
                     if mid is not None:
                         r0, r1 = self._ready_interval(mid)
                         if not (r0 <= t < r1 and self.missions[mid]["unit"] in self.subtree(o, t)):
                             continue
-                    inside = sorted(h for h, (x, y, s) in self.hostiles_at(t).items()
-                                    if self.area[area].contains(Point(x, y)))
-                    if not inside:
+                    hs = self.hostiles_at(t)
+                    near = sorted(h for h, (x, y, s) in hs.items() if near_geom.contains(Point(x, y)))
+                    if not near:
                         continue
-                    inside_at[t] = inside
-                    new = [h for h in inside if t - last_in.get(h, -math.inf) >= EPISODE_S]
-                    last_in.update((h, t) for h in inside)
-                    if new:
-                        entries.append((t, new))
-                for t, new in entries:
+                    near_at[t] = near
+                    before = [g for g in near if last_near.get(g, -math.inf) >= t - TICK]   # there already
+                    for h in near:
+                        if t - last_near.get(h, -math.inf) >= EPISODE_S and not any(
+                                math.hypot(hs[h][0] - hs[g][0], hs[h][1] - hs[g][1]) < RESOLVE_M for g in before):
+                            entered[h] = [t, None]   # a group next to one already there is no new group to any sensor
+                    for h in near:
+                        last_near[h] = t
+                    for h in [h for h in entered if h in near]:
+                        p = Point(hs[h][0], hs[h][1])
+                        if entered[h][1] is None and geom.contains(p):
+                            entered[h][1] = t
+                        if deep.contains(p):
+                            t_near, t_in = entered.pop(h)
+                            entries.append((t_near, t if t_in is None else t_in, t, h))
+                first = True
+                for t_near, t_in, t, h in sorted(entries, key=lambda e: e[1]):
                     # a triggered contingency tells the first activity in its trigger area
                     if first and mid is None and area in getattr(self, "triggered_areas", {}).get(o, ()):
                         first = False
@@ -419,17 +492,20 @@ class Truth:
                     first = False
                     # a group that only grazes the area, gone before the next track report,
                     # may be seen there or not
-                    if any(h in inside_at.get(t + TRACK_S, ()) for h in new):
-                        self.must(o, typ, [], new + [area], t - 15, t + 45, f"{new} enter {area}", at=t,
+                    later = self.hostiles_at(t + TRACK_S).get(h)
+                    if later is not None and geom.contains(Point(later[0], later[1])):
+                        self.must(o, typ, [], [h, area], t_near - 15, t + 45, f"{h} enters {area}", at=t_in,
                                   about=[area])
-                for a, b in _runs(sorted(inside_at)):
-                    who = sorted({h for t, hs in inside_at.items() if a <= t <= b for h in hs})
-                    self.may(o, [typ], who + [area], a - 15, b + 30)
+                for a, b in _runs(sorted(near_at)):
+                    who = sorted({h for t, hs_ in near_at.items() if a <= t <= b for h in hs_})
+                    self.may(o, [typ], who + [area], a - 15, b + 30, about=[area])
             for mid, m in self.missions.items():
                 by = m["params"].get("expect_hostile_by")
                 if by is None:
                     continue
-                r0, _ = self._ready_interval(mid)
+                r0, r1 = self._ready_interval(mid)
+                if not r0 <= by < r1:
+                    continue
                 seen = any(self.area[m["params"]["engagement_area"]].contains(Point(x, y))
                            for t in self.ticks if r0 <= t <= by for x, y, s in self.hostiles_at(t).values())
                 if not seen and m["unit"] in self.subtree(o, by):
@@ -440,48 +516,62 @@ class Truth:
         EPISODE_S with none near); within an episode, the nearest threat at 1/CLOSER of
         the distance of the last incident, or the threats near it STRONGER times as
         strong, is a new incident. An alert counts for it from when the change reached
-        the MATERIAL step (it is news by then), to a minute after."""
+        the MATERIAL step (it is news by then), to a minute after. Positions of hostiles
+        are known to sensors within TOLERANCE_M: a threat that only grazes the envelope's
+        edge may be told or not; one that comes TOLERANCE_M inside it must be, from when it
+        came within TOLERANCE_M of the edge."""
         radius = float(self.voi["threat_radius_m"])
+        outer, inner = radius + TOLERANCE_M, radius - TOLERANCE_M
         for o in self.owners:
             plts = sorted(u for u, d in self.units.items() if d["echelon"] == "platoon")
             for u in plts:
                 last_near, dist, dist_t0, strength, str_t0 = -1e9, math.inf, None, 0, None
-                present = []
+                present: list[float] = []
+                pending = None   # an episode whose contact is not yet certain: (began, first within radius)
+                told = {"distance": -math.inf, "strength": -math.inf}
                 for k, t in enumerate(self.ticks):
                     st = self.subtree(o, t)
                     if u not in st:
                         continue
                     c = self.member_points(u, k).mean(axis=0)
                     near = {h: (float(np.hypot(x - c[0], y - c[1])), s) for h, (x, y, s) in self.hostiles_at(t).items()}
-                    near = {h: v for h, v in near.items() if v[0] <= radius}
+                    near = {h: v for h, v in near.items() if v[0] <= outer}
                     if not near:
                         continue
                     present.append(t)
                     nearest = min(v[0] for v in near.values())
-                    total = sum(v[1] for v in near.values())
+                    total = sum(v[1] for v in near.values() if v[0] <= radius)
+                    total_out = sum(v[1] for v in near.values())   # as strong as sensors could make it
                     if t - last_near >= EPISODE_S:   # first contact, or back after a long quiet
-                        self.must(o, "contact", PROX, [u, *near], t - 15, t + 15 + self.slack, f"{sorted(near)} near {u}", at=t,
-                                  about=[u])
-                        dist, dist_t0, strength, str_t0 = nearest, None, total, None
-                        told = {"distance": t, "strength": t}
-                    else:
-                        if dist_t0 is None and nearest * MATERIAL <= dist:
-                            dist_t0 = t
-                        if nearest * CLOSER <= dist and t - told["distance"] >= NO_VALUE_S:
-                            self.must(o, "distance", PROX, [u], dist_t0 - 15, t + 60, f"threat closer to {u}", at=dist_t0,
-                                      about=[u])
-                            dist, dist_t0 = nearest, None
-                            told["distance"] = t
-                        if str_t0 is None and total >= MATERIAL * strength:
-                            str_t0 = t
-                        if total >= STRONGER * strength and t - told["strength"] >= NO_VALUE_S:
-                            self.must(o, "strength", PROX, [u], str_t0 - 15, t + 40, f"threat near {u} stronger", at=str_t0,
-                                      about=[u])
-                            strength, str_t0 = total, None
-                            told["strength"] = t
+                        pending = (t, None)
                     last_near = t
+                    if pending is not None:
+                        began, within = pending
+                        if within is None and nearest <= radius:
+                            pending = began, within = (began, t)
+                        if nearest <= inner:
+                            self.must(o, "contact", PROX, [u, *near], began - 15, t + 15 + self.slack,
+                                      f"{sorted(near)} near {u}", at=within, about=[u])
+                            dist, dist_t0, strength, str_t0 = nearest, None, total, None
+                            told = {"distance": t, "strength": t}
+                            pending = None
+                        continue
+                    if dist_t0 is None and max(nearest - TOLERANCE_M, 0.0) * MATERIAL <= dist:   # sensors err
+                        dist_t0 = t
+                    if nearest * CLOSER <= dist and t - told["distance"] >= NO_VALUE_S:
+                        self.must(o, "distance", PROX, [u], dist_t0 - 15, t + 60, f"threat closer to {u}", at=dist_t0,
+                                  about=[u])
+                        dist, dist_t0 = nearest, None
+                        told["distance"] = t
+                    if str_t0 is None and total_out >= MATERIAL * strength:
+                        str_t0 = t
+                    if total >= STRONGER * strength and t - told["strength"] >= NO_VALUE_S:
+                        self.must(o, "strength", PROX, [u], str_t0 - 15, t + 40, f"threat near {u} stronger", at=str_t0,
+                                  about=[u])
+                        strength, str_t0 = total, None
+                        told["strength"] = t
                 for a, b in _runs(present):
-                    self.may(o, PROX, [u], a - 15, b + 30)
+                    self.may(o, PROX, [u], a - 15, b + 30, about=[u])
 
     def calls_for_fire(self) -> None:
         for c in self.sim.cffs:

@@ -75,15 +75,25 @@ class Picture:
         dt = np.where(seen > moved + 0.5, 0.0, np.clip(now - moved, 0.0, horizon_s))
         return p0, p0 + self.vel[m] * dt[:, None]
 
-    def centroids(self) -> tuple[np.ndarray, np.ndarray]:
+    def reckoned(self, now: float, horizon_s: float) -> np.ndarray:
+        """Every entity's position dead-reckoned to `now` from its last report and velocity
+        (at most `horizon_s`; not at all once it reported standing still)."""
+        seen = np.asarray(self.seen)
+        with np.errstate(invalid="ignore"):
+            dt = np.where(seen > self.moved_t + 0.5, 0.0, np.clip(now - self.moved_t, 0.0, horizon_s))
+        return self.xy + self.vel * np.nan_to_num(dt)[:, None]
+
+    def centroids(self, xy: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Centroids of every leaf and every unit (NaN where no member position is known),
-        in one vectorised pass: bincount per leaf, then a membership matrix product."""
-        ok = ~np.isnan(self.xy[:, 0])
+        in one vectorised pass: bincount per leaf, then a membership matrix product; of
+        the last reports, or of other member positions `xy` (dead-reckoned)."""
+        xy = self.xy if xy is None else xy
+        ok = ~np.isnan(xy[:, 0])
         n = len(self.leaves)
         li = self.ent_leaf_i[ok]
         cnt = np.bincount(li, minlength=n).astype(float)
-        sx = np.bincount(li, weights=self.xy[ok, 0], minlength=n)
-        sy = np.bincount(li, weights=self.xy[ok, 1], minlength=n)
+        sx = np.bincount(li, weights=xy[ok, 0], minlength=n)
+        sy = np.bincount(li, weights=xy[ok, 1], minlength=n)
         with np.errstate(invalid="ignore", divide="ignore"):
             leaf = np.column_stack([sx / cnt, sy / cnt])
             ucnt = self.unit_leaf @ cnt

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .generator import DURATION, LANE_X, Hostile, Sim
+from .generator import DURATION, LANE_X, WITHDRAW_Y, Hostile, Sim
 
 
 def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
     """A battle of its own per seed: which platoons start or arrive late, attack early or
     finish late, which stray off their lane (how far, how long), which squads lose their
     radios, whether the link-up and the passage partners turn up, when R is
-    resubordinated, and the enemy: how many groups, down which avenue or across
+    resubordinated, whether the battalion orders the withdrawal plan (when, how fast each
+    platoon falls back), and the enemy: how many groups, down which avenue or across
     country, when, how fast, how strong, reinforced or not; calls for fire near friendly
     units or not, confirmed or not. Every draw is recorded in `sim.drawn`."""
     d = sim.drawn
@@ -43,6 +44,13 @@ def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
         t0 = u(300, 5000)
         sim.outages[str(leaf)] = (t0, t0 + u(60, 600))
         d.append({"kind": "radio-outage", "unit": str(leaf), "from": t0, "to": sim.outages[str(leaf)][1]})
+    if rng.random() < 0.5:   # the battalion orders the withdrawal plan (after the passage of lines)
+        t = u(4350, 4550)
+        sim.order = {"t": t, "plan": "withdrawal", "issuer": "BN"}
+        for p in LANE_X:
+            leave = t + u(20, 120)
+            sim.withdraw[p] = (leave, leave + round((11000.0 - WITHDRAW_Y) / float(rng.uniform(4.0, 6.0))))
+        d.append({"kind": "order", **sim.order, "withdraw": {p: list(w) for p, w in sim.withdraw.items()}})
     sim.reorg_t = u(300, 1500)
     d.append({"kind": "reorganization", "unit": "R", "new_parent": "BN", "t": sim.reorg_t})
     for k in range(int(rng.integers(4, 9))):

@@ -15,6 +15,9 @@ from .base import BASE, Changes, Detector
 from .geometry import AreaIndex
 
 ADVERSARIAL = "adversarial-activity"
+SAME_GROUP_M = 400.0   # a new track this near where a track in the area was last seen ...
+SAME_GROUP_S = 120.0   # ... this recently continues it
+BESIDE_M = 150.0       # a new track this near one already in the area reinforces it (its strength tells)
 
 
 class Areas(Detector):
@@ -29,6 +32,8 @@ class Areas(Detector):
         self._tids: list[str] = []
         self._members: dict[str, np.ndarray] = {}
         self.inside_t: dict[tuple[str, str], float] = {}   # (area, track) -> last time seen inside
+        self.last_xy: dict[tuple[str, str], tuple[float, float]] = {}   # ... and where
+        self.seen_in: dict[str, set[str]] = defaultdict(set)             # area -> tracks seen in it
         self._new: dict[str, list[str]] = {}               # area -> tracks new to it this epoch
         self._eligible: set[tuple[str, str]] = set()       # (area, mission) watched now
         self._stale = True
@@ -99,16 +104,32 @@ class Areas(Detector):
         self._tids, self._members = tids, members
         # A track that enters an area it was not seen in for the alert expiry is news
         # there (a new group at an NAI), whatever the area's alert history says.
+        # A new track id where a track seen in the area has just gone is that group under
+        # a new name (a fused track that broke), and one beside a track already there
+        # reinforces it: neither is a new group (a stronger one is told by its strength).
         forget = float(self.dom.ea.voa.expiry)
         self._new = {}
         for a, ids in self.tracks.items():
-            new = sorted(k for k in ids if t - self.inside_t.get((a, k), -math.inf) >= forget)
+            new = [k for k in sorted(ids) if t - self.inside_t.get((a, k), -math.inf) >= forget]
+            gone = [self.last_xy[(a, j)] for j in self.seen_in.get(a, ()) if j not in ids
+                    and t - self.inside_t[(a, j)] < SAME_GROUP_S]
+            new = [k for k in new if not any(math.hypot(pic.tracks[k].x - x, pic.tracks[k].y - y) <= SAME_GROUP_M
+                                             for x, y in gone)]
+            there = [(pic.tracks[j].x, pic.tracks[j].y) for j in ids if j not in new]
+            new = [k for k in new if not any(math.hypot(pic.tracks[k].x - x, pic.tracks[k].y - y) <= BESIDE_M
+                                             for x, y in there)]
             if new:
                 self._new[a] = new
             for k in ids:
                 self.inside_t[(a, k)] = t
+                self.last_xy[(a, k)] = (pic.tracks[k].x, pic.tracks[k].y)
+                self.seen_in[a].add(k)
         if len(self.inside_t) > 4 * max(1, len(tids)) * max(1, len(members)):   # bounded: drop the forgotten
             self.inside_t = {ak: s for ak, s in self.inside_t.items() if t - s < forget}
+            self.last_xy = {ak: xy for ak, xy in self.last_xy.items() if ak in self.inside_t}
+            self.seen_in = defaultdict(set)
+            for a, k in self.inside_t:
+                self.seen_in[a].add(k)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom

@@ -45,10 +45,13 @@ class ThreatEnvelopes(Detector):
         units = [u for u in dom.env_units if dom.unit_pos.get(u)]
         if not units:
             return
-        upos = np.array([dom.unit_pos[u] for u in units])
         if tids:
+            # a threat is in a unit's envelope when it is within reach of where the unit was
+            # last reported and of where it is dead-reckoned to be now: a report a minute old
+            # misplaces a moving unit, and reckoning overshoots one that has just stopped
             tpos = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids])
-            dist = distances(upos, tpos)
+            dist = np.maximum(distances(np.array([dom.unit_pos[u] for u in units]), tpos),
+                              distances(np.array([dom.unit_now.get(u) or dom.unit_pos[u] for u in units]), tpos))
         close = (dist <= radius) if tids else np.zeros((len(units), 0), dtype=bool)
         moved = np.array([k in ch.tracks for k in tids], dtype=bool)
         for ui, u in enumerate(units):
