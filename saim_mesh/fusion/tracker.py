@@ -64,7 +64,8 @@ class KalmanTracker:
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
-                 dr_m: float | None = 50.0, dr_k: float = 2.0, heartbeat_s: float = 30.0):
+                 dr_m: float | None = 50.0, dr_k: float = 4.0, heartbeat_s: float = 60.0,
+                 dr_lag_s: float = 2.0):
         if not (math.isfinite(q) and q > 0 and math.isfinite(q_fast) and q_fast > 0):
             raise ValueError(f"process noise must be finite and > 0 (q={q!r}, q_fast={q_fast!r})")
         if not 1 <= m <= n:
@@ -74,7 +75,7 @@ class KalmanTracker:
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
-        self.dr_m, self.dr_k, self.heartbeat_s = dr_m, dr_k, heartbeat_s
+        self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -242,7 +243,8 @@ class KalmanTracker:
             return True
         dt = r.t - last.t
         own = self.dr_k * math.sqrt(max(float(tr.P[0, 0]), float(tr.P[1, 1])))   # its own noise is no news
-        return math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > max(self.dr_m, own)
+        lag = self.dr_lag_s * math.hypot(r.vx, r.vy)   # nor an error of where it is a moment later
+        return math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > max(self.dr_m, own, lag)
 
     def domain(self, tr: Track) -> str:
         """Air when it flies (height above `air_agl_m`) or moves faster than any ground
@@ -252,6 +254,9 @@ class KalmanTracker:
 
     def _report(self, tr: Track, strength: int | None = None) -> Report:
         x = tr.x_upd
-        return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), float(x[2]), float(x[3]),
+        vx, vy = float(x[2]), float(x[3])
+        if math.hypot(vx, vy) < 2.0 * math.sqrt(max(float(tr.P[2, 2]), float(tr.P[3, 3]))):
+            vx = vy = 0.0   # a velocity within its own noise: receivers must not drift a halted group
+        return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), vx, vy,
                       max(tr.counts) if strength is None else strength,
                       None if tr.alt is None else round(tr.alt, 1), self.domain(tr))

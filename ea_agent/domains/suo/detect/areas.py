@@ -17,6 +17,8 @@ from .geometry import AreaIndex
 ADVERSARIAL = "adversarial-activity"
 SAME_GROUP_M = 400.0   # a new track this near where a track in the area was last seen ...
 SAME_GROUP_S = 120.0   # ... this recently continues it
+LINGER_M = 200.0       # a track that was in an area is still there while this near it (a halted
+                       # group at the edge flickers in and out with its reports' noise)
 BESIDE_M = 150.0       # a new track this near one already in the area reinforces it (its strength tells)
 
 
@@ -46,6 +48,7 @@ class Areas(Detector):
         """The watched areas changed: rebuild the spatial index over all of them."""
         ids = set(self.global_areas) | set(self.red_monitors) | self.dom.contingency.trigger_areas()
         self.index = AreaIndex({a: self.dom.overlay[a].area for a in sorted(ids)})
+        self.near_index = AreaIndex({a: self.dom.overlay[a].area.buffer(LINGER_M) for a in sorted(ids)})
         self._stale = True   # tracks already in a newly watched area are found at the next epoch
 
     def post_plan_monitors(self) -> None:
@@ -121,9 +124,12 @@ class Areas(Detector):
             if new:
                 self._new[a] = new
             for k in ids:
-                self.inside_t[(a, k)] = t
                 self.last_xy[(a, k)] = (pic.tracks[k].x, pic.tracks[k].y)
                 self.seen_in[a].add(k)
+        for a, idx in self.near_index.members(xy).items():   # still there, or at its edge
+            for i in idx:
+                if (a, tids[i]) in self.inside_t or tids[i] in self.tracks.get(a, ()):
+                    self.inside_t[(a, tids[i])] = t
         if len(self.inside_t) > 4 * max(1, len(tids)) * max(1, len(members)):   # bounded: drop the forgotten
             self.inside_t = {ak: s for ak, s in self.inside_t.items() if t - s < forget}
             self.last_xy = {ak: xy for ak, xy in self.last_xy.items() if ak in self.inside_t}
