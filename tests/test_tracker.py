@@ -171,14 +171,15 @@ def test_an_aircraft_is_an_air_track_and_no_ground_threat():
 
 
 def test_dead_reckoning_sends_few_reports_and_keeps_the_receivers_close():
-    """A vehicle at 10 m/s that turns once: with dead reckoning the receivers get a report
-    only when their extrapolation of the last one errs by more than 50 m and twice the
-    track's own position sigma (or every 30 s), yet at every scan their extrapolation
-    stays within that of the estimate."""
+    """A vehicle at 10 m/s that turns once: with dead reckoning (here at 50 m, twice the
+    track's own position sigma, no motion allowance, a 30 s heartbeat) the receivers get a
+    report only when their extrapolation of the last one errs by more than that, yet at
+    every scan their extrapolation stays within 50 m of the estimate."""
     def truth(t):
         return (10.0 * t, 0.0) if t < 150 else (1500.0, 10.0 * (t - 150))
+    strict = {"dr_k": 2.0, "dr_lag_s": 0.0, "heartbeat_s": 30.0}
     every = [r for r in run([truth], duration=300.0, dr_m=None)[1] if r.strength > 0]
-    few = [r for r in run([truth], duration=300.0)[1] if r.strength > 0]
+    few = [r for r in run([truth], duration=300.0, **strict)[1] if r.strength > 0]
     assert len(few) * 3 <= len(every) and len({r.track for r in few}) == 1
     assert any(abs(r.t - 150) <= 20 for r in few)               # the turn is told at once
     assert max(b.t - a.t for a, b in zip(few, few[1:])) <= 30.0  # heartbeat
@@ -186,3 +187,35 @@ def test_dead_reckoning_sends_few_reports_and_keeps_the_receivers_close():
         last = max((x for x in few if x.t <= r.t), key=lambda x: x.t)
         dx, dy = last.x + last.vx * (r.t - last.t) - r.x, last.y + last.vy * (r.t - last.t) - r.y
         assert math.hypot(dx, dy) <= 50.0 + 1e-6, (r.t, last.t)
+
+
+def test_default_dead_reckoning_waits_for_the_heartbeat_the_receivers_can_bridge():
+    """Defaults: a straight 10 m/s vehicle is reported at least every 60 s (the EAs
+    extrapolate for up to 60 s) and less often than with a 30 s heartbeat."""
+    def truth(t):
+        return (10.0 * t, 0.0)
+    dflt = [r for r in run([truth], duration=600.0)[1] if r.strength > 0]
+    short = [r for r in run([truth], duration=600.0, heartbeat_s=30.0)[1] if r.strength > 0]
+    assert max(b.t - a.t for a, b in zip(dflt, dflt[1:])) <= 60.0
+    assert len(dflt) < len(short)
+
+
+def test_a_halted_vehicle_is_reported_without_velocity():
+    """A velocity within the track's own noise is sent as zero, so receivers do not drift
+    a halted vehicle; a moving one is sent with its velocity."""
+    _, still = run([lambda t: (500.0, 500.0)], duration=300.0, dr_m=None)
+    _, moving = run([lambda t: (10.0 * t, 0.0)], duration=300.0, dr_m=None)
+    still = [r for r in still if r.strength > 0]
+    moving = [r for r in moving if r.strength > 0 and r.t > 60]
+    assert still and all(r.vx == 0.0 and r.vy == 0.0 for r in still[3:])
+    assert moving and all(abs(math.hypot(r.vx, r.vy) - 10.0) < 3.0 for r in moving)
+
+
+def test_an_error_of_two_seconds_of_flight_is_no_news():
+    """A 250 m/s aircraft flying straight: its reports' small velocity errors grow past
+    50 m within a scan or two; allowing 2 s of its motion cuts the reports it needs."""
+    def truth(t):
+        return (250.0 * t, 0.0)
+    lag = [r for r in run([truth], sigma=60.0, duration=300.0)[1] if r.strength > 0]
+    none = [r for r in run([truth], sigma=60.0, duration=300.0, dr_lag_s=0.0)[1] if r.strength > 0]
+    assert len({r.track for r in lag}) == 1 and len(lag) < len(none)

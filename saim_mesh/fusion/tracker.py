@@ -43,6 +43,7 @@ class Track:
     confirmed: bool = False
     alt: float | None = None         # metres above ground (mean of its hits' altitudes), if measured
     told: "Report | None" = None     # the last report of it (what receivers extrapolate from)
+    trail: deque = field(default_factory=lambda: deque(maxlen=32))   # (t, x, y) after each update
 
 
 @dataclass
@@ -65,7 +66,7 @@ class KalmanTracker:
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
                  dr_m: float | None = 50.0, dr_k: float = 4.0, heartbeat_s: float = 60.0,
-                 dr_lag_s: float = 2.0):
+                 dr_lag_s: float = 2.0, still_m: float = 50.0, still_s: float = 30.0):
         if not (math.isfinite(q) and q > 0 and math.isfinite(q_fast) and q_fast > 0):
             raise ValueError(f"process noise must be finite and > 0 (q={q!r}, q_fast={q_fast!r})")
         if not 1 <= m <= n:
@@ -76,6 +77,7 @@ class KalmanTracker:
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
         self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
+        self.still_m, self.still_s = still_m, still_s
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -173,6 +175,7 @@ class KalmanTracker:
         tr.t = tr.t_upd = t
         tr.x_upd = tr.x.copy()
         tr.counts.append(n)
+        tr.trail.append((t, float(tr.x[0]), float(tr.x[1])))
         tr.hit_window = True
 
     def _birth(self, z: np.ndarray, alt: np.ndarray | None, r2: float, t: float) -> None:
@@ -252,11 +255,21 @@ class KalmanTracker:
         fast = math.hypot(tr.x_upd[2], tr.x_upd[3]) > self.air_mps
         return "air" if fast or (tr.alt is not None and tr.alt > self.air_agl_m) else "ground"
 
+    def _halted(self, tr: Track) -> bool:
+        """Whether the track stands still: it moved less than `still_m` over the last
+        `still_s` (a net displacement, which the velocity's scan-to-scan noise does not
+        fake); a track younger than that: its velocity within twice its own sigma."""
+        old = [(t, x, y) for t, x, y in tr.trail if tr.t_upd - t >= self.still_s]
+        if old:
+            _, x0, y0 = old[-1]
+            return math.hypot(tr.x_upd[0] - x0, tr.x_upd[1] - y0) < self.still_m
+        return math.hypot(tr.x_upd[2], tr.x_upd[3]) < 2.0 * math.sqrt(max(float(tr.P[2, 2]), float(tr.P[3, 3])))
+
     def _report(self, tr: Track, strength: int | None = None) -> Report:
         x = tr.x_upd
         vx, vy = float(x[2]), float(x[3])
-        if math.hypot(vx, vy) < 2.0 * math.sqrt(max(float(tr.P[2, 2]), float(tr.P[3, 3]))):
-            vx = vy = 0.0   # a velocity within its own noise: receivers must not drift a halted group
+        if self._halted(tr):
+            vx = vy = 0.0   # receivers must not drift a halted group by its velocity noise
         return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), vx, vy,
                       max(tr.counts) if strength is None else strength,
                       None if tr.alt is None else round(tr.alt, 1), self.domain(tr))

@@ -37,6 +37,7 @@ class Areas(Detector):
         self.last_xy: dict[tuple[str, str], tuple[float, float]] = {}   # ... and where
         self.seen_in: dict[str, set[str]] = defaultdict(set)             # area -> tracks seen in it
         self._new: dict[str, list[str]] = {}               # area -> tracks new to it this epoch
+        self._present: set[tuple[str, str]] = set()        # (area, track) in or at the edge at the last look
         self._eligible: set[tuple[str, str]] = set()       # (area, mission) watched now
         self._stale = True
 
@@ -113,7 +114,8 @@ class Areas(Detector):
         forget = float(self.dom.ea.voa.expiry)
         self._new = {}
         for a, ids in self.tracks.items():
-            new = [k for k in sorted(ids) if t - self.inside_t.get((a, k), -math.inf) >= forget]
+            new = [k for k in sorted(ids) if (a, k) not in self._present   # there since the last look
+                   and t - self.inside_t.get((a, k), -math.inf) >= forget]
             gone = [self.last_xy[(a, j)] for j in self.seen_in.get(a, ()) if j not in ids
                     and t - self.inside_t[(a, j)] < SAME_GROUP_S]
             new = [k for k in new if not any(math.hypot(pic.tracks[k].x - x, pic.tracks[k].y - y) <= SAME_GROUP_M
@@ -126,10 +128,13 @@ class Areas(Detector):
             for k in ids:
                 self.last_xy[(a, k)] = (pic.tracks[k].x, pic.tracks[k].y)
                 self.seen_in[a].add(k)
+        present = set()
         for a, idx in self.near_index.members(xy).items():   # still there, or at its edge
             for i in idx:
                 if (a, tids[i]) in self.inside_t or tids[i] in self.tracks.get(a, ()):
                     self.inside_t[(a, tids[i])] = t
+                    present.add((a, tids[i]))
+        self._present = present
         if len(self.inside_t) > 4 * max(1, len(tids)) * max(1, len(members)):   # bounded: drop the forgotten
             self.inside_t = {ak: s for ak, s in self.inside_t.items() if t - s < forget}
             self.last_xy = {ak: xy for ak, xy in self.last_xy.items() if ak in self.inside_t}
@@ -144,6 +149,15 @@ class Areas(Detector):
         eligible = {(area, m.id) for area, mons in self.red_monitors.items() for m, _ in mons
                     if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m)}
         begun, self._eligible = eligible - self._eligible, eligible
+        # a group still in an area (or lingering at its edge) keeps what was told of it
+        # alive, changed or not: it is no news when it next moves
+        voa = dom.ea.voa
+        for area in {a for a, _ in self._present}:
+            kind = self.global_areas.get(area)
+            if kind:
+                voa.touch((kind, area, None), t)
+            for m, _ in self.red_monitors.get(area, ()):
+                voa.touch(("monitored", area, m.id), t)
         if not ch.tracks and not begun:
             return
         fired = dom.contingency.fired   # a triggered contingency says it already

@@ -1,0 +1,57 @@
+"""Watched areas tell a new hostile group once: a halted group whose reports flicker at the
+area's edge is not a new group each time it comes back inside, and a track that appears
+beside one already there reinforces it (ea_agent/domains/suo/detect/areas.py)."""
+from __future__ import annotations
+
+from ea_agent.domains.suo.generator import ORIGIN_LONLAT
+from ea_agent.domains.suo.messages import SensorTrack
+from saim_mesh import scenario as S
+from saim_mesh.runner import config_for, make_ea
+
+from .conftest import SMALL
+
+EDGE_X = 4000.0   # NAI-SCREEN (watched by the recon platoon's screen) spans x 0..4000, y 15500..19000
+
+
+def _alerts(reports, until):
+    """BN's alerts about NAI-SCREEN from the track reports [(t, id, x, y, strength)], local metres."""
+    sc = S.load(SMALL, events=False)
+    ox, oy = sc.projection.to_xy(*ORIGIN_LONLAT)
+    ea = make_ea(sc, "BN", config_for(sc, "BN"))
+    ea.start(0.0)
+    for t, k, x, y, s in sorted(reports):
+        lon, lat = sc.projection.to_lonlat(ox + x, oy + y)
+        ea.submit(SensorTrack(t, k, float(lon), float(lat), s, at=t))
+    ea.finish(until)
+    return [a for a in ea.alerts if "NAI-SCREEN" in a.details.get("places", ())]
+
+
+def test_a_halted_group_flickering_at_the_edge_is_told_once():
+    """Inside, then reported 40 m outside for 15 min (longer than the alert expiry), then
+    inside again: the same group that never left, told once."""
+    reps = [(t, "N-1", EDGE_X - 30, 17000.0, 4) for t in range(100, 200, 10)]
+    reps += [(t, "N-1", EDGE_X + 40, 17000.0, 4) for t in range(200, 1100, 10)]
+    reps += [(t, "N-1", EDGE_X - 30, 17000.0, 4) for t in range(1100, 1300, 10)]
+    got = _alerts(reps, 1300.0)
+    assert len(got) == 1 and got[0].t < 200
+
+
+def test_a_group_that_went_away_and_came_back_is_news():
+    """The same track 1 km away for 15 min, then back inside: a new arrival, told again
+    (the edge rule above does not hide real comings and goings)."""
+    reps = [(t, "N-1", EDGE_X - 30, 17000.0, 4) for t in range(100, 200, 10)]
+    reps += [(t, "N-1", EDGE_X + 1000, 17000.0, 4) for t in range(200, 1100, 10)]
+    reps += [(t, "N-1", EDGE_X - 30, 17000.0, 4) for t in range(1100, 1300, 10)]
+    got = _alerts(reps, 1300.0)
+    assert len(got) == 2 and got[1].t >= 1100
+
+
+def test_a_track_beside_one_already_there_is_no_new_group():
+    """A second track 80 m from a group already in the area is that group reinforced: not
+    news as a new group; a track 2 km away is."""
+    reps = [(t, "N-1", 2000.0, 17000.0, 4) for t in range(100, 600, 10)]
+    reps += [(t, "N-2", 2080.0, 17000.0, 4) for t in range(300, 600, 10)]
+    reps += [(t, "N-3", 2000.0, 15800.0, 4) for t in range(450, 600, 10)]
+    got = _alerts(reps, 600.0)
+    news = [k for a in got for k in a.details.get("new_tracks", ())]
+    assert "N-1" in news and "N-3" in news and "N-2" not in news
