@@ -243,6 +243,27 @@ def test_an_ordered_battle_switches_plans_in_its_events(battles):
         assert ends == ([arrive] if arrive < G.DURATION else [])
 
 
+def test_an_early_order_drops_the_main_plans_later_confirmations(monkeypatch):
+    """An order at 3000 s (mid-attack): main-plan confirmations after it never come, earlier ones do."""
+    from ea_agent.domains.suo import random_battle
+
+    def draw(sim, rng):
+        draw_battle(sim, rng)
+        sim.order = {"t": 3000.0, "plan": "withdrawal", "issuer": "BN"}
+        sim.withdraw = {p: (3050.0, 3850.0) for p in G.LANE_X}
+    draw_battle = random_battle.draw_battle
+    monkeypatch.setattr(random_battle, "draw_battle", draw)
+    ordered = G.build_sim(small=True, seed=3, incidents="random")
+    monkeypatch.undo()
+    plain = G.build_sim(small=True, seed=3, incidents="random")
+    assert plain.order is None and any(t > 3000.0 for t, *_ in plain.confirmations)   # seed 3 has no order
+    main = {m["id"] for m in G.plan_doc(ordered)["plans"]["main"]}
+    before = [c for c in plain.confirmations if c[0] <= 3000.0]
+    assert [c for c in ordered.confirmations if c[1] in main] == before
+    withdraw = [(t, f"{p}-withdraw", p, ph) for p in G.LANE_X for t, ph in ((3050.0, "start"), (3850.0, "end"))]
+    assert [c for c in ordered.confirmations if c[1] not in main] == sorted(withdraw)
+
+
 def test_a_battle_without_an_order_has_no_order_nor_withdrawal(battles):
     """No order: no order event, no withdraw confirmation, main plan valid throughout."""
     sim, ev = battles[False]
