@@ -74,6 +74,13 @@ TRACK_S = 10.0      # and one hostile track period: the slack of friendly-positi
 PROX = ["contact", "distance", "strength", "proximity"]
 
 
+def _bands(geom):
+    """An area grown and shrunk by TOLERANCE_M: where a group may be told to be in it, and
+    where it must be (the area itself when it is too small to shrink)."""
+    deep = geom.buffer(-TOLERANCE_M)
+    return geom.buffer(TOLERANCE_M), (geom if deep.is_empty else deep)
+
+
 def _runs(ts: list[float]) -> list[tuple[float, float]]:
     """Consecutive tick times -> [(first, last)] intervals."""
     out: list[list[float]] = []
@@ -400,8 +407,7 @@ class Truth:
             geom = self.area[tr["area"]]
             # sensors place hostiles within TOLERANCE_M: the trigger may fire once enough
             # strength is that near the area, and must once it is that far inside
-            near_g, deep_g = geom.buffer(TOLERANCE_M), geom.buffer(-TOLERANCE_M)
-            deep_g = geom if deep_g.is_empty else deep_g
+            near_g, deep_g = _bands(geom)
             need = tr.get("min_strength", 1)
             t_near = t_in = None
             for k, t in enumerate(self.ticks):
@@ -452,9 +458,8 @@ class Truth:
                 # less than EPISODE_S before (the user still knows of it); sensors place a
                 # group within TOLERANCE_M, so one that comes that far inside must be told,
                 # from when it came that near; one that only grazes the edge may be.
-                geom, near_geom = self.area[area], self.area[area].buffer(TOLERANCE_M)
-                deep = geom.buffer(-TOLERANCE_M)
-                deep = geom if deep.is_empty else deep
+                geom = self.area[area]
+                near_geom, deep = _bands(geom)
                 near_at: dict[float, list[str]] = {}
                 last_near: dict[str, float] = {}
                 entered: dict[str, list] = {}   # group -> [came near, came inside]: not yet deep inside
