@@ -141,6 +141,8 @@ def cmd_missions(a) -> int:
         params = ", ".join(f"{p}{'' if p in req else '?'}" for p in cls.all_params())
         rule = getattr(cls, "LOCATION_RULE", None)
         print(f"{name:22} [{parents}]{f' location={rule}' if rule else ''}\n{'':22} params: {params}")
+        for c in getattr(cls, "CHECKS", ()):
+            print(f"{'':22} checks: {c}")
     return 0
 
 

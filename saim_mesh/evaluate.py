@@ -16,10 +16,11 @@ def _matches(a: Alert, item: dict) -> bool:
     a true hostile, or the named place (fused tracks have names of their own); where
     the incident says what an alert must be `about` (a threatened unit), about that. A
     projection (`details.projects`: the type of the violation it foretells) matches what
-    that type would, from PROJECTION_WINDOW_S before the window."""
+    that type would, from PROJECTION_WINDOW_S before the window (and, where the truth
+    accepts the projection's own type, in that item's window)."""
     about = set(a.subjects) | set(a.details.get("places", ()))
     projects = a.details.get("projects")
-    if projects is not None:
+    if projects is not None and a.type not in item["accept"]:
         ok = projects in item["accept"] and item["t0"] - PROJECTION_WINDOW_S <= a.t <= item["t1"]
     else:
         ok = a.type in item["accept"] and item["t0"] <= a.t <= item["t1"]
@@ -51,6 +52,7 @@ SEVERITY = {  # SUO
             "out-of-position": ("distance_m", +1), "schedule": ("off_s", +1), "unknown-position": ("silent_s", +1),
             "fratricide": ("min_distance_m", -1), "distance": ("distance_m", -1), "strength": ("strength", +1),
             "monitored": ("strength", +1), "ave-of-approach": ("strength", +1), "projected-late": ("late_s", +1),
+            "penetration": ("strength", +1), "escape": ("strength", 0), "band": ("off_m", +1),
             # robot teams
             "stuck": ("still_s", +1), "divergent": ("distance_m", +1), "no-status": ("silent_s", +1),
             "lost-target": ("unseen_s", +1), "collision": ("clearance_m", -1), "target-visible": ("acquisition", 0)}

@@ -31,7 +31,7 @@ TC = TimeConstraint
 
 @pytest.mark.parametrize("start, end, confirms, expect", [
     (TC("ASAP"), TC("ASAP"), [(1500, "start"), (1900, "end")], []),
-    (TC("ON-ORDER"), TC("ON-ORDER"), [(700, "start")], []),
+    (TC("ON-ORDER"), TC("ON-ORDER"), [(700, "start")], [(700, "start", "unordered")]),   # no order came
     (TC("START-AT", 100), TC(), [(100, "start")], []),
     (TC("START-AT", 100), TC(), [(200, "start")], [(130, "start", "late")]),
     (TC("START-AT", 100), TC(), [(50, "start")], [(50, "start", "early")]),

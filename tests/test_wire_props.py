@@ -97,8 +97,10 @@ def check_data(m, t_max: float = math.inf) -> None:
         assert _nonempty_str(m.mission) and _nonempty_str(m.unit)
         assert m.phase in ("start", "end") and m.source in ("message", "local")
     elif isinstance(m, M.Order):
-        assert m.action in ("execute-plan", "abort-plan")
+        assert m.action in M.Order.ACTIONS
         assert _nonempty_str(m.plan) and _nonempty_str(m.issuer)
+        assert m.mission is None or _nonempty_str(m.mission)
+        assert m.mission is not None or not m.action.endswith("-mission")
     elif isinstance(m, M.CallForFire):   # and CallForFireConfirm
         assert _nonempty_str(m.cff) and _nonempty_str(m.requester)
         assert _finite_in(m.radius_m, 1.0, 100_000.0)
@@ -193,6 +195,7 @@ data_messages = st.one_of(
     st.builds(M.MissionConfirm, t_data, name, name, st.sampled_from(["start", "end"]),
               st.sampled_from(["message", "local"])),
     st.builds(M.Order, t_data, st.sampled_from(["execute-plan", "abort-plan"]), name, name),
+    st.builds(M.Order, t_data, st.sampled_from(["start-mission", "end-mission"]), name, name, name),
     st.builds(M.CallForFire, t_data, name, name, lon, lat, fl(1.0, 100_000.0)),
     st.builds(M.CallForFireConfirm, t_data, name, name, lon, lat, fl(1.0, 100_000.0)),
     st.builds(M.Reorganization, t_data, name, name),

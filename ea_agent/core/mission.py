@@ -21,6 +21,13 @@ class Mission:
     DEFAULT_PRIORITY: ClassVar[dict[str, str]] = {}   # the domain's alert type -> priority
     PRIORITY: ClassVar[dict[str, str]] = {}           # per-mission overrides
     AUTO_START: ClassVar[bool] = False                # executed by the EA itself (no confirmation)
+    LINE_PARAMS: ClassVar[tuple[str, ...]] = ()       # geometry params that must be lines
+    CHECKS: ClassVar[tuple[str, ...]] = ("start and end time constraints (Fig. 6)",)   # what it monitors
+
+    @classmethod
+    def check_params(cls, params: dict) -> tuple[str, str] | None:
+        """A class-specific problem with `params` as (field, why), or None; `validate` reports it."""
+        return None
 
     def __init__(self, spec: MissionSpec):
         self.spec = spec

@@ -19,8 +19,8 @@ from ea_agent.core.geo import Projection
 from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
-from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Changes, Contingencies, Coordination,
-                     Detector, LocationMonitors, ScheduleMonitors)
+from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Contingencies, Coordination,
+                     Coverage, Detector, EndStates, Escapes, LocationMonitors, ScheduleMonitors)
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import ContingentMission, Mission, make
 from .picture import Picture, Watchman
@@ -61,6 +61,10 @@ class SuoDomain:
         self.schedule = self._part(ScheduleMonitors)
         self.areas = self._part(Areas)
         self.contingency = self._part(Contingencies)
+        self.escape = self._part(Escapes)
+        self.end_state = self._part(EndStates)
+        self.coverage = self._part(Coverage)
+        self.bands = self._part(Bands)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -189,17 +193,48 @@ class SuoDomain:
                     m.post_execution_constraints(self)
             self.plan.start(m.id, c.t)
             self.timers.occurred(("start", m.id), c.t)
+            self.schedule.confirmed(m, "start", c.t)
             if self.in_plan(m):
                 m.check_initial_location(self, c.t)
+                self._end_by_time(m)
         else:
-            self.plan.end(m.id, c.t)
-            self.timers.occurred(("end", m.id), c.t)
-            if self.in_plan(m):
-                self.unit_pos[m.unit] = self.pic.centroid(m.unit)
-                m.check_final_location(self, c.t)
-            for d in self.detectors:
-                d.end_mission(m.id)
-            self._advance_plan(c.t)
+            self.schedule.confirmed(m, "end", c.t)
+            self._end(m, c.t)
+
+    def _end(self, m: Mission, t: float) -> None:
+        """Mission `m` ended (confirmed, or by its END-AT time): Check-Final-Location, then its monitors go."""
+        self.plan.end(m.id, t)
+        self.timers.occurred(("end", m.id), t)
+        if self.in_plan(m):
+            self.unit_pos[m.unit] = self.pic.centroid(m.unit)
+            m.check_final_location(self, t)
+        for d in self.detectors:
+            d.end_mission(m.id)
+        self._advance_plan(t)
+
+    def _end_by_time(self, m: Mission) -> None:
+        """A mission planned to end AT a time ends then even with no confirmation (once the
+        schedule threshold has passed): it is judged where it stands."""
+        end = m.spec.end
+        if end.type != "END-AT" or end.t is None:
+            return
+
+        def ended(tf, mon, how):
+            if self.plan is not None and self.plan.state.get(m.id) == "active" and self.missions.get(m.id) is m:
+                self._end(m, tf)
+            return None
+        self.timers.not_later_than(("end", m.id), end.t + self.voi(m, "schedule_s"), ended, tag=m.id)
+
+    def on_mission_order(self, o: Order) -> None:
+        """A superior orders an ON-ORDER mission to start or end (only a superior may)."""
+        if self.plan is None:
+            return
+        m = self.missions.get(o.mission)
+        if m is None:
+            raise KeyError(f"order for unknown mission {o.mission!r}")
+        if o.issuer not in self.taskorg.ancestors(m.unit):
+            raise ValueError(f"{o.issuer!r} is not a superior of {m.unit!r}: it cannot order {m.id!r}")
+        self.schedule.order(m, "start" if o.action == "start-mission" else "end", o.t, o.issuer)
 
     def resubordinate(self, unit: str, new_parent: str, t: float) -> None:
         before = set(self.own_units)
@@ -215,6 +250,7 @@ class SuoDomain:
                 self.plan.start(mid, t)
                 self.timers.occurred(("start", mid), t)
                 self.missions[mid].execute_mission(self, t)
+                self.missions[mid].check_initial_location(self, t)
                 self.plan.end(mid, t)
                 self.timers.occurred(("end", mid), t)
                 self._advance_plan(t)
@@ -228,6 +264,27 @@ class SuoDomain:
 
     def check_location(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:
         self.location.check(m, geom_id, rule, t, what)
+
+    def post_corridor(self, m: Mission, target: str) -> None:
+        self.location.post_corridor(m, target)
+
+    def start_location_constraints(self, m: Mission, t: float) -> None:
+        self.location.start(m, t)
+
+    def post_penetration(self, m: Mission, area: str) -> None:
+        self.areas.post_red_monitor(m, area, expected=False, kind="penetration")
+
+    def post_escape(self, m: Mission, area: str) -> None:
+        self.escape.post(m, area)
+
+    def check_end_state(self, m: Mission, area: str, t: float) -> None:
+        self.end_state.check(m, area, t)
+
+    def check_coverage(self, m: Mission, position: str, engagement_area: str, t: float) -> None:
+        self.coverage.check(m, position, engagement_area, t)
+
+    def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
+        self.bands.post(m, other, lo, hi)
 
     def post_red_monitor(self, m: Mission, area: str, expected: bool, expect_by: float | None = None) -> None:
         self.areas.post_red_monitor(m, area, expected, expect_by)
@@ -274,8 +331,10 @@ class SuoDomain:
         elif k is Order:
             if f.action == "execute-plan":
                 self.execute_plan(f.plan, f.t)
-            else:
+            elif f.action == "abort-plan":
                 self.abort_plan(f.t)
+            else:
+                self.on_mission_order(f)
         elif k is Reorganization:
             self.resubordinate(f.unit, f.new_parent, f.t)
         elif (handle := self._fact_handlers.get(k)) is not None:

@@ -51,6 +51,13 @@ INCIDENTS = [
     {"label": "H5 comes within range of C2 and C3; H5B reinforces it in front of both", "t": 4481,
      "types": ["contact", "proximity", "ave-of-approach"]},
     {"label": "A2 calls for fire near A3", "t": 3900, "types": ["call-for-fire"]},
+    {"label": "C3 strays 2 km east, out of its band behind C2", "t": 900, "types": ["out-of-position", "band"]},
+    {"label": "BN orders M's march (ON-ORDER) at 2150; M starts 50 s later", "t": 2180, "types": ["schedule"]},
+    {"label": "H6 breaks out of OBJ-C while C3 isolates it", "t": 3100, "types": ["escape"]},
+    {"label": "B2 ends its clear with H7 still on OBJ-B", "t": 3600, "types": ["end-state"]},
+    {"label": "H7 enters B1's blocking position", "t": 4100, "types": ["projected-penetration", "penetration"]},
+    {"label": "A2's engagement area EA-A is beyond its weapons range from BP-A2", "t": 3760,
+     "types": ["friendly-expected"]},
 ]
 
 
@@ -96,6 +103,8 @@ class Sim:
     reorg_t: float = 600
     drawn: list[dict] = field(default_factory=list)                      # what was drawn, for truth.json
     order: dict | None = None          # the battalion switches plans: {"t", "plan", "issuer"}
+    # ON-ORDER missions ordered to start or end: [{"t", "mission", "phase", "issuer"}]
+    mission_orders: list = field(default_factory=list)
     withdraw: dict[str, tuple[float, float]] = field(default_factory=dict)  # platoon -> (leaves, arrives)
     sensors: list[tuple[str, float]] = field(default_factory=list)      # (id, range m) when hostiles are sensed
 
@@ -209,6 +218,14 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -
             "H5B": H("H5B", [3000, 4563], [10700, 10700], [20050, 12550], 7, 4700),
         }
         sim.outages = {"A1S3": (1500.0, 1800.0)}
+        sim.strays["C3"] = ([600, 900, 1100, 1400], [0, 2000, 2000, 0])   # out of C2's band too
+        sim.hostiles.update({
+            # holds OBJ-C, then breaks out north while C3 isolates it
+            "H6": H("H6", [1800, 2900, 3300], [9500, 9500, 9500], [11000, 11000, 13500], 3, 1800, 3500),
+            # still on OBJ-B when B2 ends its clear, then into B1's blocking position
+            "H7": H("H7", [3000, 3900, 4150], [5800, 5800, 4700], [11200, 11200, 11000], 3, 3000, 4500),
+        })
+        sim.mission_orders = [{"t": 2150.0, "mission": "M-march", "phase": "start", "issuer": "BN"}]
     else:
         raise ValueError(f"incidents must be 'scripted' or 'random', not {incidents!r}")
     c = sim.confirmations
@@ -357,7 +374,7 @@ def plan_doc(sim: Sim) -> dict:
     def m(mid, unit, typ, start=None, end=None, after=(), **params):
         d = {"id": mid, "unit": unit, "type": typ}
         if start:
-            d["start"] = {"type": start[0], "t": start[1]}
+            d["start"] = {"type": start[0], "t": start[1]} if start[1] is not None else {"type": start[0]}
         if end:
             d["end"] = {"type": end[0], "t": end[1]}
         if after:
@@ -386,7 +403,7 @@ def plan_doc(sim: Sim) -> dict:
         m(f"{co}-defend", co, "defend", ("START-NLT", 3760), None, after=[f"{co}-attack"], position=f"OBJ-{co}")
     m("R-screen", "R", "screen", ("START-AT", 0), None, position="SCREEN-R", area="NAI-SCREEN")
     m("M-occupy", "M", "occupy", ("START-AT", 0), ("END-AT", 2200), position="BP-M1")
-    m("M-march", "M", "tactical-road-march", ("START-AT", 2200), ("END-NLT", 2900), after=["M-occupy"],
+    m("M-march", "M", "tactical-road-march", ("ON-ORDER", None), ("END-NLT", 2900), after=["M-occupy"],
       route="RTE-M", destination="BP-M2")
     m("M-sbf", "M", "support-by-fire", ("START-NLT", 2900), None, after=["M-march"], position="BP-M2")
     m("BNHQ-occupy", "BNHQ", "occupy", ("START-AT", 0), None, position="AA-BN")
@@ -396,7 +413,7 @@ def plan_doc(sim: Sim) -> dict:
     m("BN-branch-ABF", "M", "branch", None, None, owner="BN", task="attack-by-fire",
       trigger={"kind": "hostile-in-area", "area": "DP2", "min_strength": 1}, task_params={"position": "BP-M2"})
     m("A-sequel-occupy", "A1", "sequel", None, None, owner="A", task="occupy",
-      trigger={"kind": "unit-at", "unit": "A1", "area": "OBJ-A", "within_m": 0.0})
+      trigger={"kind": "unit-at", "unit": "A1", "area": "OBJ-A", "within_m": 0.0}, task_params={"position": "OBJ-A"})
     alt = [{"id": f"{p}-withdraw", "unit": p, "type": "withdraw", "start": {"type": "ASAP"},
             "params": {"destination": f"BP-{p}-BLUE"}} for p in LANE_X]
     return {"task_organization": to, "plans": {"main": M, "withdrawal": alt}, "initial_plan": "main"}
@@ -451,6 +468,10 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
         seq += 1
         ev.append((sim.order["t"], seq, {"kind": "order", "t": sim.order["t"], "action": "execute-plan",
                                          "plan": sim.order["plan"], "issuer": sim.order["issuer"]}))
+    for o in sim.mission_orders:
+        seq += 1
+        ev.append((o["t"], seq, {"kind": "order", "t": o["t"], "action": f"{o['phase']}-mission", "plan": "main",
+                                 "issuer": o["issuer"], "mission": o["mission"]}))
     for t, mid, unit, phase_ in sim.confirmations:
         seq += 1
         ev.append((t, seq, {"kind": "mission", "t": t, "mission": mid, "unit": unit, "phase": phase_}))

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from ea_agent.core.messages import integer, lonlat, NUMERIC, number, text, time_of, register
+from ea_agent.core.messages import MessageError, integer, lonlat, NUMERIC, number, text, time_of, register
 
 DOMAINS = ("ground", "air")
 
@@ -118,19 +118,28 @@ class MissionConfirm:
 
 @dataclass(slots=True, frozen=True)
 class Order:
-    """An order from a superior: execute a (new) plan, or abort the current one."""
+    """An order from a superior: execute a (new) plan, abort the current one, or start or
+    end one ON-ORDER mission by id (`mission`; `plan` names the plan it belongs to)."""
     KIND: ClassVar[str] = "order"
     KEY: ClassVar[str] = "ord/{issuer}"
+    ACTIONS: ClassVar[tuple[str, ...]] = ("execute-plan", "abort-plan", "start-mission", "end-mission")
     t: float
-    action: str  # "execute-plan" | "abort-plan"
+    action: str
     plan: str
     issuer: str
+    mission: str | None = None
 
     @classmethod
     def from_dict(cls, d: dict) -> "Order":
         k = cls.KIND
-        return cls(time_of(d, k), text(d, k, "action", ("execute-plan", "abort-plan")),
-                   text(d, k, "plan"), text(d, k, "issuer"))
+        action = text(d, k, "action", cls.ACTIONS)
+        mission = text(d, k, "mission", default=None)
+        if action.endswith("-mission") and mission is None:
+            raise MessageError(k, "mission", f"an order to {action.split('-')[0]} a mission must name it")
+        return cls(time_of(d, k), action, text(d, k, "plan"), text(d, k, "issuer"), mission)
+
+    def to_json_dict(self) -> dict:
+        return _drop_defaults(self, ("mission",), (None,))
 
 
 @dataclass(slots=True, frozen=True)

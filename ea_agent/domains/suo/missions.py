@@ -23,6 +23,8 @@ DEFAULT_PRIORITY = {
     "distance": "immediate", "strength": "immediate", "proximity": "immediate",
     "schedule": "priority", "unknown-position": "priority", "monitored": "priority",
     "hostile-expected": "priority", "ave-of-approach": "routine",
+    "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
+    "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate",
 }
 
 
@@ -31,18 +33,26 @@ mission = REGISTRY.leaf   # registers a leaf mission class under its doctrine na
 
 class Mission(CoreMission):
     """Root of the SUO model: time constraints (from the core), places on the
-    overlay, and how hostile activity near the unit is judged."""
+    overlay, and how hostile activity near the unit is judged. Check-Initial-Location
+    judges at once, from the current picture, every place constraint the mission posted
+    (a unit that never moves is judged too); the EA re-checks them on scenario time."""
     PARAMS = {
         "voi": "optional per-mission VOI overrides, e.g. {out_of_position_m: 100, schedule_s: 10}",
     }
     GEOMETRY_PARAMS: ClassVar[tuple[str, ...]] = ()   # params that name overlay features
+    LINE_PARAMS = ("route", "axis", "rear_line")
     LOCATION_RULE: ClassVar[str] = "centroid"         # centroid | any | all members
     DESIRED_STRENGTH_RATIO: ClassVar[float] = 1.0     # friendly:hostile combat power wanted
     DEFAULT_PRIORITY = DEFAULT_PRIORITY
+    CHECKS = ("start/end time constraints (Fig. 6); ON-ORDER against the superior's order",
+              "place constraints judged at start, on every move and every scan (stationary units too)")
+
+    def check_initial_location(self, ctx: "SuoDomain", t: float) -> None:
+        ctx.start_location_constraints(self, t)
 
     def respond_to_monitored_red_activity(self, ctx: "SuoDomain", area: str, t: float,
-                                          tracks: list[str], strength: int) -> None:
-        ctx.monitored_candidate(self, area, t, tracks, strength, expected=False)
+                                          tracks: list[str], strength: int, kind: str = "monitored") -> None:
+        ctx.monitored_candidate(self, area, t, tracks, strength, expected=False, kind=kind)
 
     def desired_strength_ratio(self) -> float:
         return self.DESIRED_STRENGTH_RATIO
@@ -60,17 +70,27 @@ class Mission(CoreMission):
         return "immediate" if ratio < self.desired_strength_ratio() else "priority"
 
 
+def _checks(*more: str) -> tuple[str, ...]:
+    return Mission.CHECKS + more
+
+
 # ---------------------------------------------------------------- movement
 class MovementMission(Mission):
-    """Move along a route to a destination; judged by the unit's centroid."""
-    PARAMS = {"route": "overlay route (LineString) the unit follows",
+    """Move along a route to a destination; judged by the unit's centroid. Without a
+    route, the corridor from where the unit starts to its destination is its route."""
+    PARAMS = {"route": "optional overlay route (LineString) the unit follows",
               "destination": "overlay feature the unit must reach"}
     REQUIRED = ("destination",)
     GEOMETRY_PARAMS = ("route", "destination")
+    CHECKS = _checks("on its route, or in the corridor from its start to its destination (out-of-position)",
+                     "at its destination at the end (Check-Final-Location)",
+                     "projected off its route or late at its destination (projections)")
 
     def location_constraints(self, ctx):
         if self.params.get("route"):
             ctx.post_location_monitor(self, self.params["route"], self.LOCATION_RULE, "route")
+        else:
+            ctx.post_corridor(self, self.params["destination"])
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["destination"], self.LOCATION_RULE, t, "destination")
@@ -78,61 +98,92 @@ class MovementMission(Mission):
 
 @mission
 class Move(MovementMission):
+    """The movement family as it is."""
     TYPE = "move"
 
 
 @mission
 class TacticalRoadMarch(MovementMission):
+    """March tables are tightly timed: schedule alerts are IMMEDIATE."""
     TYPE = "tactical-road-march"
-    PRIORITY = {"schedule": "immediate"}   # march tables are tightly timed
+    PRIORITY = {"schedule": "immediate"}
 
 
 @mission
 class MovementToContact(MovementMission):
+    """Expects to meet the enemy: wants 2:1 before a threat is only PRIORITY."""
     TYPE = "movement-to-contact"
     DESIRED_STRENGTH_RATIO = 2.0
 
 
+class FollowMission(MovementMission):
+    """Follow another unit: besides its route, stay within a distance band of it."""
+    PARAMS = {"supported": "unit followed",
+              "band_m": "optional [min, max] distance to the supported unit (default [0, follow_max_m])"}
+    REQUIRED = ("supported",)
+    UNIT_PARAMS = ("supported",)
+    CHECKS = MovementMission.CHECKS + ("within its distance band of the supported unit (band)",)
+
+    @classmethod
+    def check_params(cls, params):
+        band = params.get("band_m")
+        if band is None:
+            return None
+        if (not isinstance(band, list) or len(band) != 2 or not all(isinstance(x, (int, float)) and not
+                                                                     isinstance(x, bool) and x == x for x in band)):
+            return "band_m", "expected [min, max] in metres"
+        if not 0 <= band[0] <= band[1]:
+            return "band_m", f"min {band[0]} above max {band[1]} (or negative)"
+        return None
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        lo, hi = self.params.get("band_m") or (0.0, ctx.voi(self, "follow_max_m"))
+        ctx.post_band(self, self.params["supported"], float(lo), float(hi))
+
+
 @mission
-class FollowAndSupport(MovementMission):
+class FollowAndSupport(FollowMission):
     TYPE = "follow-and-support"
-    PARAMS = {"supported": "unit followed"}
-    UNIT_PARAMS = ("supported",)
 
 
 @mission
-class FollowAndAssume(MovementMission):
+class FollowAndAssume(FollowMission):
+    """Ready to take over the supported unit's mission: the same band, kept tighter by plans."""
     TYPE = "follow-and-assume"
-    PARAMS = {"supported": "unit whose mission may be assumed"}
-    UNIT_PARAMS = ("supported",)
 
 
 @mission
 class Withdraw(MovementMission):
+    """Breaking contact: accepts 1:2 before a threat is IMMEDIATE."""
     TYPE = "withdraw"
     DESIRED_STRENGTH_RATIO = 0.5
 
 
 @mission
 class Delay(MovementMission):
+    """Trades space for time: accepts 1:3 before a threat is IMMEDIATE."""
     TYPE = "delay"
     DESIRED_STRENGTH_RATIO = 0.33
 
 
 @mission
 class Bypass(MovementMission):
+    """Moves around the enemy: judged as a movement (standoff not yet checked)."""
     TYPE = "bypass"
 
 
 @mission
 class RouteReconnaissance(MovementMission):
+    """One element on the route is enough."""
     TYPE = "route-reconnaissance"
-    LOCATION_RULE = "any"   # one element on the route is enough
+    LOCATION_RULE = "any"
 
 
 # ---------------------------------------------------------------- offensive
 class OffensiveMission(Mission):
-    """Attack towards an objective; all members must be on it at the end."""
+    """Attack towards an objective along an axis (without one: the corridor from its
+    start to the objective); all members must be on the objective at the end."""
     PARAMS = {"objective": "overlay objective area", "axis": "optional route/axis of advance"}
     REQUIRED = ("objective",)
     GEOMETRY_PARAMS = ("objective", "axis")
@@ -140,13 +191,23 @@ class OffensiveMission(Mission):
     FINAL_RULE: ClassVar[str] = "all"
     DESIRED_STRENGTH_RATIO = 3.0
     PRIORITY = {"schedule": "immediate"}
+    CHECKS = _checks("on its axis, or in the corridor from its start to the objective (out-of-position)",
+                     "on the objective at the end (Check-Final-Location)")
+    END_STATE: ClassVar[bool] = False   # no hostile left in the objective at the end
+    ESCAPE: ClassVar[bool] = False      # no hostile leaves the objective while it runs
 
     def location_constraints(self, ctx):
         if self.params.get("axis"):
             ctx.post_location_monitor(self, self.params["axis"], self.LOCATION_RULE, "axis")
+        else:
+            ctx.post_corridor(self, self.params["objective"])
+        if self.ESCAPE:
+            ctx.post_escape(self, self.params["objective"])
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["objective"], self.FINAL_RULE, t, "objective")
+        if self.END_STATE:
+            ctx.check_end_state(self, self.params["objective"], t)
 
 
 @mission
@@ -156,56 +217,78 @@ class Attack(OffensiveMission):
 
 @mission
 class HastyAttack(OffensiveMission):
+    """Quick and partial: its centroid on the objective is enough."""
     TYPE = "hasty-attack"
     FINAL_RULE = "centroid"
 
 
 @mission
 class Seize(OffensiveMission):
+    """Take possession: no hostile left on the objective at the end (end-state)."""
     TYPE = "seize"
+    END_STATE = True
+    CHECKS = OffensiveMission.CHECKS + ("no hostile on the objective at the end (end-state)",)
 
 
 @mission
 class Secure(OffensiveMission):
+    """Take and protect: no hostile on the objective at the end (end-state)."""
     TYPE = "secure"
+    END_STATE = True
+    CHECKS = Seize.CHECKS
 
 
 @mission
 class Clear(OffensiveMission):
+    """Remove all resistance: no hostile on the objective at the end (end-state)."""
     TYPE = "clear"
+    END_STATE = True
+    CHECKS = Seize.CHECKS
 
 
 @mission
 class Destroy(OffensiveMission):
+    """Render the enemy ineffective: none escapes the objective, none is left at the end."""
     TYPE = "destroy"
     FINAL_RULE = "centroid"
+    END_STATE = True
+    ESCAPE = True
+    CHECKS = Seize.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
 
 
 @mission
 class Breach(OffensiveMission):
+    """Through the obstacle: one element on the far side is enough."""
     TYPE = "breach"
     FINAL_RULE = "any"
 
 
 @mission
 class Isolate(OffensiveMission):
+    """Seal the enemy off: no hostile leaves the objective while it runs (escape)."""
     TYPE = "isolate"
     FINAL_RULE = "centroid"
+    ESCAPE = True
+    CHECKS = OffensiveMission.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
 
 
 @mission
 class Fix(OffensiveMission):
+    """Keep the enemy where it is: none escapes the objective; 1:1 is enough."""
     TYPE = "fix"
     FINAL_RULE = "centroid"
     DESIRED_STRENGTH_RATIO = 1.0
+    ESCAPE = True
+    CHECKS = Isolate.CHECKS
 
 
 # ---------------------------------------------------------------- position
 class PositionMission(Mission):
     """Hold a position (battle position, support-by-fire position, ...) while active.
 
-    Optional `engagement_area` is watched for hostiles; with `expect_hostile_by` the
-    plan expects them there by that time (hostile-expected alert if absent).
+    Optional `engagement_area` is watched for hostiles (expected there) and must be
+    within the unit's weapons range of the position (friendly-expected); with
+    `expect_hostile_by` the plan expects hostiles there by that time (hostile-expected).
     """
     PARAMS = {"position": "overlay area the unit occupies",
               "engagement_area": "optional overlay area watched for hostile activity",
@@ -213,69 +296,111 @@ class PositionMission(Mission):
     REQUIRED = ("position",)
     GEOMETRY_PARAMS = ("position", "engagement_area")
     DESIRED_STRENGTH_RATIO = 0.33  # prepared defenders accept 1:3
+    PENETRATION: ClassVar[bool] = False   # a hostile entering the position is a penetration
+    CHECKS = _checks("in its position while it runs and at the end (out-of-position)",
+                     "its engagement area within weapons range of the position (friendly-expected)",
+                     "hostiles in its engagement area: expected activity; absent by a time (hostile-expected)")
 
     def location_constraints(self, ctx):
         ctx.post_location_monitor(self, self.params["position"], self.LOCATION_RULE, "position")
         ea_ = self.params.get("engagement_area")
         if ea_:
             ctx.post_red_monitor(self, ea_, expected=True, expect_by=self.params.get("expect_hostile_by"))
+        if self.PENETRATION:
+            ctx.post_penetration(self, self.params["position"])
 
-    def respond_to_monitored_red_activity(self, ctx, area, t, tracks, strength):
-        ctx.monitored_candidate(self, area, t, tracks, strength, expected=True)
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        if self.params.get("engagement_area"):
+            ctx.check_coverage(self, self.params["position"], self.params["engagement_area"], t)
+
+    def check_final_location(self, ctx, t):
+        ctx.check_location(self, self.params["position"], self.LOCATION_RULE, t, "position")
+
+    def respond_to_monitored_red_activity(self, ctx, area, t, tracks, strength, kind="monitored"):
+        ctx.monitored_candidate(self, area, t, tracks, strength, expected=kind == "monitored", kind=kind)
 
 
 @mission
 class Defend(PositionMission):
+    """An optional `rear_line` no hostile may cross (penetration); an absent expected enemy is IMMEDIATE."""
     TYPE = "defend"
+    PARAMS = {"rear_line": "optional overlay line behind the defence that no hostile may cross"}
+    GEOMETRY_PARAMS = ("position", "engagement_area", "rear_line")
     PRIORITY = {"hostile-expected": "immediate"}
+    CHECKS = PositionMission.CHECKS + ("no hostile across its rear line (penetration)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("rear_line"):
+            ctx.post_penetration(self, self.params["rear_line"])
 
 
 @mission
 class Occupy(PositionMission):
+    """The position family as it is."""
     TYPE = "occupy"
 
 
 @mission
 class Retain(PositionMission):
+    """Keep the enemy out of the position: a hostile in it is a penetration."""
     TYPE = "retain"
+    PENETRATION = True
+    CHECKS = PositionMission.CHECKS + ("no hostile enters the position (penetration, projected before)",)
 
 
 @mission
 class Block(PositionMission):
+    """Deny the enemy the position: a hostile in it is a penetration."""
     TYPE = "block"
     PRIORITY = {"hostile-expected": "immediate"}
+    PENETRATION = True
+    CHECKS = Retain.CHECKS
 
 
 @mission
 class AttackByFire(PositionMission):
+    """Fires from a position: 1:1 wanted."""
     TYPE = "attack-by-fire"
     DESIRED_STRENGTH_RATIO = 1.0
 
 
 @mission
 class SupportByFire(PositionMission):
+    """Fires for a moving unit: 1:1 wanted."""
     TYPE = "support-by-fire"
     DESIRED_STRENGTH_RATIO = 1.0
 
 
 @mission
 class Overwatch(PositionMission):
+    """One element with eyes on is enough."""
     TYPE = "overwatch"
     LOCATION_RULE = "any"
 
 
 @mission
 class Suppress(PositionMission):
+    """Judged as the position family (its fires are not modelled)."""
     TYPE = "suppress"
 
 
 @mission
 class Contain(PositionMission):
+    """Keep the enemy inside its engagement area: a hostile leaving it is an escape."""
     TYPE = "contain"
+    CHECKS = PositionMission.CHECKS + ("no hostile leaves its engagement area (escape)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("engagement_area"):
+            ctx.post_escape(self, self.params["engagement_area"])
 
 
 @mission
 class Disrupt(PositionMission):
+    """Judged as the position family (its fires are not modelled)."""
     TYPE = "disrupt"
 
 
@@ -289,35 +414,52 @@ class SecurityMission(Mission):
     LOCATION_RULE = "any"
     DESIRED_STRENGTH_RATIO = 0.5
     PRIORITY = {"monitored": "immediate"}
+    RED_KIND: ClassVar[str] = "monitored"
+    CHECKS = _checks("an element on station while it runs and at the end (out-of-position)",
+                     "hostiles in the watched area: unexpected activity (monitored)")
 
     def location_constraints(self, ctx):
         ctx.post_location_monitor(self, self.params["position"], self.LOCATION_RULE, "position")
-        ctx.post_red_monitor(self, self.params["area"], expected=False)
+        if self.RED_KIND == "penetration":
+            ctx.post_penetration(self, self.params["area"])
+        else:
+            ctx.post_red_monitor(self, self.params["area"], expected=False)
+
+    def check_final_location(self, ctx, t):
+        ctx.check_location(self, self.params["position"], self.LOCATION_RULE, t, "position")
 
 
 @mission
 class Screen(SecurityMission):
+    """Early warning: the security family as it is (standoff not yet checked)."""
     TYPE = "screen"
 
 
 @mission
 class Guard(SecurityMission):
+    """Protects the main body: a hostile in the guarded area is a penetration; 1:1 wanted."""
     TYPE = "guard"
     DESIRED_STRENGTH_RATIO = 1.0
+    RED_KIND = "penetration"
+    CHECKS = _checks("an element on station while it runs and at the end (out-of-position)",
+                     "no hostile enters the guarded area (penetration, projected before)")
 
 
 @mission
 class Observe(SecurityMission):
-    TYPE = "observe"   # observation post
+    """An observation post: the security family as it is."""
+    TYPE = "observe"
 
 
 @mission
 class AreaReconnaissance(SecurityMission):
+    """Judged as the security family (progress through the area not yet checked)."""
     TYPE = "area-reconnaissance"
 
 
 @mission
 class ZoneReconnaissance(SecurityMission):
+    """Judged as the security family (progress through the zone not yet checked)."""
     TYPE = "zone-reconnaissance"
 
 
@@ -330,6 +472,7 @@ class CoordinationMission(Mission):
     GEOMETRY_PARAMS = ("point",)
     UNIT_PARAMS = ("partner",)
     LOCATION_RULE = "any"
+    CHECKS = ("both units with an element at the point within fuzz of `at` (coordination)",)
 
     def location_constraints(self, ctx):
         ctx.post_coordination(self, self.params["partner"], self.params["point"],
@@ -343,11 +486,13 @@ class LinkUp(CoordinationMission):
 
 @mission
 class ReliefInPlace(CoordinationMission):
+    """Judged as a coordination (the no-gap handover not yet checked)."""
     TYPE = "relief-in-place"
 
 
 @mission
 class PassageOfLines(CoordinationMission):
+    """Judged as a coordination (the lane not yet checked)."""
     TYPE = "passage-of-lines"
 
 
@@ -363,6 +508,7 @@ class ContingentMission(Mission):
               "owner": "unit whose plan holds this contingency"}
     REQUIRED = ("trigger", "task", "owner")
     UNIT_PARAMS = ("owner",)
+    CHECKS = ("its trigger (contingency); once triggered, its task as a monitored mission from then",)
 
     def contingency_satisfied(self, ctx):
         return ctx.evaluate_trigger(self.params["trigger"])
@@ -388,6 +534,7 @@ class ReorganizationMission(Mission):
     REQUIRED = ("subject", "new_parent")
     UNIT_PARAMS = ("subject", "new_parent")
     AUTO_START = True
+    CHECKS = ("executed by the EA itself at its start time: the task organization changes",)
 
     def location_constraints(self, ctx):
         pass

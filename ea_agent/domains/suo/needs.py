@@ -1,5 +1,5 @@
 """What an SUO EA must hear, for dissemination: by command, the positions of its
-subtree, the orders of its chain of command and the fires it called; by mission, the
+subtree, the orders of its chain of command and of its own subtree and the fires it called; by mission, the
 confirmations of every unit its plan names; by geography, what is reported near its
 units and in the control measures it watches."""
 from __future__ import annotations
@@ -32,7 +32,7 @@ def needs(dom, radius_m: float) -> Needs:
             circles.append((p[0], p[1], radius_m))
     boxes = tuple(dom.overlay[a].area.bounds for a in sorted(dom.watched_areas()))
     return Needs(TEMPLATES, by={"path": frozenset({to.path(dom.owner)}),
-                                "issuer": frozenset([dom.owner, *to.ancestors(dom.owner)]),
+                                "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
                                 "requester": frozenset({dom.owner}),
                                 "unit": frozenset(units)},
                  circles=tuple(circles), boxes=boxes, whole=("org",))

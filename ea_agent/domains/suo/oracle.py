@@ -20,7 +20,8 @@ import math
 from collections import defaultdict
 
 import numpy as np
-from shapely.geometry import Point, Polygon, shape
+from shapely.geometry import LineString, Point, Polygon, shape
+from shapely.ops import nearest_points
 
 # What the commander said is worth knowing (the paper's scenario, 6.8); plans may
 # override per mission (params.voi). Fixed here: the EAs read theirs from their config.
@@ -53,6 +54,16 @@ CONTINGENT = {"branch", "sequel"}
 REORGANIZATION = {"reorganize"}
 AUTO_START = REORGANIZATION   # the EA executes it itself at its start time
 LIFE = {"contact", "fratricide", "call-for-fire"}   # life-threatening: the paper's flash alerts
+# What doctrine (FM 3-90) says each task forbids the enemy: to enter the held area (block, retain,
+# guard; a defence's rear line), to leave it (fix, isolate, destroy: the objective; contain: the
+# engagement area), to be left on the objective at the end (seize, clear, secure, destroy).
+PENETRATION = {"block": "position", "retain": "position", "guard": "area", "defend": "rear_line"}
+ESCAPE = {"fix": "objective", "isolate": "objective", "destroy": "objective", "contain": "engagement_area"}
+END_STATE = {"seize", "clear", "secure", "destroy"}
+FOLLOW = {"follow-and-support", "follow-and-assume"}   # stay within a distance band of the supported unit
+FOLLOW_MAX_M = 3000.0   # the band's far edge unless the plan says (band_m)
+FRIENDLY_MPS = 6.0      # the fastest a friendly unit moves (how far a stale report can be off)
+APPROACH_M = 1000.0     # a group this near an area no hostile may enter may be projected to enter it
 
 
 def geometry_params(typ: str) -> tuple[str, ...]:
@@ -140,6 +151,8 @@ class Truth:
             (self.started if ph == "start" else self.ended).setdefault(mid, t)
         self.incidents: list[dict] = []
         self.situations: list[dict] = []
+        self.task_started: dict[str, float] = {}   # triggered contingency -> when its task may have started
+        self.task_due: dict[str, float] = {}       # ... and by when it must have
 
     # -- task organization over time ----------------------------------------------------
     def parent_at(self, t: float) -> dict[str, str | None]:
@@ -238,30 +251,50 @@ class Truth:
     def thr(self, m: dict, key: str) -> float:
         return float(m["params"].get("voi", {}).get(key, self.voi[key]))
 
+    def _corridor(self, unit: str, t: float, dest: str):
+        """Where a unit with no route may be on its way: the line from its centroid at `t`
+        to the nearest point of its destination, and the destination itself."""
+        c = Point(self.member_points(unit, math.ceil(t / TICK - 1e-9)).mean(axis=0))   # the task org from t on
+        near = nearest_points(c, self.area[dest])[1]
+        return LineString([c, near]).union(self.area[dest]) if c.distance(near) > 1.0 else self.area[dest]
+
     def out_of_position(self) -> None:
         for mid, m in self.missions.items():
             typ = m["type"]
-            rule = "any" if typ in ANY_RULE else "centroid"
             p = m["params"]
+            if typ in CONTINGENT and mid in self.task_started:   # a triggered task: its own type from then
+                typ, p = m["params"]["task"], m["params"].get("task_params", {})
+                self.started.setdefault(mid, self.task_started[mid])
+            rule = "any" if typ in ANY_RULE else "centroid"
             cont = p.get("route") or p.get("axis") or p.get("position")
             if typ in CONTINGENT | REORGANIZATION or mid not in self.started:
                 continue
             thr = self.thr(m, "out_of_position_m")
             v0, v1 = self.valid[mid]
             s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
-            if cont:
-                geom = self.geom[cont] if (p.get("route") or p.get("axis")) else self.area[cont]
+            dest = p.get("destination") or p.get("objective")
+            corridor = not cont and dest in self.area and typ in ROUTE | OBJECTIVE
+            if cont or corridor:
+                # a corridor starts again wherever a reorganization moves the unit's centroid
+                anchors = [s] + [tr for tr, _, _ in self.reorgs if s < tr < e]
+                geom = (self.geom[cont] if (p.get("route") or p.get("axis")) else self.area[cont]) if cont else None
+                anchor = None
                 hits, peak = [], 0.0
                 for k, t in enumerate(self.ticks):
                     if s <= t < e:
+                        if corridor and anchor != max(x for x in anchors if x <= t):
+                            anchor = max(x for x in anchors if x <= t)
+                            geom = self._corridor(m["unit"], anchor, dest)
                         d = self.judged(geom, m["unit"], k, rule)
-                        if d > thr:
+                        if d > thr / MATERIAL:   # within a MATERIAL step of the threshold either answer is fair
                             hits.append(t)
                             peak = max(peak, d)
                 for a, b in _runs(hits):
                     for o in self.owners_of(m["unit"], a):
-                        if peak > 1.5 * thr and b - a >= 30:
-                            self.must(o, "out-of-position", [], [m["unit"]], a - self.slack, a + 60, f"{mid} off {cont}", at=a)
+                        if peak > 1.5 * thr and b - a >= 30:   # a triggered task: once it must have fired
+                            self.must(o, "out-of-position", [], [m["unit"]], a - self.slack,
+                                      max(a, self.task_due.get(mid, a)) + 60, f"{mid} off {cont or 'its corridor'}",
+                                      at=a)
                         self.may(o, ["out-of-position"], [m["unit"]], a - self.slack, b + self.slack)
             dest = p.get("destination") or p.get("objective")
             geo = geometry_params(typ)
@@ -359,6 +392,8 @@ class Truth:
         for mid, m in self.missions.items():
             for phase, actual in (("start", self.started.get(mid)), ("end", self.ended.get(mid))):
                 tc = m.get(phase)
+                if tc and tc["type"] == "ON-ORDER":
+                    self._on_order(mid, m, phase, actual)
                 if not tc or tc["type"] in ("ASAP", "ON-ORDER"):
                     continue
                 thr = float(m["params"].get("voi", {}).get("schedule_s", thr_default))
@@ -375,6 +410,112 @@ class Truth:
                 if kind in ("NET", "AT") and act < when - thr:
                     for o in self.owners_of(m["unit"], act):
                         self.must(o, "schedule", [], [m["unit"]], act - 1, act + 5, f"{mid} {phase} early", at=act)
+
+    def _on_order(self, mid: str, m: dict, phase: str, actual: float | None) -> None:
+        """An ON-ORDER phase comes within the schedule threshold of its superior's order;
+        one that comes with no order at all, or well before it, is an incident when it comes."""
+        thr = float(m["params"].get("voi", {}).get("schedule_s", self.voi["schedule_s"]))
+        order = next((o["t"] for o in getattr(self.sim, "mission_orders", ())
+                      if o["mission"] == mid and o["phase"] == phase), None)
+        v0, v1 = self.valid[mid]
+        if order is not None and (actual is None or actual > order + thr) and v0 <= order + thr < v1:
+            t = order + thr
+            for o in self.owners_of(m["unit"], t):
+                self.must(o, "schedule", [], [m["unit"]], t - 1, t + 5, f"{mid} {phase} late on order", at=t)
+                self.may(o, ["schedule"], [m["unit"]], t - 1, min(actual or 1e9, 1e9) + 1)
+        elif actual is not None and (order is None or actual < order - thr) and v0 <= actual < v1:
+            for o in self.owners_of(m["unit"], actual):
+                self.must(o, "schedule", [], [m["unit"]], actual - 1, actual + 5,
+                          f"{mid} {phase} without an order", at=actual)
+                if order is not None:   # told again when the order comes: the same story
+                    self.may(o, ["schedule"], [m["unit"]], actual - 1, order + 5)
+
+    def check_families(self) -> None:
+        """What each task forbids the enemy or asks of its unit beyond its place (FM 3-90):
+        escape, end state, the engagement area in weapons range, the distance band."""
+        for mid, m in self.missions.items():
+            typ, p = m["type"], m["params"]
+            if mid not in self.started:
+                continue
+            v0, v1 = self.valid[mid]
+            s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
+            if s >= e:
+                continue
+            if typ in ESCAPE and p.get(ESCAPE[typ]):
+                self._escape(mid, m, p[ESCAPE[typ]], s, e)
+            if typ in END_STATE and mid in self.ended and self.ended[mid] < v1:
+                self._end_state(mid, m, p["objective"], self.ended[mid])
+            if p.get("engagement_area") and geometry_params(typ) == ("position", "engagement_area"):
+                self._coverage(mid, m, p["position"], p["engagement_area"], s)
+            if typ in FOLLOW:
+                self._band(mid, m, p["supported"], p.get("band_m") or (0.0, FOLLOW_MAX_M), s, e)
+
+    def _escape(self, mid, m, area, s, e) -> None:
+        """A group well inside the area while the mission runs that goes well beyond its edge."""
+        geom = self.area[area]
+        near_g, deep_g = _bands(geom)
+        held: dict[str, float] = {}   # group -> when it was last well inside
+        out_at: dict[str, float] = {}
+        for t in self.ticks:
+            if not s <= t < e:
+                continue
+            for h, (x, y, _st) in self.hostiles_at(t).items():
+                pt = Point(x, y)
+                if deep_g.contains(pt):
+                    held[h] = t
+                    out_at.pop(h, None)
+                elif h in held and not geom.contains(pt):
+                    out_at.setdefault(h, t)   # across the edge: it may be told from now
+                    if not near_g.contains(pt):
+                        for o in self.owners_of(m["unit"], t):
+                            self.must(o, "escape", [], [h, area], out_at[h] - 15, t + 45, f"{h} escapes {area}",
+                                      at=t, about=[area])
+                            self.may(o, ["escape"], [h, area], held[h], t + 45, about=[area])
+                        del held[h]
+            for h in [h for h in held if h not in self.hostiles_at(t)]:   # gone: lost, not escaped
+                del held[h]
+        for h, t in out_at.items():   # crossed the edge, never well beyond it: may be told
+            if h in held:
+                for o in self.owners_of(m["unit"], t):
+                    self.may(o, ["escape"], [h, area], t - 15, e + 45, about=[area])
+
+    def _end_state(self, mid, m, area, t) -> None:
+        geom = self.area[area]
+        near_g, deep_g = _bands(geom)
+        hs = self.hostiles_at(round(t / TICK) * TICK)
+        deep = [h for h, (x, y, _s) in hs.items() if deep_g.contains(Point(x, y))]
+        near = [h for h, (x, y, _s) in hs.items() if near_g.contains(Point(x, y))]
+        for o in self.owners_of(m["unit"], t):
+            if deep:
+                self.must(o, "end-state", [], [m["unit"], *deep], t - 1, t + 5, f"{mid} ends with {deep} on {area}",
+                          at=t, about=[m["unit"]])
+            elif near:
+                self.may(o, ["end-state"], [m["unit"], *near], t - 1, t + 5, about=[m["unit"]])
+
+    def _coverage(self, mid, m, position, ea, s) -> None:
+        gap = self.area[position].distance(self.area[ea])
+        if gap > self._range(m["unit"], self.parent_at(s)):
+            for o in self.owners_of(m["unit"], s):
+                self.must(o, "friendly-expected", [], [m["unit"]], s - 1, s + 5, f"{ea} out of range of {position}",
+                          at=s)
+
+    def _band(self, mid, m, other, band, s, e) -> None:
+        lo, hi = float(band[0]), float(band[1])
+        thr = self.thr(m, "out_of_position_m")
+        hits, peak = [], 0.0
+        for k, t in enumerate(self.ticks):
+            if s <= t < e:
+                a, b = self.member_points(m["unit"], k).mean(axis=0), self.member_points(other, k).mean(axis=0)
+                d = float(np.hypot(*(a - b)))
+                off = d - hi if d > hi else lo - d
+                if off > thr / MATERIAL:
+                    hits.append(t)
+                    peak = max(peak, off)
+        for a, b in _runs(hits):
+            for o in self.owners_of(m["unit"], a):
+                if peak > 1.5 * thr and b - a >= 30:
+                    self.must(o, "band", [], [m["unit"], other], a - self.slack, a + 60, f"{mid} out of band", at=a)
+                self.may(o, ["band"], [m["unit"], other], a - self.slack, b + self.slack)
 
     def coordination(self) -> None:
         for mid, m in self.missions.items():
@@ -426,6 +567,7 @@ class Truth:
                     hit, t0, at = geom.distance(Point(c)) <= tr.get("within_m", 0.0), t - self.slack, t
                 if hit:
                     self.must(owner, "contingency", [], [m["unit"]], t0, t + 40, f"{mid} triggered", at=at)
+                    self.task_started[mid], self.task_due[mid] = t0 + 15, t   # its task runs from the trigger
                     self.triggered_areas[owner].add(tr["area"])
                     break
             else:
@@ -451,8 +593,11 @@ class Truth:
                 geo = geometry_params(m["type"])
                 for key in ("engagement_area", "area"):
                     a = m["params"].get(key)
-                    if a and key in geo:
+                    if a and key in geo and not (m["type"] in PENETRATION and PENETRATION[m["type"]] == key):
                         watch.append((a, "monitored", mid))
+                held = m["params"].get(PENETRATION.get(m["type"], ""))
+                if held:
+                    watch.append((held, "penetration", mid))
             for area, typ, mid in watch:
                 # An incident per hostile group that enters the area, unless it was near it
                 # less than EPISODE_S before (the user still knows of it); sensors place a
@@ -504,6 +649,8 @@ class Truth:
                 for a, b in _runs(sorted(near_at)):
                     who = sorted({h for t, hs_ in near_at.items() if a <= t <= b for h in hs_})
                     self.may(o, [typ], who + [area], a - 15, b + 30, about=[area])
+                if typ == "penetration":   # a group heading for it may be projected to enter
+                    self._approach(o, area, mid)
             for mid, m in self.missions.items():
                 by = m["params"].get("expect_hostile_by")
                 if by is None:
@@ -515,6 +662,18 @@ class Truth:
                            for t in self.ticks if r0 <= t <= by for x, y, s in self.hostiles_at(t).values())
                 if not seen and m["unit"] in self.subtree(o, by):
                     self.must(o, "hostile-expected", [], [m["unit"]], by - 1, by + 5, f"{mid}: nobody came", at=by)
+
+    def _approach(self, o: str, area: str, mid: str) -> None:
+        """Groups that come within APPROACH_M of an area no hostile may enter while its
+        mission watches it: a projection that they will enter is fair."""
+        ring = self.area[area].buffer(APPROACH_M)
+        r0, r1 = self._ready_interval(mid)
+        near = [t for t in self.ticks if r0 <= t < r1 and self.missions[mid]["unit"] in self.subtree(o, t)
+                and any(ring.contains(Point(x, y)) for x, y, _s in self.hostiles_at(t).values())]
+        for a, b in _runs(near):
+            who = sorted({h for t in self.ticks if a <= t <= b for h, (x, y, _s) in self.hostiles_at(t).items()
+                          if ring.contains(Point(x, y))})
+            self.may(o, ["projected-penetration"], who + [area], a - 15, b + 30, about=[area])
 
     def proximity(self) -> None:
         """A threat within the threat radius of a platoon is contact (a new episode after
@@ -582,11 +741,18 @@ class Truth:
         for c in self.sim.cffs:
             t = c["t"]
             k = int(round(t / TICK))
-            near_leaves = set()
+            near_leaves, loose = set(), set()
             for leaf in self.leaves:
                 pts = self.member_points(leaf, k)
-                if (np.hypot(pts[:, 0] - c["x"], pts[:, 1] - c["y"]) <= c["radius_m"]).any():
+                d = np.hypot(pts[:, 0] - c["x"], pts[:, 1] - c["y"]).min()
+                if d <= c["radius_m"]:
                     near_leaves.add(leaf)
+                if d <= c["radius_m"] + self.slack * FRIENDLY_MPS:   # as far as a report's age can put it
+                    loose.add(leaf)
+            for o in self.owners:   # friendly reports are up to `slack` old: near the edge either answer is fair
+                mine = loose & self.subtree(o, t)
+                if mine:
+                    self.may(o, ["call-for-fire"], [self.platoon_of(x, t) for x in mine], t - 1, t + 2)
             if c["kind"] == "cff":
                 others = near_leaves - self.subtree(c["requester"], t)
                 if others and c["requester"] in self.owners:
@@ -604,7 +770,7 @@ def ground_truth(sim, feats: list[dict], plan: dict, owners: list[str]) -> dict:
     tr = Truth(sim, feats, plan, owners)
     tr.contingency()
     for step in (tr.out_of_position, tr.fratricide, tr.unknown_position, tr.schedule, tr.coordination,
-                 tr.areas, tr.proximity, tr.calls_for_fire):
+                 tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families):
         step()
     key = lambda d: (d["owner"], d["t0"], d.get("type", ""), d["subjects"])
     return {"owners": owners, "tick_s": TICK, "incidents": sorted(tr.incidents, key=key),

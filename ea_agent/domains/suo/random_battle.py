@@ -51,6 +51,13 @@ def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
             leave = t + u(20, 120)
             sim.withdraw[p] = (leave, leave + round((11000.0 - WITHDRAW_Y) / float(rng.uniform(4.0, 6.0))))
         d.append({"kind": "order", **sim.order, "withdraw": {p: list(w) for p, w in sim.withdraw.items()}})
+    # BN orders M's march (ON-ORDER; M moves at 2200): in time, long before, or never
+    r = rng.random()
+    if r < 0.8:
+        sim.mission_orders = [{"t": 2200.0 - u(0, 25), "mission": "M-march", "phase": "start", "issuer": "BN"}]
+    elif r < 0.92:
+        sim.mission_orders = [{"t": 2200.0 - u(45, 240), "mission": "M-march", "phase": "start", "issuer": "BN"}]
+    d.append({"kind": "mission-order", "orders": sim.mission_orders})
     sim.reorg_t = u(300, 1500)
     d.append({"kind": "reorganization", "unit": "R", "new_parent": "BN", "t": sim.reorg_t})
     for k in range(int(rng.integers(4, 9))):

@@ -144,12 +144,18 @@ def _check_params(cls, params: Any, where: str, prefix: str, overlay: dict, ids:
     for g in cls.GEOMETRY_PARAMS:
         if params.get(g) is not None:
             _area_ref(params[g], where, prefix + g, overlay)
+            if g in cls.LINE_PARAMS and overlay[params[g]].geom.geom_type != "LineString":
+                raise ScenarioError(f"{where}: field '{prefix}{g}': {params[g]!r} is a "
+                                    f"{overlay[params[g]].geom.geom_type}, not a line")
     for g in cls.UNIT_PARAMS:
         if params.get(g) is not None:
             _unit_ref(params[g], where, prefix + g, ids)
     for k in _NUMERIC_PARAMS:
         if params.get(k) is not None:
             _number(params[k], where, prefix + k)
+    problem = cls.check_params(params)
+    if problem:
+        raise ScenarioError(f"{where}: field '{prefix}{problem[0]}': {problem[1]}")
     voi = params.get("voi")
     if voi is not None:
         if not isinstance(voi, dict):
@@ -236,9 +242,9 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
                 task = params["task"]
                 if not isinstance(task, str) or task not in REGISTRY:
                     raise ScenarioError(f"{where}: field 'params.task': unknown mission type {task!r}")
-                if params.get("task_params") is not None:   # checked as far as given (the task runs when complete)
-                    _check_params(REGISTRY[task], params["task_params"], where, "params.task_params.", overlay, ids,
-                                  voi_keys, required=False)
+                # triggered, the task is a monitored mission: it needs what its class requires
+                _check_params(REGISTRY[task], params.get("task_params", {}), where, "params.task_params.", overlay,
+                              ids, voi_keys)
             if issubclass(cls, ReorganizationMission) and params["subject"] == taskorg.root:
                 raise ScenarioError(f"{where}: field 'params.subject': the top unit {params['subject']!r} "
                                     f"cannot be resubordinated")
@@ -359,6 +365,15 @@ def _check_event(m, cx: EventContext, where: str) -> None:
             good.add(check_key_chunk(m.plan, where, "plan"))
         if units is not None and m.plan not in cx.plans:
             raise ScenarioError(f"{where}: field 'plan': no plan named {m.plan!r} in plan.json")
+        if m.mission is not None and units is not None:
+            if m.mission not in good:
+                good.add(check_key_chunk(m.mission, where, "mission"))
+            owners = cx.mission_units.get(m.mission)
+            if owners is None:
+                raise ScenarioError(f"{where}: field 'mission': unknown mission {m.mission!r} (in no plan)")
+            if not any(m.issuer in cx.taskorg.ancestors(u) for u in owners):
+                raise ScenarioError(f"{where}: field 'issuer': {m.issuer!r} is not a superior of "
+                                    f"{' or '.join(sorted(owners))}, whose mission {m.mission!r} it orders")
     elif k is M.CallForFire or k is M.CallForFireConfirm:
         unit("requester")
         if m.cff not in good:

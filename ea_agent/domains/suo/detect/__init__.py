@@ -9,12 +9,17 @@ Areas, which does not repeat the activity a fired contingency already told.
 from __future__ import annotations
 
 from .areas import Areas
+from .bands import Bands
 from .base import BASE, Changes, Detector
 from .contingency import Contingencies
 from .coordination import Coordination
+from .coverage import Coverage
+from .endstate import EndStates
+from .escape import Escapes
 from .fires import CallsForFire
 from .fratricide import Fratricide
 from .location import LocationMonitors
+from .penetration import ProjectedPenetrations
 from .projection import Projections
 from .schedule import ScheduleMonitors
 from .threats import ThreatEnvelopes
@@ -23,12 +28,14 @@ from .unknown import UnknownPositions
 DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
     Contingencies, Areas, ThreatEnvelopes, Projections,
+    # the check families the mission classes compose beyond Fig. 4 (issue 13)
+    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
 PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-projected")   # beyond the paper
-ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, and the projections
+ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, projections, check families
 
-__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "CallsForFire",
-           "Contingencies", "Coordination", "Fratricide", "LocationMonitors", "ScheduleMonitors",
-           "ThreatEnvelopes", "UnknownPositions"]
+__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire",
+           "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "Fratricide", "LocationMonitors",
+           "ProjectedPenetrations", "ScheduleMonitors", "ThreatEnvelopes", "UnknownPositions"]

@@ -25,7 +25,8 @@ BESIDE_M = 150.0       # a new track this near one already in the area reinforce
 class Areas(Detector):
     """Owns which areas are watched and, each epoch tracks change, which tracks are
     in each (read by contingency triggers before the area alerts are made)."""
-    TYPES = {"monitored": ADVERSARIAL, "ave-of-approach": ADVERSARIAL, "hostile-expected": ADVERSARIAL}
+    TYPES = {"monitored": ADVERSARIAL, "ave-of-approach": ADVERSARIAL, "hostile-expected": ADVERSARIAL,
+             "penetration": ADVERSARIAL}
 
     def __init__(self, dom) -> None:
         super().__init__(dom)
@@ -42,12 +43,14 @@ class Areas(Detector):
         self._stale = True
 
     def reset(self) -> None:
-        self.red_monitors: dict[str, list[tuple[Mission, bool]]] = defaultdict(list)  # area -> missions
+        # area -> (mission, hostiles expected there, alert kind: monitored | penetration)
+        self.red_monitors: dict[str, list[tuple[Mission, bool, str]]] = defaultdict(list)
         self.global_areas: dict[str, str] = {}   # area -> alert type (monitored / ave-of-approach)
 
     def reindex(self) -> None:
         """The watched areas changed: rebuild the spatial index over all of them."""
-        ids = set(self.global_areas) | set(self.red_monitors) | self.dom.contingency.trigger_areas()
+        ids = (set(self.global_areas) | set(self.red_monitors) | self.dom.contingency.trigger_areas()
+               | self.dom.escape.areas())
         self.index = AreaIndex({a: self.dom.overlay[a].area for a in sorted(ids)})
         self.near_index = AreaIndex({a: self.dom.overlay[a].area.buffer(LINGER_M) for a in sorted(ids)})
         self._stale = True   # tracks already in a newly watched area are found at the next epoch
@@ -62,9 +65,12 @@ class Areas(Detector):
                 self.global_areas[cm.id] = "ave-of-approach"
         self.reindex()
 
-    def post_red_monitor(self, m: Mission, area: str, expected: bool, expect_by: float | None = None) -> None:
+    def post_red_monitor(self, m: Mission, area: str, expected: bool, expect_by: float | None = None,
+                         kind: str = "monitored") -> None:
+        """Watch `area` for hostiles for mission `m`: activity there is told as `kind`
+        (monitored, or penetration where no hostile may enter)."""
         dom = self.dom
-        self.red_monitors[area].append((m, expected))
+        self.red_monitors[area].append((m, expected, kind))
         self.reindex()
         if expect_by is not None:
             def absent(tf, mon, how):
@@ -86,7 +92,8 @@ class Areas(Detector):
         dom = self.dom
         prio = m.compute_priority(kind) if m is not None else BASE.compute_priority(kind)
         where = f" ({'expected' if expected else 'unexpected'} for {dom.name(m.unit)} {m.TYPE})" if m else ""
-        label = "Enemy activity on ave of approach" if kind == "ave-of-approach" else "Red activity at"
+        label = {"ave-of-approach": "Enemy activity on ave of approach",
+                 "penetration": "Penetration: hostiles in"}.get(kind, "Red activity at")
         dom.ea.post(Candidate(t, kind, prio, tuple(tracks), f"{label} {area}{where}: {strength} entities in "
                               f"{len(tracks)} track{'s' if len(tracks) > 1 else ''}",
                               key=(kind, area, m.id if m else None), measure=float(strength), friendly=False,
@@ -146,7 +153,7 @@ class Areas(Detector):
         dom = self.dom
         # a mission whose watch begins (it became ready) is told what is already in its
         # area, stationary hostiles included: they would never show as a change
-        eligible = {(area, m.id) for area, mons in self.red_monitors.items() for m, _ in mons
+        eligible = {(area, m.id) for area, mons in self.red_monitors.items() for m, _, _ in mons
                     if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m)}
         begun, self._eligible = eligible - self._eligible, eligible
         # a group still in an area (or lingering at its edge) keeps what was told of it
@@ -156,8 +163,8 @@ class Areas(Detector):
             kind = self.global_areas.get(area)
             if kind:
                 voa.touch((kind, area, None), t)
-            for m, _ in self.red_monitors.get(area, ()):
-                voa.touch(("monitored", area, m.id), t)
+            for m, _, kind in self.red_monitors.get(area, ()):
+                voa.touch((kind, area, m.id), t)
         if not ch.tracks and not begun:
             return
         fired = dom.contingency.fired   # a triggered contingency says it already
@@ -166,10 +173,10 @@ class Areas(Detector):
             ids = [tids[k] for k in idx]
             changed = bool(ch.tracks.intersection(ids))
             strength = self.strength[area]
-            for m, expected in self.red_monitors.get(area, ()):
+            for m, expected, kind in self.red_monitors.get(area, ()):
                 if (area, m.id) in eligible and (changed or (area, m.id) in begun):
                     dom.timers.occurred(("hostile", m.id), t)
-                    m.respond_to_monitored_red_activity(dom, area, t, ids, strength)
+                    m.respond_to_monitored_red_activity(dom, area, t, ids, strength, kind)
             kind = self.global_areas.get(area)
             if changed and kind and area not in fired:
                 self.monitored_candidate(None, area, t, ids, strength, expected=False, kind=kind)

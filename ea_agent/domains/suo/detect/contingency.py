@@ -37,13 +37,21 @@ class Contingencies(Detector):
         return d is not None and d <= float(tr.get("within_m", 0.0))
 
     def execute(self, m: ContingentMission, t: float) -> None:
-        """The trigger holds: the contingency is ready and its task's constraints are posted."""
+        """The trigger holds: the EA executes the contingency. Its task becomes a monitored
+        mission of the plan, started now, judged as its class says (Check-Initial-Location
+        at once, its place constraints while it runs)."""
         dom = self.dom
+        task_cls = REGISTRY[m.params["task"]]
+        task = task_cls(MissionSpec(m.id, m.unit, task_cls.TYPE, m.spec.start, m.spec.end, (),
+                                    dict(m.params.get("task_params", {}))))
+        dom.missions[m.id] = task
         dom.plan.state[m.id] = "ready"
-        task = REGISTRY[m.params["task"]]
-        tp = dict(m.params.get("task_params", {}))
-        if all(r in tp for r in task.required()):
-            task(MissionSpec(m.id, m.unit, task.TYPE, m.spec.start, m.spec.end, (), tp)).post_execution_constraints(dom)
+        if dom.in_plan(task):
+            task.post_execution_constraints(dom)
+        dom.plan.start(m.id, t)
+        dom.timers.occurred(("start", m.id), t)
+        if dom.in_plan(task):
+            task.check_initial_location(dom, t)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         self.fired = set()

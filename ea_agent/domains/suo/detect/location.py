@@ -1,5 +1,8 @@
 """Out-of-position: location monitors a mission posts while active (route, axis,
-position) and the checks it asks for at start and end (destination, objective)."""
+position, or the corridor from its start to where it goes) and the checks it asks for
+at start and end (destination, objective). Monitors are judged when their unit moves
+and, on every periodic scan, for units that did not (a unit that never moves from the
+wrong place is told too)."""
 from __future__ import annotations
 
 from collections import defaultdict
@@ -21,12 +24,47 @@ class LocationMonitors(Detector):
 
     def reset(self) -> None:
         self.monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)
+        self.corridor_to: dict[str, str] = {}         # mission -> where its corridor leads (built at start)
+        self.corridors: dict[str, object] = {}        # mission -> corridor line
 
     def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
         self.monitors[m.id].append((m, geom, rule, what))
 
+    def post_corridor(self, m: Mission, target: str) -> None:
+        """A route for a mission that has none: from where the unit is at its start to
+        the nearest point of `target` (built by `start`)."""
+        self.corridor_to[m.id] = target
+
+    def start(self, m: Mission, t: float) -> None:
+        """Check-Initial-Location: build the mission's corridor from where its unit is,
+        then judge every monitor it posted at once, whether the unit moves or not."""
+        dom = self.dom
+        if m.id in self.corridor_to and m.id not in self.corridors and self._corridor(m):
+            self.monitors[m.id].append((m, m.id, m.LOCATION_RULE, "corridor"))
+        for _, geom, rule, what in list(self.monitors.get(m.id, ())):
+            self.check(m, geom, rule, t, what)
+
+    def _corridor(self, m: Mission) -> bool:
+        """The corridor from the unit's centroid now to the nearest point of its target,
+        with the target itself (arriving is no departure from it)."""
+        pos = self.dom.pic.centroid(m.unit)
+        if pos is None:
+            return False
+        area = self.dom.overlay[self.corridor_to[m.id]].area
+        self.corridors[m.id] = shapely.union(shapely.shortest_line(shapely.Point(pos), area), area)
+        return True
+
+    def org_changed(self) -> None:
+        """A reorganization moves a unit's centroid without any member moving: the
+        corridors of running missions start again from where the centroid is now."""
+        for mid in list(getattr(self, "corridors", ())):
+            mons = self.monitors.get(mid)
+            if mons:
+                self._corridor(mons[0][0])
+
     def end_mission(self, mid: str) -> None:
         self.monitors.pop(mid, None)
+        self.corridors.pop(mid, None)
 
     def check(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:
         """A one-off check (start or end of a mission), alerted at once."""
@@ -37,10 +75,10 @@ class LocationMonitors(Detector):
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
-        if not ch.leaves or dom.plan is None:
+        if not (ch.leaves or ch.rescan) or dom.plan is None:
             return
         todo = [mon for mid, mons in self.monitors.items()
-                if mons and mons[0][0].unit in ch.units and dom.plan.state.get(mid) == "active"
+                if mons and (ch.rescan or mons[0][0].unit in ch.units) and dom.plan.state.get(mid) == "active"
                 for mon in mons if dom.in_plan(mon[0])]
         cent = [mon for mon in todo if mon[2] == "centroid" and dom.unit_pos.get(mon[0].unit)]
         if cent:   # one vectorised distance call for every centroid-judged monitor
@@ -57,6 +95,8 @@ class LocationMonitors(Detector):
 
     def _geom(self, geom_id: str, what: str):
         """Routes and axes are judged by distance to the line; everything else to its area."""
+        if what == "corridor":
+            return self.corridors[geom_id]
         cm = self.dom.overlay[geom_id]
         return cm.geom if what in ("route", "axis") else cm.area
 
@@ -69,12 +109,13 @@ class LocationMonitors(Detector):
         thr = dom.voi(m, "out_of_position_m")
         if d is None or d <= thr:
             return None
-        ref = f"should be at {geom_id}"
+        place = self.corridor_to[geom_id] if what == "corridor" else geom_id
+        ref = f"should be in the corridor to {place}" if what == "corridor" else f"should be at {geom_id}"
         if pos is not None:
             near = shapely.shortest_line(shapely.Point(pos), geom).coords[-1]
             ref += f" ({km(d)} {bearing_name(near[0] - pos[0], near[1] - pos[1])} of {dom.name(m.unit)})" if rule == "centroid" else f" ({rule} members within {km(thr)})"
         return Candidate(t, "out-of-position", m.compute_priority("out-of-position"), (m.unit,),
                          f"{dom.name(m.unit)} out of position for {m.TYPE} mission: {ref}",
                          key=("out-of-position", m.id, what), measure=d,
-                         details={"mission": m.id, "control_measure": geom_id, "rule": rule, "check": what,
-                                  "distance_m": round(d, 1), "threshold_m": thr, "places": [geom_id]})
+                         details={"mission": m.id, "control_measure": place, "rule": rule, "check": what,
+                                  "distance_m": round(d, 1), "threshold_m": thr, "places": [place]})
