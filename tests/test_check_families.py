@@ -169,6 +169,28 @@ def test_a_platoon_sitting_in_its_position_is_not_told(tmp_path, typ):
     assert not of(ea, "out-of-position")
 
 
+def test_a_stationary_unit_is_rejudged_on_scenario_time(tmp_path):
+    """100 m outside its position: within the 150 m threshold at its start. A commander
+    lowers the threshold to 50 m at t=200; the unit never moves, yet the periodic scan
+    tells it within a scan period (voi thresholds are read live)."""
+    sc = scenario(tmp_path, [BP_HOME], [mission("A1-hold", "A1", "occupy", position="BP-HOME")])
+    msgs = sorted(stays("A1", 300, 0) + stays("A2", 0, -3000) + [start(100, "A1-hold", "A1")], key=lambda m: m.t)
+    ea = make_ea(sc, "A", config_for(sc, "A"))
+    ea.start(0.0)
+    for m in [m for m in msgs if m.t <= 200]:
+        ea.submit(m)
+    ea.advance(200.0)
+    assert not of(ea, "out-of-position")
+    ea.set_param("voi.out_of_position_m", 50.0, 200.0)
+    for m in [m for m in msgs if 200 < m.t <= 400]:
+        ea.submit(m)
+    ea.finish(400.0)
+    oop = of(ea, "out-of-position")
+    assert oop and 200 < oop[0].t <= 200 + 5.0 + 2 * EPOCH, [a.t for a in oop]
+    assert oop[0].subjects == ("A1",) and oop[0].details["threshold_m"] == 50.0
+    assert abs(oop[0].details["distance_m"] - 100) < 5
+
+
 # ================================================================================ 2. corridor
 OBJ_E = box("OBJ-E", "objective", 3000, -300, 3400, 300)
 AA_E = box("AA-E", "assembly-area", 3000, -300, 3400, 300)
@@ -234,9 +256,6 @@ def test_a_unit_that_drifted_and_keeps_its_offset_stays_out_of_its_corridor(tmp_
     assert oop and near(oop[0].t, 180.0) and oop[0].details["check"] == "corridor"
 
 
-@pytest.mark.xfail(strict=True, reason="LocationMonitors.org_changed rebuilds the corridor of EVERY running "
-                   "mission from its unit's centroid now, on any reorganization, even of a unit in another "
-                   "company: A1's corridor restarts 100 m off course and its drift is forgiven")
 def test_a_reorganization_elsewhere_does_not_move_a_units_corridor(tmp_path):
     sc = scenario(tmp_path, [OBJ_E], [mission("A1-go", "A1", "attack", objective="OBJ-E")])
     msgs = (stays("A1", 0, 0, 10, 100) + path("A1", 110, 400, _drift_then_hold) + [start(100, "A1-go", "A1")]
@@ -245,9 +264,6 @@ def test_a_reorganization_elsewhere_does_not_move_a_units_corridor(tmp_path):
     assert oop and near(oop[0].t, 180.0)
 
 
-@pytest.mark.xfail(strict=True, reason="the corridor is built only at the start confirmation (LocationMonitors."
-                   "start): a unit whose position is not yet known then never gets one, and is never judged "
-                   "against it")
 def test_a_unit_first_heard_after_its_start_is_judged_in_its_corridor(tmp_path):
     sc = scenario(tmp_path, [OBJ_E], [mission("A1-go", "A1", "attack", objective="OBJ-E")])
     msgs = path("A1", 110, 400, _east(20.0)) + [start(100, "A1-go", "A1")]   # first report 10 s after the start
@@ -255,9 +271,6 @@ def test_a_unit_first_heard_after_its_start_is_judged_in_its_corridor(tmp_path):
     assert oop and oop[0].details["check"] == "corridor"
 
 
-@pytest.mark.xfail(strict=True, reason="SuoDomain._post_all_for posts the missions of a unit that comes under "
-                   "the EA (post_corridor records the target) but LocationMonitors.start is never called for an "
-                   "already active mission, so its corridor is never built: B's EA tells the drift, A's never")
 def test_a_unit_resubordinated_under_us_mid_mission_is_judged_in_its_corridor(tmp_path):
     sc = scenario(tmp_path, [OBJ_E], [mission("B1-go", "B1", "attack", objective="OBJ-E")])
     msgs = (stays("A1", 0, -3000, 10, 400) + stays("B1", 0, 0, 10, 100) + path("B1", 110, 400, _east(20.0))
@@ -394,10 +407,6 @@ def test_a_hostile_approaching_a_held_area_steadily_is_projected_before_it_enter
     assert not [a for a in of(ea, "penetration") if a.t < 450]
 
 
-@pytest.mark.xfail(strict=True, reason="penetration.py and configs/ea.toml say the projection and the later "
-                   "penetration are one story (told again only 1.5x stronger), but Areas.monitored_candidate marks "
-                   "the entering track as news and Voa._verdict gives news before it looks at the projection: "
-                   "the same track at the same strength is told twice")
 def test_a_projected_penetration_and_the_penetration_it_foretold_are_one_story(tmp_path):
     msgs, sc = _holder(tmp_path, "block", {"position": "BP-HOME"})
     msgs += track_path("H1", 150, 520, lambda t: (0.0, EDGE_Y + 1500 - 5.0 * (t - 150)))
@@ -424,8 +433,6 @@ def test_a_hostile_of_a_mission_without_penetration_check_is_no_penetration(tmp_
     assert not of(ea, "penetration") and not of(ea, "projected-penetration")
 
 
-@pytest.mark.xfail(strict=True, reason="a rear line is watched only as a 100 m strip (its buffer): a hostile "
-                   "reported before and after the line but never within 50 m of it has crossed it unseen")
 def test_a_hostile_reported_beyond_the_rear_line_has_crossed_it(tmp_path):
     msgs, sc = _holder(tmp_path, "defend", {"position": "BP-HOME", "rear_line": "PL-REAR"})
     # 300 m in front of PL-REAR, then 30 s later 300 m behind it (20 m/s): across it
@@ -700,12 +707,14 @@ def test_missions_lists_checks_for_every_mission_class(capsys):
             blocks[name] = []
         elif name is not None:
             blocks[name].append(ln.strip())
+
+    def says(n, word):
+        return any(re.search(word, x) for x in blocks[n] if x.startswith("checks: "))
+
     assert set(blocks) == set(REGISTRY)
     for n, lines in blocks.items():
         checks = [x for x in lines if x.startswith("checks: ")]
         assert checks and all(len(x) > len("checks: ") + 10 for x in checks), n
-    def says(n, word):
-        return any(re.search(word, x) for x in blocks[n] if x.startswith("checks: "))
     for n in ("seize", "clear", "secure", "destroy"):
         assert says(n, r"\(end-state\)"), n
     for n in ("isolate", "fix", "destroy", "contain"):

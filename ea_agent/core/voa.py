@@ -85,7 +85,7 @@ class Voa:
 
     def _verdict(self, c: Candidate) -> str | None:
         rec = self.last(c.key, c.t)
-        if rec is None or c.news:
+        if rec is None or (c.news and not rec.projected):   # news, unless a projection already told it
             return None
         ratio = self.repeat.get(c.type, 0.0)
         if rec.projected:   # the violation a projection told: the same story, unless much worse

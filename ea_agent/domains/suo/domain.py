@@ -171,12 +171,14 @@ class SuoDomain:
                 at = spec.start.t if spec.start.t is not None else t
                 heapq.heappush(self.auto, (max(at, t), m.id))
 
-    def _post_all_for(self, units: set[str]) -> None:
+    def _post_all_for(self, units: set[str], t: float) -> None:
         """Units newly in our subtree: monitor their ready and active missions too."""
         for mid, st in self.plan.state.items() if self.plan else ():
             m = self.missions[mid]
             if m.unit in units and st in ("ready", "active") and not isinstance(m, ContingentMission):
                 m.post_execution_constraints(self)
+                if st == "active":   # already running: judged from now, as at its start
+                    m.check_initial_location(self, t)
 
     def on_confirm(self, c: MissionConfirm) -> None:
         if self.plan is None:
@@ -240,7 +242,7 @@ class SuoDomain:
         before = set(self.own_units)
         self.taskorg.resubordinate(unit, new_parent)
         self._org_changed()
-        self._post_all_for(self.own_units - before)
+        self._post_all_for(self.own_units - before, t)
 
     def _auto_start(self, t: float) -> None:
         """Missions the EA executes itself (reorganizations) whose time has come."""

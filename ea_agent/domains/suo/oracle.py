@@ -251,12 +251,20 @@ class Truth:
     def thr(self, m: dict, key: str) -> float:
         return float(m["params"].get("voi", {}).get(key, self.voi[key]))
 
-    def _corridor(self, unit: str, t: float, dest: str):
-        """Where a unit with no route may be on its way: the line from its centroid at `t`
-        to the nearest point of its destination, and the destination itself."""
-        c = Point(self.member_points(unit, math.ceil(t / TICK - 1e-9)).mean(axis=0))   # the task org from t on
+    def _corridor(self, start, dest: str):
+        """Where a unit with no route may be on its way: the line from `start` to the
+        nearest point of its destination, and the destination itself."""
+        c = Point(start)
         near = nearest_points(c, self.area[dest])[1]
         return LineString([c, near]).union(self.area[dest]) if c.distance(near) > 1.0 else self.area[dest]
+
+    def _shift(self, unit: str, tr: float) -> np.ndarray:
+        """How far a reorganization at `tr` moves the unit's centroid with no member moving."""
+        k = math.ceil(tr / TICK - 1e-9)
+        def mean(sub):
+            return np.concatenate([self.leaf_xy[leaf][k] + self.offsets[leaf] for leaf in self.leaves
+                                   if leaf in sub]).mean(axis=0)
+        return mean(self.subtree(unit, tr)) - mean(self.subtree(unit, tr - 1e-6))
 
     def out_of_position(self) -> None:
         for mid, m in self.missions.items():
@@ -276,25 +284,34 @@ class Truth:
             corridor = not cont and dest in self.area and typ in ROUTE | OBJECTIVE
             if cont or corridor:
                 # a corridor starts again wherever a reorganization moves the unit's centroid
-                anchors = [s] + [tr for tr, _, _ in self.reorgs if s < tr < e]
+                # a corridor starts where the unit is at its start; it moves with the centroid
+                # when a reorganization changes the unit's members
+                shifts = [tr for tr, _, _ in self.reorgs if s < tr < e and
+                          self.subtree(m["unit"], tr) != self.subtree(m["unit"], tr - 1e-6)]
                 geom = (self.geom[cont] if (p.get("route") or p.get("axis")) else self.area[cont]) if cont else None
-                anchor = None
-                hits, peak = [], 0.0
+                if corridor:
+                    start = self.member_points(m["unit"], math.ceil(s / TICK - 1e-9)).mean(axis=0)
+                    geom = self._corridor(start, dest)
+                hits: list[float] = []
+                dist: dict[float, float] = {}
                 for k, t in enumerate(self.ticks):
                     if s <= t < e:
-                        if corridor and anchor != max(x for x in anchors if x <= t):
-                            anchor = max(x for x in anchors if x <= t)
-                            geom = self._corridor(m["unit"], anchor, dest)
+                        while corridor and shifts and shifts[0] <= t:
+                            start = start + self._shift(m["unit"], shifts.pop(0))
+                            geom = self._corridor(start, dest)
                         d = self.judged(geom, m["unit"], k, rule)
                         if d > thr / MATERIAL:   # within a MATERIAL step of the threshold either answer is fair
                             hits.append(t)
-                            peak = max(peak, d)
+                            dist[t] = d
                 for a, b in _runs(hits):
+                    over = [t for t in hits if a <= t <= b and dist[t] > thr]   # past the threshold itself
+                    peak = max(dist[t] for t in hits if a <= t <= b)
                     for o in self.owners_of(m["unit"], a):
-                        if peak > 1.5 * thr and b - a >= 30:   # a triggered task: once it must have fired
+                        if peak > 1.5 * thr and over and over[-1] - over[0] >= 30:
+                            at = over[0]   # a triggered task: not before it must have fired
                             self.must(o, "out-of-position", [], [m["unit"]], a - self.slack,
-                                      max(a, self.task_due.get(mid, a)) + 60, f"{mid} off {cont or 'its corridor'}",
-                                      at=a)
+                                      max(at, self.task_due.get(mid, at)) + 60, f"{mid} off {cont or 'its corridor'}",
+                                      at=at)
                         self.may(o, ["out-of-position"], [m["unit"]], a - self.slack, b + self.slack)
             dest = p.get("destination") or p.get("objective")
             geo = geometry_params(typ)
@@ -642,8 +659,14 @@ class Truth:
                     first = False
                     # a group that only grazes the area, gone before the next track report,
                     # may be seen there or not
-                    later = self.hostiles_at(t + TRACK_S).get(h)
-                    if later is not None and geom.contains(Point(later[0], later[1])):
+                    later_all = self.hostiles_at(t + TRACK_S)
+                    later = later_all.get(h)
+                    # one that closes within RESOLVE_M of a group already there by then is one
+                    # group with it to any sensor: it may be told as new or not
+                    merged = later is not None and any(
+                        math.hypot(later[0] - x, later[1] - y) < RESOLVE_M for g, (x, y, _s) in later_all.items()
+                        if g != h and g in near_at.get(t, ()))
+                    if later is not None and geom.contains(Point(later[0], later[1])) and not merged:
                         self.must(o, typ, [], [h, area], t_near - 15, t + 45, f"{h} enters {area}", at=t_in,
                                   about=[area])
                 for a, b in _runs(sorted(near_at)):

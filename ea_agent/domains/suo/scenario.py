@@ -371,6 +371,11 @@ def _check_event(m, cx: EventContext, where: str) -> None:
             owners = cx.mission_units.get(m.mission)
             if owners is None:
                 raise ScenarioError(f"{where}: field 'mission': unknown mission {m.mission!r} (in no plan)")
+            phase = "start" if m.action == "start-mission" else "end"
+            if not any(getattr(ms, phase).type == "ON-ORDER" for pl in cx.plans.values() for ms in pl.missions
+                       if ms.id == m.mission):
+                raise ScenarioError(f"{where}: field 'mission': {m.mission!r} does not {phase} ON-ORDER "
+                                    f"(its plan says when)")
             if not any(m.issuer in cx.taskorg.ancestors(u) for u in owners):
                 raise ScenarioError(f"{where}: field 'issuer': {m.issuer!r} is not a superior of "
                                     f"{' or '.join(sorted(owners))}, whose mission {m.mission!r} it orders")

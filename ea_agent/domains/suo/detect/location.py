@@ -24,47 +24,71 @@ class LocationMonitors(Detector):
 
     def reset(self) -> None:
         self.monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)
-        self.corridor_to: dict[str, str] = {}         # mission -> where its corridor leads (built at start)
-        self.corridors: dict[str, object] = {}        # mission -> corridor line
+        self.corridor_to: dict[str, tuple[Mission, str]] = {}   # mission -> (it, where its corridor leads)
+        self.corridors: dict[str, object] = {}                   # mission -> corridor (built at start)
+        self.corridor_of: dict[str, tuple] = {}                  # ... its start and the members it judges
 
     def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
         self.monitors[m.id].append((m, geom, rule, what))
 
     def post_corridor(self, m: Mission, target: str) -> None:
         """A route for a mission that has none: from where the unit is at its start to
-        the nearest point of `target` (built by `start`)."""
-        self.corridor_to[m.id] = target
+        the nearest point of `target` (built by `start`, or as soon as the unit's
+        position is known)."""
+        self.corridor_to[m.id] = (m, target)
 
     def start(self, m: Mission, t: float) -> None:
         """Check-Initial-Location: build the mission's corridor from where its unit is,
         then judge every monitor it posted at once, whether the unit moves or not."""
-        dom = self.dom
-        if m.id in self.corridor_to and m.id not in self.corridors and self._corridor(m):
-            self.monitors[m.id].append((m, m.id, m.LOCATION_RULE, "corridor"))
+        self._corridor(m)
         for _, geom, rule, what in list(self.monitors.get(m.id, ())):
             self.check(m, geom, rule, t, what)
 
-    def _corridor(self, m: Mission) -> bool:
-        """The corridor from the unit's centroid now to the nearest point of its target,
-        with the target itself (arriving is no departure from it)."""
-        pos = self.dom.pic.centroid(m.unit)
+    def _corridor(self, m: Mission, start: tuple[float, float] | None = None) -> None:
+        """The corridor from `start` (default: the unit's centroid now) to the nearest point
+        of its target, with the target itself (arriving is no departure from it); nothing
+        while the unit's position is unknown."""
+        if m.id not in self.corridor_to:
+            return
+        # where its members' reports, moved on by their velocity, put the unit now (a report
+        # up to a minute old would start the corridor behind a moving unit)
+        pos = start or self.dom.unit_now.get(m.unit) or self.dom.pic.centroid(m.unit)
         if pos is None:
-            return False
-        area = self.dom.overlay[self.corridor_to[m.id]].area
+            return
+        area = self.dom.overlay[self.corridor_to[m.id][1]].area
+        if m.id not in self.corridors:
+            self.monitors[m.id].append((m, m.id, m.LOCATION_RULE, "corridor"))
         self.corridors[m.id] = shapely.union(shapely.shortest_line(shapely.Point(pos), area), area)
-        return True
+        self.corridor_of[m.id] = (pos, self.dom.pic.members[m.unit].copy())
+
+    def _pending_corridors(self) -> None:
+        """Running missions whose corridor could not be built at their start (position unknown)."""
+        plan = self.dom.plan
+        for mid, (m, _) in list(self.corridor_to.items()):
+            if mid not in self.corridors and plan is not None and plan.state.get(mid) == "active":
+                self._corridor(m)
 
     def org_changed(self) -> None:
-        """A reorganization moves a unit's centroid without any member moving: the
-        corridors of running missions start again from where the centroid is now."""
+        """A reorganization moves a unit's centroid without any member moving: the start
+        of a running mission's corridor moves with it (by the centroid of its new members
+        less that of its old ones, now), so a unit already off its corridor stays off."""
+        pic = self.dom.pic
         for mid in list(getattr(self, "corridors", ())):
-            mons = self.monitors.get(mid)
-            if mons:
-                self._corridor(mons[0][0])
+            m = self.corridor_to[mid][0]
+            (x, y), old = self.corridor_of[mid]
+            new = pic.members[m.unit]
+            if np.array_equal(old, new):
+                continue
+            a, b = pic.xy[old], pic.xy[new]
+            a, b = a[~np.isnan(a[:, 0])], b[~np.isnan(b[:, 0])]
+            if len(a) and len(b):
+                dx, dy = (b.mean(axis=0) - a.mean(axis=0)).tolist()
+                self._corridor(m, (x + dx, y + dy))
 
     def end_mission(self, mid: str) -> None:
         self.monitors.pop(mid, None)
         self.corridors.pop(mid, None)
+        self.corridor_to.pop(mid, None)
 
     def check(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:
         """A one-off check (start or end of a mission), alerted at once."""
@@ -77,6 +101,8 @@ class LocationMonitors(Detector):
         dom = self.dom
         if not (ch.leaves or ch.rescan) or dom.plan is None:
             return
+        if len(self.corridors) < len(self.corridor_to):
+            self._pending_corridors()
         todo = [mon for mid, mons in self.monitors.items()
                 if mons and (ch.rescan or mons[0][0].unit in ch.units) and dom.plan.state.get(mid) == "active"
                 for mon in mons if dom.in_plan(mon[0])]
@@ -109,7 +135,7 @@ class LocationMonitors(Detector):
         thr = dom.voi(m, "out_of_position_m")
         if d is None or d <= thr:
             return None
-        place = self.corridor_to[geom_id] if what == "corridor" else geom_id
+        place = self.corridor_to[geom_id][1] if what == "corridor" else geom_id
         ref = f"should be in the corridor to {place}" if what == "corridor" else f"should be at {geom_id}"
         if pos is not None:
             near = shapely.shortest_line(shapely.Point(pos), geom).coords[-1]

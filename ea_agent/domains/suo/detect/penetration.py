@@ -1,6 +1,6 @@
 """Projected penetration (beyond the paper, as the other projections): before a hostile
 enters an area no hostile may enter (block, retain, guard, a defence's rear line), from
-how its track has been moving. The actual penetration is the Areas component's alert
+how its track has been moving; and a rear line crossed between two reports. The actual penetration is the Areas component's alert
 of kind "penetration"; the projection sets that alert's history, so VOA tells the
 story once unless the penetration proves much stronger."""
 from __future__ import annotations
@@ -41,6 +41,18 @@ class ProjectedPenetrations(Detector):
             while h and h[0][0] < t - KEEP_S:
                 h.popleft()
 
+    def _crossed(self, t: float, area: str, m) -> None:
+        """A line no hostile may cross: a track whose last move went across it has, even
+        if no report put it inside the line's strip (a fast mover between two reports)."""
+        dom = self.dom
+        line = dom.overlay[area].geom
+        gone = dom.areas.tracks.get(area, set())   # in the strip: the Areas component tells it
+        over = [k for k, h in self.hist.items() if len(h) >= 2 and h[-1][0] == t and k not in gone
+                and line.intersects(shapely.LineString([h[-2][1:], h[-1][1:]]))]
+        if over:
+            strength = sum(dom.pic.tracks[k].strength for k in over if k in dom.pic.tracks)
+            dom.areas.monitored_candidate(m, area, t, sorted(over), strength, expected=False, kind="penetration")
+
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
         horizon = float(dom.voi_cfg["penetration_horizon_s"])
@@ -52,6 +64,8 @@ class ProjectedPenetrations(Detector):
             return
         tracks = dom.pic.tracks
         for area, m in watched:
+            if dom.overlay[area].geom.geom_type == "LineString":
+                self._crossed(t, area, m)
             geom = dom.overlay[area].area
             inside = dom.areas.tracks.get(area, set())
             coming = []

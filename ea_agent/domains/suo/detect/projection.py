@@ -73,13 +73,16 @@ class Projections(Detector):
     def _route(self, m: Mission) -> tuple[str, str] | None:
         """The route or axis whose centroid monitor the mission posted (geometry id, which)."""
         for _, geom, rule, what in self.dom.location.monitors.get(m.id, ()):
-            if what in ("route", "axis") and rule == "centroid":
+            if what in ("route", "axis") and rule == "centroid":   # a corridor's trend is too weak to project
                 return geom, what
         return None
 
+    def _line(self, r: tuple[str, str]):
+        return self.dom.location.corridors[r[0]] if r[1] == "corridor" else self.dom.overlay[r[0]].geom
+
     def _off_route(self, m: Mission, pos) -> float | None:
         r = self._route(m)
-        return None if r is None else float(shapely.distance(self.dom.overlay[r[0]].geom, shapely.Point(pos)))
+        return None if r is None else float(shapely.distance(self._line(r), shapely.Point(pos)))
 
     def _destination(self, m: Mission) -> str | None:
         dest = m.params.get("destination") or m.params.get("objective")
@@ -94,7 +97,7 @@ class Projections(Detector):
             return None
         p = shapely.Point(pos)
         r = self._route(m)
-        if r is not None:   # along the route, then on to the destination
+        if r is not None and r[1] != "corridor":   # along the route, then on to the destination
             line = self.dom.overlay[r[0]].geom
             along = line.length - line.project(p)
             return along + float(shapely.distance(self.dom.overlay[dest].area, shapely.Point(line.coords[-1])))
@@ -133,10 +136,12 @@ class Projections(Detector):
             return
         r = self._route(m)
         geom, what = r
+        if what == "corridor":
+            geom = self.dom.location.corridor_to[geom][1]
         name = self.dom.name(m.unit)
         cands.append(Candidate(
             t, "projected-out-of-position", m.compute_priority("projected-out-of-position"), (m.unit,),
-            f"{name} projected to leave {geom} in {ahead:.0f} s (at {hms(t + ahead)}): {km(d1)} off it now, "
+            f"{name} projected to leave {'the corridor to ' if what == 'corridor' else ''}{geom} in {ahead:.0f} s (at {hms(t + ahead)}): {km(d1)} off it now, "
             f"drifting {rate:.1f} m/s",
             key=("projected-out-of-position", m.id, what), measure=horizon - ahead,
             details={"mission": m.id, "projects": "out-of-position", "control_measure": geom, "check": what,
