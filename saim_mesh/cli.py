@@ -273,6 +273,8 @@ def _command_fields(a) -> tuple[str, dict]:
         return "set", {"key": a.key, "value": value}
     if a.cmd == "confirm":
         return "confirm", {"mission": a.mission, "phase": a.phase}
+    if a.cmd == "decide":
+        return "decide", {"alert": a.alert, "option": a.option}
     return "cff", {"cff": a.cff, "action": a.action}
 
 
@@ -458,7 +460,10 @@ def main(argv: list[str] | None = None) -> int:
             ("confirm", "confirm that a mission started or ended", [
                 ("--mission", dict(required=True)), ("--phase", dict(required=True, choices=["start", "end"]))]),
             ("cff", "confirm or cancel a call for fire the EA has seen", [
-                ("--cff", dict(required=True)), ("--action", dict(required=True, choices=["confirm", "cancel"]))])):
+                ("--cff", dict(required=True)), ("--action", dict(required=True, choices=["confirm", "cancel"]))]),
+            ("decide", "answer an alert that asks for a decision (threat-ahead: continue, abort, execute:BRANCH)", [
+                ("--alert", dict(required=True, help="alert id, <owner>/<n>")),
+                ("--option", dict(required=True, help="one of the alert's details.decision.options"))])):
         c = sub.add_parser(name, help=help_)
         c.add_argument("--scenario", required=True)
         c.add_argument("--unit", required=True, help="the unit whose EA takes the command")

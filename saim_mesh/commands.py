@@ -43,7 +43,7 @@ def make(kind: str, **fields) -> msgspec.Struct:
 
 
 REF_FIELD = {W.AckCmd: "alert", W.SilenceCmd: "id", W.UnsilenceCmd: "id", W.SetCmd: "key", W.ConfirmCmd: "mission",
-             W.CffCmd: "cff"}
+             W.CffCmd: "cff", W.DecideCmd: "alert"}
 
 
 def result(cmd, ok: bool, t: float, error: str = "") -> W.CmdResult:
@@ -99,6 +99,8 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
             _confirm(ea, cmd, t)
         elif k is W.CffCmd:
             _cff(ea, book, cmd, t)
+        elif k is W.DecideCmd:
+            _decide(ea, cmd, t)
         else:
             raise ValueError(f"not a command: {k.__name__}")
     except KeyError as e:
@@ -116,6 +118,22 @@ def _confirm(ea, cmd: W.ConfirmCmd, t: float) -> None:
     if m is None:
         raise KeyError(f"confirm: unknown mission {cmd.mission!r} (not in the EA's plan)")
     ea.submit(M.MissionConfirm(t, cmd.mission, m.unit, cmd.phase, "local"))
+
+
+def _decide(ea, cmd: W.DecideCmd, t: float) -> None:
+    """The commander's answer to an alert that asked for a decision: the EA's domain carries
+    it out (abort the mission, execute a branch, continue); the alert counts as acknowledged."""
+    a = next((x for x in reversed(ea.alerts) if x.details.get("id") == cmd.alert), None)
+    if a is None:
+        raise KeyError(f"decide: unknown alert {cmd.alert[:80]!r}: not issued by the EA of {ea.owner}")
+    decide = getattr(ea.domain, "decide", None)
+    if decide is None or "decision" not in a.details:
+        raise ValueError(f"decide: alert {cmd.alert} asks for no decision")
+    decide(a.details, cmd.option, t)
+    try:
+        ea.ack(cmd.alert, t)
+    except KeyError:
+        pass   # not repeating (no console armed repeats for it): nothing to stop
 
 
 def _cff(ea, book: OrderedDict, cmd: W.CffCmd, t: float) -> None:

@@ -142,6 +142,13 @@ class CffCmd(_Wire, kw_only=True):
     action: Literal["confirm", "cancel"]
 
 
+class DecideCmd(_Wire, kw_only=True):
+    """Answer an alert that asks for a decision (`details.decision.options`): the EA carries it out."""
+    req: Req
+    alert: Name
+    option: Name
+
+
 class CmdResult(_Wire, kw_only=True):
     """The EA's answer to command `req`: `t` is the scenario time it took effect; `ref`
     what it was about (the alert acknowledged, the silence, mission, call for fire or
@@ -155,7 +162,7 @@ class CmdResult(_Wire, kw_only=True):
 
 
 COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": UnsilenceCmd, "set": SetCmd,
-                             "confirm": ConfirmCmd, "cff": CffCmd}
+                             "confirm": ConfirmCmd, "cff": CffCmd, "decide": DecideCmd}
 CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health,
            *COMMANDS.values(), CmdResult)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}

@@ -228,7 +228,7 @@ def test_an_ordered_battle_switches_plans_in_its_events(battles):
     """One order event at the order time; no main-plan confirmation after it; every platoon's withdraw start."""
     sim, ev = battles[True]
     t = sim.order["t"]
-    orders = [e for e in ev if e["kind"] == "order"]
+    orders = [e for e in ev if e["kind"] == "order" and e["action"] == "execute-plan"]
     assert orders == [{"kind": "order", "t": t, "action": "execute-plan", "plan": "withdrawal", "issuer": "BN"}]
     main = {m["id"] for m in G.plan_doc(sim)["plans"]["main"]}
     missions = [e for e in ev if e["kind"] == "mission"]
@@ -268,7 +268,11 @@ def test_a_battle_without_an_order_has_no_order_nor_withdrawal(battles):
     """No order: no order event, no withdraw confirmation, main plan valid throughout."""
     sim, ev = battles[False]
     assert sim.withdraw == {}
-    assert not [e for e in ev if e["kind"] == "order" or "withdraw" in e.get("mission", "")]
+    assert not [e for e in ev if e["kind"] == "order" and e["action"] != "start-mission"
+                or "withdraw" in e.get("mission", "")]
+    # the only orders: BN's to start M's march (ON-ORDER), as the battle drew them
+    assert [(e["t"], e["mission"], e["issuer"]) for e in ev if e["kind"] == "order"] == \
+        [(o["t"], o["mission"], o["issuer"]) for o in sim.mission_orders]
     tr = O.Truth(sim, FEATS, G.plan_doc(sim), ["BN"])
     assert set(tr.valid.values()) == {(0.0, math.inf)}
     assert not any(m.endswith("-withdraw") for m in tr.valid)

@@ -29,10 +29,12 @@ class Actions(Protocol):
     def set(self, unit: str, key: str, value: float | int | list[float]) -> dict: ...
     def confirm(self, unit: str, mission: str, phase: str) -> dict: ...
     def cff(self, unit: str, cff: str, action: str) -> dict: ...
+    def decide(self, unit: str, alert: str, option: str) -> dict: ...
 
 
 FIELDS = {"ack": ("unit", "alert"), "silence": ("unit", "types", "subjects", "areas", "for_s", "comment"),
-          "unsilence": ("unit", "id"), "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action")}
+          "unsilence": ("unit", "id"), "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action"),
+          "decide": ("unit", "alert", "option")}
 
 
 def _text(body: dict, f: str, choices=None, default: str | None = None) -> str:
@@ -76,13 +78,15 @@ def validate(kind: str, body: Any, state) -> tuple[str, dict]:
         raise BadRequest(f"unknown unit {unit[:60]!r}: not in the task organization of {state.sc.name}")
     if unit not in state.actors:
         raise BadRequest(f"this console does not act for {unit} (it acts for {', '.join(state.actors)})")
-    if kind == "ack":
+    if kind in ("ack", "decide"):
         aid = _text(body, "alert")
         owner = state.known_alert(aid)
         if owner is None:
             raise BadRequest(f"unknown alert {aid[:60]!r}: this console has not seen it")
         if owner != unit:
             raise BadRequest(f"alert {aid} was raised by the EA of {owner}, not {unit}")
+        if kind == "decide":   # the EA checks the option against the alert's own list
+            return unit, {"alert": aid, "option": _text(body, "option")}
         return unit, {"alert": aid}
     if kind == "silence":
         f = {k: _texts(body, k) for k in ("types", "subjects", "areas")}
@@ -175,3 +179,6 @@ class CommandActions:
 
     def cff(self, unit, cff, action):
         return self._do(unit, "cff", cff=cff, action=action)
+
+    def decide(self, unit, alert, option):
+        return self._do(unit, "decide", alert=alert, option=option)

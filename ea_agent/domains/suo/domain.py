@@ -20,7 +20,8 @@ from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
 from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Contingencies, Coordination,
-                     Coverage, Detector, EndStates, Escapes, LocationMonitors, ScheduleMonitors)
+                     Coverage, Detector, EndStates, Escapes, LocationMonitors, ScheduleMonitors, ThreatsAhead)
+from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import ContingentMission, Mission, make
 from .picture import Picture, Watchman
@@ -65,6 +66,7 @@ class SuoDomain:
         self.end_state = self._part(EndStates)
         self.coverage = self._part(Coverage)
         self.bands = self._part(Bands)
+        self.ahead = self._part(ThreatsAhead)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -287,6 +289,47 @@ class SuoDomain:
 
     def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
         self.bands.post(m, other, lo, hi)
+
+    def threat_ahead(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],
+                     recommended: str) -> None:
+        self.ea.post(self.ahead.candidate(m, t, tracks, strength, options, recommended))
+
+    def branches_for(self, m: Mission) -> list[str]:
+        return branches_for(self, m)
+
+    def strength_of(self, unit: str) -> int:
+        """Friendly strength: the unit's members with a known position."""
+        xy = self.pic.xy[self.pic.members[unit]]
+        return int((~np.isnan(xy[:, 0])).sum())
+
+    # -- decisions the commander takes on an alert that asked for one --------------------
+    def decide(self, details: dict, option: str, t: float) -> str:
+        """Carry out `option` of a decision alert (its `details`): abort the mission, execute
+        a branch, or continue. Returns what was done; ValueError if it cannot be."""
+        d = details.get("decision")
+        if not d or option not in d.get("options", ()):
+            raise ValueError(f"decide: {option!r} is not an option of this alert "
+                             f"({', '.join(d['options']) if d else 'it asks for no decision'})")
+        mid = details.get("mission")
+        if self.plan is None or mid not in self.missions:
+            raise ValueError(f"decide: mission {mid!r} is no longer in the plan")
+        if option == "continue":
+            return f"{mid} continues"
+        if option == "abort":
+            if self.plan.state.get(mid) != "active":
+                raise ValueError(f"decide: mission {mid!r} is not running ({self.plan.state.get(mid)})")
+            self.plan.state[mid] = "aborted"   # not done: what follows it waits for new orders
+            self.timers.cancel(mid)
+            for det in self.detectors:
+                det.end_mission(mid)
+            return f"{mid} aborted"
+        branch = option.split(":", 1)[1]
+        c = self.contingency.pending.pop(branch, None)
+        if c is None:
+            raise ValueError(f"decide: branch {branch!r} is not waiting to be executed")
+        self.contingency.execute(c, t)
+        self.areas.reindex()
+        return f"{branch} executed"
 
     def post_red_monitor(self, m: Mission, area: str, expected: bool, expect_by: float | None = None) -> None:
         self.areas.post_red_monitor(m, area, expected, expect_by)

@@ -24,7 +24,7 @@ DEFAULT_PRIORITY = {
     "schedule": "priority", "unknown-position": "priority", "monitored": "priority",
     "hostile-expected": "priority", "ave-of-approach": "routine",
     "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
-    "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate",
+    "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate", "threat-ahead": "immediate",
 }
 
 
@@ -53,6 +53,11 @@ class Mission(CoreMission):
     def respond_to_monitored_red_activity(self, ctx: "SuoDomain", area: str, t: float,
                                           tracks: list[str], strength: int, kind: str = "monitored") -> None:
         ctx.monitored_candidate(self, area, t, tracks, strength, expected=False, kind=kind)
+
+    def respond_to_threat_ahead(self, ctx: "SuoDomain", t: float, tracks: list[str], strength: int) -> None:
+        """Hostiles on the stretch of route ahead of a moving unit: ask the commander (most
+        missions do not move along a line and never get here)."""
+        ctx.threat_ahead(self, t, tracks, strength, ["continue", "abort"], "continue")
 
     def desired_strength_ratio(self) -> float:
         return self.DESIRED_STRENGTH_RATIO
@@ -83,6 +88,7 @@ class MovementMission(Mission):
     REQUIRED = ("destination",)
     GEOMETRY_PARAMS = ("route", "destination")
     CHECKS = _checks("on its route, or in the corridor from its start to its destination (out-of-position)",
+                     "hostiles on the route ahead: recommend a branch or aborting the move (threat-ahead, a decision)",
                      "at its destination at the end (Check-Final-Location)",
                      "projected off its route or late at its destination (projections)")
 
@@ -94,6 +100,12 @@ class MovementMission(Mission):
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["destination"], self.LOCATION_RULE, t, "destination")
+
+    def respond_to_threat_ahead(self, ctx, t, tracks, strength):
+        """A move is not a fight: recommend a branch the plan holds for the unit, else aborting the move."""
+        branches = [f"execute:{b}" for b in ctx.branches_for(self)]
+        ctx.threat_ahead(self, t, tracks, strength, ["abort", *branches, "continue"],
+                         branches[0] if branches else "abort")
 
 
 @mission
@@ -192,6 +204,7 @@ class OffensiveMission(Mission):
     DESIRED_STRENGTH_RATIO = 3.0
     PRIORITY = {"schedule": "immediate"}
     CHECKS = _checks("on its axis, or in the corridor from its start to the objective (out-of-position)",
+                     "hostiles on the axis ahead: go on if strong enough, else abort (threat-ahead, a decision)",
                      "on the objective at the end (Check-Final-Location)")
     END_STATE: ClassVar[bool] = False   # no hostile left in the objective at the end
     ESCAPE: ClassVar[bool] = False      # no hostile leaves the objective while it runs
@@ -203,6 +216,12 @@ class OffensiveMission(Mission):
             ctx.post_corridor(self, self.params["objective"])
         if self.ESCAPE:
             ctx.post_escape(self, self.params["objective"])
+
+    def respond_to_threat_ahead(self, ctx, t, tracks, strength):
+        """An attack expects the enemy: go on when strong enough for it (DESIRED_STRENGTH_RATIO), else abort."""
+        ours = ctx.strength_of(self.unit)
+        ok = strength <= 0 or ours / strength >= self.desired_strength_ratio()
+        ctx.threat_ahead(self, t, tracks, strength, ["continue", "abort"], "continue" if ok else "abort")
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["objective"], self.FINAL_RULE, t, "objective")

@@ -21,12 +21,14 @@ from collections import defaultdict
 
 import numpy as np
 from shapely.geometry import LineString, Point, Polygon, shape
-from shapely.ops import nearest_points
+from shapely.ops import nearest_points, substring
 
 # What the commander said is worth knowing (the paper's scenario, 6.8); plans may
 # override per mission (params.voi). Fixed here: the EAs read theirs from their config.
 SPEC = {"out_of_position_m": 150.0, "schedule_s": 30.0, "unknown_position_s": 120.0,
-        "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0}
+        "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0,
+        "ahead_m": 1500.0, "ahead_width_m": 300.0}   # a moving unit's commander wants to know of hostiles
+                                                     # this far ahead on its route, this near it
 EPISODE_S = 720.0   # the paper's alert expiry (12 min): a threat back near a platoon, or a group back
                     # in a watched area, after this long away is news again
 CLOSER = 2.0        # the nearest threat at half the distance of the last incident: a new one
@@ -153,6 +155,7 @@ class Truth:
         self.situations: list[dict] = []
         self.task_started: dict[str, float] = {}   # triggered contingency -> when its task may have started
         self.task_due: dict[str, float] = {}       # ... and by when it must have
+        self.corridor_start: dict[str, np.ndarray] = {}   # route-less mission -> where its corridor starts
 
     # -- task organization over time ----------------------------------------------------
     def parent_at(self, t: float) -> dict[str, str | None]:
@@ -292,6 +295,7 @@ class Truth:
                 if corridor:
                     start = self.member_points(m["unit"], math.ceil(s / TICK - 1e-9)).mean(axis=0)
                     geom = self._corridor(start, dest)
+                    self.corridor_start[mid] = start
                 hits: list[float] = []
                 dist: dict[float, float] = {}
                 for k, t in enumerate(self.ticks):
@@ -466,6 +470,58 @@ class Truth:
                 self._coverage(mid, m, p["position"], p["engagement_area"], s)
             if typ in FOLLOW:
                 self._band(mid, m, p["supported"], p.get("band_m") or (0.0, FOLLOW_MAX_M), s, e)
+            line = self._line_of(mid, m)
+            if line is not None:
+                self._ahead(mid, m, line, s, e)
+
+    def _line_of(self, mid, m):
+        """The line a moving mission follows: its route or axis, or its corridor's line."""
+        typ, p = m["type"], m["params"]
+        if typ not in ROUTE | OBJECTIVE:
+            return None
+        if p.get("route") or p.get("axis"):
+            return self.geom[p.get("route") or p.get("axis")]
+        if mid in self.corridor_start:
+            c = Point(self.corridor_start[mid])
+            near = nearest_points(c, self.area[p.get("destination") or p.get("objective")])[1]
+            return LineString([c, near]) if c.distance(near) > 1.0 else None
+        return None
+
+    def _ahead(self, mid, m, line, s, e) -> None:
+        """Hostiles on the stretch of line ahead of the unit (SPEC ahead_m, ahead_width_m): the
+        commander must be asked once per episode about a group well inside it; one near its
+        edges (where sensors and the unit's own reports err) may be told."""
+        far, wide = float(self.voi["ahead_m"]), float(self.voi["ahead_width_m"])
+        near_ts, who, first_near, last_deep = [], set(), None, -math.inf
+        for k, t in enumerate(self.ticks):
+            if not s <= t < e:
+                continue
+            hs = self.hostiles_at(t)
+            if not hs:
+                first_near = None
+                continue
+            d0 = line.project(Point(self.member_points(m["unit"], k).mean(axis=0)))
+            near_zone = substring(line, d0, min(line.length, d0 + far + TOLERANCE_M)).buffer(wide + TOLERANCE_M)
+            near = [h for h, (x, y, _s) in hs.items() if near_zone.contains(Point(x, y))]
+            if not near:
+                first_near = None
+                continue
+            near_ts.append(t)
+            who |= set(near)
+            first_near = t if first_near is None else first_near
+            end = min(line.length, d0 + far - TOLERANCE_M)
+            if end - d0 < 1.0:
+                continue
+            deep_zone = substring(line, d0, end).buffer(wide - TOLERANCE_M)
+            if any(deep_zone.contains(Point(*hs[h][:2])) for h in near):
+                if t - last_deep >= EPISODE_S:
+                    for o in self.owners_of(m["unit"], t):
+                        self.must(o, "threat-ahead", [], [m["unit"], *near], first_near - 15, t + 30,
+                                  f"hostiles ahead of {m['unit']} ({mid})", at=t, about=[m["unit"]])
+                last_deep = t
+        for a, b in _runs(near_ts):
+            for o in self.owners_of(m["unit"], a):
+                self.may(o, ["threat-ahead"], [m["unit"], *sorted(who)], a - 15, b + 30, about=[m["unit"]])
 
     def _escape(self, mid, m, area, s, e) -> None:
         """A group well inside the area while the mission runs that goes well beyond its edge."""

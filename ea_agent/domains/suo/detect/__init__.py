@@ -8,6 +8,7 @@ Areas, which does not repeat the activity a fired contingency already told.
 """
 from __future__ import annotations
 
+from .ahead import ThreatsAhead
 from .areas import Areas
 from .bands import Bands
 from .base import BASE, Changes, Detector
@@ -29,7 +30,7 @@ DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
-    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations,
+    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -38,4 +39,4 @@ ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fi
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire",
            "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "Fratricide", "LocationMonitors",
-           "ProjectedPenetrations", "ScheduleMonitors", "ThreatEnvelopes", "UnknownPositions"]
+           "ProjectedPenetrations", "ScheduleMonitors", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]

@@ -26,6 +26,7 @@ class LocationMonitors(Detector):
         self.monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)
         self.corridor_to: dict[str, tuple[Mission, str]] = {}   # mission -> (it, where its corridor leads)
         self.corridors: dict[str, object] = {}                   # mission -> corridor (built at start)
+        self.lines: dict[str, object] = {}                       # ... the line of it (to the target's edge)
         self.corridor_of: dict[str, tuple] = {}                  # ... its start and the members it judges
 
     def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
@@ -58,7 +59,8 @@ class LocationMonitors(Detector):
         area = self.dom.overlay[self.corridor_to[m.id][1]].area
         if m.id not in self.corridors:
             self.monitors[m.id].append((m, m.id, m.LOCATION_RULE, "corridor"))
-        self.corridors[m.id] = shapely.union(shapely.shortest_line(shapely.Point(pos), area), area)
+        self.lines[m.id] = shapely.shortest_line(shapely.Point(pos), area)
+        self.corridors[m.id] = shapely.union(self.lines[m.id], area)
         self.corridor_of[m.id] = (pos, self.dom.pic.members[m.unit].copy())
 
     def _pending_corridors(self) -> None:
@@ -88,6 +90,7 @@ class LocationMonitors(Detector):
     def end_mission(self, mid: str) -> None:
         self.monitors.pop(mid, None)
         self.corridors.pop(mid, None)
+        self.lines.pop(mid, None)
         self.corridor_to.pop(mid, None)
 
     def check(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:

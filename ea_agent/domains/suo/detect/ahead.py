@@ -1,0 +1,86 @@
+"""Hostiles ahead (paper 6.6.1, Respond-To-Monitored-Red-Activity): a moving unit watches
+the stretch of its route, axis or corridor ahead of it, and hostiles there are answered
+by its mission class: a movement recommends aborting the move, or executing a branch the
+plan holds for it; the alert asks the commander to decide (`saim-mesh command ... decide`
+or the console), and the decision is carried out by the EA."""
+from __future__ import annotations
+
+import numpy as np
+import shapely
+from shapely.ops import substring
+
+from ea_agent.core.alert import Candidate
+
+from ..missions import ContingentMission, Mission
+from ..render import km
+from .areas import ADVERSARIAL
+from .base import Changes, Detector
+
+
+class ThreatsAhead(Detector):
+    TYPES = {"threat-ahead": ADVERSARIAL}
+
+    def watched(self) -> list[tuple[Mission, object]]:
+        """Running missions that move along a line, with it."""
+        dom = self.dom
+        loc = dom.location
+        out = []
+        for mid, mons in loc.monitors.items():
+            if dom.plan is None or dom.plan.state.get(mid) != "active" or not mons or not dom.in_plan(mons[0][0]):
+                continue
+            for m, geom, _rule, what in mons:
+                if what in ("route", "axis"):
+                    out.append((m, dom.overlay[geom].geom))
+                    break
+                if what == "corridor":
+                    out.append((m, loc.lines[mid]))
+                    break
+        return out
+
+    def ahead(self, m: Mission, line) -> object | None:
+        """The watched stretch: from the unit's place along the line, `ahead_m` on, widened by `ahead_width_m`."""
+        dom = self.dom
+        pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
+        if pos is None:
+            return None
+        s = line.project(shapely.Point(pos))
+        e = min(line.length, s + dom.voi(m, "ahead_m"))
+        if e - s < 1.0:
+            return None
+        return substring(line, s, e).buffer(dom.voi(m, "ahead_width_m"))
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        if not (ch.tracks or ch.rescan) or not dom.pic.tracks or float(dom.voi_cfg["ahead_m"]) <= 0.0:
+            return
+        tracks = dom.pic.tracks
+        ids = sorted(tracks)
+        xy = np.array([(tracks[k].x, tracks[k].y) for k in ids])
+        for m, line in self.watched():
+            zone = self.ahead(m, line)
+            if zone is None:
+                continue
+            inside = [k for k, ok in zip(ids, shapely.contains_xy(zone, xy[:, 0], xy[:, 1])) if ok
+                      and tracks[k].strength > 0]
+            if inside:
+                m.respond_to_threat_ahead(dom, t, inside, sum(tracks[k].strength for k in inside))
+
+    def candidate(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],
+                  recommended: str) -> Candidate:
+        dom = self.dom
+        branches = [o for o in options if o.startswith("execute:")]
+        how = {"abort": "abort the move", "continue": "continue"}
+        rec = how.get(recommended, f"execute branch {recommended.split(':', 1)[-1]}")
+        return Candidate(
+            t, "threat-ahead", m.compute_priority("threat-ahead"), (m.unit, *tracks),
+            f"Hostiles ahead of {dom.name(m.unit)} on its {m.TYPE} ({strength} entities within "
+            f"{km(dom.voi(m, 'ahead_m'))}): decide: {' / '.join(options)} (recommended: {rec})",
+            key=("threat-ahead", m.id), measure=float(strength), friendly=False,
+            details={"mission": m.id, "strength": strength, "tracks": tracks,
+                     "decision": {"options": options, "recommended": recommended, "branches": branches}})
+
+
+def branches_for(dom, m: Mission) -> list[str]:
+    """Dormant branches of our plan that the unit would execute (the decision's other options)."""
+    return sorted(c.id for c in dom.missions.values() if isinstance(c, ContingentMission) and c.unit == m.unit
+                  and dom.in_plan(c) and dom.plan.state.get(c.id) == "dormant" and c.TYPE == "branch")
