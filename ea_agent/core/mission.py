@@ -25,8 +25,9 @@ class Mission:
     CHECKS: ClassVar[tuple[str, ...]] = ("start and end time constraints (Fig. 6)",)   # what it monitors
 
     @classmethod
-    def check_params(cls, params: dict) -> tuple[str, str] | None:
-        """A class-specific problem with `params` as (field, why), or None; `validate` reports it."""
+    def check_params(cls, params: dict, overlay: dict) -> tuple[str, str] | None:
+        """A class-specific problem with `params` (against the overlay's control measures) as
+        (field, why), or None; `validate` reports it."""
         return None
 
     def __init__(self, spec: MissionSpec):
@@ -81,7 +82,17 @@ class Mission:
         """Missions carried out by people need nothing from the EA."""
 
     def compute_priority(self, alert_type: str) -> str:
-        return self.PRIORITY.get(alert_type, self.DEFAULT_PRIORITY.get(alert_type, "priority"))
+        """The mission's own priority for the type, else the EA's default (`defaults`: the
+        domain's table, overridden by the EA's configuration), else PRIORITY."""
+        return self.PRIORITY.get(alert_type, self.defaults.get(alert_type, "priority"))
+
+    @property
+    def defaults(self) -> dict[str, str]:
+        return self.__dict__.get("_defaults", self.DEFAULT_PRIORITY)
+
+    def use_defaults(self, table: dict[str, str]) -> "Mission":
+        self.__dict__["_defaults"] = table
+        return self
 
 
 class Registry(dict):

@@ -14,16 +14,16 @@ from typing import TypeVar
 
 import numpy as np
 
-from ea_agent.core.alert import Alert, Candidate
+from ea_agent.core.alert import PRIORITIES, Alert, Candidate
 from ea_agent.core.geo import Projection
 from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
-from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Contingencies, Coordination,
+from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies, Coordination,
                      Coverage, Detector, EndStates, Escapes, LocationMonitors, ScheduleMonitors, ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
-from .missions import ContingentMission, Mission, make
+from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
 from .picture import Picture, Watchman
 
 __all__ = ["ALERT_TYPES", "CATEGORY", "SuoDomain"]
@@ -43,6 +43,13 @@ class SuoDomain:
         self.overlay = overlay
         self.cfg = cfg
         self.voi_cfg = cfg["voi"]
+        # alert type -> default priority: the mission model's table, then the EA's [priority]
+        self.priorities = {**DEFAULT_PRIORITY, **cfg.get("priority", {})}
+        bad = {k: v for k, v in self.priorities.items() if v not in PRIORITIES}
+        if bad:
+            k = sorted(bad)[0]
+            raise ValueError(f"[priority] {k} = {bad[k]!r}: not one of {', '.join(PRIORITIES)}")
+        self.base = Mission(BASE.spec).use_defaults(self.priorities)   # for units without an active mission
         self.pic = Picture(self.taskorg, proj)
         self.watchman = Watchman(self.pic, cfg)
         self.watch = self.watchman.watch   # the watchman is the domain's filter, called directly
@@ -67,6 +74,7 @@ class SuoDomain:
         self.coverage = self._part(Coverage)
         self.bands = self._part(Bands)
         self.ahead = self._part(ThreatsAhead)
+        self.checkpoints = self._part(Checkpoints)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -138,7 +146,7 @@ class SuoDomain:
             for u in [unit, *self.taskorg.ancestors(unit)]:
                 if u in active:
                     return self.missions[active[u]]
-        return BASE
+        return self.base
 
     # -- plan execution (6.6.1) ------------------------------------------------------------
     def start(self, t: float) -> None:
@@ -149,7 +157,7 @@ class SuoDomain:
             raise KeyError(f"order names unknown plan {name!r}")
         self.abort_plan(t)
         self.plan = PlanState(self.plans[name])
-        self.missions = {s.id: make(s) for s in self.plans[name].missions}
+        self.missions = {s.id: make(s).use_defaults(self.priorities) for s in self.plans[name].missions}
         self.areas.post_plan_monitors()   # global monitors: decision points, NAIs, avenues of approach
         self._advance_plan(t)
 
@@ -289,6 +297,9 @@ class SuoDomain:
 
     def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
         self.bands.post(m, other, lo, hi)
+
+    def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
+        self.checkpoints.post(m, table)
 
     def threat_ahead(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],
                      recommended: str) -> None:

@@ -58,6 +58,7 @@ INCIDENTS = [
     {"label": "H7 enters B1's blocking position", "t": 4100, "types": ["projected-penetration", "penetration"]},
     {"label": "H9 beside RTE-M ahead of M's march: abort, execute the ABF branch or continue?", "t": 2400,
      "types": ["threat-ahead"]},
+    {"label": "B1 reaches CP-B1 150 s behind its march table", "t": 1080, "types": ["checkpoint"]},
     {"label": "A2's engagement area EA-A is beyond its weapons range from BP-A2", "t": 3760,
      "types": ["friendly-expected"]},
 ]
@@ -360,6 +361,8 @@ def overlay_features() -> list[dict]:
     add("EA-A", "engagement-area", "Polygon", _rect(1000, 12500, 3000, 14000), "A")
     add("EA-B", "engagement-area", "Polygon", _rect(5000, 12000, 7000, 14000), "B")
     add("CP-LINK", "checkpoint", "Point", [4000, 9000], "BN", radius_m=300)
+    for name, y in (("SP-B1", 0), ("CP-B1", 3500), ("RP-B1", 7000)):   # B1's march table
+        add(name, "checkpoint", "Point", [LANE_X["B1"], y], "B", radius_m=250)
     add("CP-C", "checkpoint", "Point", [10650, 11000], "C", radius_m=300)
     return F
 
@@ -388,6 +391,9 @@ def plan_doc(sim: Sim) -> dict:
     for p in LANE_X:
         co = p[0]
         extra = {"supported": "C2"} if p == "C3" else {}
+        if p == "B1":   # its march table: CP-B1 planned 150 s before B1 can make it
+            extra = {"checkpoints": [{"point": "SP-B1", "t": 300}, {"point": "CP-B1", "t": 1050},
+                                     {"point": "RP-B1", "t": 2100}]}
         m(f"{p}-move", p, MOVE_PLT[p], ("START-NLT", 300), ("END-NLT", 2160),
           route=f"RTE-{p}", destination=f"BP-{p}-BLUE", **extra)
         atk = ({"route": "RTE-A3-ATK", "destination": "BP-A3", "supported": "A2"} if p == "A3"

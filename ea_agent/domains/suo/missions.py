@@ -8,6 +8,7 @@ Leaf classes carry Army doctrine names (FM 3-90) in `TYPE`.
 """
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, ClassVar
 
 from ea_agent.core.mission import Mission as CoreMission, Registry
@@ -25,6 +26,7 @@ DEFAULT_PRIORITY = {
     "hostile-expected": "priority", "ave-of-approach": "routine",
     "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
     "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate", "threat-ahead": "immediate",
+    "checkpoint": "priority",
 }
 
 
@@ -84,19 +86,44 @@ class MovementMission(Mission):
     """Move along a route to a destination; judged by the unit's centroid. Without a
     route, the corridor from where the unit starts to its destination is its route."""
     PARAMS = {"route": "optional overlay route (LineString) the unit follows",
-              "destination": "overlay feature the unit must reach"}
+              "destination": "overlay feature the unit must reach",
+              "checkpoints": "optional march table / recon progress: [{point, t}] reached near each time"}
     REQUIRED = ("destination",)
     GEOMETRY_PARAMS = ("route", "destination")
     CHECKS = _checks("on its route, or in the corridor from its start to its destination (out-of-position)",
                      "hostiles on the route ahead: recommend a branch or aborting the move (threat-ahead, a decision)",
+                     "each checkpoint (march table SP/CP/RP, recon progress) reached near its time (checkpoint)",
                      "at its destination at the end (Check-Final-Location)",
                      "projected off its route or late at its destination (projections)")
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        table = params.get("checkpoints")
+        if table is None:
+            return None
+        if not isinstance(table, list) or not table:
+            return "checkpoints", "expected a list of {point, t}"
+        last = -math.inf
+        for i, cp in enumerate(table):
+            if not isinstance(cp, dict) or set(cp) != {"point", "t"}:
+                return f"checkpoints[{i}]", "expected {point, t}"
+            if cp["point"] not in overlay:
+                return f"checkpoints[{i}].point", f"{cp['point']!r} is not in the overlay"
+            t = cp["t"]
+            if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+                return f"checkpoints[{i}].t", "expected a finite time >= 0"
+            if t < last:
+                return f"checkpoints[{i}].t", f"{t} is before the checkpoint before it ({last})"
+            last = t
+        return None
 
     def location_constraints(self, ctx):
         if self.params.get("route"):
             ctx.post_location_monitor(self, self.params["route"], self.LOCATION_RULE, "route")
         else:
             ctx.post_corridor(self, self.params["destination"])
+        if self.params.get("checkpoints"):
+            ctx.post_checkpoints(self, self.params["checkpoints"])
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["destination"], self.LOCATION_RULE, t, "destination")
@@ -116,9 +143,10 @@ class Move(MovementMission):
 
 @mission
 class TacticalRoadMarch(MovementMission):
-    """March tables are tightly timed: schedule alerts are IMMEDIATE."""
+    """March tables (its `checkpoints`: start point, checkpoints, release point) are tightly
+    timed: schedule and checkpoint alerts are IMMEDIATE."""
     TYPE = "tactical-road-march"
-    PRIORITY = {"schedule": "immediate"}
+    PRIORITY = {"schedule": "immediate", "checkpoint": "immediate"}
 
 
 @mission
@@ -137,10 +165,11 @@ class FollowMission(MovementMission):
     CHECKS = MovementMission.CHECKS + ("within its distance band of the supported unit (band)",)
 
     @classmethod
-    def check_params(cls, params):
+    def check_params(cls, params, overlay):
+        problem = super().check_params(params, overlay)
         band = params.get("band_m")
-        if band is None:
-            return None
+        if problem or band is None:
+            return problem
         if (not isinstance(band, list) or len(band) != 2 or not all(isinstance(x, (int, float)) and not
                                                                      isinstance(x, bool) and x == x for x in band)):
             return "band_m", "expected [min, max] in metres"
@@ -187,7 +216,7 @@ class Bypass(MovementMission):
 
 @mission
 class RouteReconnaissance(MovementMission):
-    """One element on the route is enough."""
+    """One element on the route is enough; its `checkpoints` say how far along it should be when."""
     TYPE = "route-reconnaissance"
     LOCATION_RULE = "any"
 

@@ -21,13 +21,14 @@ from collections import defaultdict
 
 import numpy as np
 from shapely.geometry import LineString, Point, Polygon, shape
-from shapely.ops import nearest_points, substring
+from shapely.ops import nearest_points
 
 # What the commander said is worth knowing (the paper's scenario, 6.8); plans may
 # override per mission (params.voi). Fixed here: the EAs read theirs from their config.
 SPEC = {"out_of_position_m": 150.0, "schedule_s": 30.0, "unknown_position_s": 120.0,
         "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0,
-        "ahead_m": 1500.0, "ahead_width_m": 300.0}   # a moving unit's commander wants to know of hostiles
+        "ahead_m": 1500.0, "ahead_width_m": 300.0,   # a unit is at a checkpoint this near its point:
+        "checkpoint_m": 50.0}   # a moving unit's commander wants to know of hostiles
                                                      # this far ahead on its route, this near it
 EPISODE_S = 720.0   # the paper's alert expiry (12 min): a threat back near a platoon, or a group back
                     # in a watched area, after this long away is news again
@@ -473,6 +474,33 @@ class Truth:
             line = self._line_of(mid, m)
             if line is not None:
                 self._ahead(mid, m, line, s, e)
+            if p.get("checkpoints") and typ in ROUTE:
+                self._checkpoints(mid, m, p["checkpoints"], s, e)
+
+    def _checkpoints(self, mid, m, table, s, e) -> None:
+        """A march table: the unit reaches each point (its centroid in the point's area, once
+        the mission runs) within schedule_s of its time. Its reports lag the truth by up to
+        `slack`: nearer the edge than that, either answer is fair."""
+        fuzz = self.thr(m, "schedule_s")
+        for cp in table:
+            area, when = self.area[cp["point"]], float(cp["t"])
+            g = self.geom[cp["point"]]
+            at = (lambda c: g.distance(c) <= float(self.voi["checkpoint_m"])) if g.geom_type == "Point" else area.contains
+            arrive = next((t for k, t in enumerate(self.ticks) if s <= t < e and
+                           at(Point(self.member_points(m["unit"], k).mean(axis=0)))), math.inf)
+            if not self.valid[mid][0] <= when + fuzz < self.valid[mid][1] or (math.isinf(arrive) and e <= when + fuzz):
+                continue   # the plan changed, or the mission ended (no arrival is then a place question)
+            for o in self.owners_of(m["unit"], when):
+                if arrive > when + fuzz + self.slack:
+                    self.must(o, "checkpoint", [], [m["unit"]], when + fuzz - 1, when + fuzz + 5,
+                              f"{mid} late at {cp['point']}", at=when + fuzz)
+                elif arrive > when + fuzz - self.slack:
+                    self.may(o, ["checkpoint"], [m["unit"]], when + fuzz - 1, when + fuzz + 5)
+                if arrive < when - fuzz - self.slack:
+                    self.must(o, "checkpoint", [], [m["unit"]], arrive - 1, arrive + self.slack + 5,
+                              f"{mid} early at {cp['point']}", at=arrive)
+                elif arrive < when - fuzz + self.slack:
+                    self.may(o, ["checkpoint"], [m["unit"]], arrive - 1, arrive + self.slack + 5)
 
     def _line_of(self, mid, m):
         """The line a moving mission follows: its route or axis, or its corridor's line."""
@@ -501,19 +529,18 @@ class Truth:
                 first_near = None
                 continue
             d0 = line.project(Point(self.member_points(m["unit"], k).mean(axis=0)))
-            near_zone = substring(line, d0, min(line.length, d0 + far + TOLERANCE_M)).buffer(wide + TOLERANCE_M)
-            near = [h for h, (x, y, _s) in hs.items() if near_zone.contains(Point(x, y))]
+            place = {h: (line.project(Point(x, y)), line.distance(Point(x, y))) for h, (x, y, _s) in hs.items()}
+            near = [h for h, (a, d) in place.items()
+                    if d0 - TOLERANCE_M <= a <= d0 + far + TOLERANCE_M and a < line.length and d <= wide + TOLERANCE_M]
             if not near:
                 first_near = None
                 continue
             near_ts.append(t)
             who |= set(near)
             first_near = t if first_near is None else first_near
-            end = min(line.length, d0 + far - TOLERANCE_M)
-            if end - d0 < 1.0:
-                continue
-            deep_zone = substring(line, d0, end).buffer(wide - TOLERANCE_M)
-            if any(deep_zone.contains(Point(*hs[h][:2])) for h in near):
+            deep = [h for h in near if d0 + TOLERANCE_M <= place[h][0] <= d0 + far - TOLERANCE_M
+                    and place[h][1] <= wide - TOLERANCE_M]
+            if deep:
                 if t - last_deep >= EPISODE_S:
                     for o in self.owners_of(m["unit"], t):
                         self.must(o, "threat-ahead", [], [m["unit"], *near], first_near - 15, t + 30,

@@ -12,6 +12,7 @@ from .ahead import ThreatsAhead
 from .areas import Areas
 from .bands import Bands
 from .base import BASE, Changes, Detector
+from .checkpoints import Checkpoints
 from .contingency import Contingencies
 from .coordination import Coordination
 from .coverage import Coverage
@@ -30,13 +31,13 @@ DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
-    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead,
+    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
 PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-projected")   # beyond the paper
 ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, projections, check families
 
-__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire",
+__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire", "Checkpoints",
            "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "Fratricide", "LocationMonitors",
            "ProjectedPenetrations", "ScheduleMonitors", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]

@@ -11,7 +11,7 @@ import numpy as np
 from ea_agent.core.alert import Candidate, hms
 
 from ..missions import Mission
-from .base import BASE, Changes, Detector
+from .base import Changes, Detector
 from .geometry import AreaIndex
 
 ADVERSARIAL = "adversarial-activity"
@@ -90,7 +90,7 @@ class Areas(Detector):
     def monitored_candidate(self, m: Mission | None, area: str, t: float, tracks: list[str], strength: int,
                             expected: bool, kind: str = "monitored") -> None:
         dom = self.dom
-        prio = m.compute_priority(kind) if m is not None else BASE.compute_priority(kind)
+        prio = m.compute_priority(kind) if m is not None else self.dom.base.compute_priority(kind)
         where = f" ({'expected' if expected else 'unexpected'} for {dom.name(m.unit)} {m.TYPE})" if m else ""
         label = {"ave-of-approach": "Enemy activity on ave of approach",
                  "penetration": "Penetration: hostiles in"}.get(kind, "Red activity at")

@@ -43,7 +43,7 @@ class Contingencies(Detector):
         dom = self.dom
         task_cls = REGISTRY[m.params["task"]]
         task = task_cls(MissionSpec(m.id, m.unit, task_cls.TYPE, m.spec.start, m.spec.end, (),
-                                    dict(m.params.get("task_params", {}))))
+                                    dict(m.params.get("task_params", {})))).use_defaults(dom.priorities)
         dom.missions[m.id] = task
         dom.plan.state[m.id] = "ready"
         if dom.in_plan(task):

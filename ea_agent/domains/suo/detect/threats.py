@@ -11,7 +11,7 @@ from ea_agent.core.alert import Candidate
 from ea_agent.core.geo import bearing_name
 
 from ..render import km
-from .base import BASE, Changes, Detector
+from .base import Changes, Detector
 from .geometry import distances
 
 ADVERSARIAL = "adversarial-activity"
@@ -76,7 +76,7 @@ class ThreatEnvelopes(Detector):
             upx = dom.unit_pos[u]
             where = f"{km(nearest)} {bearing_name(tr.x - upx[0], tr.y - upx[1])} of {dom.name(u)}"
             base = dict(unit=u, nearest_track=tr.id, distance_m=round(nearest, 1), strength=strength,
-                        friendly_strength=fs, tracks=sorted(ids), mission=m.id if m is not BASE else None)
+                        friendly_strength=fs, tracks=sorted(ids), mission=m.id if m is not self.dom.base else None)
             subj = (u, *sorted(ids))
             group = ("prox", dom.taskorg.parent.get(u) or u)
             rec = [(("threat", u, "distance"), 1000.0 / max(nearest, 1.0)), (("threat", u, "strength"), float(strength))]

@@ -7,7 +7,7 @@ import numpy as np
 
 from ea_agent.core.alert import Candidate
 
-from .base import BASE, Changes, Detector
+from .base import Changes, Detector
 
 
 class UnknownPositions(Detector):
@@ -27,7 +27,7 @@ class UnknownPositions(Detector):
             last = float(last_by_leaf[k])
             silent = t - last
             parent = dom.taskorg.parent.get(leaf) or leaf
-            cands.append(Candidate(t, "unknown-position", BASE.compute_priority("unknown-position"), (leaf,),
+            cands.append(Candidate(t, "unknown-position", self.dom.base.compute_priority("unknown-position"), (leaf,),
                                    f"Unknown position: {dom.name(leaf)} silent for {silent:.0f} s",
                                    key=("unknown-position", leaf), measure=silent, merge_group=("unknown", parent),
                                    details={"unit": leaf, "last_report_t": last, "silent_s": round(silent, 1)}))

@@ -1,0 +1,67 @@
+"""Checkpoints: a march table (start point, checkpoints, release point) or a route
+reconnaissance's expected progress, as near-time monitors (paper 6.6.4) on the event
+"the unit reached the point", which this detector raises when the unit's centroid
+(dead-reckoned to now) first comes within `checkpoint_m` of a point (or into an area)
+while the mission runs."""
+from __future__ import annotations
+
+import shapely
+
+from ea_agent.core.alert import Candidate, hms
+
+from ..missions import Mission
+from .base import Changes, Detector
+
+
+class Checkpoints(Detector):
+    TYPES = {"checkpoint": "plan-constraint-violated"}
+
+    def reset(self) -> None:
+        self.waiting: dict[str, list[tuple[Mission, str]]] = {}   # mission -> checkpoints not yet reached
+
+    def post(self, m: Mission, table: list[dict]) -> None:
+        dom = self.dom
+        fuzz = dom.voi(m, "schedule_s")
+        self.waiting[m.id] = [(m, cp["point"]) for cp in table]
+        for cp in table:
+            point, when = cp["point"], float(cp["t"])
+
+            def off(tf, mon, how, point=point, when=when):
+                if dom.in_plan(m):
+                    dom.ea.post(self._cand(m, point, when, tf, how))
+                return None
+            dom.timers.near_time(("at", m.id, point), when, fuzz, off, tag=m.id)
+
+    def end_mission(self, mid: str) -> None:
+        self.waiting.pop(mid, None)
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        if not self.waiting or not (ch.units or ch.rescan) or dom.plan is None:
+            return
+        for mid, left in list(self.waiting.items()):
+            if not left or dom.plan.state.get(mid) != "active":
+                continue
+            m = left[0][0]
+            pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
+            if pos is None:
+                continue
+            p = shapely.Point(pos)
+            near = dom.voi(m, "checkpoint_m")
+            reached = [pt for _, pt in left if (dom.overlay[pt].geom.distance(p) <= near
+                       if dom.overlay[pt].geom.geom_type == "Point" else dom.overlay[pt].area.contains(p))]
+            for pt in reached:
+                dom.timers.occurred(("at", mid, pt), t)
+            if reached:
+                self.waiting[mid] = [x for x in left if x[1] not in reached]
+
+    def _cand(self, m: Mission, point: str, when: float, t: float, how: str) -> Candidate:
+        dom = self.dom
+        off = abs(t - when) if how == "early" else t - when
+        text = (f"{dom.name(m.unit)} not at {point} by {hms(when)} ({m.TYPE} checkpoint): {off:.0f} s late"
+                if how == "late" else
+                f"{dom.name(m.unit)} at {point} {when - t:.0f} s early (planned {hms(when)}, {m.TYPE} checkpoint)")
+        return Candidate(t, "checkpoint", m.compute_priority("checkpoint"), (m.unit,), text,
+                         key=("checkpoint", m.id, point), measure=abs(when - t),
+                         details={"mission": m.id, "point": point, "planned_t": when, "how": how,
+                                  "off_s": round(abs(when - t), 1), "places": [point]})
