@@ -20,7 +20,7 @@ from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
 from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies, Coordination,
-                     Coverage, Detector, EndStates, Escapes, LocationMonitors, ScheduleMonitors, ThreatsAhead)
+                     Coverage, Detector, EndStates, Escapes, Lines, LocationMonitors, ScheduleMonitors, ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
@@ -75,6 +75,7 @@ class SuoDomain:
         self.bands = self._part(Bands)
         self.ahead = self._part(ThreatsAhead)
         self.checkpoints = self._part(Checkpoints)
+        self.lines = self._part(Lines)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -297,6 +298,16 @@ class SuoDomain:
 
     def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
         self.bands.post(m, other, lo, hi)
+
+    def post_line(self, m: Mission, line: str, what: str, when: float | None = None,
+                  toward: str | None = None) -> None:
+        self.lines.post(m, line, what, when, toward)
+
+    def start_by_crossing(self, m: Mission, t: float) -> None:
+        """The unit crossed its line of departure: for the EA its mission has started (a local
+        confirmation), unless a confirmation said so already."""
+        if self.plan is not None and self.plan.state.get(m.id) == "ready":
+            self.on_confirm(MissionConfirm(t, m.id, m.unit, "start", "local"))
 
     def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
         self.checkpoints.post(m, table)

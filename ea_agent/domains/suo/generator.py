@@ -31,7 +31,7 @@ SQUAD_DY = (30.0, 0.0, -30.0, -60.0)
 MOVE_PLT = {"A1": "move", "A2": "move", "A3": "move", "B1": "tactical-road-march", "B2": "move", "B3": "move",
             "C1": "movement-to-contact", "C2": "move", "C3": "follow-and-support"}
 ATTACK_PLT = {"A1": "attack", "A2": "seize", "A3": "follow-and-assume", "B1": "attack", "B2": "clear",
-              "B3": "secure", "C1": "attack", "C2": "destroy", "C3": "isolate"}
+              "B3": "breach", "C1": "attack", "C2": "destroy", "C3": "isolate"}
 DEFEND_PLT = {"A1": "defend", "A2": "defend", "A3": "retain", "B1": "block", "B2": "defend", "B3": "occupy",
               "C1": "overwatch", "C2": "defend", "C3": "contain"}
 
@@ -59,6 +59,7 @@ INCIDENTS = [
     {"label": "H9 beside RTE-M ahead of M's march: abort, execute the ABF branch or continue?", "t": 2400,
      "types": ["threat-ahead"]},
     {"label": "B1 reaches CP-B1 150 s behind its march table", "t": 1080, "types": ["checkpoint"]},
+    {"label": "B3 not through the obstacle OBS-B3 by 2900 (its breach)", "t": 2900, "types": ["line"]},
     {"label": "A2's engagement area EA-A is beyond its weapons range from BP-A2", "t": 3760,
      "types": ["friendly-expected"]},
 ]
@@ -361,6 +362,8 @@ def overlay_features() -> list[dict]:
     add("EA-A", "engagement-area", "Polygon", _rect(1000, 12500, 3000, 14000), "A")
     add("EA-B", "engagement-area", "Polygon", _rect(5000, 12000, 7000, 14000), "B")
     add("CP-LINK", "checkpoint", "Point", [4000, 9000], "BN", radius_m=300)
+    add("OBS-B3", "obstacle", "LineString", [[LANE_X["B3"] - 400, 9000], [LANE_X["B3"] + 400, 9000]], "B")
+    add("PL-AMBER", "phase-line", "LineString", [[0, 9000], [12000, 9000]], "BN")
     for name, y in (("SP-B1", 0), ("CP-B1", 3500), ("RP-B1", 7000)):   # B1's march table
         add(name, "checkpoint", "Point", [LANE_X["B1"], y], "B", radius_m=250)
     add("CP-C", "checkpoint", "Point", [10650, 11000], "C", radius_m=300)
@@ -397,7 +400,9 @@ def plan_doc(sim: Sim) -> dict:
         m(f"{p}-move", p, MOVE_PLT[p], ("START-NLT", 300), ("END-NLT", 2160),
           route=f"RTE-{p}", destination=f"BP-{p}-BLUE", **extra)
         atk = ({"route": "RTE-A3-ATK", "destination": "BP-A3", "supported": "A2"} if p == "A3"
-               else {"objective": f"OBJ-{co}"})
+               else {"objective": f"OBJ-{co}", "line_of_departure": f"PL-BLUE-{co}"})
+        if p == "B3":   # through the obstacle belt in its lane, planned faster than it can go
+            atk.update(obstacle="OBS-B3", by=2900)
         start = ("START-NET", 2400) if p == "C1" else ("START-NLT", 2400)
         m(f"{p}-attack", p, ATTACK_PLT[p], start, ("END-NLT", 3660), after=[f"{p}-move"], **atk)
         dfd = {"position": f"BP-{p}"}
@@ -426,6 +431,8 @@ def plan_doc(sim: Sim) -> dict:
       trigger={"kind": "unit-at", "unit": "A1", "area": "OBJ-A", "within_m": 0.0}, task_params={"position": "OBJ-A"})
     alt = [{"id": f"{p}-withdraw", "unit": p, "type": "withdraw", "start": {"type": "ASAP"},
             "params": {"destination": f"BP-{p}-BLUE"}} for p in LANE_X]
+    alt[list(LANE_X).index("C1")].update(type="delay", params={"destination": "BP-C1-BLUE", "line": "PL-AMBER",
+                                                                "until": 4850})   # C1 delays north of PL AMBER
     return {"task_organization": to, "plans": {"main": M, "withdrawal": alt}, "initial_plan": "main"}
 
 

@@ -26,7 +26,7 @@ DEFAULT_PRIORITY = {
     "hostile-expected": "priority", "ave-of-approach": "routine",
     "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
     "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate", "threat-ahead": "immediate",
-    "checkpoint": "priority",
+    "checkpoint": "priority", "line": "immediate",
 }
 
 
@@ -42,7 +42,7 @@ class Mission(CoreMission):
         "voi": "optional per-mission VOI overrides, e.g. {out_of_position_m: 100, schedule_s: 10}",
     }
     GEOMETRY_PARAMS: ClassVar[tuple[str, ...]] = ()   # params that name overlay features
-    LINE_PARAMS = ("route", "axis", "rear_line")
+    LINE_PARAMS = ("route", "axis", "rear_line", "line", "obstacle", "line_of_departure")
     LOCATION_RULE: ClassVar[str] = "centroid"         # centroid | any | all members
     DESIRED_STRENGTH_RATIO: ClassVar[float] = 1.0     # friendly:hostile combat power wanted
     DEFAULT_PRIORITY = DEFAULT_PRIORITY
@@ -203,9 +203,24 @@ class Withdraw(MovementMission):
 
 @mission
 class Delay(MovementMission):
-    """Trades space for time: accepts 1:3 before a threat is IMMEDIATE."""
+    """Trades space for time: stays forward of its `line` until `until` (line); accepts 1:3
+    before a threat is IMMEDIATE."""
     TYPE = "delay"
+    PARAMS = {"line": "optional overlay line the unit holds forward of ...", "until": "... until this time"}
+    GEOMETRY_PARAMS = ("route", "destination", "line")
     DESIRED_STRENGTH_RATIO = 0.33
+    CHECKS = MovementMission.CHECKS + ("forward of its line until its time (line)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if (params.get("line") is None) != (params.get("until") is None):
+            return "line" if params.get("line") is None else "until", "a delay line needs both line and until"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("line"):
+            ctx.post_line(self, self.params["line"], "hold", float(self.params["until"]))
 
 
 @mission
@@ -225,14 +240,16 @@ class RouteReconnaissance(MovementMission):
 class OffensiveMission(Mission):
     """Attack towards an objective along an axis (without one: the corridor from its
     start to the objective); all members must be on the objective at the end."""
-    PARAMS = {"objective": "overlay objective area", "axis": "optional route/axis of advance"}
+    PARAMS = {"objective": "overlay objective area", "axis": "optional route/axis of advance",
+              "line_of_departure": "optional overlay line: crossing it is the attack's start"}
     REQUIRED = ("objective",)
-    GEOMETRY_PARAMS = ("objective", "axis")
+    GEOMETRY_PARAMS = ("objective", "axis", "line_of_departure")
     LOCATION_RULE = "centroid"
     FINAL_RULE: ClassVar[str] = "all"
     DESIRED_STRENGTH_RATIO = 3.0
     PRIORITY = {"schedule": "immediate"}
     CHECKS = _checks("on its axis, or in the corridor from its start to the objective (out-of-position)",
+                     "crossing its line of departure is its start (no confirmation needed)",
                      "hostiles on the axis ahead: go on if strong enough, else abort (threat-ahead, a decision)",
                      "on the objective at the end (Check-Final-Location)")
     END_STATE: ClassVar[bool] = False   # no hostile left in the objective at the end
@@ -243,6 +260,8 @@ class OffensiveMission(Mission):
             ctx.post_location_monitor(self, self.params["axis"], self.LOCATION_RULE, "axis")
         else:
             ctx.post_corridor(self, self.params["objective"])
+        if self.params.get("line_of_departure"):
+            ctx.post_line(self, self.params["line_of_departure"], "depart", toward=self.params["objective"])
         if self.ESCAPE:
             ctx.post_escape(self, self.params["objective"])
 
@@ -306,9 +325,24 @@ class Destroy(OffensiveMission):
 
 @mission
 class Breach(OffensiveMission):
-    """Through the obstacle: one element on the far side is enough."""
+    """Through the obstacle: past its `obstacle` line by `by` (line); one element on the far
+    side of the objective is enough at the end."""
     TYPE = "breach"
+    PARAMS = {"obstacle": "optional overlay line of the obstacle ...", "by": "... the unit is past by this time"}
+    GEOMETRY_PARAMS = ("objective", "axis", "line_of_departure", "obstacle")
     FINAL_RULE = "any"
+    CHECKS = OffensiveMission.CHECKS + ("past its obstacle by its time (line)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if (params.get("obstacle") is None) != (params.get("by") is None):
+            return "obstacle" if params.get("obstacle") is None else "by", "an obstacle needs both obstacle and by"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("obstacle"):
+            ctx.post_line(self, self.params["obstacle"], "pass", float(self.params["by"]), toward=self.params["objective"])
 
 
 @mission

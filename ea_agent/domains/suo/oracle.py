@@ -66,6 +66,8 @@ END_STATE = {"seize", "clear", "secure", "destroy"}
 FOLLOW = {"follow-and-support", "follow-and-assume"}   # stay within a distance band of the supported unit
 FOLLOW_MAX_M = 3000.0   # the band's far edge unless the plan says (band_m)
 FRIENDLY_MPS = 6.0      # the fastest a friendly unit moves (how far a stale report can be off)
+LINE_MARGIN_M = 50.0    # a unit is across a line this far beyond it (the plan's statement)
+FRIENDLY_ERR_M = 100.0  # how far the EA's picture of a moving friendly unit may be off (reports' age, noise)
 APPROACH_M = 1000.0     # a group this near an area no hostile may enter may be projected to enter it
 
 
@@ -476,6 +478,54 @@ class Truth:
                 self._ahead(mid, m, line, s, e)
             if p.get("checkpoints") and typ in ROUTE:
                 self._checkpoints(mid, m, p["checkpoints"], s, e)
+            if typ == "delay" and p.get("line"):
+                self._line(mid, m, p["line"], float(p["until"]), s, e, hold=True)
+            if typ == "breach" and p.get("obstacle"):
+                self._line(mid, m, p["obstacle"], float(p["by"]), s, e, hold=False, toward=p["objective"])
+
+    def _beyond(self, line, unit: str, k: int, own: float) -> float:
+        """How far the unit's centroid is across `line` from side `own` (+1 left, -1 right; < 0: not across)."""
+        c = Point(self.member_points(unit, k).mean(axis=0))
+        pos = line.project(c)
+        a, b = line.interpolate(max(pos - 1.0, 0.0)), line.interpolate(min(pos + 1.0, line.length))
+        left = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x) >= 0
+        d = line.distance(c)
+        return d if (left and own < 0) or (not left and own > 0) else -d
+
+    def _line(self, mid, m, lid, when, s, e, hold: bool, toward: str | None = None) -> None:
+        """A delay holds forward of its line (the side it starts on) until `when`; a breach is
+        past its obstacle (away from the side of its objective) by `when`. Across means more
+        than LINE_MARGIN_M beyond; the EA's picture of a moving unit errs by up to FRIENDLY_ERR_M."""
+        line = self.geom[lid]
+        if hold:
+            own = -1.0 if self._beyond(line, m["unit"], math.ceil(s / TICK - 1e-9), 1.0) > 0 else 1.0
+        else:
+            c = self.area[toward].centroid
+            own = -1.0 if self._beyond_point(line, c) else 1.0
+        far = {k: self._beyond(line, m["unit"], k, own) for k, t in enumerate(self.ticks) if s <= t < e}
+        first = lambda d: next((self.ticks[k] for k, v in sorted(far.items()) if v > d), math.inf)   # noqa: E731
+        sure, maybe = first(LINE_MARGIN_M + FRIENDLY_ERR_M), first(LINE_MARGIN_M - FRIENDLY_ERR_M)
+        if not self.valid[mid][0] <= min(when, maybe) < self.valid[mid][1]:
+            return
+        for o in self.owners_of(m["unit"], min(when, maybe)):
+            if hold:
+                if sure < when - self.slack:
+                    self.must(o, "line", [], [m["unit"]], maybe - 1, sure + self.slack, f"{mid} across {lid} early",
+                              at=sure)
+                if maybe < when:
+                    self.may(o, ["line"], [m["unit"]], maybe - 1, when)
+            elif e > when:   # a breach: across by its time
+                if maybe > when + self.slack:
+                    self.must(o, "line", [], [m["unit"]], when - 1, when + 5, f"{mid} not past {lid}", at=when)
+                if sure > when - self.slack:
+                    self.may(o, ["line"], [m["unit"]], when - 1, when + 5)
+
+    @staticmethod
+    def _beyond_point(line, c) -> bool:
+        """Whether point `c` is on the left of `line` (walking along it)."""
+        pos = line.project(c)
+        a, b = line.interpolate(max(pos - 1.0, 0.0)), line.interpolate(min(pos + 1.0, line.length))
+        return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x) >= 0
 
     def _checkpoints(self, mid, m, table, s, e) -> None:
         """A march table: the unit reaches each point (its centroid in the point's area, once

@@ -27,7 +27,7 @@ from .missions import REGISTRY, ContingentMission, ReorganizationMission
 
 ECHELONS = ("battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
 AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
-LINE_KINDS = {"route", "phase-line", "avenue-of-approach"}
+LINE_KINDS = {"route", "phase-line", "avenue-of-approach", "obstacle"}
 POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon
 KINDS = AREA_KINDS | LINE_KINDS | POINT_KINDS
 
@@ -124,7 +124,7 @@ def _area_ref(v: Any, where: str, name: str, overlay: dict) -> str:
     return v
 
 
-_NUMERIC_PARAMS = ("at", "fuzz_s", "expect_hostile_by")   # mission params read as times
+_NUMERIC_PARAMS = ("at", "fuzz_s", "expect_hostile_by", "until", "by")   # mission params read as times
 
 
 def _voi_keys() -> set[str]:

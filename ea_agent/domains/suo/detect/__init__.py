@@ -20,6 +20,7 @@ from .endstate import EndStates
 from .escape import Escapes
 from .fires import CallsForFire
 from .fratricide import Fratricide
+from .lines import Lines
 from .location import LocationMonitors
 from .penetration import ProjectedPenetrations
 from .projection import Projections
@@ -31,7 +32,7 @@ DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
-    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints,
+    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -39,5 +40,5 @@ PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-p
 ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, projections, check families
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire", "Checkpoints",
-           "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "Fratricide", "LocationMonitors",
+           "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "Fratricide", "Lines", "LocationMonitors",
            "ProjectedPenetrations", "ScheduleMonitors", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
