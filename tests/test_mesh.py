@@ -77,6 +77,19 @@ def test_mesh_peer_equals_in_process_run(mesh_run, inproc):
         assert [key(a) for a in plan_alerts(alerts[name])] == [key(a) for a in inproc[unit]], name
 
 
+def test_the_mission_model_checks_reach_the_mesh(mesh_run):
+    """Every check family the mission classes compose (issue 13) is raised by a peer on the
+    mesh: each peer subscribes to what its missions need (held areas, supported units,
+    checkpoints, orders within its subtree). Equality with the in-process run is above."""
+    alerts, _ = mesh_run
+    types = {a["type"] for name in ("BN", "A", "C", "A2a") for a in alerts[name]}
+    assert {"escape", "end-state", "penetration", "projected-penetration", "friendly-expected", "band",
+            "threat-ahead", "checkpoint", "line"} <= types, types
+    # the ON-ORDER march: BN ordered it at 2150, M started at 2200 (50 s later: late)
+    late = [a for a in alerts["BN"] if a["type"] == "schedule" and a["details"].get("constraint") == "ON-ORDER"]
+    assert [(a["t"], a["details"]["how"]) for a in late] == [(2180.0, "late")]
+
+
 def test_max_speed_replay_stays_within_its_window_of_the_slowest_peer(mesh_run):
     _, summaries = mesh_run
     # the replay publishes tick t only once every EA peer has done t - 20 s; its events
@@ -89,7 +102,8 @@ def test_echelons_share_threat_alerts_and_keep_their_own_plans(mesh_run):
     alerts, summaries = mesh_run
     by = lambda name, typ: [key(a) for a in alerts[name] if a["type"] == typ]
     assert by("BN", "fratricide") and by("BN", "fratricide") == by("A", "fratricide")
-    assert by("BN", "proximity") and by("BN", "proximity") == by("C", "proximity")
+    of_c = [key(a) for a in alerts["BN"] if a["type"] == "proximity" and a["details"].get("parent") == "C"]
+    assert of_c and of_c == by("C", "proximity")   # BN's about C CO's units are C's own
     missions = lambda name: {a["details"]["mission"] for a in alerts[name] if a["type"] == "contingency"}
     assert missions("BN") == {"BN-branch-ABF"} and missions("A") == {"A-sequel-occupy"} and not missions("C")
     places = lambda name: {a["details"]["place"] for a in alerts[name] if a["type"] == "ave-of-approach"}

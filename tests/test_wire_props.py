@@ -232,6 +232,7 @@ DATA_SAMPLES = [
     M.SensorHit(2.5, "S1", -116.5, 35.3),
     M.MissionConfirm(3.0, "A1-move", "A1", "start", "local"),
     M.Order(4.0, "execute-plan", "withdrawal", "BN"),
+    M.Order(4.5, "start-mission", "main", "BN", "M-march"),
     M.CallForFire(5.0, "CFF-1", "A2", -116.5, 35.3, 600.0),
     M.CallForFireConfirm(6.0, "CFF-1", "A2", -116.5, 35.3, 600.0),
     M.Reorganization(7.0, "R", "BN"),
@@ -257,6 +258,7 @@ CONTROL_SAMPLES = [
        W.make(W.SetCmd, req="r4", key="voi.out_of_position_m", value=500.0),
        W.make(W.ConfirmCmd, req="r5", mission="m1", phase="start"),
        W.make(W.CffCmd, req="r6", cff="cff1", action="confirm"),
+       W.make(W.DecideCmd, req="r7", alert="BN/27", option="execute:BN-branch-ABF"),
        W.make(W.CmdResult, req="r1", kind="ack", ok=True, error="", t=12.0)] if hasattr(W, "CmdResult") else []),
 ]
 

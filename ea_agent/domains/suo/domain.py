@@ -197,6 +197,8 @@ class SuoDomain:
         m = self.missions.get(c.mission)
         if m is None:
             raise KeyError(f"confirmation for unknown mission {c.mission!r}")
+        if self.plan.state.get(m.id) == "aborted":
+            return   # the commander aborted it: a late confirmation does not bring it back
         if c.phase == "start":
             if self.plan.state[m.id] == "dormant":
                 self.plan.state[m.id] = "ready"
@@ -337,21 +339,26 @@ class SuoDomain:
             raise ValueError(f"decide: mission {mid!r} is no longer in the plan")
         if option == "continue":
             return f"{mid} continues"
+        if self.plan.state.get(mid) != "active":
+            raise ValueError(f"decide: mission {mid!r} is not running ({self.plan.state.get(mid)})")
         if option == "abort":
-            if self.plan.state.get(mid) != "active":
-                raise ValueError(f"decide: mission {mid!r} is not running ({self.plan.state.get(mid)})")
-            self.plan.state[mid] = "aborted"   # not done: what follows it waits for new orders
-            self.timers.cancel(mid)
-            for det in self.detectors:
-                det.end_mission(mid)
+            self._abort(mid)
             return f"{mid} aborted"
         branch = option.split(":", 1)[1]
-        c = self.contingency.pending.pop(branch, None)
+        c = self.contingency.pending.get(branch)
         if c is None:
             raise ValueError(f"decide: branch {branch!r} is not waiting to be executed")
+        del self.contingency.pending[branch]
+        self._abort(mid)   # the branch replaces the course of action the alert was about
         self.contingency.execute(c, t)
         self.areas.reindex()
-        return f"{branch} executed"
+        return f"{mid} aborted, {branch} executed"
+
+    def _abort(self, mid: str) -> None:
+        self.plan.state[mid] = "aborted"   # not done: what follows it waits for new orders
+        self.timers.cancel(mid)
+        for det in self.detectors:
+            det.end_mission(mid)
 
     def post_red_monitor(self, m: Mission, area: str, expected: bool, expect_by: float | None = None) -> None:
         self.areas.post_red_monitor(m, area, expected, expect_by)

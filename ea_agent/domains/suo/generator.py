@@ -55,7 +55,9 @@ INCIDENTS = [
     {"label": "BN orders M's march (ON-ORDER) at 2150; M starts 50 s later", "t": 2180, "types": ["schedule"]},
     {"label": "H6 breaks out of OBJ-C while C3 isolates it", "t": 3100, "types": ["escape"]},
     {"label": "B2 ends its clear with H7 still on OBJ-B", "t": 3600, "types": ["end-state"]},
-    {"label": "H7 enters B1's blocking position", "t": 4100, "types": ["projected-penetration", "penetration"]},
+    {"label": "H7 enters B1's blocking position, projected before it does", "t": 4100,
+     "types": ["projected-penetration"]},
+    {"label": "H10 infiltrates B1's blocking position", "t": 4300, "types": ["penetration", "contact"]},
     {"label": "H9 beside RTE-M ahead of M's march: abort, execute the ABF branch or continue?", "t": 2400,
      "types": ["threat-ahead"]},
     {"label": "B1 reaches CP-B1 150 s behind its march table", "t": 1080, "types": ["checkpoint"]},
@@ -228,6 +230,8 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -
             "H6": H("H6", [1800, 2900, 3300], [9500, 9500, 9500], [11000, 11000, 13500], 3, 1800, 3500),
             # still on OBJ-B when B2 ends its clear, then into B1's blocking position
             "H7": H("H7", [3000, 3900, 4150], [5800, 5800, 4700], [11200, 11200, 11000], 3, 3000, 4500),
+            # infiltrators that appear inside B1's blocking position (no approach to project)
+            "H10": H("H10", [4300, 4600], [4750, 4750], [10950, 10950], 2, 4300, 4600),
             # a bypassed squad beside RTE-M, ahead of M's march
             "H9": H("H9", [2200, 2600], [6060, 6060], [5500, 5500], 2, 2200, 2600),
         })

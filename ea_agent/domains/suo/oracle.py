@@ -557,8 +557,11 @@ class Truth:
         typ, p = m["type"], m["params"]
         if typ not in ROUTE | OBJECTIVE:
             return None
-        if p.get("route") or p.get("axis"):
-            return self.geom[p.get("route") or p.get("axis")]
+        if p.get("route") or p.get("axis"):   # as travelled: towards its destination or objective
+            line = self.geom[p.get("route") or p.get("axis")]
+            goal = self.area[p.get("destination") or p.get("objective")]
+            return LineString(line.coords[::-1]) if goal.distance(Point(line.coords[0])) < \
+                goal.distance(Point(line.coords[-1])) else line
         if mid in self.corridor_start:
             c = Point(self.corridor_start[mid])
             near = nearest_points(c, self.area[p.get("destination") or p.get("objective")])[1]
@@ -569,7 +572,7 @@ class Truth:
         """Hostiles on the stretch of line ahead of the unit (SPEC ahead_m, ahead_width_m): the
         commander must be asked once per episode about a group well inside it; one near its
         edges (where sensors and the unit's own reports err) may be told."""
-        far, wide = float(self.voi["ahead_m"]), float(self.voi["ahead_width_m"])
+        far, wide = self.thr(m, "ahead_m"), self.thr(m, "ahead_width_m")
         near_ts, who, first_near, last_deep = [], set(), None, -math.inf
         for k, t in enumerate(self.ticks):
             if not s <= t < e:
@@ -783,6 +786,10 @@ class Truth:
                         if deep.contains(p):
                             t_near, t_in = entered.pop(h)
                             entries.append((t_near, t if t_in is None else t_in, t, h))
+                first_seen: dict[str, float] = {}
+                for tt in sorted(near_at):
+                    for g in near_at[tt]:
+                        first_seen.setdefault(g, tt)
                 first = True
                 for t_near, t_in, t, h in sorted(entries, key=lambda e: e[1]):
                     # a triggered contingency tells the first activity in its trigger area
@@ -798,7 +805,7 @@ class Truth:
                     # group with it to any sensor: it may be told as new or not
                     merged = later is not None and any(
                         math.hypot(later[0] - x, later[1] - y) < RESOLVE_M for g, (x, y, _s) in later_all.items()
-                        if g != h and g in near_at.get(t, ()))
+                        if g != h and g in near_at.get(t, ()) and first_seen.get(g, math.inf) < t_near)
                     if later is not None and geom.contains(Point(later[0], later[1])) and not merged:
                         self.must(o, typ, [], [h, area], t_near - 15, t + 45, f"{h} enters {area}", at=t_in,
                                   about=[area])

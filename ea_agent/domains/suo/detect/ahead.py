@@ -29,12 +29,22 @@ class ThreatsAhead(Detector):
                 continue
             for m, geom, _rule, what in mons:
                 if what in ("route", "axis"):
-                    out.append((m, dom.overlay[geom].geom))
+                    out.append((m, self._towards(m, dom.overlay[geom].geom)))
                     break
                 if what == "corridor":
                     out.append((m, loc.lines[mid]))
                     break
         return out
+
+    def _towards(self, m: Mission, line):
+        """The line as travelled: towards the mission's destination or objective, whichever
+        way it was drawn."""
+        goal = m.params.get("destination") or m.params.get("objective")
+        if goal is None:
+            return line
+        area = self.dom.overlay[goal].area
+        a, b = shapely.Point(line.coords[0]), shapely.Point(line.coords[-1])
+        return shapely.reverse(line) if area.distance(a) < area.distance(b) else line
 
     def ahead(self, m: Mission, line, xy: np.ndarray, pts: np.ndarray) -> np.ndarray | None:
         """Which of the points `xy` (shapely `pts`) are on the watched stretch: along the line
