@@ -20,7 +20,8 @@ from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
 from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies, Coordination,
-                     Coverage, Detector, EndStates, Escapes, Lines, LocationMonitors, ScheduleMonitors, ThreatsAhead)
+                     Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors, ScheduleMonitors, Standoffs,
+                     ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
@@ -76,6 +77,8 @@ class SuoDomain:
         self.ahead = self._part(ThreatsAhead)
         self.checkpoints = self._part(Checkpoints)
         self.lines = self._part(Lines)
+        self.standoff = self._part(Standoffs)
+        self.support = self._part(FireSupport)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -160,6 +163,9 @@ class SuoDomain:
         self.plan = PlanState(self.plans[name])
         self.missions = {s.id: make(s).use_defaults(self.priorities) for s in self.plans[name].missions}
         self.areas.post_plan_monitors()   # global monitors: decision points, NAIs, avenues of approach
+        for m in self.missions.values():
+            if self.in_plan(m):
+                m.plan_constraints(self)
         self._advance_plan(t)
 
     def abort_plan(self, t: float) -> None:
@@ -310,6 +316,12 @@ class SuoDomain:
         confirmation), unless a confirmation said so already."""
         if self.plan is not None and self.plan.state.get(m.id) == "ready":
             self.on_confirm(MissionConfirm(t, m.id, m.unit, "start", "local"))
+
+    def post_fire_support(self, m: Mission, supported: str, line: str | None, target: str) -> None:
+        self.support.post(m, supported, line, target)
+
+    def post_standoff(self, m: Mission) -> None:
+        self.standoff.post(m)
 
     def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
         self.checkpoints.post(m, table)

@@ -62,6 +62,8 @@ INCIDENTS = [
      "types": ["threat-ahead"]},
     {"label": "B1 reaches CP-B1 150 s behind its march table", "t": 1080, "types": ["checkpoint"]},
     {"label": "B3 not through the obstacle OBS-B3 by 2900 (its breach)", "t": 2900, "types": ["line"]},
+    {"label": "B crosses PL BLUE before M is in position to support it; M lifts fires as B nears OBJ-B", "t": 2420,
+     "types": ["fire-support"]},
     {"label": "A2's engagement area EA-A is beyond its weapons range from BP-A2", "t": 3760,
      "types": ["friendly-expected"]},
 ]
@@ -424,7 +426,8 @@ def plan_doc(sim: Sim) -> dict:
     m("M-occupy", "M", "occupy", ("START-AT", 0), ("END-AT", 2200), position="BP-M1")
     m("M-march", "M", "tactical-road-march", ("ON-ORDER", None), ("END-NLT", 2900), after=["M-occupy"],
       route="RTE-M", destination="BP-M2")
-    m("M-sbf", "M", "support-by-fire", ("START-NLT", 2900), None, after=["M-march"], position="BP-M2")
+    m("M-sbf", "M", "support-by-fire", ("START-NLT", 2900), None, after=["M-march"], position="BP-M2",
+      supported="B", line="PL-BLUE-B", target="OBJ-B")   # planned after B departs: not in position by then
     m("BNHQ-occupy", "BNHQ", "occupy", ("START-AT", 0), None, position="AA-BN")
     m("BN-reorg-R", "BN", "reorganize", ("START-AT", sim.reorg_t), None, subject="R", new_parent="BN")
     m("A3-linkup", "A3", "link-up", None, None, partner="B1", point="CP-LINK", at=3000)

@@ -26,7 +26,7 @@ DEFAULT_PRIORITY = {
     "hostile-expected": "priority", "ave-of-approach": "routine",
     "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
     "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate", "threat-ahead": "immediate",
-    "checkpoint": "priority", "line": "immediate",
+    "checkpoint": "priority", "line": "immediate", "standoff": "immediate", "fire-support": "immediate",
 }
 
 
@@ -45,9 +45,18 @@ class Mission(CoreMission):
     LINE_PARAMS = ("route", "axis", "rear_line", "line", "obstacle", "line_of_departure")
     LOCATION_RULE: ClassVar[str] = "centroid"         # centroid | any | all members
     DESIRED_STRENGTH_RATIO: ClassVar[float] = 1.0     # friendly:hostile combat power wanted
+    STANDOFF: ClassVar[bool] = False                  # keeps `standoff_m` from hostiles (screen, withdraw, ...)
     DEFAULT_PRIORITY = DEFAULT_PRIORITY
     CHECKS = ("start/end time constraints (Fig. 6); ON-ORDER against the superior's order",
               "place constraints judged at start, on every move and every scan (stationary units too)")
+
+    def post_execution_constraints(self, ctx) -> None:
+        super().post_execution_constraints(ctx)
+        if self.STANDOFF:
+            ctx.post_standoff(self)
+
+    def plan_constraints(self, ctx: "SuoDomain") -> None:
+        """Constraints that hold from the start of the plan, whatever the mission's own state."""
 
     def check_initial_location(self, ctx: "SuoDomain", t: float) -> None:
         ctx.start_location_constraints(self, t)
@@ -194,11 +203,16 @@ class FollowAndAssume(FollowMission):
     TYPE = "follow-and-assume"
 
 
+_STANDOFF = "no hostile within its standoff distance (standoff)"
+
+
 @mission
 class Withdraw(MovementMission):
-    """Breaking contact: accepts 1:2 before a threat is IMMEDIATE."""
+    """Breaking contact: keeps its standoff; accepts 1:2 before a threat is IMMEDIATE."""
     TYPE = "withdraw"
     DESIRED_STRENGTH_RATIO = 0.5
+    STANDOFF = True
+    CHECKS = MovementMission.CHECKS + (_STANDOFF,)
 
 
 @mission
@@ -209,7 +223,8 @@ class Delay(MovementMission):
     PARAMS = {"line": "optional overlay line the unit holds forward of ...", "until": "... until this time"}
     GEOMETRY_PARAMS = ("route", "destination", "line")
     DESIRED_STRENGTH_RATIO = 0.33
-    CHECKS = MovementMission.CHECKS + ("forward of its line until its time (line)",)
+    STANDOFF = True
+    CHECKS = MovementMission.CHECKS + ("forward of its line until its time (line)", _STANDOFF)
 
     @classmethod
     def check_params(cls, params, overlay):
@@ -225,8 +240,10 @@ class Delay(MovementMission):
 
 @mission
 class Bypass(MovementMission):
-    """Moves around the enemy: judged as a movement (standoff not yet checked)."""
+    """Moves around the enemy: keeps its standoff."""
     TYPE = "bypass"
+    STANDOFF = True
+    CHECKS = MovementMission.CHECKS + (_STANDOFF,)
 
 
 @mission
@@ -450,9 +467,32 @@ class AttackByFire(PositionMission):
 
 @mission
 class SupportByFire(PositionMission):
-    """Fires for a moving unit: 1:1 wanted."""
+    """Fires for a moving unit (`supported`): in position before it crosses its `line` (of
+    departure), fires lifted when it comes within `lift_m` of the `target`; 1:1 wanted."""
     TYPE = "support-by-fire"
+    PARAMS = {"supported": "optional unit whose attack it supports",
+              "line": "optional line of departure of the supported unit",
+              "target": "overlay area its fires land on (needed with supported)"}
+    GEOMETRY_PARAMS = ("position", "engagement_area", "line", "target")
+    UNIT_PARAMS = ("supported",)
     DESIRED_STRENGTH_RATIO = 1.0
+    CHECKS = PositionMission.CHECKS + (
+        "in position before the supported unit crosses its line of departure; fires lift when it nears "
+        "the target (fire-support)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if params.get("supported") is not None and params.get("target") is None:
+            return "target", "a supported unit needs the target the fires land on"
+        if params.get("line") is not None and params.get("supported") is None:
+            return "supported", "a line of departure needs the unit that crosses it"
+        return super().check_params(params, overlay)
+
+    def plan_constraints(self, ctx):
+        """From the plan's start, not its own: the supported unit may depart before this
+        mission is even ready, and that is what is checked."""
+        if self.params.get("supported"):
+            ctx.post_fire_support(self, self.params["supported"], self.params.get("line"), self.params["target"])
 
 
 @mission
@@ -513,8 +553,10 @@ class SecurityMission(Mission):
 
 @mission
 class Screen(SecurityMission):
-    """Early warning: the security family as it is (standoff not yet checked)."""
+    """Early warning without decisive engagement: keeps its standoff."""
     TYPE = "screen"
+    STANDOFF = True
+    CHECKS = SecurityMission.CHECKS + (_STANDOFF,)
 
 
 @mission

@@ -28,7 +28,7 @@ from shapely.ops import nearest_points
 SPEC = {"out_of_position_m": 150.0, "schedule_s": 30.0, "unknown_position_s": 120.0,
         "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0,
         "ahead_m": 1500.0, "ahead_width_m": 300.0,   # a unit is at a checkpoint this near its point:
-        "checkpoint_m": 50.0}   # a moving unit's commander wants to know of hostiles
+        "checkpoint_m": 50.0, "standoff_m": 1000.0, "lift_m": 500.0}   # a moving unit's commander wants to know of hostiles
                                                      # this far ahead on its route, this near it
 EPISODE_S = 720.0   # the paper's alert expiry (12 min): a threat back near a platoon, or a group back
                     # in a watched area, after this long away is news again
@@ -63,7 +63,8 @@ LIFE = {"contact", "fratricide", "call-for-fire"}   # life-threatening: the pape
 PENETRATION = {"block": "position", "retain": "position", "guard": "area", "defend": "rear_line"}
 ESCAPE = {"fix": "objective", "isolate": "objective", "destroy": "objective", "contain": "engagement_area"}
 END_STATE = {"seize", "clear", "secure", "destroy"}
-FOLLOW = {"follow-and-support", "follow-and-assume"}   # stay within a distance band of the supported unit
+FOLLOW = {"follow-and-support", "follow-and-assume"}
+STANDOFF = {"screen", "bypass", "withdraw", "delay"}   # not to become decisively engaged   # stay within a distance band of the supported unit
 FOLLOW_MAX_M = 3000.0   # the band's far edge unless the plan says (band_m)
 FRIENDLY_MPS = 6.0      # the fastest a friendly unit moves (how far a stale report can be off)
 LINE_MARGIN_M = 50.0    # a unit is across a line this far beyond it (the plan's statement)
@@ -459,6 +460,8 @@ class Truth:
         escape, end state, the engagement area in weapons range, the distance band."""
         for mid, m in self.missions.items():
             typ, p = m["type"], m["params"]
+            if typ == "support-by-fire" and p.get("supported"):
+                self._fire_support(mid, m, p)
             if mid not in self.started:
                 continue
             v0, v1 = self.valid[mid]
@@ -478,10 +481,78 @@ class Truth:
                 self._ahead(mid, m, line, s, e)
             if p.get("checkpoints") and typ in ROUTE:
                 self._checkpoints(mid, m, p["checkpoints"], s, e)
+            if typ in STANDOFF:
+                self._standoff(mid, m, s, e)
             if typ == "delay" and p.get("line"):
                 self._line(mid, m, p["line"], float(p["until"]), s, e, hold=True)
             if typ == "breach" and p.get("obstacle"):
                 self._line(mid, m, p["obstacle"], float(p["by"]), s, e, hold=False, toward=p["objective"])
+
+    def _fire_support(self, mid, m, p) -> None:
+        """Support by fire: in position (within out_of_position_m of it) when the supported unit
+        crosses its line of departure, whether its own mission has started or not; its fires
+        lift once the supported unit is within SPEC lift_m of the target, while it runs."""
+        v0, v1 = self.valid[mid]
+        sup, thr = p["supported"], self.thr(m, "out_of_position_m")
+        owners = lambda t: self.owners_of(m["unit"], t)   # noqa: E731
+        if p.get("line"):
+            line, c = self.geom[p["line"]], self.area[p["target"]].centroid
+            own = -1.0 if self._beyond_point(line, c) else 1.0
+            far = [(t, self._beyond(line, sup, k, own)) for k, t in enumerate(self.ticks) if v0 <= t < v1]
+            maybe = next((t for t, d in far if d > LINE_MARGIN_M - FRIENDLY_ERR_M), None)
+            sure = next((t for t, d in far if d > LINE_MARGIN_M + FRIENDLY_ERR_M), None)
+            if maybe is not None:
+                gap = lambda t: self.area[p["position"]].distance(   # noqa: E731
+                    Point(self.member_points(m["unit"], int(round(t / TICK))).mean(axis=0)))
+                last = sure if sure is not None else maybe
+                for o in owners(maybe):
+                    if all(gap(t) > thr * MATERIAL for t in self.ticks if maybe <= t <= last):
+                        self.must(o, "fire-support", [], [m["unit"], sup], maybe - 1, last + self.slack,
+                                  f"{m['unit']} not in position when {sup} departs", at=maybe)
+                    elif any(gap(t) > thr / MATERIAL for t in self.ticks if maybe <= t <= last):
+                        self.may(o, ["fire-support"], [m["unit"], sup], maybe - 1, last + self.slack)
+        if mid not in self.started:
+            return
+        s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
+        lift = self.thr(m, "lift_m")
+        d = [(t, self.area[p["target"]].distance(Point(self.member_points(sup, k).mean(axis=0))))
+             for k, t in enumerate(self.ticks) if s <= t < e]
+        maybe = next((t for t, x in d if x <= lift + FRIENDLY_ERR_M), None)
+        sure = next((t for t, x in d if x <= lift - FRIENDLY_ERR_M), None)
+        if maybe is not None:
+            for o in owners(maybe):
+                if sure is not None:
+                    self.must(o, "fire-support", [], [m["unit"], sup], maybe - 1, sure + self.slack,
+                              f"{m['unit']} lifts fires for {sup}", at=sure)
+                else:
+                    self.may(o, ["fire-support"], [m["unit"], sup], maybe - 1, e)
+
+    def _standoff(self, mid, m, s, e) -> None:
+        """Screens, bypasses, withdrawals and delays keep SPEC standoff_m from every hostile group:
+        the first group well inside it in an episode (none near for EPISODE_S before) must be told;
+        while groups are near its edge, alerts may be."""
+        keep = self.thr(m, "standoff_m")
+        near_ts, last_near, first_near, told = [], -math.inf, None, False
+        for k, t in enumerate(self.ticks):
+            if not s <= t < e:
+                continue
+            c = self.member_points(m["unit"], k).mean(axis=0)
+            ds = {h: math.hypot(x - c[0], y - c[1]) for h, (x, y, _s) in self.hostiles_at(t).items()}
+            near = [h for h, d in ds.items() if d < keep + TOLERANCE_M]
+            if not near:
+                continue
+            if t - last_near >= EPISODE_S:
+                first_near, told = t, False
+            last_near = t
+            near_ts.append(t)
+            if not told and any(ds[h] < keep - TOLERANCE_M for h in near):
+                for o in self.owners_of(m["unit"], t):
+                    self.must(o, "standoff", [], [m["unit"], *near], first_near - 15, t + 30,
+                              f"hostiles within {m['unit']}'s standoff ({mid})", at=t, about=[m["unit"]])
+                told = True
+        for a, b in _runs(near_ts):
+            for o in self.owners_of(m["unit"], a):
+                self.may(o, ["standoff"], [m["unit"]], a - 15, b + 30, about=[m["unit"]])
 
     def _beyond(self, line, unit: str, k: int, own: float) -> float:
         """How far the unit's centroid is across `line` from side `own` (+1 left, -1 right; < 0: not across)."""

@@ -25,6 +25,8 @@ from .location import LocationMonitors
 from .penetration import ProjectedPenetrations
 from .projection import Projections
 from .schedule import ScheduleMonitors
+from .standoff import Standoffs
+from .support import FireSupport
 from .threats import ThreatEnvelopes
 from .unknown import UnknownPositions
 
@@ -32,7 +34,7 @@ DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
-    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines,
+    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs, FireSupport,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -40,5 +42,5 @@ PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-p
 ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, projections, check families
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire", "Checkpoints",
-           "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "Fratricide", "Lines", "LocationMonitors",
-           "ProjectedPenetrations", "ScheduleMonitors", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
+           "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide", "Lines", "LocationMonitors",
+           "ProjectedPenetrations", "ScheduleMonitors", "Standoffs", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]

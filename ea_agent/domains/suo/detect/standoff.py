@@ -1,0 +1,57 @@
+"""Standoff: a screen, a bypass, a withdrawal or a delay keeps its distance from the enemy
+(`standoff_m`, by default the weapons range): a hostile nearer than that to the unit's
+centroid means it is becoming decisively engaged, against its task. One story per
+mission while hostiles stay near (VOA is touched), told again after the expiry."""
+from __future__ import annotations
+
+import numpy as np
+
+from ea_agent.core.alert import Candidate
+
+from ..missions import Mission
+from ..render import km
+from .base import Changes, Detector
+
+
+class Standoffs(Detector):
+    TYPES = {"standoff": "plan-constraint-violated"}
+
+    def reset(self) -> None:
+        self.watch: dict[str, Mission] = {}
+
+    def post(self, m: Mission) -> None:
+        self.watch[m.id] = m
+
+    def end_mission(self, mid: str) -> None:
+        self.watch.pop(mid, None)
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        dom = self.dom
+        if not self.watch or dom.plan is None or not (ch.tracks or ch.units or ch.rescan):
+            return
+        tracks = dom.pic.tracks
+        ids = [k for k in sorted(tracks) if tracks[k].strength > 0]
+        if not ids:
+            return
+        xy = np.array([(tracks[k].x, tracks[k].y) for k in ids])
+        for mid, m in self.watch.items():
+            if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
+                continue
+            pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
+            if pos is None:
+                continue
+            d = np.hypot(xy[:, 0] - pos[0], xy[:, 1] - pos[1])
+            keep = dom.voi(m, "standoff_m")
+            near = d < keep
+            if not near.any():
+                continue
+            key = ("standoff", mid)
+            dom.ea.voa.touch(key, t)   # still too near: the same story
+            inside = [k for k, ok in zip(ids, near.tolist()) if ok]
+            nearest = float(d.min())
+            cands.append(Candidate(
+                t, "standoff", m.compute_priority("standoff"), (m.unit, *inside),
+                f"{dom.name(m.unit)} within {km(nearest)} of hostiles on its {m.TYPE} (standoff {km(keep)}): "
+                f"{sum(tracks[k].strength for k in inside)} entities",
+                key=key, measure=keep - nearest, friendly=False,
+                details={"mission": mid, "distance_m": round(nearest, 1), "standoff_m": keep, "tracks": inside}))
