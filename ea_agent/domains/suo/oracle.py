@@ -69,6 +69,7 @@ FOLLOW_MAX_M = 3000.0   # the band's far edge unless the plan says (band_m)
 FRIENDLY_MPS = 6.0      # the fastest a friendly unit moves (how far a stale report can be off)
 LINE_MARGIN_M = 50.0    # a unit is across a line this far beyond it (the plan's statement)
 FRIENDLY_ERR_M = 100.0  # how far the EA's picture of a moving friendly unit may be off (reports' age, noise)
+CORRIDOR_BACK_M = 300.0  # a corridor reaches this far behind where the unit started (its start is an estimate)
 APPROACH_M = 1000.0     # a group this near an area no hostile may enter may be projected to enter it
 
 
@@ -259,11 +260,19 @@ class Truth:
         return float(m["params"].get("voi", {}).get(key, self.voi[key]))
 
     def _corridor(self, start, dest: str):
-        """Where a unit with no route may be on its way: the line from `start` to the
-        nearest point of its destination, and the destination itself."""
+        """Where a unit with no route may be on its way: the line from `start` (reaching
+        CORRIDOR_BACK_M behind it) to the nearest point of its destination, and the destination."""
+        line = self._corridor_line(start, dest)
+        return line.union(self.area[dest]) if line is not None else self.area[dest]
+
+    def _corridor_line(self, start, dest: str):
         c = Point(start)
         near = nearest_points(c, self.area[dest])[1]
-        return LineString([c, near]).union(self.area[dest]) if c.distance(near) > 1.0 else self.area[dest]
+        n = c.distance(near)
+        if n <= 1.0:
+            return None
+        k = CORRIDOR_BACK_M / n
+        return LineString([(c.x - (near.x - c.x) * k, c.y - (near.y - c.y) * k), (near.x, near.y)])
 
     def _shift(self, unit: str, tr: float) -> np.ndarray:
         """How far a reorganization at `tr` moves the unit's centroid with no member moving."""
@@ -617,11 +626,11 @@ class Truth:
                               f"{mid} late at {cp['point']}", at=when + fuzz)
                 elif arrive > when + fuzz - self.slack:
                     self.may(o, ["checkpoint"], [m["unit"]], when + fuzz - 1, when + fuzz + 5)
-                if arrive < when - fuzz - self.slack:
-                    self.must(o, "checkpoint", [], [m["unit"]], arrive - 1, arrive + self.slack + 5,
+                if arrive < when - fuzz - self.slack:   # seen up to `slack` before or after it happened
+                    self.must(o, "checkpoint", [], [m["unit"]], arrive - self.slack, arrive + self.slack + 5,
                               f"{mid} early at {cp['point']}", at=arrive)
                 elif arrive < when - fuzz + self.slack:
-                    self.may(o, ["checkpoint"], [m["unit"]], arrive - 1, arrive + self.slack + 5)
+                    self.may(o, ["checkpoint"], [m["unit"]], arrive - self.slack, arrive + self.slack + 5)
 
     def _line_of(self, mid, m):
         """The line a moving mission follows: its route or axis, or its corridor's line."""
@@ -634,9 +643,7 @@ class Truth:
             return LineString(line.coords[::-1]) if goal.distance(Point(line.coords[0])) < \
                 goal.distance(Point(line.coords[-1])) else line
         if mid in self.corridor_start:
-            c = Point(self.corridor_start[mid])
-            near = nearest_points(c, self.area[p.get("destination") or p.get("objective")])[1]
-            return LineString([c, near]) if c.distance(near) > 1.0 else None
+            return self._corridor_line(self.corridor_start[mid], p.get("destination") or p.get("objective"))
         return None
 
     def _ahead(self, mid, m, line, s, e) -> None:

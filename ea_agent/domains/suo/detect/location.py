@@ -19,6 +19,10 @@ from .base import Changes, Detector
 from .geometry import judged_distance, judged_distance_swept
 
 
+CORRIDOR_BACK_M = 300.0   # a corridor reaches this far behind its start (its start is an estimate: a
+                          # halting unit's dead-reckoned centroid overshoots, a stale one lags)
+
+
 class LocationMonitors(Detector):
     TYPES = {"out-of-position": "plan-constraint-violated"}
 
@@ -59,7 +63,11 @@ class LocationMonitors(Detector):
         area = self.dom.overlay[self.corridor_to[m.id][1]].area
         if m.id not in self.corridors:
             self.monitors[m.id].append((m, m.id, m.LOCATION_RULE, "corridor"))
-        self.lines[m.id] = shapely.shortest_line(shapely.Point(pos), area)
+        line = shapely.shortest_line(shapely.Point(pos), area)
+        (x0, y0), (x1, y1) = line.coords
+        n = max(((x1 - x0) ** 2 + (y1 - y0) ** 2) ** 0.5, 1e-9)
+        back = CORRIDOR_BACK_M / n   # a unit a little behind where it was thought to start is not off it
+        self.lines[m.id] = shapely.LineString([(x0 - (x1 - x0) * back, y0 - (y1 - y0) * back), (x1, y1)])
         self.corridors[m.id] = shapely.union(self.lines[m.id], area)
         self.corridor_of[m.id] = (pos, self.dom.pic.members[m.unit].copy())
 
