@@ -20,7 +20,7 @@ from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
 from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies, Coordination,
-                     Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors, ScheduleMonitors, Standoffs,
+                     Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors, Presence, ScheduleMonitors, Standoffs,
                      ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
@@ -79,6 +79,7 @@ class SuoDomain:
         self.lines = self._part(Lines)
         self.standoff = self._part(Standoffs)
         self.support = self._part(FireSupport)
+        self.presence = self._part(Presence)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -319,6 +320,9 @@ class SuoDomain:
 
     def post_fire_support(self, m: Mission, supported: str, line: str | None, target: str) -> None:
         self.support.post(m, supported, line, target)
+
+    def post_presence(self, m: Mission, partner: str, point: str, lane: str | None = None) -> None:
+        self.presence.post(m, partner, point, lane)
 
     def post_standoff(self, m: Mission) -> None:
         self.standoff.post(m)

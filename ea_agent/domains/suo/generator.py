@@ -62,6 +62,7 @@ INCIDENTS = [
      "types": ["threat-ahead"]},
     {"label": "B1 reaches CP-B1 150 s behind its march table", "t": 1080, "types": ["checkpoint"]},
     {"label": "B3 not through the obstacle OBS-B3 by 2900 (its breach)", "t": 2900, "types": ["line"]},
+    {"label": "C2S4 passes C3 at CP-C outside the passage lane LANE-C", "t": 3990, "types": ["presence"]},
     {"label": "B crosses PL BLUE before M is in position to support it; M lifts fires as B nears OBJ-B", "t": 2420,
      "types": ["fire-support"]},
     {"label": "A2's engagement area EA-A is beyond its weapons range from BP-A2", "t": 3760,
@@ -370,6 +371,7 @@ def overlay_features() -> list[dict]:
     add("CP-LINK", "checkpoint", "Point", [4000, 9000], "BN", radius_m=300)
     add("OBS-B3", "obstacle", "LineString", [[LANE_X["B3"] - 400, 9000], [LANE_X["B3"] + 400, 9000]], "B")
     add("PL-AMBER", "phase-line", "LineString", [[0, 9000], [12000, 9000]], "BN")
+    add("LANE-C", "area", "Polygon", _rect(10700, 10600, 10950, 11400), "C")   # C2's passage lane: C2S4 keeps west of it
     for name, y in (("SP-B1", 0), ("CP-B1", 3500), ("RP-B1", 7000)):   # B1's march table
         add(name, "checkpoint", "Point", [LANE_X["B1"], y], "B", radius_m=250)
     add("CP-C", "checkpoint", "Point", [10650, 11000], "C", radius_m=300)
@@ -431,7 +433,7 @@ def plan_doc(sim: Sim) -> dict:
     m("BNHQ-occupy", "BNHQ", "occupy", ("START-AT", 0), None, position="AA-BN")
     m("BN-reorg-R", "BN", "reorganize", ("START-AT", sim.reorg_t), None, subject="R", new_parent="BN")
     m("A3-linkup", "A3", "link-up", None, None, partner="B1", point="CP-LINK", at=3000)
-    m("C2-passage", "C2", "passage-of-lines", None, None, partner="C3", point="CP-C", at=4000)
+    m("C2-passage", "C2", "passage-of-lines", None, None, partner="C3", point="CP-C", at=4000, lane="LANE-C")
     m("BN-branch-ABF", "M", "branch", None, None, owner="BN", task="attack-by-fire",
       trigger={"kind": "hostile-in-area", "area": "DP2", "min_strength": 1}, task_params={"position": "BP-M2"})
     m("A-sequel-occupy", "A1", "sequel", None, None, owner="A", task="occupy",

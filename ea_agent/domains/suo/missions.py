@@ -26,7 +26,7 @@ DEFAULT_PRIORITY = {
     "hostile-expected": "priority", "ave-of-approach": "routine",
     "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
     "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate", "threat-ahead": "immediate",
-    "checkpoint": "priority", "line": "immediate", "standoff": "immediate", "fire-support": "immediate",
+    "checkpoint": "priority", "line": "immediate", "standoff": "immediate", "fire-support": "immediate", "presence": "immediate",
 }
 
 
@@ -610,14 +610,29 @@ class LinkUp(CoordinationMission):
 
 @mission
 class ReliefInPlace(CoordinationMission):
-    """Judged as a coordination (the no-gap handover not yet checked)."""
+    """The unit relieves `partner` at `point`: besides meeting there, no gap (the partner
+    does not leave before the unit is in)."""
     TYPE = "relief-in-place"
+    CHECKS = CoordinationMission.CHECKS + ("no gap: the relieved unit stays until the relieving one is in (presence)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_presence(self, self.params["partner"], self.params["point"])
 
 
 @mission
 class PassageOfLines(CoordinationMission):
-    """Judged as a coordination (the lane not yet checked)."""
+    """The unit passes through `partner`'s position at `point`: its elements there keep to
+    the optional `lane`."""
     TYPE = "passage-of-lines"
+    PARAMS = {"lane": "optional overlay area: the passing unit's elements at the point keep inside it"}
+    GEOMETRY_PARAMS = ("point", "lane")
+    CHECKS = CoordinationMission.CHECKS + ("its elements at the point inside its lane (presence)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("lane"):
+            ctx.post_presence(self, self.params["partner"], self.params["point"], self.params["lane"])
 
 
 # ---------------------------------------------------------------- contingent

@@ -748,6 +748,49 @@ class Truth:
                     self.must(o, "band", [], [m["unit"], other], a - self.slack, a + 60, f"{mid} out of band", at=a)
                 self.may(o, ["band"], [m["unit"], other], a - self.slack, b + self.slack)
 
+    def presence(self) -> None:
+        """A relief in place leaves no gap; a passage of lines keeps its elements at the point
+        inside its lane. From the plan's start (coordinations have no start of their own)."""
+        radius = float(self.voi["coordination_radius_m"])
+        for mid, m in self.missions.items():
+            p = m["params"]
+            if m["type"] not in ("relief-in-place", "passage-of-lines") or (
+                    m["type"] == "passage-of-lines" and not p.get("lane")):
+                continue
+            v0, v1 = self.valid[mid]
+            pt = self.geom[p["point"]]
+            sure, maybe, was, came = [], [], False, False
+            for k, t in enumerate(self.ticks):
+                if not v0 <= t < v1:
+                    continue
+                mine = self.member_points(m["unit"], k)
+                dm = np.array([pt.distance(Point(q)) for q in mine])
+                if m["type"] == "passage-of-lines":
+                    lane = self.area[p["lane"]]
+                    out = [lane.distance(Point(q)) for q, d in zip(mine, dm) if d <= radius + FRIENDLY_ERR_M]
+                    if any(o > FRIENDLY_ERR_M for o, d in zip(out, dm[dm <= radius + FRIENDLY_ERR_M])
+                           if d <= radius - FRIENDLY_ERR_M):
+                        sure.append(t)
+                    if any(o > 0 for o in out):
+                        maybe.append(t)
+                else:
+                    theirs = min(pt.distance(Point(q)) for q in self.member_points(p["partner"], k))
+                    was |= theirs <= radius
+                    came |= bool((dm <= radius).any())
+                    if was and not came and theirs > radius + FRIENDLY_ERR_M:
+                        sure.append(t)
+                    if was and not came and theirs > radius - FRIENDLY_ERR_M:
+                        maybe.append(t)
+            what = "outside its lane" if m["type"] == "passage-of-lines" else "gap in the relief"
+            for a, b in _runs(sure):
+                if b - a >= 30:
+                    for o in self.owners_of(m["unit"], a):
+                        self.must(o, "presence", [], [m["unit"], p["partner"]], a - self.slack, a + 60,
+                                  f"{mid}: {what}", at=a)
+            for a, b in _runs(maybe):
+                for o in self.owners_of(m["unit"], a):
+                    self.may(o, ["presence"], [m["unit"], p["partner"]], a - self.slack, b + self.slack)
+
     def coordination(self) -> None:
         for mid, m in self.missions.items():
             if m["type"] not in COORDINATION:
@@ -1011,7 +1054,7 @@ def ground_truth(sim, feats: list[dict], plan: dict, owners: list[str]) -> dict:
     tr = Truth(sim, feats, plan, owners)
     tr.contingency()
     for step in (tr.out_of_position, tr.fratricide, tr.unknown_position, tr.schedule, tr.coordination,
-                 tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families):
+                 tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families, tr.presence):
         step()
     key = lambda d: (d["owner"], d["t0"], d.get("type", ""), d["subjects"])
     return {"owners": owners, "tick_s": TICK, "incidents": sorted(tr.incidents, key=key),
