@@ -263,6 +263,7 @@ class SuoDomain:
         self.taskorg.resubordinate(unit, new_parent)
         self._org_changed()
         self._post_all_for(self.own_units - before, t)
+        self.coverage.resubordinated(unit, t)
 
     def _auto_start(self, t: float) -> None:
         """Missions the EA executes itself (reorganizations) whose time has come."""
@@ -304,6 +305,9 @@ class SuoDomain:
 
     def check_coverage(self, m: Mission, position: str, engagement_area: str, t: float) -> None:
         self.coverage.check(m, position, engagement_area, t)
+
+    def post_held(self, m: Mission, position: str) -> None:
+        self.coverage.post_held(m, position)
 
     def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
         self.bands.post(m, other, lo, hi)

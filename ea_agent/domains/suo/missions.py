@@ -90,6 +90,19 @@ def _checks(*more: str) -> tuple[str, ...]:
     return Mission.CHECKS + more
 
 
+def _band_problem(params: dict) -> tuple[str, str] | None:
+    """What is wrong with an optional `band_m` [min, max], if anything."""
+    band = params.get("band_m")
+    if band is None:
+        return None
+    if (not isinstance(band, list) or len(band) != 2 or not all(isinstance(x, (int, float)) and not
+                                                                 isinstance(x, bool) and x == x for x in band)):
+        return "band_m", "expected [min, max] in metres"
+    if not 0 <= band[0] <= band[1]:
+        return "band_m", f"min {band[0]} above max {band[1]} (or negative)"
+    return None
+
+
 # ---------------------------------------------------------------- movement
 class MovementMission(Mission):
     """Move along a route to a destination; judged by the unit's centroid. Without a
@@ -175,16 +188,7 @@ class FollowMission(MovementMission):
 
     @classmethod
     def check_params(cls, params, overlay):
-        problem = super().check_params(params, overlay)
-        band = params.get("band_m")
-        if problem or band is None:
-            return problem
-        if (not isinstance(band, list) or len(band) != 2 or not all(isinstance(x, (int, float)) and not
-                                                                     isinstance(x, bool) and x == x for x in band)):
-            return "band_m", "expected [min, max] in metres"
-        if not 0 <= band[0] <= band[1]:
-            return "band_m", f"min {band[0]} above max {band[1]} (or negative)"
-        return None
+        return super().check_params(params, overlay) or _band_problem(params)
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
@@ -397,11 +401,13 @@ class PositionMission(Mission):
     DESIRED_STRENGTH_RATIO = 0.33  # prepared defenders accept 1:3
     PENETRATION: ClassVar[bool] = False   # a hostile entering the position is a penetration
     CHECKS = _checks("in its position while it runs and at the end (out-of-position)",
+                     "its position holds some friendly element while it runs (friendly-expected)",
                      "its engagement area within weapons range of the position (friendly-expected)",
                      "hostiles in its engagement area: expected activity; absent by a time (hostile-expected)")
 
     def location_constraints(self, ctx):
         ctx.post_location_monitor(self, self.params["position"], self.LOCATION_RULE, "position")
+        ctx.post_held(self, self.params["position"])
         ea_ = self.params.get("engagement_area")
         if ea_:
             ctx.post_red_monitor(self, ea_, expected=True, expect_by=self.params.get("expect_hostile_by"))
@@ -497,9 +503,23 @@ class SupportByFire(PositionMission):
 
 @mission
 class Overwatch(PositionMission):
-    """One element with eyes on is enough."""
+    """One element with eyes on is enough; an optional `supported` unit stays within its
+    distance band of it (default [0, weapons_range_m]: within its fires)."""
     TYPE = "overwatch"
     LOCATION_RULE = "any"
+    PARAMS = {"supported": "optional unit overwatched", "band_m": "optional [min, max] distance to it"}
+    UNIT_PARAMS = ("supported",)
+    CHECKS = PositionMission.CHECKS + ("the overwatched unit within its band (band)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return super().check_params(params, overlay) or _band_problem(params)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("supported"):
+            lo, hi = self.params.get("band_m") or (0.0, ctx.voi(self, "weapons_range_m"))
+            ctx.post_band(self, self.params["supported"], float(lo), float(hi))
 
 
 @mission
@@ -571,8 +591,13 @@ class Guard(SecurityMission):
 
 @mission
 class Observe(SecurityMission):
-    """An observation post: the security family as it is."""
+    """An observation post: its position must hold some friendly element while it runs."""
     TYPE = "observe"
+    CHECKS = SecurityMission.CHECKS + ("its post holds some friendly element while it runs (friendly-expected)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_held(self, self.params["position"])
 
 
 @mission

@@ -483,8 +483,12 @@ class Truth:
                 self._end_state(mid, m, p["objective"], self.ended[mid])
             if p.get("engagement_area") and geometry_params(typ) == ("position", "engagement_area"):
                 self._coverage(mid, m, p["position"], p["engagement_area"], s)
+            if geometry_params(typ) == ("position", "engagement_area") or typ == "observe":
+                self._held(mid, m, p["position"], s, e)
             if typ in FOLLOW:
                 self._band(mid, m, p["supported"], p.get("band_m") or (0.0, FOLLOW_MAX_M), s, e)
+            if typ == "overwatch" and p.get("supported"):   # within its fires unless the plan says
+                self._band(mid, m, p["supported"], p.get("band_m") or (0.0, self.thr(m, "weapons_range_m")), s, e)
             line = self._line_of(mid, m)
             if line is not None:
                 self._ahead(mid, m, line, s, e)
@@ -496,6 +500,29 @@ class Truth:
                 self._line(mid, m, p["line"], float(p["until"]), s, e, hold=True)
             if typ == "breach" and p.get("obstacle"):
                 self._line(mid, m, p["obstacle"], float(p["by"]), s, e, hold=False, toward=p["objective"])
+
+    def _held(self, mid, m, position, s, e) -> None:
+        """A position its mission must hold: some friendly element (anyone's) in it while it runs;
+        near its edge (reports lag) either answer is fair."""
+        near_g = self.area[position].buffer(FRIENDLY_ERR_M)
+        deep = self.area[position].buffer(-FRIENDLY_ERR_M)
+        sure, maybe = [], []
+        for k, t in enumerate(self.ticks):
+            if not s <= t < e:
+                continue
+            pts = [Point(q) for leaf in self.leaves for q in self.leaf_xy[leaf][k] + self.offsets[leaf]]
+            if not any(near_g.contains(q) for q in pts):
+                sure.append(t)
+            if deep.is_empty or not any(deep.contains(q) for q in pts):
+                maybe.append(t)
+        for a, b in _runs(sure):
+            if b - a >= 30:
+                for o in self.owners_of(m["unit"], a):
+                    self.must(o, "friendly-expected", [], [m["unit"]], a - self.slack, a + 60,
+                              f"{position} empty ({mid})", at=a)
+        for a, b in _runs(maybe):
+            for o in self.owners_of(m["unit"], a):
+                self.may(o, ["friendly-expected"], [m["unit"]], a - self.slack, b + self.slack)
 
     def _fire_support(self, mid, m, p) -> None:
         """Support by fire: in position (within out_of_position_m of it) when the supported unit

@@ -1,20 +1,69 @@
 """Friendly expected (the paper's EA Manager watches a place for activity "friendly or
 enemy, expected or unexpected"; this is the friendly half): a position mission's
 engagement area must be within its unit's weapons range of the position, or no one
-covers it. Judged when the mission starts."""
+covers it (judged when the mission starts); a position that must hold a unit (a battle
+position, an observation post) holds some friendly element while its mission runs
+(judged on each scan); and a unit resubordinated has a mission under its new superior."""
 from __future__ import annotations
 
+import numpy as np
 import shapely
 
 from ea_agent.core.alert import Candidate
 
-from ..missions import Mission
+from ..missions import ContingentMission, Mission, ReorganizationMission
 from ..render import km
-from .base import Detector
+from .base import Changes, Detector
 
 
 class Coverage(Detector):
     TYPES = {"friendly-expected": "plan-constraint-violated"}
+
+    def reset(self) -> None:
+        self.held: dict[str, tuple[Mission, str]] = {}   # mission -> (it, the position it must hold)
+
+    def post_held(self, m: Mission, position: str) -> None:
+        self.held[m.id] = (m, position)
+
+    def end_mission(self, mid: str) -> None:
+        self.held.pop(mid, None)
+
+    def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        """Each scan: a held position with no friendly element in it (whoever's)."""
+        dom = self.dom
+        if not ch.rescan or not self.held or dom.plan is None:
+            return
+        xy = dom.pic.xy
+        ok = ~np.isnan(xy[:, 0])
+        for mid, (m, pos) in self.held.items():
+            if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
+                continue
+            if len(dom.pic.member_xy(m.unit)) == 0:
+                continue   # where its unit is is not known yet: not known to be empty either
+            area = dom.overlay[pos].area
+            if shapely.contains_xy(area, xy[ok, 0], xy[ok, 1]).any():
+                continue
+            cands.append(Candidate(
+                t, "friendly-expected", m.compute_priority("friendly-expected"), (m.unit,),
+                f"{pos} holds no friendly element ({dom.name(m.unit)} {m.TYPE})",
+                key=("friendly-expected", mid, pos),
+                details={"mission": mid, "check": "empty", "position": pos, "places": [pos]}))
+
+    def resubordinated(self, unit: str, t: float) -> None:
+        """A unit put under a new superior with no mission of its own or of a superior in the plan."""
+        dom = self.dom
+        if dom.plan is None or unit not in dom.own_units:
+            return
+        chain = (unit, *dom.taskorg.ancestors(unit))
+        mine = [mid for mid, st in dom.plan.state.items() if st in ("pending", "ready", "active")
+                and dom.missions[mid].unit in chain
+                and not isinstance(dom.missions[mid], (ContingentMission, ReorganizationMission))]
+        if mine:
+            return
+        dom.ea.post(Candidate(
+            t, "friendly-expected", dom.base.compute_priority("friendly-expected"), (unit,),
+            f"{dom.name(unit)} resubordinated to {dom.name(dom.taskorg.units[unit].parent)} with no mission in the plan",
+            key=("friendly-expected", "org", unit), details={"check": "no-mission", "unit": unit}))
 
     def weapons_range(self, unit: str) -> float:
         to = self.dom.taskorg
