@@ -143,6 +143,8 @@ def cmd_missions(a) -> int:
         print(f"{name:22} [{parents}]{f' location={rule}' if rule else ''}\n{'':22} params: {params}")
         for c in getattr(cls, "CHECKS", ()):
             print(f"{'':22} checks: {c}")
+        if getattr(cls, "PRIORITY", None):
+            print(f"{'':22} priority: " + ", ".join(f"{k} {v}" for k, v in sorted(cls.PRIORITY.items())))
     return 0
 
 
