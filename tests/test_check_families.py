@@ -16,6 +16,7 @@ import pytest
 from ea_agent.core.geo import Projection
 from ea_agent.domains.suo.generator import ORIGIN_LONLAT
 from ea_agent.domains.suo.messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
+from ea_agent.domains.suo.detect.location import RECHECK_S
 from ea_agent.domains.suo.missions import REGISTRY
 from saim_mesh import cli
 from saim_mesh import scenario as S
@@ -186,7 +187,7 @@ def test_a_stationary_unit_is_rejudged_on_scenario_time(tmp_path):
         ea.submit(m)
     ea.finish(400.0)
     oop = of(ea, "out-of-position")
-    assert oop and 200 < oop[0].t <= 200 + 5.0 + 2 * EPOCH, [a.t for a in oop]
+    assert oop and 200 < oop[0].t <= 200 + RECHECK_S + 2 * EPOCH, [a.t for a in oop]   # the next re-check
     assert oop[0].subjects == ("A1",) and oop[0].details["threshold_m"] == 50.0
     assert abs(oop[0].details["distance_m"] - 100) < 5
 

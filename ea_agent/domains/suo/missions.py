@@ -125,10 +125,15 @@ class MovementMission(Mission):
             return None
         if not isinstance(table, list) or not table:
             return "checkpoints", "expected a list of {point, t}"
-        last = -math.inf
+        last, seen = -math.inf, set()
         for i, cp in enumerate(table):
             if not isinstance(cp, dict) or set(cp) != {"point", "t"}:
                 return f"checkpoints[{i}]", "expected {point, t}"
+            if not isinstance(cp["point"], str):
+                return f"checkpoints[{i}].point", "expected a control measure id"
+            if cp["point"] in seen:   # each point is reached once: an out-and-back table needs two points
+                return f"checkpoints[{i}].point", f"{cp['point']!r} is already in the table"
+            seen.add(cp["point"])
             if cp["point"] not in overlay:
                 return f"checkpoints[{i}].point", f"{cp['point']!r} is not in the overlay"
             t = cp["t"]

@@ -19,8 +19,23 @@ from .base import Changes, Detector
 class ThreatsAhead(Detector):
     TYPES = {"threat-ahead": ADVERSARIAL}
 
+    def reset(self) -> None:
+        self._towards_cache: dict[str, object] = {}
+        self._watched: tuple = (None, [])
+
     def watched(self) -> list[tuple[Mission, object]]:
-        """Running missions that move along a line, with it."""
+        """Running missions that move along a line, with it (recomputed when what runs, or a
+        corridor, changes)."""
+        dom = self.dom
+        if dom.plan is None:
+            return []
+        key = (frozenset(mid for mid, st in dom.plan.state.items() if st == "active"),
+               tuple(id(x) for x in dom.location.lines.values()))
+        if key != self._watched[0]:
+            self._watched = (key, self._compute_watched())
+        return self._watched[1]
+
+    def _compute_watched(self) -> list[tuple[Mission, object]]:
         dom = self.dom
         loc = dom.location
         out = []
@@ -29,7 +44,10 @@ class ThreatsAhead(Detector):
                 continue
             for m, geom, _rule, what in mons:
                 if what in ("route", "axis"):
-                    out.append((m, self._towards(m, dom.overlay[geom].geom)))
+                    line = self._towards_cache.get(mid)
+                    if line is None:
+                        line = self._towards_cache[mid] = self._towards(m, dom.overlay[geom].geom)
+                    out.append((m, line))
                     break
                 if what == "corridor":
                     out.append((m, loc.lines[mid]))
@@ -73,8 +91,16 @@ class ThreatsAhead(Detector):
         if not ids:
             return
         xy = np.array([(tracks[k].x, tracks[k].y) for k in ids])
+        watched = self.watched()
+        if not watched:
+            return
+        w = max(dom.voi(m, "ahead_width_m") for m, _ in watched)
+        b = np.array([line.bounds for _, line in watched])
+        x0, y0, x1, y1 = b[:, 0].min() - w, b[:, 1].min() - w, b[:, 2].max() + w, b[:, 3].max() + w
+        if not ((xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)).any():
+            return   # no track anywhere near any moving unit's line
         pts = shapely.points(xy)
-        for m, line in self.watched():
+        for m, line in watched:
             hit = self.ahead(m, line, xy, pts)
             if hit is not None and hit.any():
                 inside = [k for k, ok in zip(ids, hit.tolist()) if ok]

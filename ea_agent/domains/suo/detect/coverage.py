@@ -16,11 +16,15 @@ from ..render import km
 from .base import Changes, Detector
 
 
+HELD_SCAN_S = 30.0   # an empty position is looked for this often (emptiness that lasts seconds is no news)
+
+
 class Coverage(Detector):
     TYPES = {"friendly-expected": "plan-constraint-violated"}
 
     def reset(self) -> None:
         self.held: dict[str, tuple[Mission, str]] = {}   # mission -> (it, the position it must hold)
+        self.next_t = 0.0
 
     def post_held(self, m: Mission, position: str) -> None:
         self.held[m.id] = (m, position)
@@ -31,8 +35,9 @@ class Coverage(Detector):
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         """Each scan: a held position with no friendly element in it (whoever's)."""
         dom = self.dom
-        if not ch.rescan or not self.held or dom.plan is None:
+        if not ch.rescan or not self.held or dom.plan is None or t < self.next_t:
             return
+        self.next_t = t + HELD_SCAN_S
         xy = dom.pic.xy
         ok = ~np.isnan(xy[:, 0])
         for mid, (m, pos) in self.held.items():

@@ -5,6 +5,8 @@ the line; "across" means more than `line_margin_m` beyond it, so report noise do
 flicker a unit standing on the line."""
 from __future__ import annotations
 
+import math
+
 import shapely
 
 from ea_agent.core.alert import Candidate, hms
@@ -15,6 +17,13 @@ from .base import Changes, Detector
 
 def side(line, p) -> float:
     """Signed distance of point `p` from `line`: positive on its left (walking along it)."""
+    if len(line.coords) == 2:   # a straight line (most are): no geometry built
+        (ax, ay), (bx, by) = line.coords
+        dx, dy, px, py = bx - ax, by - ay, p[0] - ax, p[1] - ay
+        n2 = dx * dx + dy * dy
+        u = min(max((px * dx + py * dy) / n2, 0.0), 1.0) if n2 > 0 else 0.0
+        d = math.hypot(px - u * dx, py - u * dy)
+        return d if dx * py - dy * px >= 0 else -d
     pt = shapely.Point(p)
     s = line.project(pt)
     a, b = line.interpolate(max(s - 1.0, 0.0)), line.interpolate(min(s + 1.0, line.length))
@@ -55,13 +64,15 @@ class Lines(Detector):
         dom = self.dom
         if not self.watch or dom.plan is None or not (ch.units or ch.rescan):
             return
-        margin = float(dom.voi_cfg["line_margin_m"])
         for mid, items in list(self.watch.items()):
             state = dom.plan.state.get(mid)
             for it in items:
                 m, lid, what, when, start = it
+                margin = dom.voi(m, "line_margin_m")
                 if state not in (("ready", "active") if what == "depart" else ("active",)):
                     continue
+                if m.unit not in ch.units and start is not None:
+                    continue   # it did not move: it did not cross
                 pos = dom.unit_pos.get(m.unit)   # as reported: dead reckoning overshoots a unit halting on its line
                 if pos is None:
                     continue

@@ -19,6 +19,7 @@ from .base import Changes, Detector
 from .geometry import judged_distance, judged_distance_swept
 
 
+RECHECK_S = 30.0          # units that did not move are judged this often (they move nothing but the clock)
 CORRIDOR_BACK_M = 300.0   # a corridor reaches this far behind its start (its start is an estimate: a
                           # halting unit's dead-reckoned centroid overshoots, a stale one lags)
 
@@ -32,6 +33,7 @@ class LocationMonitors(Detector):
         self.corridors: dict[str, object] = {}                   # mission -> corridor (built at start)
         self.lines: dict[str, object] = {}                       # ... the line of it (to the target's edge)
         self.corridor_of: dict[str, tuple] = {}                  # ... its start and the members it judges
+        self.next_all = 0.0                                      # when units that did not move are judged next
 
     def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
         self.monitors[m.id].append((m, geom, rule, what))
@@ -110,12 +112,15 @@ class LocationMonitors(Detector):
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
-        if not (ch.leaves or ch.rescan) or dom.plan is None:
+        every = ch.rescan and t >= self.next_all
+        if not (ch.leaves or every) or dom.plan is None:
             return
-        if len(self.corridors) < len(self.corridor_to):
+        if every:
+            self.next_all = t + RECHECK_S
+        if every and len(self.corridors) < len(self.corridor_to):
             self._pending_corridors()
         todo = [mon for mid, mons in self.monitors.items()
-                if mons and (ch.rescan or mons[0][0].unit in ch.units) and dom.plan.state.get(mid) == "active"
+                if mons and (every or mons[0][0].unit in ch.units) and dom.plan.state.get(mid) == "active"
                 for mon in mons if dom.in_plan(mon[0])]
         cent = [mon for mon in todo if mon[2] == "centroid" and dom.unit_pos.get(mon[0].unit)]
         if cent:   # one vectorised distance call for every centroid-judged monitor

@@ -13,6 +13,9 @@ from ..missions import Mission
 from .base import Changes, Detector
 
 
+NEAR_M = 1500.0   # a unit's elements are no farther than this from its centroid
+
+
 class Presence(Detector):
     TYPES = {"presence": "plan-constraint-violated"}
 
@@ -35,15 +38,19 @@ class Presence(Detector):
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
-        if not self.watch or dom.plan is None or not (ch.units or ch.rescan):
+        if not self.watch or dom.plan is None or not ch.units:
             return
         for mid, w in self.watch.items():
             m, partner, point, lane, was, arrived = w
             if dom.plan.state.get(mid) in ("done", "aborted") or not dom.in_plan(m):
                 continue
-            if m.unit not in ch.units and partner not in ch.units and not ch.rescan:
-                continue
+            if m.unit not in ch.units and partner not in ch.units:
+                continue   # nobody moved: nothing changed
             radius = dom.voi(m, "coordination_radius_m")
+            if lane is not None:   # a passage: nothing to judge while the passing unit is nowhere near
+                c = dom.unit_pos.get(m.unit)
+                if c is None or dom.overlay[point].geom.distance(shapely.Point(c)) > radius + NEAR_M:
+                    continue
             mine = self._at(m.unit, point, radius)
             if lane is None:   # relief in place
                 theirs = len(self._at(partner, point, radius))

@@ -46,12 +46,10 @@ class Projections(Detector):
             return
         self.next_t = t + SAMPLE_S
         self.due = self._watched()
-        reckon = float(dom.voi_cfg["dead_reckon_s"])
         for m in self.due:
-            _, p1 = dom.pic.swept(m.unit, t, reckon)   # where reports up to a minute old put it now
-            if len(p1) == 0:
+            pos = dom.unit_now.get(m.unit)   # where reports up to a minute old put it now (dead-reckoned)
+            if pos is None:
                 continue
-            pos = tuple(p1.mean(axis=0).tolist())
             h = self.hist.setdefault(m.id, deque())
             if h and h[-1][0] >= t:
                 continue

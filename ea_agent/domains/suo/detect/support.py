@@ -32,14 +32,15 @@ class FireSupport(Detector):
         dom = self.dom
         if not self.watch or dom.plan is None or not (ch.units or ch.rescan):
             return
-        margin = float(dom.voi_cfg["line_margin_m"])
         for mid, w in self.watch.items():
             m, sup, line, target, start, crossed, lifted = w
-            if not dom.in_plan(m) or dom.plan.state.get(mid) in ("done", "aborted"):
+            if (crossed and lifted) or sup not in ch.units or not dom.in_plan(m) or \
+                    dom.plan.state.get(mid) in ("done", "aborted"):
                 continue
             pos = dom.unit_pos.get(sup)
             if pos is None:
                 continue
+            margin = dom.voi(m, "line_margin_m")
             if not crossed and side(dom.overlay[line].geom, pos) * start < -margin:
                 w[5] = True
                 self._in_position(m, sup, line, t, cands)
