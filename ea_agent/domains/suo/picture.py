@@ -118,6 +118,11 @@ class Picture:
         self.xy[idx, 1] = y
         return {self.ent_leaf[i] for i in idx.tolist()}
 
+    def live_tracks(self) -> tuple[list[str], np.ndarray]:
+        """The hostile entities with some strength, sorted by id, and their positions (n, 2)."""
+        ids = [k for k in sorted(self.tracks) if self.tracks[k].strength > 0]
+        return ids, np.array([(self.tracks[k].x, self.tracks[k].y) for k in ids]).reshape(-1, 2)
+
     def apply_tracks(self, tracks: list[SensorTrack]) -> set[str]:
         """Track reports go through adjudication; returns the entities whose state changed."""
         if not tracks:

@@ -22,6 +22,28 @@ class ThreatsAhead(Detector):
     def reset(self) -> None:
         self._towards_cache: dict[str, object] = {}
         self._watched: tuple = (None, [])
+        self._box: tuple | None = None   # rebuilt when a corridor is added (see _near_any_line)
+        self._box_lines = 0
+
+    def org_changed(self) -> None:
+        self._box = None   # the missions in our plan changed
+
+    def _near_any_line(self, xy: np.ndarray) -> bool:
+        """Whether any track is within the bounding box of any line a mission of ours may move
+        along (built once per plan: most of the time no hostile is near any of them)."""
+        dom = self.dom
+        if self._box is None:
+            boxes = [dom.overlay[m.params[k]].geom.bounds for m in dom.missions.values() if dom.in_plan(m)
+                     for k in ("route", "axis") if m.params.get(k) in dom.overlay]
+            boxes += [line.bounds for line in dom.location.lines.values()]
+            if not boxes:
+                return False
+            b = np.array(boxes)
+            w = float(dom.voi_cfg["ahead_width_m"]) * 4   # missions may widen theirs
+            self._box = (b[:, 0].min() - w, b[:, 1].min() - w, b[:, 2].max() + w, b[:, 3].max() + w)
+            self._box_lines = len(dom.location.lines)
+        x0, y0, x1, y1 = self._box
+        return bool(((xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)).any())
 
     def watched(self) -> list[tuple[Mission, object]]:
         """Running missions that move along a line, with it (recomputed when what runs, or a
@@ -87,10 +109,11 @@ class ThreatsAhead(Detector):
         if not (ch.tracks or ch.rescan) or not dom.pic.tracks or float(dom.voi_cfg["ahead_m"]) <= 0.0:
             return
         tracks = dom.pic.tracks
-        ids = [k for k in sorted(tracks) if tracks[k].strength > 0]
-        if not ids:
+        ids, xy = dom.pic.live_tracks()
+        if len(dom.location.lines) != self._box_lines:
+            self._box = None
+        if not ids or not self._near_any_line(xy):
             return
-        xy = np.array([(tracks[k].x, tracks[k].y) for k in ids])
         watched = self.watched()
         if not watched:
             return

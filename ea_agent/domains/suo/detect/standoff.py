@@ -30,10 +30,9 @@ class Standoffs(Detector):
         if not self.watch or dom.plan is None or not (ch.tracks or ch.units or ch.rescan):
             return
         tracks = dom.pic.tracks
-        ids = [k for k in sorted(tracks) if tracks[k].strength > 0]
+        ids, xy = dom.pic.live_tracks()
         if not ids:
             return
-        xy = np.array([(tracks[k].x, tracks[k].y) for k in ids])
         for mid, m in self.watch.items():
             if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
                 continue
