@@ -203,6 +203,7 @@ class FollowMission(MovementMission):
 
 @mission
 class FollowAndSupport(FollowMission):
+    """The follow family as it is: behind the supported unit, within its band."""
     TYPE = "follow-and-support"
 
 
@@ -305,6 +306,7 @@ class OffensiveMission(Mission):
 
 @mission
 class Attack(OffensiveMission):
+    """The offensive family as it is: all members on the objective at the end."""
     TYPE = "attack"
 
 
@@ -635,6 +637,7 @@ class CoordinationMission(Mission):
 
 @mission
 class LinkUp(CoordinationMission):
+    """The coordination family as it is: both units meet at the point in time."""
     TYPE = "link-up"
 
 
@@ -688,11 +691,13 @@ class ContingentMission(Mission):
 
 @mission
 class Branch(ContingentMission):
+    """An alternative course of action: also offered when a moving unit meets hostiles ahead."""
     TYPE = "branch"
 
 
 @mission
 class Sequel(ContingentMission):
+    """What follows once its trigger holds (never offered as an alternative to a move)."""
     TYPE = "sequel"
 
 
@@ -714,6 +719,7 @@ class ReorganizationMission(Mission):
 
 @mission
 class Reorganize(ReorganizationMission):
+    """The reorganization family as it is."""
     TYPE = "reorganize"
 
 
