@@ -558,6 +558,22 @@
     ack.dataset.alert = id;
     ack.dataset.unit = a.owner || "";
     if (d.silenced) box.appendChild(el("p", "muted", `silenced by ${d.silenced}`));
+    // an alert that asks for a decision: one button per option, the recommended one first
+    const dec = d.decision;
+    if (dec && Array.isArray(dec.options)) {
+      const p = el("p", "decision", "Decide: ");
+      const opts = [...dec.options].sort((x, y) => (y === dec.recommended) - (x === dec.recommended));
+      for (const o of opts) {
+        const b = el("button", o === dec.recommended ? "decide recommended" : "decide", o);
+        b.type = "button";
+        b.dataset.option = o;
+        b.addEventListener("click", () => post("decide", { unit: a.owner || "", alert: id, option: o }).then((j) => {
+          if (j && j.ok !== false) p.appendChild(el("span", "badge acked", `decided: ${o}`));
+        }));
+        p.appendChild(b);
+      }
+      box.appendChild(p);
+    }
     // prefill the silence form with this alert's type and subjects
     $("silence-type").value = a.type || "";
     $("silence-subject").value = (a.subjects || []).join(", ");
