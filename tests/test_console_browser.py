@@ -87,3 +87,25 @@ def test_a_silence_by_area_is_listed_and_lifted_from_the_page(console):
         assert len(rows(d)) == 0
         bad = [e for e in js_errors(d) if "400" not in e]
         assert bad == [], bad
+
+
+def test_a_decision_is_taken_from_the_alert_that_asks_for_it(console):
+    """BN's EA asks whether M goes on past H9 (threat-ahead): the alert's details show one
+    button per option, the recommended one first; a click sends `decide` and the EA answers."""
+    from selenium.webdriver.common.by import By
+    with chromium() as d:
+        d.get(console)
+        asks = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, 'li.alert[data-type="threat-ahead"][data-owner="BN"]'))
+        d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", asks[0])   # in a scrolled pane
+        buttons = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#details .decision button.decide"))
+        options = [b.get_attribute("data-option") for b in buttons]
+        assert options[0] == "execute:BN-branch-ABF" and set(options) == {"abort", "execute:BN-branch-ABF", "continue"}
+        assert "recommended" in buttons[0].get_attribute("class")
+        go_on = next(b for b in buttons if b.get_attribute("data-option") == "continue")
+        d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", go_on)
+        status = lambda: d.find_element(By.ID, "status").get_attribute("textContent")
+        wait(d, lambda d: "decide" in status().lower())
+        assert ": ok" in status(), status()
+        wait(d, lambda d: "decided: continue" in d.find_element(By.ID, "details").get_attribute("textContent"))
+        bad = [e for e in js_errors(d) if "400" not in e]
+        assert bad == [], bad
