@@ -84,7 +84,7 @@ def main(argv=None) -> int:
            "tracks": "true positions" if a.true_tracks else "simulated sensors, fused near their source",
            "wall_s": round(time.perf_counter() - t0),
            "note": ("each seed is a battle drawn at random (ea_agent/domains/suo/random_battle.py); truth from "
-                    "the oracle (ea_agent/domains/suo/oracle.py, which imports nothing from ea_agent); scored by "
+                    "the oracle (ea_agent/domains/suo/oracle/, which imports nothing else of ea_agent); scored by "
                     "saim_mesh/evaluate.py: recall per incident in its window, delay from when it happened, unwanted = "
                     "matches nothing, repeats the same story without a 1.25x severity change, or wrong priority"),
            "rows": rows}

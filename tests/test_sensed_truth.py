@@ -1,4 +1,4 @@
-"""The oracle holds the EAs to what the sensors could see (oracle.py: hostiles_at, areas'
+"""The oracle holds the EAs to what the sensors could see (the oracle: hostiles_at, areas'
 tolerance and resolution), stories are per place (evaluate._no_news), fusion's max speed
 (make_node, KalmanTracker) and orders switching plans in random battles (generator.py)."""
 from __future__ import annotations

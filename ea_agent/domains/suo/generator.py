@@ -4,7 +4,7 @@ A battalion (three line companies of three platoons of four squads, company and
 battalion HQs, a recon and a mortar platoon) moves north over Fort Irwin (UTM 11N):
 road march to PL BLUE, attack to the objectives, then defend. Hostile groups come
 down avenues of approach. Labelled incidents are injected so that every alert type
-occurs; `oracle.py` derives the ground truth from the simulated true state.
+occurs; the `oracle` package derives the ground truth from the simulated true state.
 """
 from __future__ import annotations
 

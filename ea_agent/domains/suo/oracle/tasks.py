@@ -1,0 +1,330 @@
+"""Ground truth for what each tactical task asks beyond its place (doctrine, FM 3-90)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from shapely.geometry import LineString, Point
+
+from .spec import (
+    END_STATE, EPISODE_S, ESCAPE, FOLLOW, FOLLOW_MAX_M, FRIENDLY_ERR_M,
+    LINE_MARGIN_M, MATERIAL, OBJECTIVE, ROUTE, STANDOFF,
+    TICK, TOLERANCE_M, _bands, _runs, geometry_params,
+)
+
+
+class Tasks:
+    """What each task asks beyond its place (FM 3-90): escape, end state, the engagement
+    area in range and held positions, bands, standoff, lines and times, checkpoints, fire
+    support, hostiles ahead."""
+
+    def check_families(self) -> None:
+        """What each task forbids the enemy or asks of its unit beyond its place (FM 3-90):
+        escape, end state, the engagement area in weapons range, the distance band."""
+        for mid, m in self.missions.items():
+            typ, p = m["type"], m["params"]
+            if typ == "support-by-fire" and p.get("supported"):
+                self._fire_support(mid, m, p)
+            if mid not in self.started:
+                continue
+            v0, v1 = self.valid[mid]
+            s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
+            if s >= e:
+                continue
+            if typ in ESCAPE and p.get(ESCAPE[typ]):
+                self._escape(mid, m, p[ESCAPE[typ]], s, e)
+            if typ in END_STATE and mid in self.ended and self.ended[mid] < v1:
+                self._end_state(mid, m, p["objective"], self.ended[mid])
+            if p.get("engagement_area") and geometry_params(typ) == ("position", "engagement_area"):
+                self._coverage(mid, m, p["position"], p["engagement_area"], s)
+            if geometry_params(typ) == ("position", "engagement_area") or typ == "observe":
+                self._held(mid, m, p["position"], s, e)
+            if typ in FOLLOW:
+                self._band(mid, m, p["supported"], p.get("band_m") or (0.0, FOLLOW_MAX_M), s, e)
+            if typ == "overwatch" and p.get("supported"):   # within its fires unless the plan says
+                self._band(mid, m, p["supported"], p.get("band_m") or (0.0, self.thr(m, "weapons_range_m")), s, e)
+            line = self._line_of(mid, m)
+            if line is not None:
+                self._ahead(mid, m, line, s, e)
+            if p.get("checkpoints") and typ in ROUTE:
+                self._checkpoints(mid, m, p["checkpoints"], s, e)
+            if typ in STANDOFF:
+                self._standoff(mid, m, s, e)
+            if typ == "delay" and p.get("line"):
+                self._line(mid, m, p["line"], float(p["until"]), s, e, hold=True)
+            if typ == "breach" and p.get("obstacle"):
+                self._line(mid, m, p["obstacle"], float(p["by"]), s, e, hold=False, toward=p["objective"])
+
+    def _held(self, mid, m, position, s, e) -> None:
+        """A position its mission must hold: some friendly element (anyone's) in it while it runs;
+        near its edge (reports lag) either answer is fair."""
+        near_g = self.area[position].buffer(FRIENDLY_ERR_M)
+        deep = self.area[position].buffer(-FRIENDLY_ERR_M)
+        sure, maybe = [], []
+        for k, t in enumerate(self.ticks):
+            if not s <= t < e:
+                continue
+            pts = [Point(q) for leaf in self.leaves for q in self.leaf_xy[leaf][k] + self.offsets[leaf]]
+            if not any(near_g.contains(q) for q in pts):
+                sure.append(t)
+            if deep.is_empty or not any(deep.contains(q) for q in pts):
+                maybe.append(t)
+        for a, b in _runs(sure):
+            if b - a >= 30:
+                for o in self.owners_of(m["unit"], a):
+                    self.must(o, "friendly-expected", [], [m["unit"]], a - self.slack, a + 60,
+                              f"{position} empty ({mid})", at=a)
+        for a, b in _runs(maybe):
+            for o in self.owners_of(m["unit"], a):
+                self.may(o, ["friendly-expected"], [m["unit"]], a - self.slack, b + self.slack)
+
+    def _fire_support(self, mid, m, p) -> None:
+        """Support by fire: in position (within out_of_position_m of it) when the supported unit
+        crosses its line of departure, whether its own mission has started or not; its fires
+        lift once the supported unit is within SPEC lift_m of the target, while it runs."""
+        v0, v1 = self.valid[mid]
+        sup, thr = p["supported"], self.thr(m, "out_of_position_m")
+        owners = lambda t: self.owners_of(m["unit"], t)   # noqa: E731
+        if p.get("line"):
+            line, c = self.geom[p["line"]], self.area[p["target"]].centroid
+            own = -1.0 if self._beyond_point(line, c) else 1.0
+            far = [(t, self._beyond(line, sup, k, own)) for k, t in enumerate(self.ticks) if v0 <= t < v1]
+            maybe = next((t for t, d in far if d > LINE_MARGIN_M - FRIENDLY_ERR_M), None)
+            sure = next((t for t, d in far if d > LINE_MARGIN_M + FRIENDLY_ERR_M), None)
+            if maybe is not None:
+                gap = lambda t: self.area[p["position"]].distance(   # noqa: E731
+                    Point(self.member_points(m["unit"], int(round(t / TICK))).mean(axis=0)))
+                last = sure if sure is not None else maybe
+                for o in owners(maybe):
+                    if all(gap(t) > thr * MATERIAL for t in self.ticks if maybe <= t <= last):
+                        self.must(o, "fire-support", [], [m["unit"], sup], maybe - 1, last + self.slack,
+                                  f"{m['unit']} not in position when {sup} departs", at=maybe)
+                    elif any(gap(t) > thr / MATERIAL for t in self.ticks if maybe <= t <= last):
+                        self.may(o, ["fire-support"], [m["unit"], sup], maybe - 1, last + self.slack)
+        if mid not in self.started:
+            return
+        s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
+        lift = self.thr(m, "lift_m")
+        d = [(t, self.area[p["target"]].distance(Point(self.member_points(sup, k).mean(axis=0))))
+             for k, t in enumerate(self.ticks) if s <= t < e]
+        maybe = next((t for t, x in d if x <= lift + FRIENDLY_ERR_M), None)
+        sure = next((t for t, x in d if x <= lift - FRIENDLY_ERR_M), None)
+        if maybe is not None:
+            for o in owners(maybe):
+                if sure is not None:
+                    self.must(o, "fire-support", [], [m["unit"], sup], maybe - 1, sure + self.slack,
+                              f"{m['unit']} lifts fires for {sup}", at=sure)
+                else:
+                    self.may(o, ["fire-support"], [m["unit"], sup], maybe - 1, e)
+
+    def _standoff(self, mid, m, s, e) -> None:
+        """Screens, bypasses, withdrawals and delays keep SPEC standoff_m from every hostile group:
+        the first group well inside it in an episode (none near for EPISODE_S before) must be told;
+        while groups are near its edge, alerts may be."""
+        keep = self.thr(m, "standoff_m")
+        near_ts, last_near, first_near, told = [], -math.inf, None, False
+        for k, t in enumerate(self.ticks):
+            if not s <= t < e:
+                continue
+            c = self.member_points(m["unit"], k).mean(axis=0)
+            ds = {h: math.hypot(x - c[0], y - c[1]) for h, (x, y, _s) in self.hostiles_at(t).items()}
+            near = [h for h, d in ds.items() if d < keep + TOLERANCE_M]
+            if not near:
+                continue
+            if t - last_near >= EPISODE_S:
+                first_near, told = t, False
+            last_near = t
+            near_ts.append(t)
+            if not told and any(ds[h] < keep - TOLERANCE_M for h in near):
+                for o in self.owners_of(m["unit"], t):
+                    self.must(o, "standoff", [], [m["unit"], *near], first_near - 15, t + 30,
+                              f"hostiles within {m['unit']}'s standoff ({mid})", at=t, about=[m["unit"]])
+                told = True
+        for a, b in _runs(near_ts):
+            for o in self.owners_of(m["unit"], a):
+                self.may(o, ["standoff"], [m["unit"]], a - 15, b + 30, about=[m["unit"]])
+
+    def _beyond(self, line, unit: str, k: int, own: float) -> float:
+        """How far the unit's centroid is across `line` from side `own` (+1 left, -1 right; < 0: not across)."""
+        c = Point(self.member_points(unit, k).mean(axis=0))
+        pos = line.project(c)
+        a, b = line.interpolate(max(pos - 1.0, 0.0)), line.interpolate(min(pos + 1.0, line.length))
+        left = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x) >= 0
+        d = line.distance(c)
+        return d if (left and own < 0) or (not left and own > 0) else -d
+
+    def _line(self, mid, m, lid, when, s, e, hold: bool, toward: str | None = None) -> None:
+        """A delay holds forward of its line (the side it starts on) until `when`; a breach is
+        past its obstacle (away from the side of its objective) by `when`. Across means more
+        than LINE_MARGIN_M beyond; the EA's picture of a moving unit errs by up to FRIENDLY_ERR_M."""
+        line = self.geom[lid]
+        if hold:
+            own = -1.0 if self._beyond(line, m["unit"], math.ceil(s / TICK - 1e-9), 1.0) > 0 else 1.0
+        else:
+            c = self.area[toward].centroid
+            own = -1.0 if self._beyond_point(line, c) else 1.0
+        far = {k: self._beyond(line, m["unit"], k, own) for k, t in enumerate(self.ticks) if s <= t < e}
+        first = lambda d: next((self.ticks[k] for k, v in sorted(far.items()) if v > d), math.inf)   # noqa: E731
+        sure, maybe = first(LINE_MARGIN_M + FRIENDLY_ERR_M), first(LINE_MARGIN_M - FRIENDLY_ERR_M)
+        if not self.valid[mid][0] <= min(when, maybe) < self.valid[mid][1]:
+            return
+        for o in self.owners_of(m["unit"], min(when, maybe)):
+            if hold:
+                if sure < when - self.slack:
+                    self.must(o, "line", [], [m["unit"]], maybe - 1, sure + self.slack, f"{mid} across {lid} early",
+                              at=sure)
+                if maybe < when:
+                    self.may(o, ["line"], [m["unit"]], maybe - 1, when)
+            elif e > when:   # a breach: across by its time
+                if maybe > when + self.slack:
+                    self.must(o, "line", [], [m["unit"]], when - 1, when + 5, f"{mid} not past {lid}", at=when)
+                if sure > when - self.slack:
+                    self.may(o, ["line"], [m["unit"]], when - 1, when + 5)
+
+    @staticmethod
+    def _beyond_point(line, c) -> bool:
+        """Whether point `c` is on the left of `line` (walking along it)."""
+        pos = line.project(c)
+        a, b = line.interpolate(max(pos - 1.0, 0.0)), line.interpolate(min(pos + 1.0, line.length))
+        return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x) >= 0
+
+    def _checkpoints(self, mid, m, table, s, e) -> None:
+        """A march table: the unit reaches each point (its centroid in the point's area, once
+        the mission runs) within schedule_s of its time. Its reports lag the truth by up to
+        `slack`: nearer the edge than that, either answer is fair."""
+        fuzz = self.thr(m, "schedule_s")
+        for cp in table:
+            area, when = self.area[cp["point"]], float(cp["t"])
+            g = self.geom[cp["point"]]
+            at = (lambda c: g.distance(c) <= float(self.voi["checkpoint_m"])) if g.geom_type == "Point" else area.contains
+            arrive = next((t for k, t in enumerate(self.ticks) if s <= t < e and
+                           at(Point(self.member_points(m["unit"], k).mean(axis=0)))), math.inf)
+            if not self.valid[mid][0] <= when + fuzz < self.valid[mid][1] or (math.isinf(arrive) and e <= when + fuzz):
+                continue   # the plan changed, or the mission ended (no arrival is then a place question)
+            for o in self.owners_of(m["unit"], when):
+                if arrive > when + fuzz + self.slack:
+                    self.must(o, "checkpoint", [], [m["unit"]], when + fuzz - 1, when + fuzz + 5,
+                              f"{mid} late at {cp['point']}", at=when + fuzz)
+                elif arrive > when + fuzz - self.slack:
+                    self.may(o, ["checkpoint"], [m["unit"]], when + fuzz - 1, when + fuzz + 5)
+                if arrive < when - fuzz - self.slack:   # seen up to `slack` before or after it happened
+                    self.must(o, "checkpoint", [], [m["unit"]], arrive - self.slack, arrive + self.slack + 5,
+                              f"{mid} early at {cp['point']}", at=arrive)
+                elif arrive < when - fuzz + self.slack:
+                    self.may(o, ["checkpoint"], [m["unit"]], arrive - self.slack, arrive + self.slack + 5)
+
+    def _line_of(self, mid, m):
+        """The line a moving mission follows: its route or axis, or its corridor's line."""
+        typ, p = m["type"], m["params"]
+        if typ not in ROUTE | OBJECTIVE:
+            return None
+        if p.get("route") or p.get("axis"):   # as travelled: towards its destination or objective
+            line = self.geom[p.get("route") or p.get("axis")]
+            goal = self.area[p.get("destination") or p.get("objective")]
+            return LineString(line.coords[::-1]) if goal.distance(Point(line.coords[0])) < \
+                goal.distance(Point(line.coords[-1])) else line
+        if mid in self.corridor_start:
+            return self._corridor_line(self.corridor_start[mid], p.get("destination") or p.get("objective"))
+        return None
+
+    def _ahead(self, mid, m, line, s, e) -> None:
+        """Hostiles on the stretch of line ahead of the unit (SPEC ahead_m, ahead_width_m): the
+        commander must be asked once per episode about a group well inside it; one near its
+        edges (where sensors and the unit's own reports err) may be told."""
+        far, wide = self.thr(m, "ahead_m"), self.thr(m, "ahead_width_m")
+        near_ts, who, first_near, last_deep = [], set(), None, -math.inf
+        for k, t in enumerate(self.ticks):
+            if not s <= t < e:
+                continue
+            hs = self.hostiles_at(t)
+            if not hs:
+                first_near = None
+                continue
+            d0 = line.project(Point(self.member_points(m["unit"], k).mean(axis=0)))
+            place = {h: (line.project(Point(x, y)), line.distance(Point(x, y))) for h, (x, y, _s) in hs.items()}
+            near = [h for h, (a, d) in place.items()
+                    if d0 - TOLERANCE_M <= a <= d0 + far + TOLERANCE_M and a < line.length and d <= wide + TOLERANCE_M]
+            if not near:
+                first_near = None
+                continue
+            near_ts.append(t)
+            who |= set(near)
+            first_near = t if first_near is None else first_near
+            deep = [h for h in near if d0 + TOLERANCE_M <= place[h][0] <= d0 + far - TOLERANCE_M
+                    and place[h][1] <= wide - TOLERANCE_M]
+            if deep:
+                if t - last_deep >= EPISODE_S:
+                    for o in self.owners_of(m["unit"], t):
+                        self.must(o, "threat-ahead", [], [m["unit"], *near], first_near - 15, t + 30,
+                                  f"hostiles ahead of {m['unit']} ({mid})", at=t, about=[m["unit"]])
+                last_deep = t
+        for a, b in _runs(near_ts):
+            for o in self.owners_of(m["unit"], a):
+                self.may(o, ["threat-ahead"], [m["unit"], *sorted(who)], a - 15, b + 30, about=[m["unit"]])
+
+    def _escape(self, mid, m, area, s, e) -> None:
+        """A group well inside the area while the mission runs that goes well beyond its edge."""
+        geom = self.area[area]
+        near_g, deep_g = _bands(geom)
+        held: dict[str, float] = {}   # group -> when it was last well inside
+        out_at: dict[str, float] = {}
+        for t in self.ticks:
+            if not s <= t < e:
+                continue
+            for h, (x, y, _st) in self.hostiles_at(t).items():
+                pt = Point(x, y)
+                if deep_g.contains(pt):
+                    held[h] = t
+                    out_at.pop(h, None)
+                elif h in held and not geom.contains(pt):
+                    out_at.setdefault(h, t)   # across the edge: it may be told from now
+                    if not near_g.contains(pt):
+                        for o in self.owners_of(m["unit"], t):
+                            self.must(o, "escape", [], [h, area], out_at[h] - 15, t + 45, f"{h} escapes {area}",
+                                      at=t, about=[area])
+                            self.may(o, ["escape"], [h, area], held[h], t + 45, about=[area])
+                        del held[h]
+            for h in [h for h in held if h not in self.hostiles_at(t)]:   # gone: lost, not escaped
+                del held[h]
+        for h, t in out_at.items():   # crossed the edge, never well beyond it: may be told
+            if h in held:
+                for o in self.owners_of(m["unit"], t):
+                    self.may(o, ["escape"], [h, area], t - 15, e + 45, about=[area])
+
+    def _end_state(self, mid, m, area, t) -> None:
+        geom = self.area[area]
+        near_g, deep_g = _bands(geom)
+        hs = self.hostiles_at(round(t / TICK) * TICK)
+        deep = [h for h, (x, y, _s) in hs.items() if deep_g.contains(Point(x, y))]
+        near = [h for h, (x, y, _s) in hs.items() if near_g.contains(Point(x, y))]
+        for o in self.owners_of(m["unit"], t):
+            if deep:
+                self.must(o, "end-state", [], [m["unit"], *deep], t - 1, t + 5, f"{mid} ends with {deep} on {area}",
+                          at=t, about=[m["unit"]])
+            elif near:
+                self.may(o, ["end-state"], [m["unit"], *near], t - 1, t + 5, about=[m["unit"]])
+
+    def _coverage(self, mid, m, position, ea, s) -> None:
+        gap = self.area[position].distance(self.area[ea])
+        if gap > self._range(m["unit"], self.parent_at(s)):
+            for o in self.owners_of(m["unit"], s):
+                self.must(o, "friendly-expected", [], [m["unit"]], s - 1, s + 5, f"{ea} out of range of {position}",
+                          at=s)
+
+    def _band(self, mid, m, other, band, s, e) -> None:
+        lo, hi = float(band[0]), float(band[1])
+        thr = self.thr(m, "out_of_position_m")
+        hits, peak = [], 0.0
+        for k, t in enumerate(self.ticks):
+            if s <= t < e:
+                a, b = self.member_points(m["unit"], k).mean(axis=0), self.member_points(other, k).mean(axis=0)
+                d = float(np.hypot(*(a - b)))
+                off = d - hi if d > hi else lo - d
+                if off > thr / MATERIAL:
+                    hits.append(t)
+                    peak = max(peak, off)
+        for a, b in _runs(hits):
+            for o in self.owners_of(m["unit"], a):
+                if peak > 1.5 * thr and b - a >= 30:
+                    self.must(o, "band", [], [m["unit"], other], a - self.slack, a + 60, f"{mid} out of band", at=a)
+                self.may(o, ["band"], [m["unit"], other], a - self.slack, b + self.slack)
