@@ -7,7 +7,7 @@ import numpy as np
 from shapely.geometry import LineString, Point
 
 from .spec import (
-    END_STATE, EPISODE_S, ESCAPE, FOLLOW, FOLLOW_MAX_M, FRIENDLY_ERR_M,
+    CONTINGENT, END_STATE, EPISODE_S, ESCAPE, FOLLOW, FOLLOW_MAX_M, FRIENDLY_ERR_M,
     LINE_MARGIN_M, MATERIAL, OBJECTIVE, ROUTE, STANDOFF,
     TICK, TOLERANCE_M, _bands, _runs, geometry_params,
 )
@@ -23,6 +23,9 @@ class Tasks:
         escape, end state, the engagement area in weapons range, the distance band."""
         for mid, m in self.missions.items():
             typ, p = m["type"], m["params"]
+            if typ in CONTINGENT and mid in self.task_started:   # a triggered task is judged as its own type
+                typ, p = p["task"], p.get("task_params", {})
+                m = {**m, "type": typ, "params": p}
             if typ == "support-by-fire" and p.get("supported"):
                 self._fire_support(mid, m, p)
             if mid not in self.started:
@@ -72,11 +75,13 @@ class Tasks:
         for a, b in _runs(sure):
             if b - a >= 30:
                 for o in self.owners_of(m["unit"], a):
-                    self.must(o, "friendly-expected", [], [m["unit"]], a - self.slack, a + 60,
-                              f"{position} empty ({mid})", at=a)
+                    # the unit told out of that position has been told this story; emptiness is told
+                    # within 90 s (seconds of it are no news), for a triggered task once it must have fired
+                    self.must(o, "friendly-expected", ["out-of-position"], [m["unit"]], a - self.slack,
+                              max(a, self.task_due.get(mid, a)) + 90, f"{position} empty ({mid})", at=a)
         for a, b in _runs(maybe):
             for o in self.owners_of(m["unit"], a):
-                self.may(o, ["friendly-expected"], [m["unit"]], a - self.slack, b + self.slack)
+                self.may(o, ["friendly-expected", "out-of-position"], [m["unit"]], a - self.slack, b + self.slack)
 
     def _fire_support(self, mid, m, p) -> None:
         """Support by fire: in position (within out_of_position_m of it) when the supported unit
