@@ -229,7 +229,9 @@ def test_oversized_flood_is_rejected_before_decoding(insecure_run, inproc):
     assert any(x.startswith("reject undecodable on ") and "over the 65536 limit" in x for x in lines)
     # the flood was over mid-run: the peer kept working through it
     assert info["flood_done_t"] is not None and info["flood_done_t"] < 5400.0
-    assert summary["peak_rss_mb"] < 250, summary["peak_rss_mb"]
+    # the flood is 370 MB of payloads: a peer that held it would pass 300 MB whatever its own size
+    # (about 150 MB with the mission model's detectors), as in the sibling tests below
+    assert summary["peak_rss_mb"] < 300, summary["peak_rss_mb"]
     assert keys_of(alerts) == [key(a) for a in inproc["A2"]]
 
 
