@@ -19,9 +19,9 @@ from ea_agent.core.geo import Projection
 from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
-from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies, Coordination,
-                     Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors, Presence, ScheduleMonitors, Standoffs,
-                     ThreatsAhead)
+from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies,
+                     Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
+                     Presence, ScheduleMonitors, Standoffs, ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make

@@ -35,13 +35,15 @@ DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
-    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs, FireSupport, Presence,
+    Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs,
+    FireSupport, Presence,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
 PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-projected")   # beyond the paper
 ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, projections, check families
 
-__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire", "Checkpoints",
-           "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide", "Lines", "LocationMonitors", "Presence",
-           "ProjectedPenetrations", "ScheduleMonitors", "Standoffs", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
+__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire",
+           "Checkpoints", "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide",
+           "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ScheduleMonitors", "Standoffs",
+           "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
