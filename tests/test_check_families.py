@@ -1,4 +1,4 @@
-"""The check families the mission classes compose (ea_agent/domains/suo/missions.py and
+"""The check families the mission classes compose (ea_agent/domains/suo/missions/ and
 detect/): one small synthetic scenario per family, in process and on scenario time. Each
 test asserts the alert (time, type, subjects, priority) where the plan is broken, and
 its twin asserts silence where the plan is kept. Plus the scenario checks that guard

@@ -1,4 +1,4 @@
-"""More check families of the mission classes (ea_agent/domains/suo/missions.py and
+"""More check families of the mission classes (ea_agent/domains/suo/missions/ and
 detect/): march-table checkpoints, friendly lines (delay, breach, line of departure),
 standoff, fire support, the EA's per-type alert priorities and the ON-ORDER end.
 

@@ -1,0 +1,57 @@
+"""Missions that change the plan: contingencies (branches, sequels) and reorganizations."""
+from __future__ import annotations
+
+from .base import Mission, mission
+
+
+class ContingentMission(Mission):
+    """A branch or sequel: executed only when its trigger holds.
+
+    trigger: {"kind": "hostile-in-area", "area": ID, "min_strength": N}
+          or {"kind": "unit-at", "unit": ID, "area": ID}
+    `owner` is the unit whose plan holds the contingency (only its EA monitors it).
+    """
+    PARAMS = {"trigger": "condition that activates the contingency", "task": "mission type to execute",
+              "owner": "unit whose plan holds this contingency"}
+    REQUIRED = ("trigger", "task", "owner")
+    UNIT_PARAMS = ("owner",)
+    CHECKS = ("its trigger (contingency); once triggered, its task as a monitored mission from then",)
+
+    def contingency_satisfied(self, ctx):
+        return ctx.evaluate_trigger(self.params["trigger"])
+
+    def post_execution_constraints(self, ctx):
+        ctx.post_contingency(self)
+
+
+@mission
+class Branch(ContingentMission):
+    """An alternative course of action: also offered when a moving unit meets hostiles ahead."""
+    TYPE = "branch"
+
+
+@mission
+class Sequel(ContingentMission):
+    """What follows once its trigger holds (never offered as an alternative to a move)."""
+    TYPE = "sequel"
+
+
+class ReorganizationMission(Mission):
+    """Changes the task organization when executed (dynamic resubordination)."""
+    PARAMS = {"subject": "unit that changes hands", "new_parent": "its new superior"}
+    REQUIRED = ("subject", "new_parent")
+    UNIT_PARAMS = ("subject", "new_parent")
+    AUTO_START = True
+    CHECKS = ("executed by the EA itself at its start time: the task organization changes",)
+
+    def location_constraints(self, ctx):
+        pass
+
+    def execute_mission(self, ctx, t):
+        ctx.resubordinate(self.params["subject"], self.params["new_parent"], t)
+
+
+@mission
+class Reorganize(ReorganizationMission):
+    """The reorganization family as it is."""
+    TYPE = "reorganize"

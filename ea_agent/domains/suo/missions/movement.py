@@ -1,0 +1,162 @@
+"""Movement missions: along a route (or a corridor) to a destination."""
+from __future__ import annotations
+
+import math
+
+from .base import Mission, _STANDOFF, _band_problem, _checks, mission
+
+
+class MovementMission(Mission):
+    """Move along a route to a destination; judged by the unit's centroid. Without a
+    route, the corridor from where the unit starts to its destination is its route."""
+    PARAMS = {"route": "optional overlay route (LineString) the unit follows",
+              "destination": "overlay feature the unit must reach",
+              "checkpoints": "optional march table / recon progress: [{point, t}] reached near each time"}
+    REQUIRED = ("destination",)
+    GEOMETRY_PARAMS = ("route", "destination")
+    CHECKS = _checks("on its route, or in the corridor from its start to its destination (out-of-position)",
+                     "hostiles on the route ahead: recommend a branch or aborting the move (threat-ahead, a decision)",
+                     "each checkpoint (march table SP/CP/RP, recon progress) reached near its time (checkpoint)",
+                     "at its destination at the end (Check-Final-Location)",
+                     "projected off its route or late at its destination (projections)")
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        table = params.get("checkpoints")
+        if table is None:
+            return None
+        if not isinstance(table, list) or not table:
+            return "checkpoints", "expected a list of {point, t}"
+        last, seen = -math.inf, set()
+        for i, cp in enumerate(table):
+            if not isinstance(cp, dict) or set(cp) != {"point", "t"}:
+                return f"checkpoints[{i}]", "expected {point, t}"
+            if not isinstance(cp["point"], str):
+                return f"checkpoints[{i}].point", "expected a control measure id"
+            if cp["point"] in seen:   # each point is reached once: an out-and-back table needs two points
+                return f"checkpoints[{i}].point", f"{cp['point']!r} is already in the table"
+            seen.add(cp["point"])
+            if cp["point"] not in overlay:
+                return f"checkpoints[{i}].point", f"{cp['point']!r} is not in the overlay"
+            t = cp["t"]
+            if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+                return f"checkpoints[{i}].t", "expected a finite time >= 0"
+            if t < last:
+                return f"checkpoints[{i}].t", f"{t} is before the checkpoint before it ({last})"
+            last = t
+        return None
+
+    def location_constraints(self, ctx):
+        if self.params.get("route"):
+            ctx.post_location_monitor(self, self.params["route"], self.LOCATION_RULE, "route")
+        else:
+            ctx.post_corridor(self, self.params["destination"])
+        if self.params.get("checkpoints"):
+            ctx.post_checkpoints(self, self.params["checkpoints"])
+
+    def check_final_location(self, ctx, t):
+        ctx.check_location(self, self.params["destination"], self.LOCATION_RULE, t, "destination")
+
+    def respond_to_threat_ahead(self, ctx, t, tracks, strength):
+        """A move is not a fight: recommend a branch the plan holds for the unit, else aborting the move."""
+        branches = [f"execute:{b}" for b in ctx.branches_for(self)]
+        ctx.threat_ahead(self, t, tracks, strength, ["abort", *branches, "continue"],
+                         branches[0] if branches else "abort")
+
+
+@mission
+class Move(MovementMission):
+    """The movement family as it is."""
+    TYPE = "move"
+
+
+@mission
+class TacticalRoadMarch(MovementMission):
+    """March tables (its `checkpoints`: start point, checkpoints, release point) are tightly
+    timed: schedule and checkpoint alerts are IMMEDIATE."""
+    TYPE = "tactical-road-march"
+    PRIORITY = {"schedule": "immediate", "checkpoint": "immediate"}
+
+
+@mission
+class MovementToContact(MovementMission):
+    """Expects to meet the enemy: wants 2:1 before a threat is only PRIORITY."""
+    TYPE = "movement-to-contact"
+    DESIRED_STRENGTH_RATIO = 2.0
+
+
+class FollowMission(MovementMission):
+    """Follow another unit: besides its route, stay within a distance band of it."""
+    PARAMS = {"supported": "unit followed",
+              "band_m": "optional [min, max] distance to the supported unit (default [0, follow_max_m])"}
+    REQUIRED = ("supported",)
+    UNIT_PARAMS = ("supported",)
+    CHECKS = MovementMission.CHECKS + ("within its distance band of the supported unit (band)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return super().check_params(params, overlay) or _band_problem(params)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        lo, hi = self.params.get("band_m") or (0.0, ctx.voi(self, "follow_max_m"))
+        ctx.post_band(self, self.params["supported"], float(lo), float(hi))
+
+
+@mission
+class FollowAndSupport(FollowMission):
+    """The follow family as it is: behind the supported unit, within its band."""
+    TYPE = "follow-and-support"
+
+
+@mission
+class FollowAndAssume(FollowMission):
+    """Ready to take over the supported unit's mission: the same band, kept tighter by plans."""
+    TYPE = "follow-and-assume"
+
+
+@mission
+class Withdraw(MovementMission):
+    """Breaking contact: keeps its standoff; accepts 1:2 before a threat is IMMEDIATE."""
+    TYPE = "withdraw"
+    DESIRED_STRENGTH_RATIO = 0.5
+    STANDOFF = True
+    CHECKS = MovementMission.CHECKS + (_STANDOFF,)
+
+
+@mission
+class Delay(MovementMission):
+    """Trades space for time: stays forward of its `line` until `until` (line); accepts 1:3
+    before a threat is IMMEDIATE."""
+    TYPE = "delay"
+    PARAMS = {"line": "optional overlay line the unit holds forward of ...", "until": "... until this time"}
+    GEOMETRY_PARAMS = ("route", "destination", "line")
+    DESIRED_STRENGTH_RATIO = 0.33
+    STANDOFF = True
+    CHECKS = MovementMission.CHECKS + ("forward of its line until its time (line)", _STANDOFF)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if (params.get("line") is None) != (params.get("until") is None):
+            return "line" if params.get("line") is None else "until", "a delay line needs both line and until"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("line"):
+            ctx.post_line(self, self.params["line"], "hold", float(self.params["until"]))
+
+
+@mission
+class Bypass(MovementMission):
+    """Moves around the enemy: keeps its standoff."""
+    TYPE = "bypass"
+    STANDOFF = True
+    CHECKS = MovementMission.CHECKS + (_STANDOFF,)
+
+
+@mission
+class RouteReconnaissance(MovementMission):
+    """One element on the route is enough; its `checkpoints` say how far along it should be when."""
+    TYPE = "route-reconnaissance"
+    LOCATION_RULE = "any"

@@ -1,0 +1,134 @@
+"""Offensive missions: towards an objective, and what each leaves there."""
+from __future__ import annotations
+
+from typing import ClassVar
+
+from .base import Mission, _checks, mission
+
+
+class OffensiveMission(Mission):
+    """Attack towards an objective along an axis (without one: the corridor from its
+    start to the objective); all members must be on the objective at the end."""
+    PARAMS = {"objective": "overlay objective area", "axis": "optional route/axis of advance",
+              "line_of_departure": "optional overlay line: crossing it is the attack's start"}
+    REQUIRED = ("objective",)
+    GEOMETRY_PARAMS = ("objective", "axis", "line_of_departure")
+    LOCATION_RULE = "centroid"
+    FINAL_RULE: ClassVar[str] = "all"
+    DESIRED_STRENGTH_RATIO = 3.0
+    PRIORITY = {"schedule": "immediate"}
+    CHECKS = _checks("on its axis, or in the corridor from its start to the objective (out-of-position)",
+                     "crossing its line of departure is its start (no confirmation needed)",
+                     "hostiles on the axis ahead: go on if strong enough, else abort (threat-ahead, a decision)",
+                     "on the objective at the end (Check-Final-Location)")
+    END_STATE: ClassVar[bool] = False   # no hostile left in the objective at the end
+    ESCAPE: ClassVar[bool] = False      # no hostile leaves the objective while it runs
+
+    def location_constraints(self, ctx):
+        if self.params.get("axis"):
+            ctx.post_location_monitor(self, self.params["axis"], self.LOCATION_RULE, "axis")
+        else:
+            ctx.post_corridor(self, self.params["objective"])
+        if self.params.get("line_of_departure"):
+            ctx.post_line(self, self.params["line_of_departure"], "depart", toward=self.params["objective"])
+        if self.ESCAPE:
+            ctx.post_escape(self, self.params["objective"])
+
+    def respond_to_threat_ahead(self, ctx, t, tracks, strength):
+        """An attack expects the enemy: go on when strong enough for it (DESIRED_STRENGTH_RATIO), else abort."""
+        ours = ctx.strength_of(self.unit)
+        ok = strength <= 0 or ours / strength >= self.desired_strength_ratio()
+        ctx.threat_ahead(self, t, tracks, strength, ["continue", "abort"], "continue" if ok else "abort")
+
+    def check_final_location(self, ctx, t):
+        ctx.check_location(self, self.params["objective"], self.FINAL_RULE, t, "objective")
+        if self.END_STATE:
+            ctx.check_end_state(self, self.params["objective"], t)
+
+
+@mission
+class Attack(OffensiveMission):
+    """The offensive family as it is: all members on the objective at the end."""
+    TYPE = "attack"
+
+
+@mission
+class HastyAttack(OffensiveMission):
+    """Quick and partial: its centroid on the objective is enough."""
+    TYPE = "hasty-attack"
+    FINAL_RULE = "centroid"
+
+
+@mission
+class Seize(OffensiveMission):
+    """Take possession: no hostile left on the objective at the end (end-state)."""
+    TYPE = "seize"
+    END_STATE = True
+    CHECKS = OffensiveMission.CHECKS + ("no hostile on the objective at the end (end-state)",)
+
+
+@mission
+class Secure(OffensiveMission):
+    """Take and protect: no hostile on the objective at the end (end-state)."""
+    TYPE = "secure"
+    END_STATE = True
+    CHECKS = Seize.CHECKS
+
+
+@mission
+class Clear(OffensiveMission):
+    """Remove all resistance: no hostile on the objective at the end (end-state)."""
+    TYPE = "clear"
+    END_STATE = True
+    CHECKS = Seize.CHECKS
+
+
+@mission
+class Destroy(OffensiveMission):
+    """Render the enemy ineffective: none escapes the objective, none is left at the end."""
+    TYPE = "destroy"
+    FINAL_RULE = "centroid"
+    END_STATE = True
+    ESCAPE = True
+    CHECKS = Seize.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
+
+
+@mission
+class Breach(OffensiveMission):
+    """Through the obstacle: past its `obstacle` line by `by` (line); one element on the far
+    side of the objective is enough at the end."""
+    TYPE = "breach"
+    PARAMS = {"obstacle": "optional overlay line of the obstacle ...", "by": "... the unit is past by this time"}
+    GEOMETRY_PARAMS = ("objective", "axis", "line_of_departure", "obstacle")
+    FINAL_RULE = "any"
+    CHECKS = OffensiveMission.CHECKS + ("past its obstacle by its time (line)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if (params.get("obstacle") is None) != (params.get("by") is None):
+            return "obstacle" if params.get("obstacle") is None else "by", "an obstacle needs both obstacle and by"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("obstacle"):
+            ctx.post_line(self, self.params["obstacle"], "pass", float(self.params["by"]), toward=self.params["objective"])
+
+
+@mission
+class Isolate(OffensiveMission):
+    """Seal the enemy off: no hostile leaves the objective while it runs (escape)."""
+    TYPE = "isolate"
+    FINAL_RULE = "centroid"
+    ESCAPE = True
+    CHECKS = OffensiveMission.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
+
+
+@mission
+class Fix(OffensiveMission):
+    """Keep the enemy where it is: none escapes the objective; 1:1 is enough."""
+    TYPE = "fix"
+    FINAL_RULE = "centroid"
+    DESIRED_STRENGTH_RATIO = 1.0
+    ESCAPE = True
+    CHECKS = Isolate.CHECKS

@@ -1,0 +1,166 @@
+"""Position missions: hold a place, watch an engagement area, support."""
+from __future__ import annotations
+
+from typing import ClassVar
+
+from .base import Mission, _band_problem, _checks, mission
+
+
+class PositionMission(Mission):
+    """Hold a position (battle position, support-by-fire position, ...) while active.
+
+    Optional `engagement_area` is watched for hostiles (expected there) and must be
+    within the unit's weapons range of the position (friendly-expected); with
+    `expect_hostile_by` the plan expects hostiles there by that time (hostile-expected).
+    """
+    PARAMS = {"position": "overlay area the unit occupies",
+              "engagement_area": "optional overlay area watched for hostile activity",
+              "expect_hostile_by": "optional scenario time by which hostiles are expected there"}
+    REQUIRED = ("position",)
+    GEOMETRY_PARAMS = ("position", "engagement_area")
+    DESIRED_STRENGTH_RATIO = 0.33  # prepared defenders accept 1:3
+    PENETRATION: ClassVar[bool] = False   # a hostile entering the position is a penetration
+    CHECKS = _checks("in its position while it runs and at the end (out-of-position)",
+                     "its position holds some friendly element while it runs (friendly-expected)",
+                     "its engagement area within weapons range of the position (friendly-expected)",
+                     "hostiles in its engagement area: expected activity; absent by a time (hostile-expected)")
+
+    def location_constraints(self, ctx):
+        ctx.post_location_monitor(self, self.params["position"], self.LOCATION_RULE, "position")
+        ctx.post_held(self, self.params["position"])
+        ea_ = self.params.get("engagement_area")
+        if ea_:
+            ctx.post_red_monitor(self, ea_, expected=True, expect_by=self.params.get("expect_hostile_by"))
+        if self.PENETRATION:
+            ctx.post_penetration(self, self.params["position"])
+
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        if self.params.get("engagement_area"):
+            ctx.check_coverage(self, self.params["position"], self.params["engagement_area"], t)
+
+    def check_final_location(self, ctx, t):
+        ctx.check_location(self, self.params["position"], self.LOCATION_RULE, t, "position")
+
+    def respond_to_monitored_red_activity(self, ctx, area, t, tracks, strength, kind="monitored"):
+        ctx.monitored_candidate(self, area, t, tracks, strength, expected=kind == "monitored", kind=kind)
+
+
+@mission
+class Defend(PositionMission):
+    """An optional `rear_line` no hostile may cross (penetration); an absent expected enemy is IMMEDIATE."""
+    TYPE = "defend"
+    PARAMS = {"rear_line": "optional overlay line behind the defence that no hostile may cross"}
+    GEOMETRY_PARAMS = ("position", "engagement_area", "rear_line")
+    PRIORITY = {"hostile-expected": "immediate"}
+    CHECKS = PositionMission.CHECKS + ("no hostile across its rear line (penetration)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("rear_line"):
+            ctx.post_penetration(self, self.params["rear_line"])
+
+
+@mission
+class Occupy(PositionMission):
+    """The position family as it is."""
+    TYPE = "occupy"
+
+
+@mission
+class Retain(PositionMission):
+    """Keep the enemy out of the position: a hostile in it is a penetration."""
+    TYPE = "retain"
+    PENETRATION = True
+    CHECKS = PositionMission.CHECKS + ("no hostile enters the position (penetration, projected before)",)
+
+
+@mission
+class Block(PositionMission):
+    """Deny the enemy the position: a hostile in it is a penetration."""
+    TYPE = "block"
+    PRIORITY = {"hostile-expected": "immediate"}
+    PENETRATION = True
+    CHECKS = Retain.CHECKS
+
+
+@mission
+class AttackByFire(PositionMission):
+    """Fires from a position: 1:1 wanted."""
+    TYPE = "attack-by-fire"
+    DESIRED_STRENGTH_RATIO = 1.0
+
+
+@mission
+class SupportByFire(PositionMission):
+    """Fires for a moving unit (`supported`): in position before it crosses its `line` (of
+    departure), fires lifted when it comes within `lift_m` of the `target`; 1:1 wanted."""
+    TYPE = "support-by-fire"
+    PARAMS = {"supported": "optional unit whose attack it supports",
+              "line": "optional line of departure of the supported unit",
+              "target": "overlay area its fires land on (needed with supported)"}
+    GEOMETRY_PARAMS = ("position", "engagement_area", "line", "target")
+    UNIT_PARAMS = ("supported",)
+    DESIRED_STRENGTH_RATIO = 1.0
+    CHECKS = PositionMission.CHECKS + (
+        "in position before the supported unit crosses its line of departure; fires lift when it nears "
+        "the target (fire-support)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if params.get("supported") is not None and params.get("target") is None:
+            return "target", "a supported unit needs the target the fires land on"
+        if params.get("line") is not None and params.get("supported") is None:
+            return "supported", "a line of departure needs the unit that crosses it"
+        return super().check_params(params, overlay)
+
+    def plan_constraints(self, ctx):
+        """From the plan's start, not its own: the supported unit may depart before this
+        mission is even ready, and that is what is checked."""
+        if self.params.get("supported"):
+            ctx.post_fire_support(self, self.params["supported"], self.params.get("line"), self.params["target"])
+
+
+@mission
+class Overwatch(PositionMission):
+    """One element with eyes on is enough; an optional `supported` unit stays within its
+    distance band of it (default [0, weapons_range_m]: within its fires)."""
+    TYPE = "overwatch"
+    LOCATION_RULE = "any"
+    PARAMS = {"supported": "optional unit overwatched", "band_m": "optional [min, max] distance to it"}
+    UNIT_PARAMS = ("supported",)
+    CHECKS = PositionMission.CHECKS + ("the overwatched unit within its band (band)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return super().check_params(params, overlay) or _band_problem(params)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("supported"):
+            lo, hi = self.params.get("band_m") or (0.0, ctx.voi(self, "weapons_range_m"))
+            ctx.post_band(self, self.params["supported"], float(lo), float(hi))
+
+
+@mission
+class Suppress(PositionMission):
+    """Judged as the position family (its fires are not modelled)."""
+    TYPE = "suppress"
+
+
+@mission
+class Contain(PositionMission):
+    """Keep the enemy inside its engagement area: a hostile leaving it is an escape."""
+    TYPE = "contain"
+    CHECKS = PositionMission.CHECKS + ("no hostile leaves its engagement area (escape)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("engagement_area"):
+            ctx.post_escape(self, self.params["engagement_area"])
+
+
+@mission
+class Disrupt(PositionMission):
+    """Judged as the position family (its fires are not modelled)."""
+    TYPE = "disrupt"
