@@ -181,13 +181,23 @@ class PlanSpec:
         return None
 
 
+class _States(dict):
+    """Mission id -> state, counting its changes (what is derived from it is cached by them)."""
+    version = 0
+
+    def __setitem__(self, key: str, value: str) -> None:
+        dict.__setitem__(self, key, value)
+        self.version += 1
+
+
 class PlanState:
     """Traversal of a plan's partial order: pending -> ready -> active -> done."""
 
     def __init__(self, plan: PlanSpec):
         self.plan = plan
         self.by_id = {m.id: m for m in plan.missions}
-        self.state: dict[str, str] = {m.id: "pending" for m in plan.missions}
+        self.state: dict[str, str] = _States((m.id, "pending") for m in plan.missions)
+        self._active: tuple[int, dict[str, str]] = (-1, {})
         self.started: dict[str, float] = {}
         self.ended: dict[str, float] = {}
 
@@ -210,3 +220,11 @@ class PlanState:
 
     def active(self) -> list[MissionSpec]:
         return [m for m in self.plan.missions if self.state[m.id] == "active"]
+
+    def active_by_unit(self) -> dict[str, str]:
+        """Unit -> its active mission's id (the last in plan order if several); cached
+        until a state changes, as this is asked for on every alert."""
+        v = self.state.version
+        if self._active[0] != v:
+            self._active = (v, {s.unit: s.id for s in self.active()})
+        return self._active[1]

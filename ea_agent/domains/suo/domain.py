@@ -147,7 +147,7 @@ class SuoDomain:
     def current_mission(self, unit: str) -> Mission:
         """The unit's active mission, or the nearest superior's; defaults otherwise."""
         if self.plan is not None:
-            active = {s.unit: s.id for s in self.plan.active()}
+            active = self.plan.active_by_unit()
             for u in [unit, *self.taskorg.ancestors(unit)]:
                 if u in active:
                     return self.missions[active[u]]
@@ -468,16 +468,14 @@ class SuoDomain:
         """Leaf and unit centroids after movement, and the watchman's area of interest;
         `unit_now`: the centroids of members dead-reckoned to now (threat envelopes: a
         report up to a minute old puts a moving unit hundreds of metres off)."""
-        leaf_c, unit_c = self.pic.centroids()
-        self.leaf_xy = leaf_c
-        self.unit_pos = {u: (None if x != x else (float(x), float(y)))
-                         for u, (x, y) in zip(self.pic.units, unit_c.tolist())}
         horizon = float(self.voi_cfg["dead_reckon_s"])
-        _, now_c = self.pic.centroids(self.pic.reckoned(t, horizon))
+        leaf_c, unit_c, now_c = self.pic.positions(t, horizon)
+        self.leaf_xy = leaf_c
+        units = self.pic.units
+        self.unit_pos = _by_unit(units, unit_c)
+        self.unit_now = _by_unit(units, now_c)
         moving = self.pic.moved_t[(self.pic.vel != 0.0).any(axis=1)]
         self._reckon_until = float(moving.max()) + horizon if len(moving) else -math.inf
-        self.unit_now = {u: (None if x != x else (float(x), float(y)))
-                         for u, (x, y) in zip(self.pic.units, now_c.tolist())}
         own = unit_c[self.own_rows]
         own = own[~np.isnan(own[:, 0])]
         self.watchman.set_bbox(own)
@@ -488,3 +486,11 @@ class SuoDomain:
 
     def to_alert(self, c: Candidate) -> Alert:
         return render.to_alert(c, self.owner, CATEGORY)
+
+
+def _by_unit(units: list[str], xy: np.ndarray) -> dict[str, tuple[float, float] | None]:
+    """Unit -> (x, y), None where unknown (NaN)."""
+    out = dict(zip(units, map(tuple, xy.tolist())))
+    for i in np.flatnonzero(np.isnan(xy[:, 0])).tolist():
+        out[units[i]] = None
+    return out

@@ -23,7 +23,7 @@ class Picture:
         n = len(self.ents)
         self.lon = [math.nan] * n          # last raw report (python lists: fast scalar access)
         self.lat = [math.nan] * n
-        self.seen = [0.0] * n              # scenario time of the last report, changed or not
+        self.seen = np.zeros(n)            # scenario time of the last report, changed or not
         self.xy = np.full((n, 2), np.nan)
         self.moved_t = np.full(n, np.nan)  # when xy last changed, and the velocity that change showed
         self.vel = np.zeros((n, 2))
@@ -70,7 +70,7 @@ class Picture:
         p0 = self.xy[m]
         ok = ~np.isnan(p0[:, 0])
         m, p0 = m[ok], p0[ok]
-        seen = np.array([self.seen[i] for i in m.tolist()])
+        seen = self.seen[m]
         moved = self.moved_t[m]
         dt = np.where(seen > moved + 0.5, 0.0, np.clip(now - moved, 0.0, horizon_s))
         return p0, p0 + self.vel[m] * dt[:, None]
@@ -78,27 +78,43 @@ class Picture:
     def reckoned(self, now: float, horizon_s: float) -> np.ndarray:
         """Every entity's position dead-reckoned to `now` from its last report and velocity
         (at most `horizon_s`; not at all once it reported standing still)."""
-        seen = np.asarray(self.seen)
-        with np.errstate(invalid="ignore"):
-            dt = np.where(seen > self.moved_t + 0.5, 0.0, np.clip(now - self.moved_t, 0.0, horizon_s))
-        return self.xy + self.vel * np.nan_to_num(dt)[:, None]
+        dt = now - self.moved_t
+        np.clip(dt, 0.0, horizon_s, out=dt)
+        dt[self.seen > self.moved_t + 0.5] = 0.0
+        # dt is NaN only for entities never reported, whose position is NaN anyway
+        return self.xy + self.vel * dt[:, None]
 
     def centroids(self, xy: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Centroids of every leaf and every unit (NaN where no member position is known),
-        in one vectorised pass: bincount per leaf, then a membership matrix product; of
-        the last reports, or of other member positions `xy` (dead-reckoned)."""
-        xy = self.xy if xy is None else xy
+        of the last reports or of other member positions `xy` (dead-reckoned)."""
+        leaf, unit, _ = self._centroids(self.xy if xy is None else xy, None)
+        return leaf, unit
+
+    def positions(self, now: float, horizon_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Leaf and unit centroids of the last reports, and unit centroids of the members
+        dead-reckoned to `now`, in one vectorised pass (this runs at every epoch close)."""
+        return self._centroids(self.xy, self.reckoned(now, horizon_s))
+
+    def _centroids(self, xy: np.ndarray, rxy: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """bincount per leaf, then one membership matrix product for every unit."""
         ok = ~np.isnan(xy[:, 0])
         n = len(self.leaves)
         li = self.ent_leaf_i[ok]
-        cnt = np.bincount(li, minlength=n).astype(float)
-        sx = np.bincount(li, weights=xy[ok, 0], minlength=n)
-        sy = np.bincount(li, weights=xy[ok, 1], minlength=n)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            leaf = np.column_stack([sx / cnt, sy / cnt])
-            ucnt = self.unit_leaf @ cnt
-            unit = np.column_stack([self.unit_leaf @ sx / ucnt, self.unit_leaf @ sy / ucnt])
-        return leaf, unit
+        sums = np.empty((n, 5 if rxy is not None else 3))
+        sums[:, 0] = np.bincount(li, minlength=n)
+        sums[:, 1] = np.bincount(li, weights=xy[ok, 0], minlength=n)
+        sums[:, 2] = np.bincount(li, weights=xy[ok, 1], minlength=n)
+        if rxy is not None:
+            sums[:, 3] = np.bincount(li, weights=rxy[ok, 0], minlength=n)
+            sums[:, 4] = np.bincount(li, weights=rxy[ok, 1], minlength=n)
+        u = self.unit_leaf @ sums
+        lc, uc = sums[:, :1], u[:, :1]
+        lc[lc == 0.0] = np.nan   # no member known: NaN centroids, without a divide warning
+        uc[uc == 0.0] = np.nan
+        leaf = sums[:, 1:3] / lc
+        unit = u[:, 1:3] / uc
+        now = u[:, 3:5] / uc if rxy is not None else None
+        return leaf, unit, now
 
     def apply_locations(self, reports: list[LocationReport]) -> set[str]:
         """Project a batch of reports in one pyproj call; returns the leaf units touched."""

@@ -45,29 +45,35 @@ class ThreatEnvelopes(Detector):
         units = [u for u in dom.env_units if dom.unit_pos.get(u)]
         if not units:
             return
+        # a threat is in a unit's envelope when it is within reach of where the unit was
+        # last reported and of where it is dead-reckoned to be now: a report a minute old
+        # misplaces a moving unit, and reckoning overshoots one that has just stopped
+        n = len(units)
         if tids:
-            # a threat is in a unit's envelope when it is within reach of where the unit was
-            # last reported and of where it is dead-reckoned to be now: a report a minute old
-            # misplaces a moving unit, and reckoning overshoots one that has just stopped
             tpos = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids])
-            dist = np.maximum(distances(np.array([dom.unit_pos[u] for u in units]), tpos),
-                              distances(np.array([dom.unit_now.get(u) or dom.unit_pos[u] for u in units]), tpos))
-        close = (dist <= radius) if tids else np.zeros((len(units), 0), dtype=bool)
-        moved = np.array([k in ch.tracks for k in tids], dtype=bool)
+            both = distances(np.array([dom.unit_pos[u] for u in units]
+                                      + [dom.unit_now.get(u) or dom.unit_pos[u] for u in units]), tpos)
+            dist = np.maximum(both[:n], both[n:]).tolist()
+        else:
+            dist = [[]] * n
+        close = [[d <= radius for d in row] for row in dist]
+        moved = [k for k, tid in enumerate(tids) if tid in ch.tracks]
+        empty = frozenset()
         for ui, u in enumerate(units):
-            prev0 = self.env_prev.get(u, (frozenset(),))[0]
-            if not (rescan and prev0) and u not in ch.units and not (close[ui] & moved).any() \
+            row = close[ui]
+            prev0 = self.env_prev.get(u, (empty,))[0]
+            if not (rescan and prev0) and u not in ch.units and not any(row[k] for k in moved) \
                     and not prev0 & ch.tracks:
                 continue
-            if not close[ui].any():
-                if self.env_prev.get(u, (frozenset(),))[0]:
-                    self.env_prev[u] = (frozenset(), math.inf, 0)
+            if True not in row:
+                if prev0:
+                    self.env_prev[u] = (empty, math.inf, 0)
                 continue
-            inn = np.nonzero(close[ui])[0]
+            inn = [k for k, c in enumerate(row) if c]
             ids = frozenset(tids[k] for k in inn)
-            prev = self.env_prev.get(u, (frozenset(), math.inf, 0))
-            k_near = inn[np.argmin(dist[ui, inn])]
-            nearest = float(dist[ui, k_near])
+            prev = self.env_prev.get(u, (empty, math.inf, 0))
+            k_near = min(inn, key=dist[ui].__getitem__)
+            nearest = dist[ui][k_near]
             strength = int(sum(pic.tracks[tids[k]].strength for k in inn))
             self.env_prev[u] = (ids, nearest, strength)
             m = dom.current_mission(u)
