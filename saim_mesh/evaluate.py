@@ -53,6 +53,7 @@ SEVERITY = {  # SUO
             "fratricide": ("min_distance_m", -1), "distance": ("distance_m", -1), "strength": ("strength", +1),
             "monitored": ("strength", +1), "ave-of-approach": ("strength", +1), "projected-late": ("late_s", +1),
             "penetration": ("strength", +1), "escape": ("strength", 0), "band": ("off_m", +1),
+            "recon-progress": ("behind_by", +1),
             # robot teams
             "stuck": ("still_s", +1), "divergent": ("distance_m", +1), "no-status": ("silent_s", +1),
             "lost-target": ("unseen_s", +1), "collision": ("clearance_m", -1), "target-visible": ("acquisition", 0)}

@@ -21,7 +21,7 @@ from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 from . import render
 from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies,
                      Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
-                     Presence, ScheduleMonitors, Standoffs, ThreatsAhead)
+                     Presence, ReconProgress, ScheduleMonitors, Standoffs, ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
@@ -80,6 +80,7 @@ class SuoDomain:
         self.standoff = self._part(Standoffs)
         self.support = self._part(FireSupport)
         self.presence = self._part(Presence)
+        self.recon = self._part(ReconProgress)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -333,6 +334,12 @@ class SuoDomain:
 
     def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
         self.checkpoints.post(m, table)
+
+    def post_recon(self, m: Mission, area: str, by: float | None) -> None:
+        self.recon.post(m, area, by)
+
+    def check_recon(self, m: Mission, t: float) -> None:
+        self.recon.check_final(m, t)
 
     def threat_ahead(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],
                      recommended: str) -> None:

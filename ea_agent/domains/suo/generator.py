@@ -254,7 +254,7 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -
     for co in COMPANIES:
         c += [(300.0, f"{co}-mtc", co, "start"), (2400.0 if co == "C" else 2100.0, f"{co}-mtc", co, "end"),
               (2400.0, f"{co}-attack", co, "start"), (3600.0, f"{co}-attack", co, "end"), (3700.0, f"{co}-defend", co, "start")]
-    c += [(0.0, "R-screen", "R", "start"), (0.0, "M-occupy", "M", "start"), (2200.0, "M-occupy", "M", "end"),
+    c += [(0.0, "R-zone", "R", "start"), (1800.0, "R-zone", "R", "end"), (0.0, "R-screen", "R", "start"), (0.0, "M-occupy", "M", "start"), (2200.0, "M-occupy", "M", "end"),
           (2200.0, "M-march", "M", "start"), (2800.0, "M-march", "M", "end"), (2800.0, "M-sbf", "M", "start"),
           (0.0, "BNHQ-occupy", "BNHQ", "start"), (2800.0, "A3-linkup", "A3", "start"),
           (3800.0, "C2-passage", "C2", "start")]
@@ -360,6 +360,7 @@ def overlay_features() -> list[dict]:
     add("RTE-M", "route", "LineString", [[6000, 2000], [6000, 8000]], "BN")
     add("SCREEN-R", "area", "Polygon", _rect(800, 14700, 3200, 15300), "BN")
     add("NAI-SCREEN", "nai", "Polygon", _rect(0, 15500, 4000, 19000), "R")
+    add("ZONE-R", "area", "Polygon", _rect(0, 14200, 4000, 15400), "R")
     add("NAI-1", "nai", "Point", [2000, 17500], "BN", radius_m=700)
     add("NAI-A", "nai", "Point", [1500, 15000], "A", radius_m=500)
     add("DP1", "decision-point", "Point", [9000, 17000], "BN", radius_m=500)
@@ -424,6 +425,9 @@ def plan_doc(sim: Sim) -> dict:
         m(f"{co}-attack", co, "hasty-attack", ("START-NLT", 2460), ("END-NLT", 3660), after=[f"{co}-mtc"],
           objective=f"OBJ-{co}")
         m(f"{co}-defend", co, "defend", ("START-NLT", 3760), None, after=[f"{co}-attack"], position=f"OBJ-{co}")
+    # R is also to reconnoitre the ground south of its screen by 1800; it never leaves the
+    # screen line, so it sees a third of it (before R-screen: that is R's mission for threats)
+    m("R-zone", "R", "zone-reconnaissance", ("START-AT", 0), ("END-NLT", 1800), position="SCREEN-R", area="ZONE-R")
     m("R-screen", "R", "screen", ("START-AT", 0), None, position="SCREEN-R", area="NAI-SCREEN")
     m("M-occupy", "M", "occupy", ("START-AT", 0), ("END-AT", 2200), position="BP-M1")
     m("M-march", "M", "tactical-road-march", ("ON-ORDER", None), ("END-NLT", 2900), after=["M-occupy"],

@@ -25,6 +25,7 @@ from .location import LocationMonitors
 from .penetration import ProjectedPenetrations
 from .presence import Presence
 from .projection import Projections
+from .recon import ReconProgress
 from .schedule import ScheduleMonitors
 from .standoff import Standoffs
 from .support import FireSupport
@@ -36,7 +37,7 @@ DETECTORS: tuple[type[Detector], ...] = (
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
     Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs,
-    FireSupport, Presence,
+    FireSupport, Presence, ReconProgress,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -45,5 +46,5 @@ ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fi
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire",
            "Checkpoints", "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide",
-           "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ScheduleMonitors", "Standoffs",
+           "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ReconProgress", "ScheduleMonitors", "Standoffs",
            "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]

@@ -1,4 +1,5 @@
-"""Fratricide risk by the unit-boundary rule (paper 6.7.2)."""
+"""Fratricide risk by the unit-boundary rule (paper 6.7.2), relaxed inside the lane of a
+passage of lines: there the passing unit is expected inside the passed unit's boundary."""
 from __future__ import annotations
 
 from collections import defaultdict
@@ -8,6 +9,7 @@ import shapely
 
 from ea_agent.core.alert import Candidate
 
+from ..missions import PassageOfLines
 from ..render import km
 from .base import Changes, Detector, platoon_of
 from .geometry import inside_matrix
@@ -67,6 +69,22 @@ class Fratricide(Detector):
         u = to.nearest_with(unit, "weapons_range_m")
         return dflt if u is None else float(to.units[u].attrs["weapons_range_m"])
 
+    def _lanes(self) -> list[tuple[str, str, object]]:
+        """(passing unit, passed unit, lane area) of each passage of lines with a lane that
+        has not ended (the lane is agreed beforehand, so it holds before the passage starts)."""
+        dom = self.dom
+        if dom.plan is None:
+            return []
+        return [(m.unit, m.params["partner"], dom.overlay[m.params["lane"]].area) for m in dom.missions.values()
+                if isinstance(m, PassageOfLines) and m.params.get("lane")
+                and dom.plan.state.get(m.id) not in ("done", "aborted")]
+
+    def _passing(self, a: str, b: str, xy: np.ndarray, lanes) -> bool:
+        """Leaf `a` belongs to a passing unit, is inside its lane, and `b` to the unit it passes."""
+        to = self.dom.taskorg
+        return any(to.is_under(a, p) and to.is_under(b, q) and shapely.contains_xy(lane, xy[0], xy[1])
+                   for p, q, lane in lanes)
+
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
         rows = [dom.leaf_i[u] for u in ch.leaves if self.frat_ok[dom.leaf_i[u]]]
@@ -88,8 +106,12 @@ class Fratricide(Detector):
         pos = np.where(self.frat_ok[:, None], pos, np.nan)
         to = dom.taskorg
         groups: dict[tuple[str, str], list[tuple[str, str, float]]] = defaultdict(list)
+        lanes = None
         for i, j, d in fratricide_pairs(pos, bnd, inside, self.leaf_rng, dirty, self.leaf_mine):
             a, b = dom.leaves[i], dom.leaves[j]
+            lanes = self._lanes() if lanes is None else lanes
+            if lanes and (self._passing(a, b, pos[i], lanes) or self._passing(b, a, pos[j], lanes)):
+                continue
             pa, pb = platoon_of(to, a), platoon_of(to, b)
             if (pa, a) > (pb, b):
                 a, b, pa, pb = b, a, pb, pa

@@ -20,7 +20,7 @@ DEFAULT_PRIORITY = {
     "penetration": "immediate", "projected-penetration": "immediate", "escape": "immediate",
     "end-state": "immediate", "friendly-expected": "immediate", "band": "immediate", "threat-ahead": "immediate",
     "checkpoint": "priority", "line": "immediate", "standoff": "immediate", "fire-support": "immediate",
-    "presence": "immediate",
+    "presence": "immediate", "recon-progress": "priority",
 }
 
 

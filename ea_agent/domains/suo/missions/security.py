@@ -1,6 +1,7 @@
 """Security and reconnaissance missions: keep station, watch an area."""
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 from .base import Mission, _STANDOFF, _checks, mission
@@ -59,13 +60,45 @@ class Observe(SecurityMission):
         ctx.post_held(self, self.params["position"])
 
 
+class ReconnaissanceMission(SecurityMission):
+    """Reconnaissance of a zone or an area: its elements must come within sight of all of
+    it, at a pace that finishes by `by` (or the mission's END-NLT/END-AT time); hostiles
+    found in it are what it looks for, and are reported at once as in the security family."""
+    PARAMS = {"by": "optional scenario time by which all of the area must be seen (default: its end time)"}
+    CHECKS = SecurityMission.CHECKS + (
+        "progress: the share of the area seen against the share of its time gone, and most of it seen "
+        "at its end (recon-progress)",)
+
+    def by(self) -> float | None:
+        if self.params.get("by") is not None:
+            return float(self.params["by"])
+        end = self.spec.end
+        return float(end.t) if end.type in ("END-NLT", "END-AT") and end.t is not None else None
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        by = params.get("by")
+        if by is not None and (isinstance(by, bool) or not isinstance(by, (int, float)) or not math.isfinite(by) or by < 0):
+            return "by", "expected a scenario time >= 0"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_recon(self, self.params["area"], self.by())
+
+    def check_final_location(self, ctx, t):
+        super().check_final_location(ctx, t)
+        ctx.check_recon(self, t)
+
+
 @mission
-class AreaReconnaissance(SecurityMission):
-    """Judged as the security family (progress through the area not yet checked)."""
+class AreaReconnaissance(ReconnaissanceMission):
+    """A named area: the unit's elements see all of it."""
     TYPE = "area-reconnaissance"
 
 
 @mission
-class ZoneReconnaissance(SecurityMission):
-    """Judged as the security family (progress through the zone not yet checked)."""
+class ZoneReconnaissance(ReconnaissanceMission):
+    """Everything between its boundaries: as an area reconnaissance, over a whole zone
+    (usually larger, so its progress is what the commander watches)."""
     TYPE = "zone-reconnaissance"

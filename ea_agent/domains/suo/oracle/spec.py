@@ -9,7 +9,11 @@ from __future__ import annotations
 SPEC = {"out_of_position_m": 150.0, "schedule_s": 30.0, "unknown_position_s": 120.0,
         "weapons_range_m": 1000.0, "threat_radius_m": 2000.0, "coordination_radius_m": 300.0,
         "ahead_m": 1500.0, "ahead_width_m": 300.0,   # a unit is at a checkpoint this near its point:
-        "checkpoint_m": 50.0, "standoff_m": 1000.0, "lift_m": 500.0}   # a moving unit's commander wants to know of hostiles
+        "checkpoint_m": 50.0, "standoff_m": 1000.0, "lift_m": 500.0,
+        # a zone/area reconnaissance sees a cell of this grid once a member is this near its
+        # centre; it is behind when the share seen trails the share of its time gone by
+        # `recon_lag`, and incomplete below `recon_complete` at its end
+        "recon_cell_m": 250.0, "recon_sight_m": 400.0, "recon_lag": 0.25, "recon_complete": 0.9}   # a moving unit's commander wants to know of hostiles
                                                      # this far ahead on its route, this near it
 EPISODE_S = 720.0   # the paper's alert expiry (12 min): a threat back near a platoon, or a group back
                     # in a watched area, after this long away is news again
@@ -33,6 +37,7 @@ OBJECTIVE = {"attack", "breach", "clear", "destroy", "fix", "hasty-attack", "iso
 ROUTE = {"bypass", "delay", "follow-and-assume", "follow-and-support", "move", "movement-to-contact",
          "route-reconnaissance", "tactical-road-march", "withdraw"}
 AREA = {"area-reconnaissance", "guard", "observe", "screen", "zone-reconnaissance"}   # position + area
+RECON = {"area-reconnaissance", "zone-reconnaissance"}   # progress through the area by its time
 COORDINATION = {"link-up", "passage-of-lines", "relief-in-place"}
 CONTINGENT = {"branch", "sequel"}
 REORGANIZATION = {"reorganize"}

@@ -8,7 +8,7 @@ from shapely.geometry import LineString, Point
 
 from .spec import (
     CONTINGENT, END_STATE, EPISODE_S, ESCAPE, FOLLOW, FOLLOW_MAX_M, FRIENDLY_ERR_M,
-    LINE_MARGIN_M, MATERIAL, OBJECTIVE, ROUTE, STANDOFF,
+    LINE_MARGIN_M, MATERIAL, OBJECTIVE, RECON, ROUTE, STANDOFF,
     TICK, TOLERANCE_M, _bands, _runs, geometry_params,
 )
 
@@ -51,6 +51,8 @@ class Tasks:
                 self._ahead(mid, m, line, s, e)
             if p.get("checkpoints") and typ in ROUTE:
                 self._checkpoints(mid, m, p["checkpoints"], s, e)
+            if typ in RECON:
+                self._recon(mid, m, s, e)
             if typ in STANDOFF:
                 self._standoff(mid, m, s, e)
             if typ == "delay" and p.get("line"):
@@ -217,6 +219,51 @@ class Tasks:
                               f"{mid} early at {cp['point']}", at=arrive)
                 elif arrive < when - fuzz + self.slack:
                     self.may(o, ["checkpoint"], [m["unit"]], arrive - self.slack, arrive + self.slack + 5)
+
+    def _recon(self, mid, m, s, e) -> None:
+        """A zone or area reconnaissance: the share of its area on a grid of cells some member
+        came within sight of, against the share of its time gone by its `by` (or END-NLT/END-AT
+        time); too little seen when it ends. Within 2 % of a threshold, either answer is fair."""
+        p = m["params"]
+        area = self.area[p["area"]]
+        step, sight = self.thr(m, "recon_cell_m"), self.thr(m, "recon_sight_m")
+        lag_max, complete = self.thr(m, "recon_lag"), self.thr(m, "recon_complete")
+        x0, y0, x1, y1 = area.bounds
+        cells = [(x, y) for y in np.arange(y0 + step / 2, y1, step) for x in np.arange(x0 + step / 2, x1, step)
+                 if area.contains(Point(x, y))] or [area.representative_point().coords[0]]
+        cells = np.array(cells)
+        seen = np.zeros(len(cells), dtype=bool)
+        end = m.get("end") or {}
+        by = p.get("by")
+        if by is None and end.get("type") in ("END-NLT", "END-AT"):
+            by = end.get("t")
+        behind, near = None, []
+        for k, t in enumerate(self.ticks):
+            if not s <= t <= e:
+                continue
+            pts = self.member_points(m["unit"], k)
+            d = np.hypot(cells[:, None, 0] - pts[None, :, 0], cells[:, None, 1] - pts[None, :, 1]).min(axis=1)
+            seen |= d <= sight
+            if by is not None and by > s:
+                lag = min(1.0, (t - s) / (by - s)) - seen.mean()
+                if lag > lag_max - 0.02:
+                    near.append(t)
+                if lag > lag_max + 0.02 and behind is None:
+                    behind = t
+        unit = m["unit"]
+        if behind is not None:   # judged every 30 s on the EA's scan
+            for o in self.owners_of(unit, behind):
+                self.must(o, "recon-progress", [], [unit], behind - self.slack, behind + 30 + self.slack + 5,
+                          f"{mid} behind", at=behind)
+        if near:
+            for o in set(self.owners_of(unit, near[0])) | set(self.owners_of(unit, e)):
+                self.may(o, ["recon-progress"], [unit], near[0] - self.slack, e + self.slack)
+        if mid in self.ended and self.ended[mid] < self.valid[mid][1]:
+            for o in self.owners_of(unit, e):
+                if seen.mean() < complete - 0.02:
+                    self.must(o, "recon-progress", [], [unit], e - 1, e + self.slack + 5, f"{mid} incomplete", at=e)
+                elif seen.mean() < complete + 0.02:
+                    self.may(o, ["recon-progress"], [unit], e - 1, e + self.slack + 5)
 
     def _line_of(self, mid, m):
         """The line a moving mission follows: its route or axis, or its corridor's line."""

@@ -18,9 +18,18 @@ class Threats:
     proximity of hostiles, calls for fire near friendly units."""
 
     def fratricide(self) -> None:
+        """The unit-boundary rule (paper 6.7.2); inside the lane of a passage of lines that has
+        not ended, the passing unit is where the plan puts it."""
         hits: dict[tuple[str, str, str], list[float]] = defaultdict(list)
+        lanes = [(mid, m["unit"], m["params"]["partner"], self.area[m["params"]["lane"]])
+                 for mid, m in self.missions.items() if m["type"] == "passage-of-lines" and m["params"].get("lane")]
         for k, t in enumerate(self.ticks):
             par = self.parent_at(t)
+            open_lanes = [(self.subtree(p, t), self.subtree(q, t), lane) for mid, p, q, lane in lanes
+                          if self.valid[mid][0] <= t < min(self.valid[mid][1], self.ended.get(mid, math.inf))]
+
+            def passing(a, ca, b) -> bool:
+                return any(a in sp and b in sq and lane.contains(Point(ca)) for sp, sq, lane in open_lanes)
 
             def bowner(u):
                 while u is not None and not self.units[u].get("boundary"):
@@ -47,7 +56,7 @@ class Threats:
                         continue
                     in_own_b = pb_.contains(Point(cb))
                     if ((not in_own_a and pb_.contains(Point(ca))) or (not in_own_b and pa_.contains(Point(cb)))
-                            or (not in_own_a and not in_own_b)):
+                            or (not in_own_a and not in_own_b)) and not passing(a, ca, b) and not passing(b, cb, a):
                         pla, plb = sorted([self.platoon_of(a, t), self.platoon_of(b, t)])
                         for o in self.owners:
                             st = self.subtree(o, t)
