@@ -2,6 +2,10 @@
 (link-up, relief in place, passage of lines)."""
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from ea_agent.core.alert import Candidate
 
 from ..missions import Mission
@@ -44,14 +48,31 @@ class Coordination(Detector):
         if not ch.leaves:
             return
         dom = self.dom
+        near: dict[str, np.ndarray] = {}   # point -> every entity's distance from it (inf: unknown)
         for mid, (m, partner, point, radius) in list(self.pending.items()):
             if m.unit not in ch.units and partner not in ch.units:
                 continue
             g = dom.overlay[point].geom
-            ok = True
-            for u in (m.unit, partner):
-                d = judged_distance(g, dom.pic.member_xy(u), "any", None)
-                ok &= d is not None and d <= radius
-            if ok:
+            # both must be there: the partner is not looked at while the unit is not
+            if all(self._within(g, point, u, radius, near) for u in (m.unit, partner)):
                 dom.timers.occurred(("coord", mid), t)
                 del self.pending[mid]
+
+    def _within(self, g, point: str, unit: str, radius: float, near: dict[str, np.ndarray]) -> bool:
+        """Whether some element of `unit` is within `radius` of `g`. A point's distance from
+        every entity is taken once per epoch (one numpy call for all of them, not one per
+        unit); other measures are judged as before."""
+        pic = self.dom.pic
+        if g.geom_type != "Point":
+            d = judged_distance(g, pic.member_xy(unit), "any", None)
+            return d is not None and d <= radius
+        ds = near.get(point)
+        if ds is None:
+            xy = pic.xy
+            ds = near[point] = np.hypot(xy[:, 0] - g.x, xy[:, 1] - g.y)
+            ds[np.isnan(ds)] = np.inf
+        idx = pic.members[unit]
+        if len(idx) == 0:
+            return False
+        d = float(ds[idx].min())
+        return d != math.inf and d <= radius   # no member known: not there
