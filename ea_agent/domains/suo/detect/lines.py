@@ -83,7 +83,6 @@ class Lines(Detector):
             state = dom.plan.state.get(mid)
             for it in items:
                 m, lid, what, when, start = it
-                margin = dom.voi(m, "line_margin_m")
                 if state not in (("ready", "active") if what == "depart" else ("active",)):
                     continue
                 if m.unit not in ch.units and start is not None:
@@ -91,6 +90,7 @@ class Lines(Detector):
                 pos = dom.unit_pos.get(m.unit)   # as reported: dead reckoning overshoots a unit halting on its line
                 if pos is None:
                     continue
+                margin = dom.voi(m, "line_margin_m")
                 d = side(dom.overlay[lid].geom, pos)
                 if start is None:   # the side it starts on (or, standing on the line, the first it leaves to)
                     if abs(d) > margin:
