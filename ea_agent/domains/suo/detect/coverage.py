@@ -25,6 +25,7 @@ class Coverage(Detector):
     def reset(self) -> None:
         self.held: dict[str, tuple[Mission, str]] = {}   # mission -> (it, the position it must hold)
         self.next_t = 0.0
+        self._bounds: dict[str, tuple] = {}   # position -> (its area, the area's bounds)
 
     def post_held(self, m: Mission, position: str) -> None:
         self.held[m.id] = (m, position)
@@ -47,7 +48,10 @@ class Coverage(Detector):
             if not ok[dom.pic.members[m.unit]].any():
                 continue   # where its unit is is not known yet: not known to be empty either
             area = dom.overlay[pos].area
-            x0, y0, x1, y1 = area.bounds
+            hit = self._bounds.get(pos)
+            if hit is None or hit[0] is not area:   # shapely's bounds cost microseconds: once per area
+                hit = self._bounds[pos] = (area, area.bounds)
+            x0, y0, x1, y1 = hit[1]
             box = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)   # only these can be inside
             if box.any() and shapely.contains_xy(area, xs[box], ys[box]).any():
                 continue
