@@ -21,16 +21,18 @@ class ThreatsAhead(Detector):
 
     def reset(self) -> None:
         self._towards_cache: dict[str, object] = {}
-        self._watched: tuple = (None, [])
+        # (state dict, its version, what runs, corridor ids, watched, each line's bounds)
+        self._watched: tuple = (None, -1, None, None, [], [])
         self._box: tuple | None = None   # rebuilt when a corridor is added (see _near_any_line)
         self._box_lines = 0
 
     def org_changed(self) -> None:
         self._box = None   # the missions in our plan changed
 
-    def _near_any_line(self, xy: np.ndarray) -> bool:
+    def _near_any_line(self, live: list[tuple[str, float, float]]) -> bool:
         """Whether any track is within the bounding box of any line a mission of ours may move
-        along (built once per plan: most of the time no hostile is near any of them)."""
+        along (built once per plan: most of the time no hostile is near any of them). Plain
+        floats: a handful of tracks costs less than one numpy call."""
         dom = self.dom
         if self._box is None:
             boxes = [dom.overlay[m.params[k]].geom.bounds for m in dom.missions.values() if dom.in_plan(m)
@@ -40,22 +42,37 @@ class ThreatsAhead(Detector):
                 return False
             b = np.array(boxes)
             w = float(dom.voi_cfg["ahead_width_m"]) * 4   # missions may widen theirs
-            self._box = (b[:, 0].min() - w, b[:, 1].min() - w, b[:, 2].max() + w, b[:, 3].max() + w)
+            self._box = (float(b[:, 0].min() - w), float(b[:, 1].min() - w),
+                         float(b[:, 2].max() + w), float(b[:, 3].max() + w))
             self._box_lines = len(dom.location.lines)
         x0, y0, x1, y1 = self._box
-        return bool(((xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)).any())
+        return any(x0 <= x <= x1 and y0 <= y <= y1 for _, x, y in live)
 
     def watched(self) -> list[tuple[Mission, object]]:
         """Running missions that move along a line, with it (recomputed when what runs, or a
         corridor, changes)."""
+        return self._watched_with_bounds()[0]
+
+    def _watched_with_bounds(self) -> tuple[list[tuple[Mission, object]], list[tuple[float, ...]]]:
+        """watched(), and each line's bounds (shapely's bounds cost microseconds a call). What
+        runs is only looked at again when a plan state changed since the last look."""
         dom = self.dom
         if dom.plan is None:
-            return []
-        key = (frozenset(mid for mid, st in dom.plan.state.items() if st == "active"),
-               tuple(id(x) for x in dom.location.lines.values()))
-        if key != self._watched[0]:
-            self._watched = (key, self._compute_watched())
-        return self._watched[1]
+            return [], []
+        states = dom.plan.state
+        version = getattr(states, "version", None)
+        lines = tuple(map(id, dom.location.lines.values()))
+        old_states, old_version, old_active, old_lines = self._watched[:4]
+        if version is not None and states is old_states and version == old_version and lines == old_lines:
+            active = old_active
+        else:
+            active = frozenset(mid for mid, st in states.items() if st == "active")
+        if (active, lines) != (old_active, old_lines) or old_states is None:
+            out = self._compute_watched()
+            self._watched = (states, version, active, lines, out, [line.bounds for _, line in out])
+        elif states is not old_states or version != old_version:
+            self._watched = (states, version, active, lines, *self._watched[4:])
+        return self._watched[4], self._watched[5]
 
     def _compute_watched(self) -> list[tuple[Mission, object]]:
         dom = self.dom
@@ -86,16 +103,12 @@ class ThreatsAhead(Detector):
         a, b = shapely.Point(line.coords[0]), shapely.Point(line.coords[-1])
         return shapely.reverse(line) if area.distance(a) < area.distance(b) else line
 
-    def ahead(self, m: Mission, line, xy: np.ndarray, pts: np.ndarray) -> np.ndarray | None:
-        """Which of the points `xy` (shapely `pts`) are on the watched stretch: along the line
-        from the unit's place to `ahead_m` on, and within `ahead_width_m` of it (vectorised,
-        after a bounding-box test: most of the time no track is anywhere near)."""
+    def ahead(self, m: Mission, line, xy: np.ndarray, pts: np.ndarray, box: np.ndarray) -> np.ndarray | None:
+        """Which of the points `xy` (shapely `pts`) in the line's widened bounding box `box`
+        are on the watched stretch: along the line from the unit's place to `ahead_m` on,
+        and within `ahead_width_m` of it (vectorised)."""
         dom = self.dom
         w = dom.voi(m, "ahead_width_m")
-        x0, y0, x1, y1 = line.bounds
-        box = (xy[:, 0] >= x0 - w) & (xy[:, 0] <= x1 + w) & (xy[:, 1] >= y0 - w) & (xy[:, 1] <= y1 + w)
-        if not box.any():
-            return None
         pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
         if pos is None:
             return None
@@ -109,24 +122,33 @@ class ThreatsAhead(Detector):
         if not (ch.tracks or ch.rescan) or not dom.pic.tracks or float(dom.voi_cfg["ahead_m"]) <= 0.0:
             return
         tracks = dom.pic.tracks
-        ids, xy = dom.pic.live_tracks()
+        # the live tracks (as Picture.live_tracks), on plain floats: bounding boxes first
+        live = [(k, e.x, e.y) for k, e in sorted(tracks.items()) if e.strength > 0]
         if len(dom.location.lines) != self._box_lines:
             self._box = None
-        if not ids or not self._near_any_line(xy):
+        if not live or not self._near_any_line(live):
             return
-        watched = self.watched()
+        watched, bounds = self._watched_with_bounds()
         if not watched:
             return
         w = max(dom.voi(m, "ahead_width_m") for m, _ in watched)
-        b = np.array([line.bounds for _, line in watched])
-        x0, y0, x1, y1 = b[:, 0].min() - w, b[:, 1].min() - w, b[:, 2].max() + w, b[:, 3].max() + w
-        if not ((xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)).any():
+        x0, y0 = min(b[0] for b in bounds) - w, min(b[1] for b in bounds) - w
+        x1, y1 = max(b[2] for b in bounds) + w, max(b[3] for b in bounds) + w
+        if not any(x0 <= x <= x1 and y0 <= y <= y1 for _, x, y in live):
             return   # no track anywhere near any moving unit's line
-        pts = shapely.points(xy)
-        for m, line in watched:
-            hit = self.ahead(m, line, xy, pts)
+        xy = pts = None
+        for (m, line), (bx0, by0, bx1, by1) in zip(watched, bounds):
+            wm = dom.voi(m, "ahead_width_m")
+            bx0, by0, bx1, by1 = bx0 - wm, by0 - wm, bx1 + wm, by1 + wm
+            box = [bx0 <= x <= bx1 and by0 <= y <= by1 for _, x, y in live]
+            if not any(box):
+                continue   # most of the time no track is anywhere near this line
+            if xy is None:
+                xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
+                pts = shapely.points(xy)
+            hit = self.ahead(m, line, xy, pts, np.array(box))
             if hit is not None and hit.any():
-                inside = [k for k, ok in zip(ids, hit.tolist()) if ok]
+                inside = [k for (k, _, _), ok in zip(live, hit.tolist()) if ok]
                 m.respond_to_threat_ahead(dom, t, inside, sum(tracks[k].strength for k in inside))
 
     def candidate(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],

@@ -7,6 +7,7 @@ import math
 from collections import defaultdict
 
 import numpy as np
+import shapely
 
 from ea_agent.core.alert import Candidate, hms
 
@@ -33,19 +34,25 @@ class Areas(Detector):
         self.strength: dict[str, int] = {}        # area -> hostile strength in it (last time tracks changed)
         self.tracks: dict[str, set[str]] = {}     # area -> tracks in it
         self._tids: list[str] = []
-        self._members: dict[str, np.ndarray] = {}
+        self._members: dict[str, list[int]] = {}
         self.inside_t: dict[tuple[str, str], float] = {}   # (area, track) -> last time seen inside
         self.last_xy: dict[tuple[str, str], tuple[float, float]] = {}   # ... and where
         self.seen_in: dict[str, set[str]] = defaultdict(set)             # area -> tracks seen in it
         self._new: dict[str, list[str]] = {}               # area -> tracks new to it this epoch
         self._present: set[tuple[str, str]] = set()        # (area, track) in or at the edge at the last look
         self._eligible: set[tuple[str, str]] = set()       # (area, mission) watched now
+        self._present_areas: set[str] = set()              # the areas in _present
+        self._mon_v = 0                                    # counts changes of red_monitors
+        self._elig_key: tuple = ()                         # what _eligible was derived from
+        self._bounds: tuple = (None, [])                   # (index, its areas' bounds on plain floats)
+        self._near_bounds: tuple = (None, [])
         self._stale = True
 
     def reset(self) -> None:
         # area -> (mission, hostiles expected there, alert kind: monitored | penetration)
         self.red_monitors: dict[str, list[tuple[Mission, bool, str]]] = defaultdict(list)
         self.global_areas: dict[str, str] = {}   # area -> alert type (monitored / ave-of-approach)
+        self._mon_v = getattr(self, "_mon_v", 0) + 1
 
     def reindex(self) -> None:
         """The watched areas changed: rebuild the spatial index over all of them."""
@@ -71,6 +78,7 @@ class Areas(Detector):
         (monitored, or penetration where no hostile may enter)."""
         dom = self.dom
         self.red_monitors[area].append((m, expected, kind))
+        self._mon_v += 1
         self.reindex()
         if expect_by is not None:
             def absent(tf, mon, how):
@@ -86,6 +94,7 @@ class Areas(Detector):
     def end_mission(self, mid: str) -> None:
         for area in list(self.red_monitors):
             self.red_monitors[area] = [x for x in self.red_monitors[area] if x[0].id != mid]
+        self._mon_v += 1
 
     def monitored_candidate(self, m: Mission | None, area: str, t: float, tracks: list[str], strength: int,
                             expected: bool, kind: str = "monitored") -> None:
@@ -108,8 +117,8 @@ class Areas(Detector):
         self._stale = False
         pic = self.dom.pic
         tids = sorted(pic.tracks)
-        xy = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids]) if tids else np.zeros((0, 2))
-        members = self.index.members(xy)
+        xy = [(pic.tracks[k].x, pic.tracks[k].y) for k in tids]
+        members = self._inside(self.index, xy)
         self.strength = {a: int(sum(pic.tracks[tids[k]].strength for k in idx)) for a, idx in members.items()}
         self.tracks = {a: {tids[k] for k in idx} for a, idx in members.items()}
         self._tids, self._members = tids, members
@@ -136,12 +145,13 @@ class Areas(Detector):
                 self.last_xy[(a, k)] = (pic.tracks[k].x, pic.tracks[k].y)
                 self.seen_in[a].add(k)
         present = set()
-        for a, idx in self.near_index.members(xy).items():   # still there, or at its edge
+        for a, idx in self._inside(self.near_index, xy).items():   # still there, or at its edge
             for i in idx:
                 if (a, tids[i]) in self.inside_t or tids[i] in self.tracks.get(a, ()):
                     self.inside_t[(a, tids[i])] = t
                     present.add((a, tids[i]))
         self._present = present
+        self._present_areas = {a for a, _ in present}
         if len(self.inside_t) > 4 * max(1, len(tids)) * max(1, len(members)):   # bounded: drop the forgotten
             self.inside_t = {ak: s for ak, s in self.inside_t.items() if t - s < forget}
             self.last_xy = {ak: xy for ak, xy in self.last_xy.items() if ak in self.inside_t}
@@ -149,17 +159,60 @@ class Areas(Detector):
             for a, k in self.inside_t:
                 self.seen_in[a].add(k)
 
+    def _inside(self, index: AreaIndex, xy: list[tuple[float, float]]) -> dict[str, list[int]]:
+        """AreaIndex.members on plain floats (a handful of tracks and areas: the bounding boxes
+        in Python, then one contains_xy call for every candidate pair, not one per area)."""
+        if not xy or not index.ids:
+            return {}
+        cache = self._bounds if index is self.index else self._near_bounds
+        if cache[0] is not index:
+            cache = (index, [tuple(b) for b in index.bounds.tolist()])
+            if index is self.index:
+                self._bounds = cache
+            else:
+                self._near_bounds = cache
+        ks, ii, px, py = [], [], [], []
+        for k, (x0, y0, x1, y1) in enumerate(cache[1]):
+            for i, (x, y) in enumerate(xy):
+                if x0 <= x <= x1 and y0 <= y <= y1:
+                    ks.append(k)
+                    ii.append(i)
+                    px.append(x)
+                    py.append(y)
+        out: dict[str, list[int]] = {}
+        if not ks:
+            return out
+        polys = index.polys
+        for k, i, inside in zip(ks, ii, shapely.contains_xy([polys[k] for k in ks], px, py).tolist()):
+            if inside:
+                out.setdefault(index.ids[k], []).append(i)
+        return out
+
+    def _eligible_now(self) -> set[tuple[str, str]]:
+        """(area, mission) pairs watched now: derived again only when a plan state, the
+        red monitors or our units changed."""
+        dom = self.dom
+        plan = dom.plan
+        states = plan.state if plan else None
+        key = (plan, states, getattr(states, "version", None), self._mon_v, dom.own_units)
+        old = self._elig_key
+        if (old and states is not None and old[1] is states and old[0] is plan and old[2] == key[2]
+                and old[3] == key[3] and old[4] is key[4]):
+            return self._eligible
+        self._elig_key = key
+        return {(area, m.id) for area, mons in self.red_monitors.items() for m, _, _ in mons
+                if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m)}
+
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
         # a mission whose watch begins (it became ready) is told what is already in its
         # area, stationary hostiles included: they would never show as a change
-        eligible = {(area, m.id) for area, mons in self.red_monitors.items() for m, _, _ in mons
-                    if dom.plan and dom.plan.state.get(m.id) in ("ready", "active") and dom.in_plan(m)}
+        eligible = self._eligible_now()
         begun, self._eligible = eligible - self._eligible, eligible
         # a group still in an area (or lingering at its edge) keeps what was told of it
         # alive, changed or not: it is no news when it next moves
         voa = dom.ea.voa
-        for area in {a for a, _ in self._present}:
+        for area in self._present_areas:
             kind = self.global_areas.get(area)
             if kind:
                 voa.touch((kind, area, None), t)

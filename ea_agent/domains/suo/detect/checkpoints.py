@@ -5,6 +5,8 @@ reconnaissance's expected progress, as near-time monitors (paper 6.6.4) on the e
 while the mission runs."""
 from __future__ import annotations
 
+import math
+
 import shapely
 
 from ea_agent.core.alert import Candidate, hms
@@ -18,6 +20,7 @@ class Checkpoints(Detector):
 
     def reset(self) -> None:
         self.waiting: dict[str, list[tuple[Mission, str]]] = {}   # mission -> checkpoints not yet reached
+        self._points: dict[str, tuple] = {}   # measure -> (its geometry, its point's x, y or None)
 
     def post(self, m: Mission, table: list[dict]) -> None:
         dom = self.dom
@@ -46,14 +49,26 @@ class Checkpoints(Detector):
             pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
             if pos is None:
                 continue
-            p = shapely.Point(pos)
             near = dom.voi(m, "checkpoint_m")
-            reached = [pt for _, pt in left if (dom.overlay[pt].geom.distance(p) <= near
-                       if dom.overlay[pt].geom.geom_type == "Point" else dom.overlay[pt].area.contains(p))]
+            reached = [pt for _, pt in left if self._reached(pt, pos, near)]
             for pt in reached:
                 dom.timers.occurred(("at", mid, pt), t)
             if reached:
                 self.waiting[mid] = [x for x in left if x[1] not in reached]
+
+    def _reached(self, point: str, pos: tuple[float, float], near: float) -> bool:
+        """Whether `pos` is within `near` of a point measure (GEOS's distance formula on its
+        coordinates, read once), or inside an area."""
+        cm = self.dom.overlay[point]
+        hit = self._points.get(point)
+        if hit is None or hit[0] is not cm.geom:
+            g = cm.geom
+            hit = self._points[point] = (g, (g.x, g.y) if g.geom_type == "Point" else None)
+        p = hit[1]
+        if p is None:
+            return cm.area.contains(shapely.Point(pos))
+        dx, dy = pos[0] - p[0], pos[1] - p[1]
+        return math.sqrt(dx * dx + dy * dy) <= near
 
     def _cand(self, m: Mission, point: str, when: float, t: float, how: str) -> Candidate:
         dom = self.dom

@@ -2,6 +2,8 @@
 (link-up, relief in place, passage of lines)."""
 from __future__ import annotations
 
+import numpy as np
+
 from ea_agent.core.alert import Candidate
 
 from ..missions import Mission
@@ -17,6 +19,7 @@ class Coordination(Detector):
 
     def reset(self) -> None:
         self.pending: dict[str, tuple[Mission, str, str, float]] = {}
+        self._points: dict[str, tuple] = {}   # measure -> (its geometry, its point's x, y or None)
 
     def post(self, m: Mission, partner: str, point: str, at: float, fuzz: float) -> None:
         dom = self.dom
@@ -47,11 +50,31 @@ class Coordination(Detector):
         for mid, (m, partner, point, radius) in list(self.pending.items()):
             if m.unit not in ch.units and partner not in ch.units:
                 continue
-            g = dom.overlay[point].geom
-            ok = True
-            for u in (m.unit, partner):
-                d = judged_distance(g, dom.pic.member_xy(u), "any", None)
-                ok &= d is not None and d <= radius
-            if ok:
+            # both must be there: the partner is not looked at while the unit is not
+            if all(self._within(point, u, radius) for u in (m.unit, partner)):
                 dom.timers.occurred(("coord", mid), t)
                 del self.pending[mid]
+
+    def _point(self, point: str) -> tuple[float, float] | None:
+        """The measure's coordinates when it is a point (read once: shapely's accessors cost
+        microseconds), else None."""
+        g = self.dom.overlay[point].geom
+        hit = self._points.get(point)
+        if hit is None or hit[0] is not g:
+            hit = self._points[point] = (g, (g.x, g.y) if g.geom_type == "Point" else None)
+        return hit[1]
+
+    def _within(self, point: str, unit: str, radius: float) -> bool:
+        """Whether some element of `unit` is within `radius` of `point` (as judged_distance
+        "any", without its per-call overhead when the measure is a point)."""
+        pic = self.dom.pic
+        p = self._point(point)
+        if p is None:
+            d = judged_distance(self.dom.overlay[point].geom, pic.member_xy(unit), "any", None)
+            return d is not None and d <= radius
+        idx = pic.members[unit]
+        if len(idx) == 0:
+            return False
+        xy = pic.xy[idx]
+        # unknown members are NaN, which fmin skips (all unknown: NaN, never within)
+        return bool(np.fmin.reduce(np.hypot(xy[:, 0] - p[0], xy[:, 1] - p[1])) <= radius)

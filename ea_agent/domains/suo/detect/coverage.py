@@ -25,6 +25,7 @@ class Coverage(Detector):
     def reset(self) -> None:
         self.held: dict[str, tuple[Mission, str]] = {}   # mission -> (it, the position it must hold)
         self.next_t = 0.0
+        self._bounds: dict[str, tuple] = {}   # position -> (its area, the area's bounds)
 
     def post_held(self, m: Mission, position: str) -> None:
         self.held[m.id] = (m, position)
@@ -40,13 +41,19 @@ class Coverage(Detector):
         self.next_t = t + HELD_SCAN_S
         xy = dom.pic.xy
         ok = ~np.isnan(xy[:, 0])
+        xs, ys = xy[ok, 0], xy[ok, 1]
         for mid, (m, pos) in self.held.items():
             if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
                 continue
-            if len(dom.pic.member_xy(m.unit)) == 0:
+            if not ok[dom.pic.members[m.unit]].any():
                 continue   # where its unit is is not known yet: not known to be empty either
             area = dom.overlay[pos].area
-            if shapely.contains_xy(area, xy[ok, 0], xy[ok, 1]).any():
+            hit = self._bounds.get(pos)
+            if hit is None or hit[0] is not area:   # shapely's bounds cost microseconds: once per area
+                hit = self._bounds[pos] = (area, area.bounds)
+            x0, y0, x1, y1 = hit[1]
+            box = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)   # only these can be inside
+            if box.any() and shapely.contains_xy(area, xs[box], ys[box]).any():
                 continue
             cands.append(Candidate(
                 t, "friendly-expected", m.compute_priority("friendly-expected"), (m.unit,),

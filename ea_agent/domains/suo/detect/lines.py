@@ -15,10 +15,25 @@ from ..missions import Mission
 from .base import Changes, Detector
 
 
+_COORDS: dict[int, tuple] = {}   # id(line) -> (line, its coordinates): shapely's coords cost microseconds
+
+
+def _coords(line) -> tuple:
+    """The line's coordinates, read once per geometry (geometries are immutable; the line
+    is kept with them so its id is never reused while cached)."""
+    hit = _COORDS.get(id(line))
+    if hit is None or hit[0] is not line:
+        if len(_COORDS) > 4096:   # bounded: corridors come and go
+            _COORDS.clear()
+        hit = _COORDS[id(line)] = (line, tuple(line.coords))
+    return hit[1]
+
+
 def side(line, p) -> float:
     """Signed distance of point `p` from `line`: positive on its left (walking along it)."""
-    if len(line.coords) == 2:   # a straight line (most are): no geometry built
-        (ax, ay), (bx, by) = line.coords
+    coords = _coords(line)
+    if len(coords) == 2:   # a straight line (most are): no geometry built
+        (ax, ay), (bx, by) = coords
         dx, dy, px, py = bx - ax, by - ay, p[0] - ax, p[1] - ay
         n2 = dx * dx + dy * dy
         u = min(max((px * dx + py * dy) / n2, 0.0), 1.0) if n2 > 0 else 0.0
@@ -68,7 +83,6 @@ class Lines(Detector):
             state = dom.plan.state.get(mid)
             for it in items:
                 m, lid, what, when, start = it
-                margin = dom.voi(m, "line_margin_m")
                 if state not in (("ready", "active") if what == "depart" else ("active",)):
                     continue
                 if m.unit not in ch.units and start is not None:
@@ -76,6 +90,7 @@ class Lines(Detector):
                 pos = dom.unit_pos.get(m.unit)   # as reported: dead reckoning overshoots a unit halting on its line
                 if pos is None:
                     continue
+                margin = dom.voi(m, "line_margin_m")
                 d = side(dom.overlay[lid].geom, pos)
                 if start is None:   # the side it starts on (or, standing on the line, the first it leaves to)
                     if abs(d) > margin:

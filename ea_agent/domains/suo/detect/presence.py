@@ -4,6 +4,8 @@ passage of lines goes through its lane (the passing unit's elements near the poi
 inside the `lane`). "At the point" means an element within `coordination_radius_m`."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import shapely
 
@@ -22,6 +24,7 @@ class Presence(Detector):
     def reset(self) -> None:
         # mission -> [it, partner, point, lane or None, partner was at the point, relieving unit arrived, told]
         self.watch: dict[str, list] = {}
+        self._points: dict[str, tuple] = {}   # measure -> (its geometry, its point's x, y or None)
 
     def post(self, m: Mission, partner: str, point: str, lane: str | None) -> None:
         self.watch[m.id] = [m, partner, point, lane, False, False]
@@ -29,12 +32,34 @@ class Presence(Detector):
     def end_mission(self, mid: str) -> None:
         self.watch.pop(mid, None)
 
+    def _point(self, point: str) -> tuple[float, float] | None:
+        """The measure's coordinates when it is a point (read once: shapely's accessors cost
+        microseconds), else None."""
+        g = self.dom.overlay[point].geom
+        hit = self._points.get(point)
+        if hit is None or hit[0] is not g:
+            hit = self._points[point] = (g, (g.x, g.y) if g.geom_type == "Point" else None)
+        return hit[1]
+
     def _at(self, unit: str, point: str, radius: float) -> np.ndarray:
-        """The unit's members (positions) within `radius` of `point`."""
+        """The unit's members (positions) within `radius` of `point` (from a point, GEOS's
+        own formula on plain numpy: no geometry built)."""
         xy = self.dom.pic.member_xy(unit)
         if len(xy) == 0:
             return xy
-        return xy[shapely.distance(self.dom.overlay[point].geom, shapely.points(xy)) <= radius]
+        p = self._point(point)
+        if p is None:
+            return xy[shapely.distance(self.dom.overlay[point].geom, shapely.points(xy)) <= radius]
+        dx, dy = xy[:, 0] - p[0], xy[:, 1] - p[1]
+        return xy[np.sqrt(dx * dx + dy * dy) <= radius]
+
+    def _far(self, c: tuple[float, float], point: str, limit: float) -> bool:
+        """Whether `c` is farther than `limit` from the measure."""
+        p = self._point(point)
+        if p is None:
+            return self.dom.overlay[point].geom.distance(shapely.Point(c)) > limit
+        dx, dy = c[0] - p[0], c[1] - p[1]
+        return math.sqrt(dx * dx + dy * dy) > limit
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
@@ -49,7 +74,7 @@ class Presence(Detector):
             radius = dom.voi(m, "coordination_radius_m")
             if lane is not None:   # a passage: nothing to judge while the passing unit is nowhere near
                 c = dom.unit_pos.get(m.unit)
-                if c is None or dom.overlay[point].geom.distance(shapely.Point(c)) > radius + NEAR_M:
+                if c is None or self._far(c, point, radius + NEAR_M):
                     continue
             mine = self._at(m.unit, point, radius)
             if lane is None:   # relief in place

@@ -30,17 +30,25 @@ class Standoffs(Detector):
         if not self.watch or dom.plan is None or not (ch.tracks or ch.units or ch.rescan):
             return
         tracks = dom.pic.tracks
-        ids, xy = dom.pic.live_tracks()
-        if not ids:
+        # the live tracks (as Picture.live_tracks), on plain floats
+        live = [(k, e.x, e.y) for k, e in sorted(tracks.items()) if e.strength > 0]
+        if not live:
             return
+        ids = xy = None
         for mid, m in self.watch.items():
             if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
                 continue
             pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
             if pos is None:
                 continue
-            d = np.hypot(xy[:, 0] - pos[0], xy[:, 1] - pos[1])
             keep = dom.voi(m, "standoff_m")
+            px, py = pos
+            if not any(abs(x - px) < keep and abs(y - py) < keep for _, x, y in live):
+                continue   # a square around the unit holds none: hypot >= either side, none is near
+            if ids is None:
+                ids = [k for k, _, _ in live]
+                xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
+            d = np.hypot(xy[:, 0] - pos[0], xy[:, 1] - pos[1])
             near = d < keep
             if not near.any():
                 continue
