@@ -38,6 +38,7 @@ class Projections(Detector):
         self.due: list[Mission] = []
         self.routes: dict[str, tuple] = {}      # mission -> (its monitor list, its length, _route of it)
         self.beyond: dict[tuple, tuple] = {}    # (route, destination) -> (line, area, length, end to area)
+        self.active: tuple | None = None        # (plan states, their version, the active mission ids)
 
     def observe(self, t: float, ch: Changes) -> None:
         """Every SAMPLE_S of scenario time (a trend over minutes needs no finer samples),
@@ -113,12 +114,21 @@ class Projections(Detector):
         """Active missions of ours that have a route or axis, or a destination and a deadline."""
         dom = self.dom
         out = []
-        for mid, state in dom.plan.state.items():
+        for mid in self._active():
             m = dom.missions.get(mid)
-            if state == "active" and m is not None and dom.in_plan(m) and (
-                    self._route(m) is not None or self._destination(m) is not None):
+            if m is not None and dom.in_plan(m) and (self._route(m) is not None or self._destination(m) is not None):
                 out.append(m)
         return out
+
+    def _active(self) -> list[str]:
+        """The active missions' ids in plan-state order, kept until a plan state changes
+        (the state dict counts its changes) rather than scanning every mission per sample."""
+        state = self.dom.plan.state
+        version = getattr(state, "version", None)
+        c = self.active
+        if version is None or c is None or c[0] is not state or c[1] != version:
+            c = self.active = (state, version, [mid for mid, s in state.items() if s == "active"])
+        return c[2]
 
     def _route(self, m: Mission) -> tuple[str, str] | None:
         """The route or axis whose centroid monitor the mission posted (geometry id, which);
