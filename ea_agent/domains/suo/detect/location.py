@@ -5,7 +5,9 @@ and, on every periodic scan, for units that did not (a unit that never moves fro
 wrong place is told too)."""
 from __future__ import annotations
 
+import math
 from collections import defaultdict
+from typing import NamedTuple
 
 import numpy as np
 import shapely
@@ -24,6 +26,16 @@ CORRIDOR_BACK_M = 300.0   # a corridor reaches this far behind its start (its st
                           # halting unit's dead-reckoned centroid overshoots, a stale one lags)
 
 
+class Anchor(NamedTuple):
+    """A centroid monitor's last measured distance: where the unit was, from which geometry
+    (a rebuilt corridor is a new one), and the nearest point of it once a message needed it."""
+    geom: object
+    x: float
+    y: float
+    d: float
+    near: tuple[float, float] | None
+
+
 class LocationMonitors(Detector):
     TYPES = {"out-of-position": "plan-constraint-violated"}
 
@@ -34,6 +46,7 @@ class LocationMonitors(Detector):
         self.lines: dict[str, object] = {}                       # ... the line of it (to the target's edge)
         self.corridor_of: dict[str, tuple] = {}                  # ... its start and the members it judges
         self.next_all = 0.0                                      # when units that did not move are judged next
+        self.anchors: dict[tuple[str, str, str], Anchor] = {}   # (mission, geometry id, check) -> last measured
 
     def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
         self.monitors[m.id].append((m, geom, rule, what))
@@ -98,6 +111,8 @@ class LocationMonitors(Detector):
                 self._corridor(m, (x + dx, y + dy))
 
     def end_mission(self, mid: str) -> None:
+        for _, g, _, what in self.monitors.get(mid, ()):
+            self.anchors.pop((mid, g, what), None)
         self.monitors.pop(mid, None)
         self.corridors.pop(mid, None)
         self.lines.pop(mid, None)
@@ -119,21 +134,68 @@ class LocationMonitors(Detector):
             self.next_all = t + RECHECK_S
         if every and len(self.corridors) < len(self.corridor_to):
             self._pending_corridors()
-        todo = [mon for mid, mons in self.monitors.items()
-                if mons and (every or mons[0][0].unit in ch.units) and dom.plan.state.get(mid) == "active"
-                for mon in mons if dom.in_plan(mon[0])]
-        cent = [mon for mon in todo if mon[2] == "centroid" and dom.unit_pos.get(mon[0].unit)]
-        if cent:   # one vectorised distance call for every centroid-judged monitor
-            ds = shapely.distance(np.array([self._geom(g, w) for _, g, _, w in cent], dtype=object),
-                                  shapely.points(np.array([dom.unit_pos[m.unit] for m, _, _, _ in cent])))
-            for (m, g, rule, what), d in zip(cent, ds.tolist()):
-                if d > dom.voi(m, "out_of_position_m"):
-                    cands.append(self._oop(m, g, rule, what, t, d))
+        todo = self._todo(every, ch.units)
+        cands.extend(self._centroid_candidates(t, [mon for mon in todo if mon[2] == "centroid"]))
         for m, g, rule, what in todo:
             if rule != "centroid":
                 c = self._oop(m, g, rule, what, t)
                 if c is not None:
                     cands.append(c)
+
+    def _todo(self, every: bool, units: set[str]) -> list[tuple[Mission, str, str, str]]:
+        """The monitors of active missions of ours whose unit moved (all of them when `every`),
+        in the order they were posted."""
+        dom = self.dom
+        state = dom.plan.state
+        todo = []
+        for mid, mons in self.monitors.items():
+            if not mons:
+                continue
+            m = mons[0][0]
+            if (every or m.unit in units) and state.get(mid) == "active":
+                ours = dom.in_plan(m)
+                for mon in mons:
+                    if ours if mon[0] is m else dom.in_plan(mon[0]):
+                        todo.append(mon)
+        return todo
+
+    def _centroid_candidates(self, t: float, mons: list[tuple[Mission, str, str, str]]) -> list[Candidate]:
+        """Centroid-judged monitors. A distance is 1-Lipschitz in the position, so a unit whose
+        last measured distance plus how far it moved since is still within the threshold is
+        within it: only the others are measured (one vectorised call for all of them)."""
+        dom = self.dom
+        anchors = self.anchors
+        judged = []    # (monitor, anchor key, threshold) of the monitors that may be out
+        measure = []   # (anchor key, geometry, position) whose distance is not known
+        for mon in mons:
+            m, g, _, what = mon
+            pos = dom.unit_pos.get(m.unit)
+            if not pos:
+                continue
+            key = (m.id, g, what)
+            geom = self._geom(g, what)
+            thr = dom.voi(m, "out_of_position_m")
+            a = anchors.get(key)
+            if a is None or a.geom is not geom:
+                measure.append((key, geom, pos))
+            elif a.x != pos[0] or a.y != pos[1]:
+                if a.d + math.hypot(pos[0] - a.x, pos[1] - a.y) < thr * (1.0 - 1e-9) - 1e-6:
+                    continue
+                measure.append((key, geom, pos))
+            judged.append((mon, key, thr))
+        if measure:
+            ds = shapely.distance(np.array([geom for _, geom, _ in measure], dtype=object),
+                                  shapely.points(np.array([pos for _, _, pos in measure]))).tolist()
+            for (key, geom, (x, y)), d in zip(measure, ds):
+                anchors[key] = Anchor(geom, x, y, d, None)
+        out = [(mon, anchors[key]) for mon, key, thr in judged if anchors[key].d > thr]
+        need = [(mon, a) for mon, a in out if a.near is None]
+        if need:   # the nearest points, for the bearing the message gives
+            lines = shapely.shortest_line(shapely.points(np.array([(a.x, a.y) for _, a in need])),
+                                          np.array([a.geom for _, a in need], dtype=object))
+            for (mon, a), near in zip(need, shapely.get_coordinates(lines)[1::2].tolist()):
+                anchors[mon[0].id, mon[1], mon[3]] = a._replace(near=tuple(near))
+        return [self._oop(m, g, rule, what, t, a.d, anchors[m.id, g, what].near) for (m, g, rule, what), a in out]
 
     def _geom(self, geom_id: str, what: str):
         """Routes and axes are judged by distance to the line; everything else to its area."""
@@ -142,7 +204,8 @@ class LocationMonitors(Detector):
         cm = self.dom.overlay[geom_id]
         return cm.geom if what in ("route", "axis") else cm.area
 
-    def _oop(self, m: Mission, geom_id: str, rule: str, what: str, t: float, d: float | None = None) -> Candidate | None:
+    def _oop(self, m: Mission, geom_id: str, rule: str, what: str, t: float, d: float | None = None,
+             near: tuple[float, float] | None = None) -> Candidate | None:
         dom = self.dom
         pos = dom.unit_pos.get(m.unit)
         geom = self._geom(geom_id, what)
@@ -154,7 +217,8 @@ class LocationMonitors(Detector):
         place = self.corridor_to[geom_id][1] if what == "corridor" else geom_id
         ref = f"should be in the corridor to {place}" if what == "corridor" else f"should be at {geom_id}"
         if pos is not None:
-            near = shapely.shortest_line(shapely.Point(pos), geom).coords[-1]
+            if near is None:
+                near = shapely.shortest_line(shapely.Point(pos), geom).coords[-1]
             ref += f" ({km(d)} {bearing_name(near[0] - pos[0], near[1] - pos[1])} of {dom.name(m.unit)})" if rule == "centroid" else f" ({rule} members within {km(thr)})"
         return Candidate(t, "out-of-position", m.compute_priority("out-of-position"), (m.unit,),
                          f"{dom.name(m.unit)} out of position for {m.TYPE} mission: {ref}",

@@ -6,6 +6,7 @@ story once unless the penetration proves much stronger."""
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 
 import shapely
 
@@ -19,11 +20,25 @@ TREND_S = 30.0    # a velocity is measured over at least this much of it
 MIN_SPEED = 1.0   # m/s: slower tracks are halted or noise
 
 
+@dataclass(slots=True)
+class Ray:
+    """A moving track this epoch: where it is, where it heads within the horizon, the box
+    of that ray (a cheap miss test per area) and the ray itself, built when first needed."""
+    k: str
+    x: float
+    y: float
+    tip: tuple[float, float]
+    speed: float
+    box: tuple[float, float, float, float]
+    ray: object = None
+
+
 class ProjectedPenetrations(Detector):
     TYPES = {"projected-penetration": "constraint-violation-projected"}
 
     def reset(self) -> None:
         self.hist: dict[str, deque] = {}
+        self.boxes: dict[str, tuple] = {}   # area -> (its geometry, the bounds of it)
 
     def observe(self, t: float, ch: Changes) -> None:
         if not ch.tracks:
@@ -53,6 +68,30 @@ class ProjectedPenetrations(Detector):
             strength = sum(dom.pic.tracks[k].strength for k in over if k in dom.pic.tracks)
             dom.areas.monitored_candidate(m, area, t, sorted(over), strength, expected=False, kind="penetration")
 
+    def _moving(self, keys: list[str], horizon: float) -> list[Ray]:
+        """The changed tracks with a trend long enough and a speed worth projecting, each with
+        where its velocity takes it within the horizon (the same for every watched area)."""
+        out = []
+        for k in keys:
+            h = self.hist.get(k)
+            if not h or h[-1][0] - h[0][0] < TREND_S:
+                continue
+            (t0, x0, y0), (t1, x1, y1) = h[0], h[-1]
+            vx, vy = (x1 - x0) / (t1 - t0), (y1 - y0) / (t1 - t0)
+            speed = (vx * vx + vy * vy) ** 0.5
+            if speed < MIN_SPEED:
+                continue
+            x2, y2 = x1 + vx * horizon, y1 + vy * horizon
+            out.append(Ray(k, x1, y1, (x2, y2), speed, (min(x1, x2), min(y1, y2), max(x1, x2), max(y1, y2))))
+        return out
+
+    def _bounds(self, area: str, geom) -> tuple[float, float, float, float]:
+        """An area's bounding box, kept while the area is the same geometry."""
+        c = self.boxes.get(area)
+        if c is None or c[0] is not geom:
+            c = self.boxes[area] = (geom, geom.bounds)
+        return c[1]
+
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
         horizon = float(dom.voi_cfg["penetration_horizon_s"])
@@ -63,26 +102,26 @@ class ProjectedPenetrations(Detector):
         if not watched:
             return
         tracks = dom.pic.tracks
+        moving = self._moving(sorted(ch.tracks & tracks.keys()), horizon)
         for area, m in watched:
             if dom.overlay[area].geom.geom_type == "LineString":
                 self._crossed(t, area, m)
             geom = dom.overlay[area].area
+            gx0, gy0, gx1, gy1 = self._bounds(area, geom)
             inside = dom.areas.tracks.get(area, set())
             coming = []
-            for k in sorted(ch.tracks & tracks.keys()):
-                h = self.hist.get(k)
-                if k in inside or not h or h[-1][0] - h[0][0] < TREND_S:
+            for mv in moving:
+                if mv.k in inside:
                     continue
-                (t0, x0, y0), (t1, x1, y1) = h[0], h[-1]
-                vx, vy = (x1 - x0) / (t1 - t0), (y1 - y0) / (t1 - t0)
-                speed = (vx * vx + vy * vy) ** 0.5
-                if speed < MIN_SPEED:
+                bx0, by0, bx1, by1 = mv.box
+                if bx0 > gx1 or bx1 < gx0 or by0 > gy1 or by1 < gy0:   # the ray's box misses the area's
                     continue
-                ray = shapely.LineString([(x1, y1), (x1 + vx * horizon, y1 + vy * horizon)])
-                if not ray.intersects(geom):
+                if mv.ray is None:
+                    mv.ray = shapely.LineString([(mv.x, mv.y), mv.tip])
+                if not mv.ray.intersects(geom):
                     continue
-                lead = float(shapely.distance(shapely.Point(x1, y1), ray.intersection(geom))) / speed
-                coming.append((lead, k, speed))
+                lead = float(shapely.distance(shapely.Point(mv.x, mv.y), mv.ray.intersection(geom))) / mv.speed
+                coming.append((lead, mv.k, mv.speed))
             if not coming:
                 continue
             lead, first, speed = min(coming)

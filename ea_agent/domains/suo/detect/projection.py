@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
+import numpy as np
 import shapely
 
 from ea_agent.core.alert import Candidate, hms
@@ -35,6 +36,9 @@ class Projections(Detector):
         self.hist: dict[str, deque] = {}   # mission -> (t, distance off its route, distance to go)
         self.next_t = 0.0
         self.due: list[Mission] = []
+        self.routes: dict[str, tuple] = {}      # mission -> (its monitor list, its length, _route of it)
+        self.beyond: dict[tuple, tuple] = {}    # (route, destination) -> (line, area, length, end to area)
+        self.active: tuple | None = None        # (plan states, their version, the active mission ids)
 
     def observe(self, t: float, ch: Changes) -> None:
         """Every SAMPLE_S of scenario time (a trend over minutes needs no finer samples),
@@ -46,6 +50,7 @@ class Projections(Detector):
             return
         self.next_t = t + SAMPLE_S
         self.due = self._watched()
+        rows = []   # (mission, its history, where it is now)
         for m in self.due:
             pos = dom.unit_now.get(m.unit)   # where reports up to a minute old put it now (dead-reckoned)
             if pos is None:
@@ -53,34 +58,96 @@ class Projections(Detector):
             h = self.hist.setdefault(m.id, deque())
             if h and h[-1][0] >= t:
                 continue
-            h.append((t, self._off_route(m, pos), self._to_go(m, pos)))
+            rows.append((m, h, pos))
+        if not rows:
+            return
+        for (m, h, _), off, to_go in zip(rows, *self._measure([m for m, _, _ in rows], [pos for _, _, pos in rows])):
+            h.append((t, off, to_go))
             while h and h[0][0] < t - KEEP_S:
                 h.popleft()
+
+    def _measure(self, ms: list[Mission], where: list) -> tuple[list, list]:
+        """Each mission's distance off its route (None without one) and still to go (along its
+        route, then on to its destination; None without a destination and a deadline), with
+        one vectorised GEOS call per kind of measure for all of them (per-call overhead is
+        most of the cost for a few missions)."""
+        dom = self.dom
+        off: list[float | None] = [None] * len(ms)
+        to_go: list[float | None] = [None] * len(ms)
+        dist = []    # (index, which list, geometry): plain distances from the position
+        along = []   # (index, route line, the route's length and its end's distance to the destination)
+        for i, m in enumerate(ms):
+            r = self._route(m)
+            if r is not None:
+                dist.append((i, off, self._line(r)))
+            dest = self._destination(m)
+            if dest is None:
+                continue
+            if r is not None and r[1] != "corridor":   # along the route, then on to the destination
+                line = dom.overlay[r[0]].geom
+                along.append((i, line, self._beyond(r[0], line, dest)))
+            else:
+                dist.append((i, to_go, dom.overlay[dest].area))
+        pts = shapely.points(np.array(where, dtype=float))
+        if dist:
+            idx = [i for i, _, _ in dist]
+            ds = shapely.distance(np.array([g for _, _, g in dist], dtype=object), pts[idx]).tolist()
+            for (i, out, _), d in zip(dist, ds):
+                out[i] = d
+        if along:
+            idx = [i for i, _, _ in along]
+            at = shapely.line_locate_point(np.array([line for _, line, _ in along], dtype=object), pts[idx]).tolist()
+            for (i, _, (length, rest)), x in zip(along, at):
+                to_go[i] = length - x + rest
+        return off, to_go
+
+    def _beyond(self, rid: str, line, dest: str) -> tuple[float, float]:
+        """A route's length and the distance from its end to the destination (fixed per pair)."""
+        area = self.dom.overlay[dest].area
+        c = self.beyond.get((rid, dest))
+        if c is None or c[0] is not line or c[1] is not area:
+            c = (line, area, line.length, float(shapely.distance(area, shapely.Point(line.coords[-1]))))
+            self.beyond[rid, dest] = c
+        return c[2], c[3]
 
     def _watched(self) -> list[Mission]:
         """Active missions of ours that have a route or axis, or a destination and a deadline."""
         dom = self.dom
         out = []
-        for mid, state in dom.plan.state.items():
+        for mid in self._active():
             m = dom.missions.get(mid)
-            if state == "active" and m is not None and dom.in_plan(m) and (
-                    self._route(m) is not None or self._destination(m) is not None):
+            if m is not None and dom.in_plan(m) and (self._route(m) is not None or self._destination(m) is not None):
                 out.append(m)
         return out
 
+    def _active(self) -> list[str]:
+        """The active missions' ids in plan-state order, kept until a plan state changes
+        (the state dict counts its changes) rather than scanning every mission per sample."""
+        state = self.dom.plan.state
+        version = getattr(state, "version", None)
+        c = self.active
+        if version is None or c is None or c[0] is not state or c[1] != version:
+            c = self.active = (state, version, [mid for mid, s in state.items() if s == "active"])
+        return c[2]
+
     def _route(self, m: Mission) -> tuple[str, str] | None:
-        """The route or axis whose centroid monitor the mission posted (geometry id, which)."""
-        for _, geom, rule, what in self.dom.location.monitors.get(m.id, ()):
+        """The route or axis whose centroid monitor the mission posted (geometry id, which);
+        remembered while the mission's monitor list is the same list of the same length
+        (monitors are only ever appended to it)."""
+        mons = self.dom.location.monitors.get(m.id, ())
+        c = self.routes.get(m.id)
+        if c is not None and c[0] is mons and c[1] == len(mons):
+            return c[2]
+        r = None
+        for _, geom, rule, what in mons:
             if what in ("route", "axis") and rule == "centroid":   # a corridor's trend is too weak to project
-                return geom, what
-        return None
+                r = geom, what
+                break
+        self.routes[m.id] = (mons, len(mons), r)
+        return r
 
     def _line(self, r: tuple[str, str]):
         return self.dom.location.corridors[r[0]] if r[1] == "corridor" else self.dom.overlay[r[0]].geom
-
-    def _off_route(self, m: Mission, pos) -> float | None:
-        r = self._route(m)
-        return None if r is None else float(shapely.distance(self._line(r), shapely.Point(pos)))
 
     def _destination(self, m: Mission) -> str | None:
         dest = m.params.get("destination") or m.params.get("objective")
@@ -88,18 +155,6 @@ class Projections(Detector):
         if dest not in self.dom.overlay or end.type not in ("END-NLT", "END-AT") or end.t is None:
             return None
         return dest
-
-    def _to_go(self, m: Mission, pos) -> float | None:
-        dest = self._destination(m)
-        if dest is None:
-            return None
-        p = shapely.Point(pos)
-        r = self._route(m)
-        if r is not None and r[1] != "corridor":   # along the route, then on to the destination
-            line = self.dom.overlay[r[0]].geom
-            along = line.length - line.project(p)
-            return along + float(shapely.distance(self.dom.overlay[dest].area, shapely.Point(line.coords[-1])))
-        return float(shapely.distance(self.dom.overlay[dest].area, p))
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
@@ -111,7 +166,7 @@ class Projections(Detector):
             h = self.hist.get(m.id)
             if not h:
                 continue
-            old = next((x for x in h if x[0] <= t - span), None)
+            old = h[0] if h[0][0] <= t - span else None   # samples are in time order
             now = h[-1]
             if old is None or now[0] < t:
                 continue
@@ -152,10 +207,12 @@ class Projections(Detector):
         g0, g1 = old[2], now[2]
         if g0 is None or g1 is None:
             return
+        end = m.spec.end.t
+        if end - t > horizon:
+            return   # the deadline too far to judge by a trend
         dom = self.dom
         thr_m, thr_s = dom.voi(m, "out_of_position_m"), dom.voi(m, "schedule_s")
-        end = m.spec.end.t
-        if g1 <= thr_m or t >= end + thr_s or end - t > horizon:
+        if g1 <= thr_m or t >= end + thr_s:
             return   # there already, the actual late alert is due, or the deadline too far to judge by a trend
         closing = (g0 - g1) / dt
         eta = t + g1 / closing if closing > 0.05 else math.inf
