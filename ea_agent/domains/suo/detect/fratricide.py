@@ -31,16 +31,21 @@ def fratricide_pairs(pos: np.ndarray, bnd: np.ndarray, inside: np.ndarray, rng: 
     n = len(pos)
     if n < 2 or not dirty.any():
         return []
-    d = np.hypot(pos[:, None, 0] - pos[None, :, 0], pos[:, None, 1] - pos[None, :, 1])
-    in_range = d <= np.maximum(rng[:, None], rng[None, :])   # NaN compares False
     in_own = inside[np.arange(n), bnd]
-    in_other = inside[:, bnd]            # [i, j]: i inside j's boundary
-    i_fault = ~in_own[:, None] & in_other
-    risk = in_range & (bnd[:, None] != bnd[None, :]) & (
-        i_fault | i_fault.T | (~in_own[:, None] & ~in_own[None, :]))
-    risk &= (dirty[:, None] | dirty[None, :]) & (mine[:, None] | mine[None, :])
-    ii, jj = np.nonzero(np.triu(risk, 1))
-    return [(int(i), int(j), float(d[i, j])) for i, j in zip(ii, jj)]
+    out = np.flatnonzero(~in_own & ~np.isnan(pos[:, 0]))   # a pair needs one of them outside its own
+    if not len(out):
+        return []
+    # rows: the units outside their own boundary; for such a unit i the rule reduces to
+    # "i inside j's boundary, or j outside its own too"
+    d = np.hypot(pos[out, None, 0] - pos[None, :, 0], pos[out, None, 1] - pos[None, :, 1])
+    in_range = d <= np.maximum(rng[out, None], rng[None, :])   # NaN compares False
+    risk = in_range & (bnd[out, None] != bnd[None, :]) & (inside[out][:, bnd] | ~in_own[None, :])
+    risk &= (dirty[out, None] | dirty[None, :]) & (mine[out, None] | mine[None, :])
+    found = {}
+    for r, j in zip(*np.nonzero(risk)):
+        i = int(out[r])
+        found[(min(i, int(j)), max(i, int(j)))] = float(d[r, j])
+    return sorted((i, j, dist) for (i, j), dist in found.items())
 
 
 class Fratricide(Detector):
@@ -58,45 +63,49 @@ class Fratricide(Detector):
         bi = {b: k for k, b in enumerate(bnd_units)}
         self.leaf_bnd = np.array([bi.get(to.nearest_with(u, 'boundary'), -1) for u in leaves])
         self.frat_ok = self.leaf_bnd >= 0
+        self.frat_ok_l = self.frat_ok.tolist()
         dflt = float(dom.voi_cfg["weapons_range_m"])
         self.leaf_rng = np.array([self._weapons_range(u, dflt) for u in leaves])
         self.leaf_mine = np.array([u in dom.own_units for u in leaves])
         self.outside = np.zeros(len(leaves), dtype=bool)
-        self.leaf_own_poly = [self.bnd_polys[b] if b >= 0 else None for b in self.leaf_bnd]
+        self.own_poly = np.array([self.bnd_polys[b] if b >= 0 else None for b in self.leaf_bnd], dtype=object)
+        shapely.prepare(self.bnd_polys)   # containment is asked for every moving leaf each epoch
+        self.platoon = {u: platoon_of(to, u) for u in leaves}
 
     def _weapons_range(self, unit: str, dflt: float) -> float:
         to = self.dom.taskorg
         u = to.nearest_with(unit, "weapons_range_m")
         return dflt if u is None else float(to.units[u].attrs["weapons_range_m"])
 
-    def _lanes(self) -> list[tuple[str, str, object]]:
-        """(passing unit, passed unit, lane area) of each passage of lines with a lane that
+    def _lanes(self) -> list[tuple[set[str], set[str], object]]:
+        """(passing unit's subtree, passed unit's subtree, lane area) of each passage of lines with a lane that
         has not ended (the lane is agreed beforehand, so it holds before the passage starts)."""
         dom = self.dom
         if dom.plan is None:
             return []
-        return [(m.unit, m.params["partner"], dom.overlay[m.params["lane"]].area) for m in dom.missions.values()
-                if isinstance(m, PassageOfLines) and m.params.get("lane")
+        to = dom.taskorg
+        return [(set(to.subtree(m.unit)), set(to.subtree(m.params["partner"])), dom.overlay[m.params["lane"]].area)
+                for m in dom.missions.values() if isinstance(m, PassageOfLines) and m.params.get("lane")
                 and dom.plan.state.get(m.id) not in ("done", "aborted")]
 
-    def _passing(self, a: str, b: str, xy: np.ndarray, lanes) -> bool:
+    @staticmethod
+    def _passing(a: str, b: str, xy: np.ndarray, lanes) -> bool:
         """Leaf `a` belongs to a passing unit, is inside its lane, and `b` to the unit it passes."""
-        to = self.dom.taskorg
-        return any(to.is_under(a, p) and to.is_under(b, q) and shapely.contains_xy(lane, xy[0], xy[1])
-                   for p, q, lane in lanes)
+        return any(a in mine and b in theirs and shapely.contains_xy(lane, xy[0], xy[1])
+                   for mine, theirs, lane in lanes)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
-        rows = [dom.leaf_i[u] for u in ch.leaves if self.frat_ok[dom.leaf_i[u]]]
+        ok_l, leaf_i = self.frat_ok_l, dom.leaf_i
+        rows = [leaf_i[u] for u in ch.leaves if ok_l[leaf_i[u]]]
         if not rows:
             return
         pos = dom.leaf_xy
         r = np.array(rows)
-        ok = ~np.isnan(pos[r, 0])
-        polys = np.array([self.leaf_own_poly[i] for i in r[ok]], dtype=object)
         self.outside[r] = False
-        if len(polys):
-            self.outside[r[ok]] = ~shapely.contains_xy(polys, pos[r[ok], 0], pos[r[ok], 1])
+        r = r[~np.isnan(pos[r, 0])]
+        if len(r):
+            self.outside[r] = ~shapely.contains_xy(self.own_poly[r], pos[r, 0], pos[r, 1])
         if not self.outside.any():
             return
         dirty = np.zeros(len(dom.leaves), dtype=bool)
@@ -112,7 +121,7 @@ class Fratricide(Detector):
             lanes = self._lanes() if lanes is None else lanes
             if lanes and (self._passing(a, b, pos[i], lanes) or self._passing(b, a, pos[j], lanes)):
                 continue
-            pa, pb = platoon_of(to, a), platoon_of(to, b)
+            pa, pb = self.platoon[a], self.platoon[b]
             if (pa, a) > (pb, b):
                 a, b, pa, pb = b, a, pb, pa
             groups[(pa, pb)].append((a, b, d))

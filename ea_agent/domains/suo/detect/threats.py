@@ -53,10 +53,10 @@ class ThreatEnvelopes(Detector):
             tpos = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids])
             both = distances(np.array([dom.unit_pos[u] for u in units]
                                       + [dom.unit_now.get(u) or dom.unit_pos[u] for u in units]), tpos)
-            dist = np.maximum(both[:n], both[n:]).tolist()
+            dmax = np.maximum(both[:n], both[n:])
+            dist, close = dmax.tolist(), (dmax <= radius).tolist()
         else:
-            dist = [[]] * n
-        close = [[d <= radius for d in row] for row in dist]
+            dist = close = [[]] * n
         moved = [k for k, tid in enumerate(tids) if tid in ch.tracks]
         empty = frozenset()
         for ui, u in enumerate(units):
