@@ -405,6 +405,9 @@ class SuoDomain:
 
     def apply(self, facts: list) -> None:
         locs = [f for f in facts if type(f) is LocationReport]
+        if len(locs) == len(facts):   # the usual batch: location reports only
+            self.dirty_leaves |= self.pic.apply_locations(locs)
+            return
         if locs:
             self.dirty_leaves |= self.pic.apply_locations(locs)
         tracks = [f for f in facts if type(f) is SensorTrack]

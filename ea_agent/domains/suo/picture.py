@@ -118,21 +118,29 @@ class Picture:
 
     def apply_locations(self, reports: list[LocationReport]) -> set[str]:
         """Project a batch of reports in one pyproj call; returns the leaf units touched."""
-        if not reports:
+        n = len(reports)
+        if not n:
             return set()
-        idx = np.fromiter((self.eidx[r.entity] for r in reports), dtype=np.intp, count=len(reports))
-        x, y = self.proj.to_xy(np.fromiter((r.lon for r in reports), float, len(reports)),
-                               np.fromiter((r.lat for r in reports), float, len(reports)))
-        t = np.fromiter((r.t for r in reports), float, len(reports))
+        eidx = self.eidx
+        rows = [(eidx[r.entity], r.lon, r.lat, r.t) for r in reports]   # one pass over the reports
+        a = np.array(rows, dtype=float).T.copy()   # contiguous columns: pyproj copies strided ones
+        idx = a[0].astype(np.intp)
+        x, y = self.proj.to_xy(a[1], a[2])
+        t = a[3]
         dt = t - self.moved_t[idx]
         ok = (dt > 0) & (dt <= 120.0)        # NaN (first report) compares false
-        with np.errstate(invalid="ignore", divide="ignore"):
-            v = np.column_stack([(x - self.xy[idx, 0]) / dt, (y - self.xy[idx, 1]) / dt])
-        self.vel[idx] = np.where(ok[:, None], v, 0.0)
+        stale = ~ok
+        dt[stale] = 1.0                      # no divide warning; those velocities are zeroed below
+        new = np.empty((n, 2))
+        new[:, 0] = x
+        new[:, 1] = y
+        v = (new - self.xy[idx]) / dt[:, None]
+        v[stale] = 0.0
+        self.vel[idx] = v
         self.moved_t[idx] = t
-        self.xy[idx, 0] = x
-        self.xy[idx, 1] = y
-        return {self.ent_leaf[i] for i in idx.tolist()}
+        self.xy[idx] = new
+        ent_leaf = self.ent_leaf
+        return {ent_leaf[r[0]] for r in rows}
 
     def live_tracks(self) -> tuple[list[str], np.ndarray]:
         """The hostile entities with some strength, sorted by id, and their positions (n, 2)."""
@@ -185,7 +193,14 @@ class Watchman:
         self.own = [False] * len(picture.ents)
         self.bbox = (-math.inf, -math.inf, math.inf, math.inf)
         self.quiet: list[LocationReport] = []
-        self.stats: Counter = Counter()
+        # plain int counters: a Counter update per message is measurable on the hot path
+        self.n_unchanged = self.n_irrelevant = self.n_passed = 0
+
+    @property
+    def stats(self) -> Counter:
+        """What the watchman did with the messages it saw."""
+        return Counter({k: v for k, v in (("passed", self.n_passed), ("unchanged", self.n_unchanged),
+                                          ("irrelevant", self.n_irrelevant)) if v})
 
     def set_own(self, own_leaves: set[str]) -> None:
         self.own = [u in own_leaves for u in self.p.ent_leaf]
@@ -197,37 +212,44 @@ class Watchman:
             self.bbox = (lo[0], lo[1], hi[0], hi[1])
 
     def watch(self, msg):
+        """Called for every message: plain locals and list lookups, no numpy scalars
+        where a python value will do."""
         if type(msg) is LocationReport:
             p = self.p
             i = p.eidx.get(msg.entity)
             if i is None:
                 raise KeyError(f"location report for unknown entity {msg.entity!r}")
-            if not (-180.0 <= msg.lon <= 180.0 and -90.0 <= msg.lat <= 90.0):   # also catches NaN
+            lon = msg.lon
+            lat = msg.lat
+            if not (-180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):   # also catches NaN
                 raise ValueError(f"location report for {msg.entity}: field 'lat'/'lon' not a valid coordinate "
-                                 f"({msg.lat}, {msg.lon})")
-            if msg.t > p.seen[i]:
-                p.seen[i] = msg.t
-            if abs(p.lon[i] - msg.lon) < self.eps and abs(p.lat[i] - msg.lat) < self.eps:
-                self.stats["unchanged"] += 1
+                                 f"({lat}, {lon})")
+            t = msg.t
+            seen = p.seen
+            if t > seen[i]:
+                seen[i] = t
+            eps = self.eps
+            plon = p.lon
+            plat = p.lat
+            if abs(plon[i] - lon) < eps and abs(plat[i] - lat) < eps:
+                self.n_unchanged += 1
                 return None
-            p.lon[i] = msg.lon
-            p.lat[i] = msg.lat
+            plon[i] = lon
+            plat[i] = lat
             if not self.own[i]:
-                x, y = p.xy[i]
+                x, y = p.xy[i].tolist()
                 b = self.bbox
                 if not (x != x or (b[0] <= x <= b[2] and b[1] <= y <= b[3])):
                     self.quiet.append(msg)
-                    self.stats["irrelevant"] += 1
+                    self.n_irrelevant += 1
                     return None
-            self.stats["passed"] += 1
+            self.n_passed += 1
             return msg
         if type(msg) is SensorTrack:
             tr = self.p.adj.latest.get((msg.source, msg.track))
             if tr is not None and tr.strength == msg.strength and abs(tr.lon - msg.lon) < self.eps \
                     and abs(tr.lat - msg.lat) < self.eps:
-                self.stats["unchanged"] += 1
+                self.n_unchanged += 1
                 return None
-            self.stats["passed"] += 1
-            return msg
-        self.stats["passed"] += 1
+        self.n_passed += 1
         return msg
