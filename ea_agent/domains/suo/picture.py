@@ -27,6 +27,7 @@ class Picture:
         self.xy = np.full((n, 2), np.nan)
         self.moved_t = np.full(n, np.nan)  # when xy last changed, and the velocity that change showed
         self.vel = np.zeros((n, 2))
+        self.all_known = n == 0            # every entity has a position (xy never goes back to NaN)
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
         self.tracks: dict[str, Entity] = {}      # the adjudicated picture of hostile entities
         self.adj = Adjudicator()
@@ -53,6 +54,8 @@ class Picture:
 
     def member_xy(self, unit: str) -> np.ndarray:
         pts = self.xy[self.members[unit]]
+        if self.all_known:   # the usual case once every entity has reported: nothing to drop
+            return pts
         return pts[~np.isnan(pts[:, 0])]
 
     def centroid(self, unit: str) -> tuple[float, float] | None:
@@ -139,6 +142,8 @@ class Picture:
         self.vel[idx] = v
         self.moved_t[idx] = t
         self.xy[idx] = new
+        if not self.all_known:
+            self.all_known = not np.isnan(self.xy[:, 0]).any()
         ent_leaf = self.ent_leaf
         return {ent_leaf[r[0]] for r in rows}
 
