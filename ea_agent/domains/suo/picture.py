@@ -100,16 +100,21 @@ class Picture:
 
     def _centroids(self, xy: np.ndarray, rxy: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """bincount per leaf, then one membership matrix product for every unit."""
-        ok = ~np.isnan(xy[:, 0])
         n = len(self.leaves)
-        li = self.ent_leaf_i[ok]
+        if self.all_known and xy is self.xy:   # nothing to drop: no masking copies (same sums, same order)
+            li = self.ent_leaf_i
+        else:
+            ok = ~np.isnan(xy[:, 0])
+            li = self.ent_leaf_i[ok]
+            xy = xy[ok]
+            rxy = rxy[ok] if rxy is not None else None
         sums = np.empty((n, 5 if rxy is not None else 3))
         sums[:, 0] = np.bincount(li, minlength=n)
-        sums[:, 1] = np.bincount(li, weights=xy[ok, 0], minlength=n)
-        sums[:, 2] = np.bincount(li, weights=xy[ok, 1], minlength=n)
+        sums[:, 1] = np.bincount(li, weights=xy[:, 0], minlength=n)
+        sums[:, 2] = np.bincount(li, weights=xy[:, 1], minlength=n)
         if rxy is not None:
-            sums[:, 3] = np.bincount(li, weights=rxy[ok, 0], minlength=n)
-            sums[:, 4] = np.bincount(li, weights=rxy[ok, 1], minlength=n)
+            sums[:, 3] = np.bincount(li, weights=rxy[:, 0], minlength=n)
+            sums[:, 4] = np.bincount(li, weights=rxy[:, 1], minlength=n)
         u = self.unit_leaf @ sums
         lc, uc = sums[:, :1], u[:, :1]
         lc[lc == 0.0] = np.nan   # no member known: NaN centroids, without a divide warning
