@@ -30,6 +30,7 @@ class Picture:
         self.all_known = n == 0            # every entity has a position (xy never goes back to NaN)
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
         self.tracks: dict[str, Entity] = {}      # the adjudicated picture of hostile entities
+        self._live: tuple = (None, [], np.zeros((0, 2)))   # live_tracks() of the `tracks` object first item
         self.adj = Adjudicator()
         self.rebuild(taskorg)
 
@@ -153,9 +154,15 @@ class Picture:
         return {ent_leaf[r[0]] for r in rows}
 
     def live_tracks(self) -> tuple[list[str], np.ndarray]:
-        """The hostile entities with some strength, sorted by id, and their positions (n, 2)."""
-        ids = [k for k in sorted(self.tracks) if self.tracks[k].strength > 0]
-        return ids, np.array([(self.tracks[k].x, self.tracks[k].y) for k in ids]).reshape(-1, 2)
+        """The hostile entities with some strength, sorted by id, and their positions (n, 2).
+        Asked by several detectors each epoch: kept until `tracks` is replaced (read-only)."""
+        tracks = self.tracks
+        if self._live[0] is not tracks:
+            ids = [k for k in sorted(tracks) if tracks[k].strength > 0]
+            xy = np.array([(tracks[k].x, tracks[k].y) for k in ids]).reshape(-1, 2)
+            xy.flags.writeable = False
+            self._live = (tracks, ids, xy)
+        return list(self._live[1]), self._live[2]
 
     def apply_tracks(self, tracks: list[SensorTrack]) -> set[str]:
         """Track reports go through adjudication; returns the entities whose state changed."""
@@ -198,6 +205,8 @@ class Watchman:
 
     def __init__(self, picture: Picture, cfg: dict):
         self.p = picture
+        # the picture's per-entity containers, never replaced: one attribute load less per message
+        self.eidx, self.seen, self.lon, self.lat = picture.eidx, picture.seen, picture.lon, picture.lat
         self.eps = float(cfg["watchman"]["unchanged_m"]) / 111_000.0
         self.interest = float(cfg["watchman"]["interest_m"])
         self.own = [False] * len(picture.ents)
@@ -226,7 +235,7 @@ class Watchman:
         where a python value will do."""
         if type(msg) is LocationReport:
             p = self.p
-            i = p.eidx.get(msg.entity)
+            i = self.eidx.get(msg.entity)
             if i is None:
                 raise KeyError(f"location report for unknown entity {msg.entity!r}")
             lon = msg.lon
@@ -235,12 +244,12 @@ class Watchman:
                 raise ValueError(f"location report for {msg.entity}: field 'lat'/'lon' not a valid coordinate "
                                  f"({lat}, {lon})")
             t = msg.t
-            seen = p.seen
+            seen = self.seen
             if t > seen[i]:
                 seen[i] = t
             eps = self.eps
-            plon = p.lon
-            plat = p.lat
+            plon = self.lon
+            plat = self.lat
             if abs(plon[i] - lon) < eps and abs(plat[i] - lat) < eps:
                 self.n_unchanged += 1
                 return None
