@@ -53,14 +53,22 @@ class Entity:
     members: tuple[str, ...]
 
 
+def _first(pair: tuple):
+    return pair[0]
+
+
 class Adjudicator:
     def __init__(self, merge_m: float = 500.0, extrapolate_s: float = 60.0):
         self.merge_m, self.extrapolate_s = merge_m, extrapolate_s
         self.latest: dict[tuple[str, str], Report] = {}
+        self._moving: bool | None = False   # moving(), cached until a report is kept (None: stale)
 
     def moving(self) -> bool:
-        """Whether a live report has a velocity (the picture changes with time alone)."""
-        return any(r.strength > 0 and (r.vx or r.vy) for r in self.latest.values())
+        """Whether a live report has a velocity (the picture changes with time alone).
+        Asked every epoch; it can only change when update() keeps a report."""
+        if self._moving is None:
+            self._moving = any(r.strength > 0 and (r.vx or r.vy) for r in self.latest.values())
+        return self._moving
 
     def update(self, r: Report) -> bool:
         """Keep r if it is newer than what we hold for its (source, track); True if kept."""
@@ -69,14 +77,17 @@ class Adjudicator:
         if cur is not None and r.rank() <= cur.rank():
             return False
         self.latest[k] = r
+        self._moving = None
         return True
 
     def picture(self, now: float | None = None) -> dict[str, Entity]:
         """The entities, positions extrapolated to `now` (None: as reported)."""
-        live = sorted((r for r in self.latest.values() if r.strength > 0), key=lambda r: r.name)
-        n = len(live)
+        named = sorted(((f"{r.source}/{r.track}", r) for r in self.latest.values() if r.strength > 0),
+                       key=_first)   # each name built once (stable sort: the order of sorting by r.name)
+        n = len(named)
         if n == 0:
             return {}
+        live = [r for _, r in named]
         xy = np.array([self._at(r, now) for r in live])
         d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
         src = np.array([r.source for r in live])
@@ -88,20 +99,25 @@ class Adjudicator:
                 comp[i] = comp[comp[i]]
                 i = comp[i]
             return i
-        for i, j in zip(*np.nonzero(np.triu(link, 1))):
-            a, b = find(int(i)), find(int(j))
+        ii, jj = np.nonzero(np.triu(link, 1))
+        for i, j in zip(ii.tolist(), jj.tolist()):
+            a, b = find(i), find(j)
             if a != b:
                 comp[max(a, b)] = min(a, b)
-        groups: dict[int, list[Report]] = {}
-        for i, r in enumerate(live):
-            groups.setdefault(find(i), []).append(r)
+        groups: dict[int, list[tuple[str, Report]]] = {}
+        for i, nr in enumerate(named):
+            groups.setdefault(find(i), []).append(nr)
         out = {}
         for members in groups.values():
-            best = max(members, key=lambda r: (r.t, tuple(-ord(c) for c in r.name)))
-            ident = min((r.track, r.source) for r in members)[0]   # fusion nodes prefix their track ids
+            tmax = max(r.t for _, r in members)
+            top = [nr for nr in members if nr[1].t == tmax]
+            # the newest report; ties (rare) as the full key says, the first of equals kept
+            best = top[0][1] if len(top) == 1 else \
+                max(top, key=lambda nr: (nr[1].t, tuple(-ord(c) for c in nr[0])))[1]
+            ident = min((r.track, r.source) for _, r in members)[0]   # fusion nodes prefix their track ids
             bx, by = self._at(best, now)
-            out[ident] = Entity(ident, bx, by, max(r.strength for r in members), best.t, best.lon, best.lat,
-                                tuple(sorted(r.name for r in members)))
+            out[ident] = Entity(ident, bx, by, max(r.strength for _, r in members), best.t, best.lon, best.lat,
+                                tuple(sorted(name for name, _ in members)))
         return out
 
     def _at(self, r: Report, now: float | None) -> tuple[float, float]:

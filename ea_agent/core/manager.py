@@ -150,8 +150,10 @@ class ExecutionAssistant:
             self._next_forget = end + 60.0
         if self.notify.pending:   # thresholds changed by a commander count from this epoch on
             self.stats["settings"] += len(self.notify.apply_pending(end, self.voa))
-        self.notify.expire(end)
-        for r in self.notify.repeats_until(end):
+        notify = self.notify
+        if notify.silences:
+            notify.expire(end)
+        for r in notify.repeats_until(end) if notify.due else ():
             self.stats["repeats"] += 1
             self.stats["escalations"] += r.priority != r.details.get("escalated_from", r.priority)
             self.notify.chained(r.details["repeat_of"], self.emit(r))

@@ -53,7 +53,7 @@ class Voa:
     def last(self, key: Hashable, now: float) -> Record | None:
         """The unexpired alert on `key`, if any (expired alerts no longer count)."""
         rec = self.history.get(key)
-        if rec is not None and now - max(rec.t, rec.seen) >= self.expiry:
+        if rec is not None and now - (rec.t if rec.t > rec.seen else rec.seen) >= self.expiry:   # max(), inlined
             return None
         return rec
 

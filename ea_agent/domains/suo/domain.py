@@ -63,6 +63,8 @@ class SuoDomain:
         self.unit_pos: dict[str, tuple[float, float] | None] = {}
         self.unit_now: dict[str, tuple[float, float] | None] = {}
         self._reckon_until = -math.inf   # scenario time until which some member is dead-reckoned
+        self._unit_c: np.ndarray | None = None   # unit centroids of the last update (rows: pic.units)
+        self._foreign = True
         self.detectors: list[Detector] = [cls(self) for cls in DETECTORS]
         # the components the monitoring API routes to
         self.location = self._part(LocationMonitors)
@@ -116,10 +118,13 @@ class SuoDomain:
     def _org_changed(self) -> None:
         """Recompute everything that depends on the command hierarchy."""
         to = self.taskorg
+        if self._unit_c is not None and not self._foreign:
+            self._set_bbox()   # skipped while every entity was ours: the box it had, now that it counts
         self.own_units = set(to.subtree(self.owner))
         self.pic.rebuild(to)
         self.own_leaves = {u for u in self.pic.leaves if u in self.own_units}
         self.watchman.set_own(self.own_leaves)
+        self._foreign = not all(self.watchman.own)   # some entity is not ours: the watchman's box matters
         self.leaves = self.pic.leaves
         self.leaf_i = {u: i for i, u in enumerate(self.leaves)}
         env = [u for u in sorted(self.own_units) if to.units[u].kind == "platoon"]
@@ -138,7 +143,9 @@ class SuoDomain:
 
     def voi(self, m: Mission, key: str) -> float:
         """A VOI threshold: the mission's override, else the EA's configuration."""
-        return float(m.params.get("voi", {}).get(key, self.voi_cfg[key]))
+        default = self.voi_cfg[key]   # looked up first: an unknown key is an error even when overridden
+        over = m.params.get("voi")     # asked ~50k times a run: no empty dict made per call
+        return float(default if over is None else over.get(key, default))
 
     def in_plan(self, m: Mission) -> bool:
         if isinstance(m, ContingentMission):
@@ -412,6 +419,9 @@ class SuoDomain:
 
     def apply(self, facts: list) -> None:
         locs = [f for f in facts if type(f) is LocationReport]
+        if len(locs) == len(facts):   # the usual batch: location reports only
+            self.dirty_leaves |= self.pic.apply_locations(locs)
+            return
         if locs:
             self.dirty_leaves |= self.pic.apply_locations(locs)
         tracks = [f for f in facts if type(f) is SensorTrack]
@@ -453,8 +463,8 @@ class SuoDomain:
         self.dirty_tracks |= self.pic.advance_tracks(t)
         dirty_units: set[str] = set()
         if self.dirty_leaves:
-            for leaf in self.dirty_leaves:
-                dirty_units.update(self._up[leaf])
+            up = self._up
+            dirty_units = dirty_units.union(*[up[leaf] for leaf in self.dirty_leaves])
             self._update_positions(t)
         elif t <= self._reckon_until:   # members still dead-reckoned: their estimate moves on
             self._update_positions(t)
@@ -476,16 +486,23 @@ class SuoDomain:
         `unit_now`: the centroids of members dead-reckoned to now (threat envelopes: a
         report up to a minute old puts a moving unit hundreds of metres off)."""
         horizon = float(self.voi_cfg["dead_reckon_s"])
-        leaf_c, unit_c, now_c = self.pic.positions(t, horizon)
+        pic = self.pic
+        leaf_c, unit_c, now_c = pic.positions(t, horizon)
         self.leaf_xy = leaf_c
-        units = self.pic.units
+        units = pic.units
         self.unit_pos = _by_unit(units, unit_c)
         self.unit_now = _by_unit(units, now_c)
-        moving = self.pic.moved_t[(self.pic.vel != 0.0).any(axis=1)]
-        self._reckon_until = float(moving.max()) + horizon if len(moving) else -math.inf
-        own = unit_c[self.own_rows]
-        own = own[~np.isnan(own[:, 0])]
-        self.watchman.set_bbox(own)
+        vel = pic.vel
+        moving = (vel[:, 0] != 0.0) | (vel[:, 1] != 0.0)
+        self._reckon_until = float(np.max(pic.moved_t, where=moving, initial=-math.inf)) + horizon
+        self._unit_c = unit_c
+        if self._foreign:   # the area of interest only filters entities not our own
+            self._set_bbox()
+
+    def _set_bbox(self) -> None:
+        """The watchman's area of interest around our units' centroids of the last update."""
+        own = self._unit_c[self.own_rows]
+        self.watchman.set_bbox(own[~np.isnan(own[:, 0])])
 
     # -- VOA heuristics: merging and rendering ------------------------------------------
     def merge(self, key, cands: list[Candidate]) -> Candidate:
@@ -497,7 +514,4 @@ class SuoDomain:
 
 def _by_unit(units: list[str], xy: np.ndarray) -> dict[str, tuple[float, float] | None]:
     """Unit -> (x, y), None where unknown (NaN)."""
-    out = dict(zip(units, map(tuple, xy.tolist())))
-    for i in np.flatnonzero(np.isnan(xy[:, 0])).tolist():
-        out[units[i]] = None
-    return out
+    return dict(zip(units, [None if x != x else (x, y) for x, y in xy.tolist()]))

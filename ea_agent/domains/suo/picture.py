@@ -27,8 +27,10 @@ class Picture:
         self.xy = np.full((n, 2), np.nan)
         self.moved_t = np.full(n, np.nan)  # when xy last changed, and the velocity that change showed
         self.vel = np.zeros((n, 2))
+        self.all_known = n == 0            # every entity has a position (xy never goes back to NaN)
         self.ent_leaf = [taskorg.entity_unit[e] for e in self.ents]
         self.tracks: dict[str, Entity] = {}      # the adjudicated picture of hostile entities
+        self._live: tuple = (None, [], np.zeros((0, 2)))   # live_tracks() of the `tracks` object first item
         self.adj = Adjudicator()
         self.rebuild(taskorg)
 
@@ -53,6 +55,8 @@ class Picture:
 
     def member_xy(self, unit: str) -> np.ndarray:
         pts = self.xy[self.members[unit]]
+        if self.all_known:   # the usual case once every entity has reported: nothing to drop
+            return pts
         return pts[~np.isnan(pts[:, 0])]
 
     def centroid(self, unit: str) -> tuple[float, float] | None:
@@ -97,16 +101,21 @@ class Picture:
 
     def _centroids(self, xy: np.ndarray, rxy: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """bincount per leaf, then one membership matrix product for every unit."""
-        ok = ~np.isnan(xy[:, 0])
         n = len(self.leaves)
-        li = self.ent_leaf_i[ok]
+        if self.all_known and xy is self.xy:   # nothing to drop: no masking copies (same sums, same order)
+            li = self.ent_leaf_i
+        else:
+            ok = ~np.isnan(xy[:, 0])
+            li = self.ent_leaf_i[ok]
+            xy = xy[ok]
+            rxy = rxy[ok] if rxy is not None else None
         sums = np.empty((n, 5 if rxy is not None else 3))
         sums[:, 0] = np.bincount(li, minlength=n)
-        sums[:, 1] = np.bincount(li, weights=xy[ok, 0], minlength=n)
-        sums[:, 2] = np.bincount(li, weights=xy[ok, 1], minlength=n)
+        sums[:, 1] = np.bincount(li, weights=xy[:, 0], minlength=n)
+        sums[:, 2] = np.bincount(li, weights=xy[:, 1], minlength=n)
         if rxy is not None:
-            sums[:, 3] = np.bincount(li, weights=rxy[ok, 0], minlength=n)
-            sums[:, 4] = np.bincount(li, weights=rxy[ok, 1], minlength=n)
+            sums[:, 3] = np.bincount(li, weights=rxy[:, 0], minlength=n)
+            sums[:, 4] = np.bincount(li, weights=rxy[:, 1], minlength=n)
         u = self.unit_leaf @ sums
         lc, uc = sums[:, :1], u[:, :1]
         lc[lc == 0.0] = np.nan   # no member known: NaN centroids, without a divide warning
@@ -118,26 +127,42 @@ class Picture:
 
     def apply_locations(self, reports: list[LocationReport]) -> set[str]:
         """Project a batch of reports in one pyproj call; returns the leaf units touched."""
-        if not reports:
+        n = len(reports)
+        if not n:
             return set()
-        idx = np.fromiter((self.eidx[r.entity] for r in reports), dtype=np.intp, count=len(reports))
-        x, y = self.proj.to_xy(np.fromiter((r.lon for r in reports), float, len(reports)),
-                               np.fromiter((r.lat for r in reports), float, len(reports)))
-        t = np.fromiter((r.t for r in reports), float, len(reports))
+        eidx = self.eidx
+        rows = [(eidx[r.entity], r.lon, r.lat, r.t) for r in reports]   # one pass over the reports
+        a = np.array(rows, dtype=float).T.copy()   # contiguous columns: pyproj copies strided ones
+        idx = a[0].astype(np.intp)
+        x, y = self.proj.to_xy(a[1], a[2])
+        t = a[3]
         dt = t - self.moved_t[idx]
         ok = (dt > 0) & (dt <= 120.0)        # NaN (first report) compares false
-        with np.errstate(invalid="ignore", divide="ignore"):
-            v = np.column_stack([(x - self.xy[idx, 0]) / dt, (y - self.xy[idx, 1]) / dt])
-        self.vel[idx] = np.where(ok[:, None], v, 0.0)
+        stale = ~ok
+        dt[stale] = 1.0                      # no divide warning; those velocities are zeroed below
+        new = np.empty((n, 2))
+        new[:, 0] = x
+        new[:, 1] = y
+        v = (new - self.xy[idx]) / dt[:, None]
+        v[stale] = 0.0
+        self.vel[idx] = v
         self.moved_t[idx] = t
-        self.xy[idx, 0] = x
-        self.xy[idx, 1] = y
-        return {self.ent_leaf[i] for i in idx.tolist()}
+        self.xy[idx] = new
+        if not self.all_known:
+            self.all_known = not np.isnan(self.xy[:, 0]).any()
+        ent_leaf = self.ent_leaf
+        return {ent_leaf[r[0]] for r in rows}
 
     def live_tracks(self) -> tuple[list[str], np.ndarray]:
-        """The hostile entities with some strength, sorted by id, and their positions (n, 2)."""
-        ids = [k for k in sorted(self.tracks) if self.tracks[k].strength > 0]
-        return ids, np.array([(self.tracks[k].x, self.tracks[k].y) for k in ids]).reshape(-1, 2)
+        """The hostile entities with some strength, sorted by id, and their positions (n, 2).
+        Asked by several detectors each epoch: kept until `tracks` is replaced (read-only)."""
+        tracks = self.tracks
+        if self._live[0] is not tracks:
+            ids = [k for k in sorted(tracks) if tracks[k].strength > 0]
+            xy = np.array([(tracks[k].x, tracks[k].y) for k in ids]).reshape(-1, 2)
+            xy.flags.writeable = False
+            self._live = (tracks, ids, xy)
+        return list(self._live[1]), self._live[2]
 
     def apply_tracks(self, tracks: list[SensorTrack]) -> set[str]:
         """Track reports go through adjudication; returns the entities whose state changed."""
@@ -180,12 +205,21 @@ class Watchman:
 
     def __init__(self, picture: Picture, cfg: dict):
         self.p = picture
+        # the picture's per-entity containers, never replaced: one attribute load less per message
+        self.eidx, self.seen, self.lon, self.lat = picture.eidx, picture.seen, picture.lon, picture.lat
         self.eps = float(cfg["watchman"]["unchanged_m"]) / 111_000.0
         self.interest = float(cfg["watchman"]["interest_m"])
         self.own = [False] * len(picture.ents)
         self.bbox = (-math.inf, -math.inf, math.inf, math.inf)
         self.quiet: list[LocationReport] = []
-        self.stats: Counter = Counter()
+        # plain int counters: a Counter update per message is measurable on the hot path
+        self.n_unchanged = self.n_irrelevant = self.n_passed = 0
+
+    @property
+    def stats(self) -> Counter:
+        """What the watchman did with the messages it saw."""
+        return Counter({k: v for k, v in (("passed", self.n_passed), ("unchanged", self.n_unchanged),
+                                          ("irrelevant", self.n_irrelevant)) if v})
 
     def set_own(self, own_leaves: set[str]) -> None:
         self.own = [u in own_leaves for u in self.p.ent_leaf]
@@ -197,37 +231,44 @@ class Watchman:
             self.bbox = (lo[0], lo[1], hi[0], hi[1])
 
     def watch(self, msg):
+        """Called for every message: plain locals and list lookups, no numpy scalars
+        where a python value will do."""
         if type(msg) is LocationReport:
             p = self.p
-            i = p.eidx.get(msg.entity)
+            i = self.eidx.get(msg.entity)
             if i is None:
                 raise KeyError(f"location report for unknown entity {msg.entity!r}")
-            if not (-180.0 <= msg.lon <= 180.0 and -90.0 <= msg.lat <= 90.0):   # also catches NaN
+            lon = msg.lon
+            lat = msg.lat
+            if not (-180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):   # also catches NaN
                 raise ValueError(f"location report for {msg.entity}: field 'lat'/'lon' not a valid coordinate "
-                                 f"({msg.lat}, {msg.lon})")
-            if msg.t > p.seen[i]:
-                p.seen[i] = msg.t
-            if abs(p.lon[i] - msg.lon) < self.eps and abs(p.lat[i] - msg.lat) < self.eps:
-                self.stats["unchanged"] += 1
+                                 f"({lat}, {lon})")
+            t = msg.t
+            seen = self.seen
+            if t > seen[i]:
+                seen[i] = t
+            eps = self.eps
+            plon = self.lon
+            plat = self.lat
+            if abs(plon[i] - lon) < eps and abs(plat[i] - lat) < eps:
+                self.n_unchanged += 1
                 return None
-            p.lon[i] = msg.lon
-            p.lat[i] = msg.lat
+            plon[i] = lon
+            plat[i] = lat
             if not self.own[i]:
-                x, y = p.xy[i]
+                x, y = p.xy[i].tolist()
                 b = self.bbox
                 if not (x != x or (b[0] <= x <= b[2] and b[1] <= y <= b[3])):
                     self.quiet.append(msg)
-                    self.stats["irrelevant"] += 1
+                    self.n_irrelevant += 1
                     return None
-            self.stats["passed"] += 1
+            self.n_passed += 1
             return msg
         if type(msg) is SensorTrack:
             tr = self.p.adj.latest.get((msg.source, msg.track))
             if tr is not None and tr.strength == msg.strength and abs(tr.lon - msg.lon) < self.eps \
                     and abs(tr.lat - msg.lat) < self.eps:
-                self.stats["unchanged"] += 1
+                self.n_unchanged += 1
                 return None
-            self.stats["passed"] += 1
-            return msg
-        self.stats["passed"] += 1
+        self.n_passed += 1
         return msg

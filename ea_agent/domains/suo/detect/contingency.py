@@ -62,7 +62,7 @@ class Contingencies(Detector):
         for mid, m in list(self.pending.items()):
             tr = m.params["trigger"]
             if tr["kind"] == "unit-at":
-                if not any(dom.taskorg.is_under(leaf, tr["unit"]) for leaf in ch.leaves):
+                if tr["unit"] not in ch.units:   # no moved leaf under it (ch.units: those leaves and superiors)
                     continue
             elif not ch.tracks.intersection(dom.areas.tracks.get(tr["area"], ())):
                 continue
