@@ -99,7 +99,9 @@ class Adjudicator:
                 comp[i] = comp[comp[i]]
                 i = comp[i]
             return i
-        ii, jj = np.nonzero(np.triu(link, 1))
+        ii, jj = np.nonzero(link)   # the upper triangle, in row order (cheaper than np.triu)
+        upper = ii < jj
+        ii, jj = ii[upper], jj[upper]
         for i, j in zip(ii.tolist(), jj.tolist()):
             a, b = find(i), find(j)
             if a != b:

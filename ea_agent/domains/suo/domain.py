@@ -515,3 +515,4 @@ class SuoDomain:
 def _by_unit(units: list[str], xy: np.ndarray) -> dict[str, tuple[float, float] | None]:
     """Unit -> (x, y), None where unknown (NaN)."""
     return dict(zip(units, [None if x != x else (x, y) for x, y in xy.tolist()]))
+

@@ -32,6 +32,19 @@ class ThreatEnvelopes(Detector):
 
     def org_changed(self) -> None:
         self.env_prev = {u: v for u, v in self.env_prev.items() if u in self.dom.own_units}
+        self._told: dict[str, tuple] = {}   # unit -> (envelope state, what is told of it)
+
+    def _render(self, u: str, m, fs: int, ids: frozenset, nearest: float, strength: int, tr, upx, danger: float):
+        """The parts of an envelope's candidates that depend only on its state."""
+        dom = self.dom
+        where = f"{km(nearest)} {bearing_name(tr.x - upx[0], tr.y - upx[1])} of {dom.name(u)}"
+        tracks = sorted(ids)
+        base = dict(unit=u, nearest_track=tr.id, distance_m=round(nearest, 1), strength=strength,
+                    friendly_strength=fs, tracks=tracks, mission=m.id if m is not dom.base else None)
+        rec = ((("threat", u, "distance"), 1000.0 / max(nearest, 1.0)), (("threat", u, "strength"), float(strength)))
+        return (where, base, (u, *tracks), ("prox", dom.taskorg.parent.get(u) or u), rec,
+                m.red_alert_priority("distance", fs, strength, nearest, danger),
+                m.red_alert_priority("strength", fs, strength, nearest, danger))
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
@@ -80,12 +93,13 @@ class ThreatEnvelopes(Detector):
             fs = len(pic.members[u])
             tr = pic.tracks[tids[k_near]]
             upx = dom.unit_pos[u]
-            where = f"{km(nearest)} {bearing_name(tr.x - upx[0], tr.y - upx[1])} of {dom.name(u)}"
-            base = dict(unit=u, nearest_track=tr.id, distance_m=round(nearest, 1), strength=strength,
-                        friendly_strength=fs, tracks=sorted(ids), mission=m.id if m is not self.dom.base else None)
-            subj = (u, *sorted(ids))
-            group = ("prox", dom.taskorg.parent.get(u) or u)
-            rec = [(("threat", u, "distance"), 1000.0 / max(nearest, 1.0)), (("threat", u, "strength"), float(strength))]
+            # what is told of this envelope: rebuilt only when something in it changed (a
+            # periodic re-evaluation of a contact that stands still finds the same)
+            state = (ids, nearest, strength, m, fs, tr.id, tr.x, tr.y, upx, danger)
+            told = self._told.get(u)
+            if told is None or told[0] != state:
+                told = self._told[u] = (state, *self._render(u, m, fs, ids, nearest, strength, tr, upx, danger))
+            _, where, base, subj, group, rec, p_distance, p_strength = told
             new = ids - prev[0]
             voa = dom.ea.voa
             ckey = ("threat", u, "contact")
@@ -98,18 +112,16 @@ class ThreatEnvelopes(Detector):
             elif new or not voa.enabled:   # VOA off (the naive baseline): every re-evaluation
                 p = m.red_alert_priority("contact", fs, strength, nearest, danger)
                 cands.append(Candidate(t, "contact", p, subj, f"Contact: {strength} hostile entities {where}",
-                                       key=ckey, friendly=False, merge_group=group, also=tuple(rec),
+                                       key=ckey, friendly=False, merge_group=group, also=rec,
                                        details={**base, "new_tracks": sorted(new)}))
             if remembered or not voa.enabled:
                 # Propose on every re-evaluation; VOA compares with what the user was last told.
                 if not new:
-                    p = m.red_alert_priority("distance", fs, strength, nearest, danger)
-                    cands.append(Candidate(t, "distance", p, subj, f"Closest threat is now closer: {where}",
+                    cands.append(Candidate(t, "distance", p_distance, subj, f"Closest threat is now closer: {where}",
                                            key=("threat", u, "distance"), measure=1000.0 / max(nearest, 1.0),
                                            friendly=False, merge_group=group, details=dict(base)))
-                p = m.red_alert_priority("strength", fs, strength, nearest, danger)
-                if p is not None:
-                    cands.append(Candidate(t, "strength", p, subj,
+                if p_strength is not None:
+                    cands.append(Candidate(t, "strength", p_strength, subj,
                                            f"Threat near {dom.name(u)} stronger: {strength} hostile entities, "
                                            f"nearest {where}",
                                            key=("threat", u, "strength"), measure=float(strength), friendly=False,
