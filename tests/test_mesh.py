@@ -84,7 +84,7 @@ def test_the_mission_model_checks_reach_the_mesh(mesh_run):
     alerts, _ = mesh_run
     types = {a["type"] for name in ("BN", "A", "C", "A2a") for a in alerts[name]}
     assert {"escape", "end-state", "penetration", "projected-penetration", "friendly-expected", "band",
-            "threat-ahead", "checkpoint", "line"} <= types, types
+            "threat-ahead", "checkpoint", "line", "recon-progress"} <= types, types
     # the ON-ORDER march: BN ordered it at 2150, M started at 2200 (50 s later: late)
     late = [a for a in alerts["BN"] if a["type"] == "schedule" and a["details"].get("constraint") == "ON-ORDER"]
     assert [(a["t"], a["details"]["how"]) for a in late] == [(2180.0, "late")]
