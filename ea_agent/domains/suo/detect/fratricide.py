@@ -156,7 +156,7 @@ class Fratricide(Detector):
         if clear <= 0.0:   # on or next to the edge (or a polygon too big to measure here)
             poly = self.bnd_polys[k]
             ins = bool(shapely.contains_xy(poly, x, y))
-            if segs is None:
+            if segs is None and poly.geom_type in ("Polygon", "MultiPolygon"):   # a side to keep
                 clear = float(shapely.distance(poly.boundary, shapely.Point(x, y))) - 1e-3
         self._own[i] = (x, y, clear, ins)
         return ins
