@@ -6,6 +6,8 @@ position, an observation post) holds some friendly element while its mission run
 (judged on each scan); and a unit resubordinated has a mission under its new superior."""
 from __future__ import annotations
 
+from math import hypot
+
 import numpy as np
 import shapely
 
@@ -26,6 +28,9 @@ class Coverage(Detector):
         self.held: dict[str, tuple[Mission, str]] = {}   # mission -> (it, the position it must hold)
         self.next_t = 0.0
         self._bounds: dict[str, tuple] = {}   # position -> (its area, the area's bounds)
+        # position -> (its area, the positions array, entity row, x, y, distance to the edge) of
+        # the element last found in it
+        self._witness: dict[str, tuple] = {}
 
     def post_held(self, m: Mission, position: str) -> None:
         self.held[m.id] = (m, position)
@@ -40,26 +45,54 @@ class Coverage(Detector):
             return
         self.next_t = t + HELD_SCAN_S
         xy = dom.pic.xy
-        ok = ~np.isnan(xy[:, 0])
-        xs, ys = xy[ok, 0], xy[ok, 1]
+        ok = xs = ys = None
         for mid, (m, pos) in self.held.items():
             if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
                 continue
+            area = dom.overlay[pos].area
+            if self._still_held(pos, area, xy):
+                continue
+            if ok is None:
+                ok = ~np.isnan(xy[:, 0])
+                xs, ys = xy[ok, 0], xy[ok, 1]
             if not ok[dom.pic.members[m.unit]].any():
                 continue   # where its unit is is not known yet: not known to be empty either
-            area = dom.overlay[pos].area
             hit = self._bounds.get(pos)
             if hit is None or hit[0] is not area:   # shapely's bounds cost microseconds: once per area
                 hit = self._bounds[pos] = (area, area.bounds)
             x0, y0, x1, y1 = hit[1]
             box = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)   # only these can be inside
-            if box.any() and shapely.contains_xy(area, xs[box], ys[box]).any():
-                continue
+            if box.any():
+                idx = np.flatnonzero(box)
+                inside = idx[shapely.contains_xy(area, xs[idx], ys[idx])]
+                if len(inside):
+                    self._keep_witness(pos, area, xy, np.flatnonzero(ok)[inside])
+                    continue
             cands.append(Candidate(
                 t, "friendly-expected", m.compute_priority("friendly-expected"), (m.unit,),
                 f"{pos} holds no friendly element ({dom.name(m.unit)} {m.TYPE})",
                 key=("friendly-expected", mid, pos),
                 details={"mission": mid, "check": "empty", "position": pos, "places": [pos]}))
+
+    def _still_held(self, pos: str, area, xy: np.ndarray) -> bool:
+        """The element last found in the position is still there: it moved less than its
+        distance to the area's edge then (one entity looked at, not every one)."""
+        w = self._witness.get(pos)
+        if w is None or w[0] is not area or w[1] is not xy:
+            return False
+        e, x0, y0, clear = w[2:]
+        x, y = xy[e].tolist()
+        return hypot(x - x0, y - y0) < clear
+
+    def _keep_witness(self, pos: str, area, xy: np.ndarray, rows: np.ndarray) -> None:
+        """Of the entities inside the position, the one deepest inside, to look at next."""
+        if area.geom_type not in ("Polygon", "MultiPolygon"):
+            return   # no inside to stay in
+        d = shapely.distance(area.boundary, shapely.points(xy[rows]))
+        k = int(np.argmax(d))
+        x, y = xy[rows[k]].tolist()
+        # less a millimetre: far more than the rounding of a distance of map coordinates
+        self._witness[pos] = (area, xy, int(rows[k]), x, y, float(d[k]) - 1e-3)
 
     def resubordinated(self, unit: str, t: float) -> None:
         """A unit put under a new superior with no mission of its own or of a superior in the plan."""

@@ -2,7 +2,9 @@
 passage of lines: there the passing unit is expected inside the passed unit's boundary."""
 from __future__ import annotations
 
+import math
 from collections import defaultdict
+from math import hypot
 
 import numpy as np
 import shapely
@@ -12,7 +14,6 @@ from ea_agent.core.alert import Candidate
 from ..missions import PassageOfLines
 from ..render import km
 from .base import Changes, Detector, platoon_of
-from .geometry import inside_matrix
 
 
 def fratricide_pairs(pos: np.ndarray, bnd: np.ndarray, inside: np.ndarray, rng: np.ndarray,
@@ -48,6 +49,41 @@ def fratricide_pairs(pos: np.ndarray, bnd: np.ndarray, inside: np.ndarray, rng: 
     return sorted((i, j, dist) for (i, j), dist in found.items())
 
 
+def _segments(poly, most: int = 64) -> list[tuple[float, float, float, float, float]] | None:
+    """The edges of a valid polygon's rings as (x, y, dx, dy, squared length), when they
+    are few enough that measuring in Python is cheaper than asking shapely."""
+    if poly.geom_type != "Polygon" or not poly.is_valid:
+        return None
+    rings = [poly.exterior, *poly.interiors]
+    if sum(len(r.coords) for r in rings) > most:
+        return None
+    out = []
+    for r in rings:
+        c = list(r.coords)
+        for (ax, ay), (bx, by) in zip(c, c[1:]):
+            dx, dy = bx - ax, by - ay
+            out.append((ax, ay, dx, dy, dx * dx + dy * dy))
+    return out
+
+
+def _edge_distance(x: float, y: float, segs) -> tuple[float, bool]:
+    """Distance of (x, y) from the nearest edge (exact to far below a millimetre), and
+    whether it is inside by crossing parity: right for a point more than a millimetre
+    from every edge, where a rounding error cannot move a crossing past it."""
+    best = math.inf
+    inside = False
+    for ax, ay, dx, dy, ll in segs:
+        px, py = x - ax, y - ay
+        f = (px * dx + py * dy) / ll if ll > 0.0 else 0.0
+        f = 0.0 if f < 0.0 else 1.0 if f > 1.0 else f
+        d = hypot(px - f * dx, py - f * dy)
+        if d < best:
+            best = d
+        if (ay > y) != (ay + dy > y) and x < ax + (y - ay) * dx / dy:
+            inside = not inside
+    return best, inside
+
+
 class Fratricide(Detector):
     """Only units outside their own boundary can be at risk, so the pair check runs
     only while some unit is outside; the inside test runs for movers."""
@@ -67,8 +103,14 @@ class Fratricide(Detector):
         dflt = float(dom.voi_cfg["weapons_range_m"])
         self.leaf_rng = np.array([self._weapons_range(u, dflt) for u in leaves])
         self.leaf_mine = np.array([u in dom.own_units for u in leaves])
-        self.outside = np.zeros(len(leaves), dtype=bool)
-        self.own_poly = np.array([self.bnd_polys[b] if b >= 0 else None for b in self.leaf_bnd], dtype=object)
+        self.outside: set[int] = set()   # leaves last seen outside their own boundary
+        self.leaf_bnd_l = self.leaf_bnd.tolist()
+        self.bnd0 = np.where(self.frat_ok, self.leaf_bnd, 0)   # any boundary where none: those leaves have no position
+        self.rows_n = np.arange(len(leaves))
+        self.bnd_arr = np.array(self.bnd_polys, dtype=object)
+        self.bnd_segs = [_segments(p) for p in self.bnd_polys]
+        # leaf -> (x, y, distance to its boundary's edge, inside) when last measured
+        self._own: list[tuple[float, float, float, bool]] = [(math.nan, math.nan, -1.0, False)] * len(leaves)
         shapely.prepare(self.bnd_polys)   # containment is asked for every moving leaf each epoch
         self.platoon = {u: platoon_of(to, u) for u in leaves}
 
@@ -94,25 +136,75 @@ class Fratricide(Detector):
         return any(a in mine and b in theirs and shapely.contains_xy(lane, xy[0], xy[1])
                    for mine, theirs, lane in lanes)
 
+    def _in_own(self, i: int, x: float, y: float) -> bool:
+        """Whether leaf i at (x, y) is inside its own boundary. A leaf that moved less than
+        its distance to that boundary when last measured is on the same side, so the
+        polygon is asked only near its edge (the test is inlined in detect)."""
+        x0, y0, clear, ins = self._own[i]
+        return ins if hypot(x - x0, y - y0) < clear else self._measure(i, x, y)
+
+    def _measure(self, i: int, x: float, y: float) -> bool:
+        """Leaf i inside its own boundary, asked of the polygon, and how far it may move
+        before it must be asked again."""
+        k = self.leaf_bnd_l[i]
+        segs = self.bnd_segs[k]
+        if segs is not None:
+            d, ins = _edge_distance(x, y, segs)
+        else:
+            d, ins = -1.0, False
+        clear = d - 1e-3   # less a millimetre: far more than the rounding of map coordinates
+        if clear <= 0.0:   # on or next to the edge (or a polygon too big to measure here)
+            poly = self.bnd_polys[k]
+            ins = bool(shapely.contains_xy(poly, x, y))
+            if segs is None and poly.geom_type in ("Polygon", "MultiPolygon"):   # a side to keep
+                clear = float(shapely.distance(poly.boundary, shapely.Point(x, y))) - 1e-3
+        self._own[i] = (x, y, clear, ins)
+        return ins
+
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
         ok_l, leaf_i = self.frat_ok_l, dom.leaf_i
-        rows = [leaf_i[u] for u in ch.leaves if ok_l[leaf_i[u]]]
-        if not rows:
+        if not ch.leaves:
             return
-        pos = dom.leaf_xy
-        r = np.array(rows)
-        self.outside[r] = False
-        r = r[~np.isnan(pos[r, 0])]
-        if len(r):
-            self.outside[r] = ~shapely.contains_xy(self.own_poly[r], pos[r, 0], pos[r, 1])
-        if not self.outside.any():
+        xy = dom.leaf_xy.tolist()
+        outside, own_l = self.outside, self._own
+        moved = []
+        rows = False
+        for u in ch.leaves:
+            i = leaf_i[u]
+            if not ok_l[i]:
+                continue
+            rows = True
+            x, y = xy[i]
+            if x != x:   # position unknown
+                outside.discard(i)
+                continue
+            moved.append(i)
+            x0, y0, clear, ins = own_l[i]
+            if not hypot(x - x0, y - y0) < clear:
+                ins = self._measure(i, x, y)
+            if ins:
+                outside.discard(i)
+            else:
+                outside.add(i)
+        if not (rows and outside):
             return
-        dirty = np.zeros(len(dom.leaves), dtype=bool)
-        dirty[r] = True
-        inside = inside_matrix(pos, self.bnd_polys)
-        bnd = np.where(self.frat_ok, self.leaf_bnd, 0)
-        pos = np.where(self.frat_ok[:, None], pos, np.nan)
+        n = len(dom.leaves)
+        dirty = np.zeros(n, dtype=bool)
+        dirty[moved] = True
+        # where every leaf is now, inside its own boundary or not (reports held back by
+        # the watchman may have moved leaves this epoch did not see move); only the rows
+        # of leaves outside their own are needed whole (fratricide_pairs reads no others)
+        in_own = self._in_own
+        own = [ok_l[i] and x == x and in_own(i, x, y) for i, (x, y) in enumerate(xy)]
+        inside = np.zeros((n, len(self.bnd_polys)), dtype=bool)
+        bnd = self.bnd0
+        inside[self.rows_n, bnd] = own
+        out = [i for i in range(n) if ok_l[i] and not own[i] and xy[i][0] == xy[i][0]]
+        if out:
+            px = dom.leaf_xy[out]
+            inside[out] = shapely.contains_xy(self.bnd_arr[None, :], px[:, 0, None], px[:, 1, None])
+        pos = np.where(self.frat_ok[:, None], dom.leaf_xy, np.nan)
         to = dom.taskorg
         groups: dict[tuple[str, str], list[tuple[str, str, float]]] = defaultdict(list)
         lanes = None

@@ -4,6 +4,8 @@ proximity."""
 from __future__ import annotations
 
 import math
+from math import hypot
+from operator import itemgetter
 
 import numpy as np
 
@@ -12,7 +14,6 @@ from ea_agent.core.geo import bearing_name
 
 from ..render import km
 from .base import Changes, Detector
-from .geometry import distances
 
 ADVERSARIAL = "adversarial-activity"
 
@@ -33,6 +34,7 @@ class ThreatEnvelopes(Detector):
     def org_changed(self) -> None:
         self.env_prev = {u: v for u, v in self.env_prev.items() if u in self.dom.own_units}
         self._told: dict[str, tuple] = {}   # unit -> (envelope state, what is told of it)
+        self._exact: dict[tuple, float] = {}   # (unit position, reckoned position, track position) -> distance
 
     def _render(self, u: str, m, fs: int, ids: frozenset, nearest: float, strength: int, tr, upx, danger: float):
         """The parts of an envelope's candidates that depend only on its state."""
@@ -46,6 +48,35 @@ class ThreatEnvelopes(Detector):
                 m.red_alert_priority("distance", fs, strength, nearest, danger),
                 m.red_alert_priority("strength", fs, strength, nearest, danger))
 
+    def _dmax(self, p: tuple, q: tuple, xy: tuple) -> float:
+        """How far a track is from the farther of the unit's two positions, exactly as
+        numpy computes it (math.hypot may differ in the last bit); remembered, as a
+        contact that stands still is asked again at every periodic re-evaluation."""
+        key = (p, q, xy)
+        d = self._exact.get(key)
+        if d is None:
+            if len(self._exact) > 4096:
+                self._exact.clear()
+            x, y = xy
+            d = self._exact[key] = max(float(np.hypot(p[0] - x, p[1] - y)), float(np.hypot(q[0] - x, q[1] - y)))
+        return d
+
+    def _close(self, p: tuple, q: tuple, tpos: list, ks, radius: float) -> list[tuple[int, float]]:
+        """(index, distance) of the tracks among `ks` within `radius` of both positions.
+        math.hypot (cheap) rules out the tracks clearly beyond reach; only those within
+        reach of its last-bit error are measured exactly."""
+        reach = radius * (1.0 + 1e-9) + 1e-9
+        px, py = p
+        qx, qy = q
+        out = []
+        for k in ks:
+            x, y = xy = tpos[k]
+            if hypot(px - x, py - y) <= reach and hypot(qx - x, qy - y) <= reach:
+                d = self._dmax(p, q, xy)
+                if d <= radius:
+                    out.append((k, d))
+        return out
+
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
         rescan = ch.rescan   # periodic: keeps a continuing contact's story alive
@@ -54,45 +85,39 @@ class ThreatEnvelopes(Detector):
         radius = float(dom.voi_cfg["threat_radius_m"])
         danger = float(dom.voi_cfg["danger_close_m"])
         pic = dom.pic
-        tids = sorted(pic.tracks)
-        units = [u for u in dom.env_units if dom.unit_pos.get(u)]
-        if not units:
-            return
+        tracks = pic.tracks
+        tids = sorted(tracks)
+        tpos = [(tracks[k].x, tracks[k].y) for k in tids]
+        every = range(len(tids))
+        moved = [k for k, tid in enumerate(tids) if tid in ch.tracks]
         # a threat is in a unit's envelope when it is within reach of where the unit was
         # last reported and of where it is dead-reckoned to be now: a report a minute old
         # misplaces a moving unit, and reckoning overshoots one that has just stopped
-        n = len(units)
-        if tids:
-            tpos = np.array([(pic.tracks[k].x, pic.tracks[k].y) for k in tids])
-            both = distances(np.array([dom.unit_pos[u] for u in units]
-                                      + [dom.unit_now.get(u) or dom.unit_pos[u] for u in units]), tpos)
-            dmax = np.maximum(both[:n], both[n:])
-            dist, close = dmax.tolist(), (dmax <= radius).tolist()
-        else:
-            dist = close = [[]] * n
-        moved = [k for k, tid in enumerate(tids) if tid in ch.tracks]
+        unit_pos, unit_now = dom.unit_pos, dom.unit_now
         empty = frozenset()
-        for ui, u in enumerate(units):
-            row = close[ui]
-            prev0 = self.env_prev.get(u, (empty,))[0]
-            if not (rescan and prev0) and u not in ch.units and not any(row[k] for k in moved) \
-                    and not prev0 & ch.tracks:
+        for u in dom.env_units:
+            p = unit_pos.get(u)
+            if not p:
                 continue
-            if True not in row:
+            q = unit_now.get(u) or p
+            prev0 = self.env_prev.get(u, (empty,))[0]
+            if not (rescan and prev0) and u not in ch.units and not prev0 & ch.tracks \
+                    and not (moved and self._close(p, q, tpos, moved, radius)):
+                continue
+            near = self._close(p, q, tpos, every, radius) if tids else []
+            if not near:
                 if prev0:
                     self.env_prev[u] = (empty, math.inf, 0)
                 continue
-            inn = [k for k, c in enumerate(row) if c]
-            ids = frozenset(tids[k] for k in inn)
+            ids = frozenset(tids[k] for k, _ in near)
             prev = self.env_prev.get(u, (empty, math.inf, 0))
-            k_near = min(inn, key=dist[ui].__getitem__)
-            nearest = dist[ui][k_near]
-            strength = int(sum(pic.tracks[tids[k]].strength for k in inn))
+            k_near, nearest = min(near, key=itemgetter(1))
+            strength = int(sum(tracks[tids[k]].strength for k, _ in near))
             self.env_prev[u] = (ids, nearest, strength)
             m = dom.current_mission(u)
             fs = len(pic.members[u])
-            tr = pic.tracks[tids[k_near]]
-            upx = dom.unit_pos[u]
+            tr = tracks[tids[k_near]]
+            upx = p
             # what is told of this envelope: rebuilt only when something in it changed (a
             # periodic re-evaluation of a contact that stands still finds the same)
             state = (ids, nearest, strength, m, fs, tr.id, tr.x, tr.y, upx, danger)
