@@ -49,41 +49,6 @@ def fratricide_pairs(pos: np.ndarray, bnd: np.ndarray, inside: np.ndarray, rng: 
     return sorted((i, j, dist) for (i, j), dist in found.items())
 
 
-def _segments(poly, most: int = 64) -> list[tuple[float, float, float, float, float]] | None:
-    """The edges of a valid polygon's rings as (x, y, dx, dy, squared length), when they
-    are few enough that measuring in Python is cheaper than asking shapely."""
-    if poly.geom_type != "Polygon" or not poly.is_valid:
-        return None
-    rings = [poly.exterior, *poly.interiors]
-    if sum(len(r.coords) for r in rings) > most:
-        return None
-    out = []
-    for r in rings:
-        c = list(r.coords)
-        for (ax, ay), (bx, by) in zip(c, c[1:]):
-            dx, dy = bx - ax, by - ay
-            out.append((ax, ay, dx, dy, dx * dx + dy * dy))
-    return out
-
-
-def _edge_distance(x: float, y: float, segs) -> tuple[float, bool]:
-    """Distance of (x, y) from the nearest edge (exact to far below a millimetre), and
-    whether it is inside by crossing parity: right for a point more than a millimetre
-    from every edge, where a rounding error cannot move a crossing past it."""
-    best = math.inf
-    inside = False
-    for ax, ay, dx, dy, ll in segs:
-        px, py = x - ax, y - ay
-        f = (px * dx + py * dy) / ll if ll > 0.0 else 0.0
-        f = 0.0 if f < 0.0 else 1.0 if f > 1.0 else f
-        d = hypot(px - f * dx, py - f * dy)
-        if d < best:
-            best = d
-        if (ay > y) != (ay + dy > y) and x < ax + (y - ay) * dx / dy:
-            inside = not inside
-    return best, inside
-
-
 class Fratricide(Detector):
     """Only units outside their own boundary can be at risk, so the pair check runs
     only while some unit is outside; the inside test runs for movers."""
@@ -108,7 +73,7 @@ class Fratricide(Detector):
         self.bnd0 = np.where(self.frat_ok, self.leaf_bnd, 0)   # any boundary where none: those leaves have no position
         self.rows_n = np.arange(len(leaves))
         self.bnd_arr = np.array(self.bnd_polys, dtype=object)
-        self.bnd_segs = [_segments(p) for p in self.bnd_polys]
+        self.bnd_edges = [p.boundary if p.geom_type in ("Polygon", "MultiPolygon") else None for p in self.bnd_polys]
         # leaf -> (x, y, distance to its boundary's edge, inside) when last measured
         self._own: list[tuple[float, float, float, bool]] = [(math.nan, math.nan, -1.0, False)] * len(leaves)
         shapely.prepare(self.bnd_polys)   # containment is asked for every moving leaf each epoch
@@ -147,17 +112,11 @@ class Fratricide(Detector):
         """Leaf i inside its own boundary, asked of the polygon, and how far it may move
         before it must be asked again."""
         k = self.leaf_bnd_l[i]
-        segs = self.bnd_segs[k]
-        if segs is not None:
-            d, ins = _edge_distance(x, y, segs)
-        else:
-            d, ins = -1.0, False
-        clear = d - 1e-3   # less a millimetre: far more than the rounding of map coordinates
-        if clear <= 0.0:   # on or next to the edge (or a polygon too big to measure here)
-            poly = self.bnd_polys[k]
-            ins = bool(shapely.contains_xy(poly, x, y))
-            if segs is None and poly.geom_type in ("Polygon", "MultiPolygon"):   # a side to keep
-                clear = float(shapely.distance(poly.boundary, shapely.Point(x, y))) - 1e-3
+        ins = bool(shapely.contains_xy(self.bnd_polys[k], x, y))
+        edge = self.bnd_edges[k]
+        # less a millimetre: far more than the rounding of map coordinates; a boundary that
+        # is no polygon keeps no side, and is asked every time
+        clear = float(shapely.distance(edge, shapely.Point(x, y))) - 1e-3 if edge is not None else -1.0
         self._own[i] = (x, y, clear, ins)
         return ins
 
