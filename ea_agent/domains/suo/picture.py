@@ -52,6 +52,19 @@ class Picture:
             for leaf in taskorg.subtree(u):
                 if leaf in li:
                     self.unit_leaf[r, li[leaf]] = 1.0
+        # positions(): one weighted bincount over an (entity, 5) buffer [1, x, y, rx, ry] whose
+        # bins are (leaf, column); per bin the same sequential sums as five separate bincounts
+        n = len(self.leaves)
+        self._bins = (5 * self.ent_leaf_i)[:, None] + np.arange(5, dtype=np.intp)
+        self._bins_flat = self._bins.ravel()
+        self._w = np.empty((len(self.ent_leaf), 5))
+        self._w[:, 0] = 1.0
+        # member counts once every entity is known: fixed until the next reorganization
+        lc = np.bincount(self.ent_leaf_i, minlength=n).astype(float)[:, None]
+        uc = self.unit_leaf @ lc
+        lc[lc == 0.0] = np.nan
+        uc[uc == 0.0] = np.nan
+        self._known_counts = (lc, uc)
 
     def member_xy(self, unit: str) -> np.ndarray:
         pts = self.xy[self.members[unit]]
@@ -95,10 +108,35 @@ class Picture:
         leaf, unit, _ = self._centroids(self.xy if xy is None else xy, None)
         return leaf, unit
 
-    def positions(self, now: float, horizon_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Leaf and unit centroids of the last reports, and unit centroids of the members
-        dead-reckoned to `now`, in one vectorised pass (this runs at every epoch close)."""
-        return self._centroids(self.xy, self.reckoned(now, horizon_s))
+    def positions(self, now: float, horizon_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Leaf centroids of the last reports, and unit centroids (n_units, 4): columns 0:2 of
+        the last reports, 2:4 of the members dead-reckoned to `now` (see `reckoned`). One
+        vectorised pass with few numpy calls: this runs at nearly every epoch close."""
+        xy = self.xy
+        w = self._w
+        w[:, 1:3] = xy
+        dt = now - self.moved_t
+        np.minimum(dt, horizon_s, out=dt)
+        np.maximum(dt, 0.0, out=dt)
+        dt[self.seen > self.moved_t + 0.5] = 0.0
+        r = w[:, 3:5]
+        np.multiply(self.vel, dt[:, None], out=r)
+        r += xy   # = xy + vel * dt, as reckoned() (addition commutes exactly)
+        n = len(self.leaves)
+        if self.all_known:
+            sums = np.bincount(self._bins_flat, weights=w.ravel(), minlength=5 * n).reshape(n, 5)
+        else:
+            ok = ~np.isnan(xy[:, 0])
+            sums = np.bincount(self._bins[ok].ravel(), weights=w[ok].ravel(), minlength=5 * n)
+            sums = sums.astype(float, copy=False).reshape(n, 5)   # int when nothing is known
+        u = self.unit_leaf @ sums
+        if self.all_known:
+            lc, uc = self._known_counts
+        else:
+            lc, uc = sums[:, :1], u[:, :1]
+            lc[lc == 0.0] = np.nan   # no member known: NaN centroids, without a divide warning
+            uc[uc == 0.0] = np.nan
+        return sums[:, 1:3] / lc, u[:, 1:5] / uc
 
     def _centroids(self, xy: np.ndarray, rxy: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """bincount per leaf, then one membership matrix product for every unit."""
