@@ -171,17 +171,15 @@ class Picture:
             return set()
         eidx = self.eidx
         rows = [(eidx[r.entity], r.lon, r.lat, r.t) for r in reports]   # one pass over the reports
-        a = np.array(rows, dtype=float).T.copy()   # contiguous columns: pyproj copies strided ones
+        a = np.array(rows, dtype=float).T.copy()   # contiguous float64 rows: projected in place
         idx = a[0].astype(np.intp)
-        x, y = self.proj.to_xy(a[1], a[2])
+        self.proj.to_xy_inplace(a[1], a[2])
+        new = a[1:3].T                       # (n, 2): x, y
         t = a[3]
         dt = t - self.moved_t[idx]
         ok = (dt > 0) & (dt <= 120.0)        # NaN (first report) compares false
         stale = ~ok
         dt[stale] = 1.0                      # no divide warning; those velocities are zeroed below
-        new = np.empty((n, 2))
-        new[:, 0] = x
-        new[:, 1] = y
         v = (new - self.xy[idx]) / dt[:, None]
         v[stale] = 0.0
         self.vel[idx] = v
@@ -207,9 +205,13 @@ class Picture:
         """Track reports go through adjudication; returns the entities whose state changed."""
         if not tracks:
             return set()
-        x, y = self.proj.to_xy(np.array([t.lon for t in tracks]), np.array([t.lat for t in tracks]))
+        x, y = np.array([t.lon for t in tracks]), np.array([t.lat for t in tracks])
+        if x.dtype == np.float64 and y.dtype == np.float64:   # the usual case: fresh arrays, projected in place
+            self.proj.to_xy_inplace(x, y)
+        else:
+            x, y = self.proj.to_xy(x, y)
         kept = False
-        for t, tx, ty in zip(tracks, np.atleast_1d(x), np.atleast_1d(y)):
+        for t, tx, ty in zip(tracks, x.tolist(), y.tolist()):   # 1-d arrays (from lists): python floats
             # an air track is no ground threat (contact, envelopes, areas): as gone for this picture
             strength = 0 if t.domain == "air" else t.strength
             vx = vy = 0.0
