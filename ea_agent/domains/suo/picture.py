@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, defaultdict
+from operator import itemgetter
 
 import numpy as np
 
@@ -11,6 +12,8 @@ from ea_agent.core.plan import TaskOrg
 from ea_agent.core.adjudication import Adjudicator, Entity, Report
 from ea_agent.core.geo import Projection
 from .messages import LocationReport, SensorTrack
+
+_first = itemgetter(0)
 
 
 class Picture:
@@ -52,11 +55,10 @@ class Picture:
             for leaf in taskorg.subtree(u):
                 if leaf in li:
                     self.unit_leaf[r, li[leaf]] = 1.0
-        # positions(): one weighted bincount over an (entity, 5) buffer [1, x, y, rx, ry] whose
-        # bins are (leaf, column); per bin the same sequential sums as five separate bincounts
+        # positions(): weighted bincounts whose bins are (leaf, column): per bin the same
+        # sequential sums as one bincount per column
         n = len(self.leaves)
         self._bins = (5 * self.ent_leaf_i)[:, None] + np.arange(5, dtype=np.intp)
-        self._bins_flat = self._bins.ravel()
         self._w = np.empty((len(self.ent_leaf), 5))
         self._w[:, 0] = 1.0
         # member counts once every entity is known: fixed until the next reorganization
@@ -65,6 +67,11 @@ class Picture:
         lc[lc == 0.0] = np.nan
         uc[uc == 0.0] = np.nan
         self._known_counts = (lc, uc)
+        # the same sums once every entity is known: x, y bins (2 per leaf) over contiguous
+        # (entity, 2) arrays, written next to the fixed counts (strided writes cost more)
+        self._bins2 = ((2 * self.ent_leaf_i)[:, None] + np.arange(2, dtype=np.intp)).ravel()
+        self._sums = np.empty((n, 5))
+        self._sums[:, 0] = np.bincount(self.ent_leaf_i, minlength=n)
 
     def member_xy(self, unit: str) -> np.ndarray:
         pts = self.xy[self.members[unit]]
@@ -113,26 +120,29 @@ class Picture:
         the last reports, 2:4 of the members dead-reckoned to `now` (see `reckoned`). One
         vectorised pass with few numpy calls: this runs at nearly every epoch close."""
         xy = self.xy
-        w = self._w
-        w[:, 1:3] = xy
         dt = now - self.moved_t
-        np.minimum(dt, horizon_s, out=dt)
+        np.minimum(dt, horizon_s, out=dt)    # as np.clip (NaN stays NaN), at a third of its cost
         np.maximum(dt, 0.0, out=dt)
         dt[self.seen > self.moved_t + 0.5] = 0.0
-        r = w[:, 3:5]
-        np.multiply(self.vel, dt[:, None], out=r)
-        r += xy   # = xy + vel * dt, as reckoned() (addition commutes exactly)
         n = len(self.leaves)
         if self.all_known:
-            sums = np.bincount(self._bins_flat, weights=w.ravel(), minlength=5 * n).reshape(n, 5)
-        else:
+            r = self.vel * dt[:, None]
+            r += xy   # = xy + vel * dt, as reckoned() (addition commutes exactly)
+            sums = self._sums
+            sums[:, 1:3] = np.bincount(self._bins2, weights=xy.ravel(), minlength=2 * n).reshape(n, 2)
+            sums[:, 3:5] = np.bincount(self._bins2, weights=r.ravel(), minlength=2 * n).reshape(n, 2)
+            u = self.unit_leaf @ sums
+            lc, uc = self._known_counts
+        else:   # unknown entities dropped: one bincount over (leaf, column) bins of [1, x, y, rx, ry]
+            w = self._w
+            w[:, 1:3] = xy
+            r = w[:, 3:5]
+            np.multiply(self.vel, dt[:, None], out=r)
+            r += xy
             ok = ~np.isnan(xy[:, 0])
             sums = np.bincount(self._bins[ok].ravel(), weights=w[ok].ravel(), minlength=5 * n)
             sums = sums.astype(float, copy=False).reshape(n, 5)   # int when nothing is known
-        u = self.unit_leaf @ sums
-        if self.all_known:
-            lc, uc = self._known_counts
-        else:
+            u = self.unit_leaf @ sums
             lc, uc = sums[:, :1], u[:, :1]
             lc[lc == 0.0] = np.nan   # no member known: NaN centroids, without a divide warning
             uc[uc == 0.0] = np.nan
@@ -187,8 +197,7 @@ class Picture:
         self.xy[idx] = new
         if not self.all_known:
             self.all_known = not np.isnan(self.xy[:, 0]).any()
-        ent_leaf = self.ent_leaf
-        return {ent_leaf[r[0]] for r in rows}
+        return set(map(self.ent_leaf.__getitem__, map(_first, rows)))   # the leaves touched (in C)
 
     def live_tracks(self) -> tuple[list[str], np.ndarray]:
         """The hostile entities with some strength, sorted by id, and their positions (n, 2).
