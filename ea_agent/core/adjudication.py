@@ -111,6 +111,11 @@ class Adjudicator:
             groups.setdefault(find(i), []).append(nr)
         out = {}
         for members in groups.values():
+            if len(members) == 1:   # the usual entity: one report, which the rules below pick alike
+                name, r = members[0]
+                bx, by = self._at(r, now)
+                out[r.track] = Entity(r.track, bx, by, r.strength, r.t, r.lon, r.lat, (name,))
+                continue
             tmax = max(r.t for _, r in members)
             top = [nr for nr in members if nr[1].t == tmax]
             # the newest report; ties (rare) as the full key says, the first of equals kept

@@ -65,27 +65,49 @@ class Voa:
             rec.seen = max(rec.seen, now)
 
     def judge(self, cands: Iterable[Candidate]) -> list[Candidate]:
-        """Issue or suppress each candidate; returns the issued ones (in input order)."""
+        """Issue or suppress each candidate; returns the issued ones (in input order).
+        Most candidates of a run are suppressed (thousands): the history is looked up
+        once per candidate and the counts are added once per call (the same counts, their
+        keys first counted in the same order)."""
         out: list[Candidate] = []
+        suppressed: dict[str, int] = {}
+        n = 0
+        history = self.history
+        expiry = self.expiry
         for c in cands:
-            self.stats["candidates"] += 1
+            n += 1
             if not self.enabled:
                 out.append(c)
                 continue
-            verdict = self._verdict(c)
-            if verdict is not None:
-                self.touch(c.key, c.t)
-                self.stats["suppressed-" + verdict] += 1
+            key, t = c.key, c.t
+            rec = history.get(key)   # last(), inlined: the unexpired alert on the key
+            if rec is not None and t - (rec.t if rec.t > rec.seen else rec.seen) >= expiry:
+                rec = None
+            verdict = None if rec is None else self._verdict_on(c, rec)
+            if verdict is not None:   # suppressed: its story goes on (touch(), with the record found)
+                if t > rec.seen:
+                    rec.seen = t
+                k = "suppressed-" + verdict
+                suppressed[k] = suppressed.get(k, 0) + 1
                 continue
-            self.history[c.key] = Record(c.t, c.measure, c.priority)
+            history[key] = Record(t, c.measure, c.priority)
             for k, measure in c.also:  # e.g. a contact sets the baseline for later distance alerts
-                self.history[k] = Record(c.t, measure, c.priority, c.projection)
+                history[k] = Record(t, measure, c.priority, c.projection)
             out.append(c)
+        if n:
+            stats = self.stats
+            stats["candidates"] += n
+            for k, v in suppressed.items():
+                stats[k] += v
         return out
 
     def _verdict(self, c: Candidate) -> str | None:
         rec = self.last(c.key, c.t)
-        if rec is None or (c.news and not rec.projected):   # news, unless a projection already told it
+        return None if rec is None else self._verdict_on(c, rec)
+
+    def _verdict_on(self, c: Candidate, rec: Record) -> str | None:
+        """Why `c` is suppressed given the unexpired alert `rec` on its key (None: give it)."""
+        if c.news and not rec.projected:   # news, unless a projection already told it
             return None
         ratio = self.repeat.get(c.type, 0.0)
         if rec.projected:   # the violation a projection told: the same story, unless much worse

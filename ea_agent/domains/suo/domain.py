@@ -62,7 +62,8 @@ class SuoDomain:
         self.dirty_tracks: set[str] = set()
         self.unit_pos: dict[str, tuple[float, float] | None] = {}
         self.unit_now: dict[str, tuple[float, float] | None] = {}
-        self._reckon_until = -math.inf   # scenario time until which some member is dead-reckoned
+        self._reckon_until: float | None = -math.inf   # until when some member is dead-reckoned (None: not yet computed)
+        self._reckon_h = 0.0
         self._unit_c: np.ndarray | None = None   # unit centroids of the last update (rows: pic.units)
         self._foreign = True
         self.detectors: list[Detector] = [cls(self) for cls in DETECTORS]
@@ -454,6 +455,7 @@ class SuoDomain:
     def flush_quiet(self) -> None:
         """Bring the picture fully up to date with reports the watchman held back."""
         if self.watchman.quiet:
+            self._reckoning_until()   # fixed before these reports change the velocities
             self.pic.apply_locations(self.watchman.quiet)
             self.watchman.quiet = []
 
@@ -466,7 +468,7 @@ class SuoDomain:
             up = self._up
             dirty_units = dirty_units.union(*[up[leaf] for leaf in self.dirty_leaves])
             self._update_positions(t)
-        elif t <= self._reckon_until:   # members still dead-reckoned: their estimate moves on
+        elif t <= self._reckoning_until():   # members still dead-reckoned: their estimate moves on
             self._update_positions(t)
         ch = Changes(self.dirty_leaves, dirty_units, self.dirty_tracks, t >= self.next_scan)
         cands: list[Candidate] = []
@@ -487,17 +489,33 @@ class SuoDomain:
         report up to a minute old puts a moving unit hundreds of metres off)."""
         horizon = float(self.voi_cfg["dead_reckon_s"])
         pic = self.pic
-        leaf_c, unit_c, now_c = pic.positions(t, horizon)
+        leaf_c, unit_c = pic.positions(t, horizon)
         self.leaf_xy = leaf_c
         units = pic.units
-        self.unit_pos = _by_unit(units, unit_c)
-        self.unit_now = _by_unit(units, now_c)
-        vel = pic.vel
-        moving = (vel[:, 0] != 0.0) | (vel[:, 1] != 0.0)
-        self._reckon_until = float(np.max(pic.moved_t, where=moving, initial=-math.inf)) + horizon
-        self._unit_c = unit_c
+        xs, ys, rxs, rys = unit_c.T.tolist()
+        if (s := sum(xs) + sum(rxs)) == s:   # no NaN: every unit known (the usual case), built in C
+            self.unit_pos = dict(zip(units, zip(xs, ys)))
+            self.unit_now = dict(zip(units, zip(rxs, rys)))
+        else:
+            self.unit_pos = _by_unit(units, xs, ys)
+            self.unit_now = _by_unit(units, rxs, rys)
+        # when dead reckoning stops moving anyone: asked only on an epoch without reports
+        self._reckon_until = None
+        self._reckon_h = horizon
+        self._unit_c = unit_c[:, :2]
         if self._foreign:   # the area of interest only filters entities not our own
             self._set_bbox()
+
+    def _reckoning_until(self) -> float:
+        """Scenario time until which some member is dead-reckoned, as of the last
+        `_update_positions` (computed when first asked; the picture's velocities have
+        not changed since: see `flush_quiet`)."""
+        if self._reckon_until is None:
+            pic = self.pic
+            vel = pic.vel
+            moving = (vel[:, 0] != 0.0) | (vel[:, 1] != 0.0)
+            self._reckon_until = float(np.max(pic.moved_t, where=moving, initial=-math.inf)) + self._reckon_h
+        return self._reckon_until
 
     def _set_bbox(self) -> None:
         """The watchman's area of interest around our units' centroids of the last update."""
@@ -512,7 +530,7 @@ class SuoDomain:
         return render.to_alert(c, self.owner, CATEGORY)
 
 
-def _by_unit(units: list[str], xy: np.ndarray) -> dict[str, tuple[float, float] | None]:
+def _by_unit(units: list[str], xs: list[float], ys: list[float]) -> dict[str, tuple[float, float] | None]:
     """Unit -> (x, y), None where unknown (NaN)."""
-    return dict(zip(units, [None if x != x else (x, y) for x, y in xy.tolist()]))
+    return dict(zip(units, [None if x != x else (x, y) for x, y in zip(xs, ys)]))
 
