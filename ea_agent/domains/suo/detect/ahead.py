@@ -25,7 +25,7 @@ class ThreatsAhead(Detector):
         self._watched: tuple = (None, -1, None, None, [], [])
         self._box: tuple | None = None   # rebuilt when a corridor is added (see _near_any_line)
         self._box_lines = 0
-        self._boxes_of: tuple | None = None   # (watched lines' bounds, their union box, each one's box)
+        self._boxes_of: tuple | None = None   # (watched lines' bounds, their union box, each one's box, the width)
 
     def org_changed(self) -> None:
         self._box = None   # the missions in our plan changed
@@ -154,17 +154,18 @@ class ThreatsAhead(Detector):
 
     def _boxes(self, watched: list, bounds: list) -> tuple[tuple[float, ...], list[tuple[float, ...]]]:
         """Each watched line's bounds widened by its mission's ahead width, and the bounds of
-        them all widened by the widest (kept while the watched list is the same one)."""
-        c = self._boxes_of
-        if c is not None and c[0] is bounds:
-            return c[1], c[2]
+        them all widened by the widest (kept while the watched list and the width are the same)."""
         dom = self.dom
+        width = dom.voi_cfg["ahead_width_m"]   # set live
+        c = self._boxes_of
+        if c is not None and c[0] is bounds and c[3] == width:
+            return c[1], c[2]
         ws = [dom.voi(m, "ahead_width_m") for m, _ in watched]
         w = max(ws)
         union = (min(b[0] for b in bounds) - w, min(b[1] for b in bounds) - w,
                  max(b[2] for b in bounds) + w, max(b[3] for b in bounds) + w)
         boxes = [(b[0] - wm, b[1] - wm, b[2] + wm, b[3] + wm) for b, wm in zip(bounds, ws)]
-        self._boxes_of = (bounds, union, boxes)
+        self._boxes_of = (bounds, union, boxes, width)
         return union, boxes
 
     def candidate(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],

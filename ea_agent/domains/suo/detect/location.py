@@ -156,14 +156,15 @@ class LocationMonitors(Detector):
     def _running_monitors(self) -> list[tuple[str, list[tuple], list[tuple]]]:
         """Per active mission of ours with monitors, in the order they were posted: its unit, its
         centroid monitors (with what judging them needs: see _centroid_entry) and its other ones.
-        Rebuilt only when a plan state, a monitor, a corridor or the organization changed
-        (scanning every mission per epoch was a large part of this detector's cost)."""
+        Rebuilt only when a plan state, a monitor, a corridor, the organization or the threshold
+        changed (scanning every mission per epoch was a large part of this detector's cost)."""
         dom = self.dom
         state = dom.plan.state
         version = getattr(state, "version", None)
         c = self._running
+        thr = dom.voi_cfg["out_of_position_m"]   # thresholds are set live (commanders lower them)
         if (c is not None and version is not None and c[0] is dom.plan and c[1] is state and c[2] == version
-                and c[3] is dom.own_units and c[4] == self._rev):
+                and c[3] is dom.own_units and c[4] == self._rev and c[6] == thr):
             return c[5]
         out = []
         for mid, mons in self.monitors.items():
@@ -175,13 +176,13 @@ class LocationMonitors(Detector):
             if mine:
                 out.append((m.unit, [self._centroid_entry(mon) for mon in mine if mon[2] == "centroid"],
                             [mon for mon in mine if mon[2] != "centroid"]))
-        self._running = (dom.plan, state, version, dom.own_units, self._rev, out)
+        self._running = (dom.plan, state, version, dom.own_units, self._rev, out, thr)
         return out
 
     def _centroid_entry(self, mon: tuple[Mission, str, str, str]) -> tuple:
         """A centroid monitor with its anchor key, geometry, threshold and the bound under which
-        a distance is surely within it (fixed while the monitor runs: a rebuilt corridor bumps
-        the revision the running monitors are kept by)."""
+        a distance is surely within it (a rebuilt corridor bumps the revision the running
+        monitors are kept by, a threshold set anew rebuilds them)."""
         m, g, _, what = mon
         thr = self.dom.voi(m, "out_of_position_m")
         return mon, m.unit, (m.id, g, what), self._geom(g, what), thr, thr * (1.0 - 1e-9) - 1e-6
