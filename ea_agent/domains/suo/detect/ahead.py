@@ -25,6 +25,7 @@ class ThreatsAhead(Detector):
         self._watched: tuple = (None, -1, None, None, [], [])
         self._box: tuple | None = None   # rebuilt when a corridor is added (see _near_any_line)
         self._box_lines = 0
+        self._boxes_of: tuple | None = None   # (watched lines' bounds, their union box, each one's box, the width)
 
     def org_changed(self) -> None:
         self._box = None   # the missions in our plan changed
@@ -131,18 +132,18 @@ class ThreatsAhead(Detector):
         watched, bounds = self._watched_with_bounds()
         if not watched:
             return
-        w = max(dom.voi(m, "ahead_width_m") for m, _ in watched)
-        x0, y0 = min(b[0] for b in bounds) - w, min(b[1] for b in bounds) - w
-        x1, y1 = max(b[2] for b in bounds) + w, max(b[3] for b in bounds) + w
-        if not any(x0 <= x <= x1 and y0 <= y <= y1 for _, x, y in live):
+        (x0, y0, x1, y1), boxes = self._boxes(watched, bounds)
+        near = [(i, x, y) for i, (_, x, y) in enumerate(live) if x0 <= x <= x1 and y0 <= y <= y1]
+        if not near:
             return   # no track anywhere near any moving unit's line
         xy = pts = None
-        for (m, line), (bx0, by0, bx1, by1) in zip(watched, bounds):
-            wm = dom.voi(m, "ahead_width_m")
-            bx0, by0, bx1, by1 = bx0 - wm, by0 - wm, bx1 + wm, by1 + wm
-            box = [bx0 <= x <= bx1 and by0 <= y <= by1 for _, x, y in live]
-            if not any(box):
-                continue   # most of the time no track is anywhere near this line
+        for (m, line), (bx0, by0, bx1, by1) in zip(watched, boxes):
+            # only tracks in the union of the boxes can be in this one (most of the time none is)
+            if not any(bx0 <= x <= bx1 and by0 <= y <= by1 for _, x, y in near):
+                continue
+            box = [False] * len(live)
+            for i, x, y in near:
+                box[i] = bx0 <= x <= bx1 and by0 <= y <= by1
             if xy is None:
                 xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
                 pts = shapely.points(xy)
@@ -150,6 +151,22 @@ class ThreatsAhead(Detector):
             if hit is not None and hit.any():
                 inside = [k for (k, _, _), ok in zip(live, hit.tolist()) if ok]
                 m.respond_to_threat_ahead(dom, t, inside, sum(tracks[k].strength for k in inside))
+
+    def _boxes(self, watched: list, bounds: list) -> tuple[tuple[float, ...], list[tuple[float, ...]]]:
+        """Each watched line's bounds widened by its mission's ahead width, and the bounds of
+        them all widened by the widest (kept while the watched list and the width are the same)."""
+        dom = self.dom
+        width = dom.voi_cfg["ahead_width_m"]   # set live
+        c = self._boxes_of
+        if c is not None and c[0] is bounds and c[3] == width:
+            return c[1], c[2]
+        ws = [dom.voi(m, "ahead_width_m") for m, _ in watched]
+        w = max(ws)
+        union = (min(b[0] for b in bounds) - w, min(b[1] for b in bounds) - w,
+                 max(b[2] for b in bounds) + w, max(b[3] for b in bounds) + w)
+        boxes = [(b[0] - wm, b[1] - wm, b[2] + wm, b[3] + wm) for b, wm in zip(bounds, ws)]
+        self._boxes_of = (bounds, union, boxes, width)
+        return union, boxes
 
     def candidate(self, m: Mission, t: float, tracks: list[str], strength: int, options: list[str],
                   recommended: str) -> Candidate:

@@ -20,6 +20,8 @@ from ..render import km
 from .base import Changes, Detector
 from .geometry import judged_distance, judged_distance_swept
 
+_NAN_ALLOW = np.intc(0)   # shapely.lib.points' handle_nan: allow (shapely.points' default)
+
 
 RECHECK_S = 30.0          # units that did not move are judged this often (they move nothing but the clock)
 CORRIDOR_BACK_M = 300.0   # a corridor reaches this far behind its start (its start is an estimate: a
@@ -40,16 +42,19 @@ class LocationMonitors(Detector):
     TYPES = {"out-of-position": "plan-constraint-violated"}
 
     def reset(self) -> None:
-        self.monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)
+        self.monitors: dict[str, list[tuple[Mission, str, str, str]]] = defaultdict(list)   # only via post
         self.corridor_to: dict[str, tuple[Mission, str]] = {}   # mission -> (it, where its corridor leads)
         self.corridors: dict[str, object] = {}                   # mission -> corridor (built at start)
         self.lines: dict[str, object] = {}                       # ... the line of it (to the target's edge)
         self.corridor_of: dict[str, tuple] = {}                  # ... its start and the members it judges
         self.next_all = 0.0                                      # when units that did not move are judged next
         self.anchors: dict[tuple[str, str, str], Anchor] = {}   # (mission, geometry id, check) -> last measured
+        self._rev = 0            # bumped whenever a monitor or corridor is added or dropped
+        self._running: tuple | None = None   # (what it was built from, the running monitors: see _running_monitors)
 
     def post(self, m: Mission, geom: str, rule: str, what: str) -> None:
         self.monitors[m.id].append((m, geom, rule, what))
+        self._rev += 1
 
     def post_corridor(self, m: Mission, target: str) -> None:
         """A route for a mission that has none: from where the unit is at its start to
@@ -85,6 +90,7 @@ class LocationMonitors(Detector):
         self.lines[m.id] = shapely.LineString([(x0 - (x1 - x0) * back, y0 - (y1 - y0) * back), (x1, y1)])
         self.corridors[m.id] = shapely.union(self.lines[m.id], area)
         self.corridor_of[m.id] = (pos, self.dom.pic.members[m.unit].copy())
+        self._rev += 1
 
     def _pending_corridors(self) -> None:
         """Running missions whose corridor could not be built at their start (position unknown)."""
@@ -117,6 +123,7 @@ class LocationMonitors(Detector):
         self.corridors.pop(mid, None)
         self.lines.pop(mid, None)
         self.corridor_to.pop(mid, None)
+        self._rev += 1
 
     def check(self, m: Mission, geom_id: str, rule: str, t: float, what: str) -> None:
         """A one-off check (start or end of a mission), alerted at once."""
@@ -134,68 +141,91 @@ class LocationMonitors(Detector):
             self.next_all = t + RECHECK_S
         if every and len(self.corridors) < len(self.corridor_to):
             self._pending_corridors()
-        todo = self._todo(every, ch.units)
-        cands.extend(self._centroid_candidates(t, [mon for mon in todo if mon[2] == "centroid"]))
-        for m, g, rule, what in todo:
-            if rule != "centroid":
-                c = self._oop(m, g, rule, what, t)
-                if c is not None:
-                    cands.append(c)
+        cents, others = [], []
+        for unit, c, o in self._running_monitors():
+            if every or unit in ch.units:
+                cents += c
+                others += o
+        if cents:
+            cands.extend(self._centroid_candidates(t, cents))
+        for m, g, rule, what in others:
+            c = self._oop(m, g, rule, what, t)
+            if c is not None:
+                cands.append(c)
 
-    def _todo(self, every: bool, units: set[str]) -> list[tuple[Mission, str, str, str]]:
-        """The monitors of active missions of ours whose unit moved (all of them when `every`),
-        in the order they were posted."""
+    def _running_monitors(self) -> list[tuple[str, list[tuple], list[tuple]]]:
+        """Per active mission of ours with monitors, in the order they were posted: its unit, its
+        centroid monitors (with what judging them needs: see _centroid_entry) and its other ones.
+        Rebuilt only when a plan state, a monitor, a corridor, the organization or the threshold
+        changed (scanning every mission per epoch was a large part of this detector's cost)."""
         dom = self.dom
         state = dom.plan.state
-        todo = []
+        version = getattr(state, "version", None)
+        c = self._running
+        thr = dom.voi_cfg["out_of_position_m"]   # thresholds are set live (commanders lower them)
+        if (c is not None and version is not None and c[0] is dom.plan and c[1] is state and c[2] == version
+                and c[3] is dom.own_units and c[4] == self._rev and c[6] == thr):
+            return c[5]
+        out = []
         for mid, mons in self.monitors.items():
-            if not mons:
+            if not mons or state.get(mid) != "active":
                 continue
             m = mons[0][0]
-            if (every or m.unit in units) and state.get(mid) == "active":
-                ours = dom.in_plan(m)
-                for mon in mons:
-                    if ours if mon[0] is m else dom.in_plan(mon[0]):
-                        todo.append(mon)
-        return todo
+            ours = dom.in_plan(m)
+            mine = [mon for mon in mons if (ours if mon[0] is m else dom.in_plan(mon[0]))]
+            if mine:
+                out.append((m.unit, [self._centroid_entry(mon) for mon in mine if mon[2] == "centroid"],
+                            [mon for mon in mine if mon[2] != "centroid"]))
+        self._running = (dom.plan, state, version, dom.own_units, self._rev, out, thr)
+        return out
 
-    def _centroid_candidates(self, t: float, mons: list[tuple[Mission, str, str, str]]) -> list[Candidate]:
-        """Centroid-judged monitors. A distance is 1-Lipschitz in the position, so a unit whose
-        last measured distance plus how far it moved since is still within the threshold is
-        within it: only the others are measured (one vectorised call for all of them)."""
-        dom = self.dom
+    def _centroid_entry(self, mon: tuple[Mission, str, str, str]) -> tuple:
+        """A centroid monitor with its anchor key, geometry, threshold and the bound under which
+        a distance is surely within it (a rebuilt corridor bumps the revision the running
+        monitors are kept by, a threshold set anew rebuilds them)."""
+        m, g, _, what = mon
+        thr = self.dom.voi(m, "out_of_position_m")
+        return mon, m.unit, (m.id, g, what), self._geom(g, what), thr, thr * (1.0 - 1e-9) - 1e-6
+
+    def _centroid_candidates(self, t: float, entries: list[tuple]) -> list[Candidate]:
+        """Centroid-judged monitors (entries of _centroid_entry). A distance is 1-Lipschitz in the
+        position, so a unit whose last measured distance plus how far it moved since is still
+        within the threshold is within it: only the others are measured (one vectorised call
+        for all of them, straight to shapely.lib: the wrappers' overhead is most of the cost)."""
+        unit_pos = self.dom.unit_pos
         anchors = self.anchors
+        hypot = math.hypot
         judged = []    # (monitor, anchor key, threshold) of the monitors that may be out
         measure = []   # (anchor key, geometry, position) whose distance is not known
-        for mon in mons:
-            m, g, _, what = mon
-            pos = dom.unit_pos.get(m.unit)
+        for mon, unit, key, geom, thr, lim in entries:
+            pos = unit_pos.get(unit)
             if not pos:
                 continue
-            key = (m.id, g, what)
-            geom = self._geom(g, what)
-            thr = dom.voi(m, "out_of_position_m")
             a = anchors.get(key)
             if a is None or a.geom is not geom:
                 measure.append((key, geom, pos))
             elif a.x != pos[0] or a.y != pos[1]:
-                if a.d + math.hypot(pos[0] - a.x, pos[1] - a.y) < thr * (1.0 - 1e-9) - 1e-6:
+                if a.d + hypot(pos[0] - a.x, pos[1] - a.y) < lim:
                     continue
                 measure.append((key, geom, pos))
             judged.append((mon, key, thr))
+        if not judged:
+            return []
         if measure:
-            ds = shapely.distance(np.array([geom for _, geom, _ in measure], dtype=object),
-                                  shapely.points(np.array([pos for _, _, pos in measure]))).tolist()
+            pts = shapely.lib.points(np.array([pos for _, _, pos in measure], dtype=float), _NAN_ALLOW)
+            ds = shapely.lib.distance(np.array([geom for _, geom, _ in measure], dtype=object), pts).tolist()
             for (key, geom, (x, y)), d in zip(measure, ds):
                 anchors[key] = Anchor(geom, x, y, d, None)
-        out = [(mon, anchors[key]) for mon, key, thr in judged if anchors[key].d > thr]
-        need = [(mon, a) for mon, a in out if a.near is None]
+        out = [(mon, key, anchors[key]) for mon, key, thr in judged if anchors[key].d > thr]
+        need = [(key, a) for _, key, a in out if a.near is None]
         if need:   # the nearest points, for the bearing the message gives
-            lines = shapely.shortest_line(shapely.points(np.array([(a.x, a.y) for _, a in need])),
-                                          np.array([a.geom for _, a in need], dtype=object))
-            for (mon, a), near in zip(need, shapely.get_coordinates(lines)[1::2].tolist()):
-                anchors[mon[0].id, mon[1], mon[3]] = a._replace(near=tuple(near))
-        return [self._oop(m, g, rule, what, t, a.d, anchors[m.id, g, what].near) for (m, g, rule, what), a in out]
+            lines = shapely.lib.shortest_line(
+                shapely.lib.points(np.array([(a.x, a.y) for _, a in need], dtype=float), _NAN_ALLOW),
+                np.array([a.geom for _, a in need], dtype=object))
+            near = shapely.lib.get_coordinates(lines, False, False, False)[1::2].tolist()
+            for (key, a), p in zip(need, near):
+                anchors[key] = a._replace(near=tuple(p))
+        return [self._oop(m, g, rule, what, t, a.d, anchors[key].near) for (m, g, rule, what), key, a in out]
 
     def _geom(self, geom_id: str, what: str):
         """Routes and axes are judged by distance to the line; everything else to its area."""

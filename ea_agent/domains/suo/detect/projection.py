@@ -39,6 +39,7 @@ class Projections(Detector):
         self.routes: dict[str, tuple] = {}      # mission -> (its monitor list, its length, _route of it)
         self.beyond: dict[tuple, tuple] = {}    # (route, destination) -> (line, area, length, end to area)
         self.active: tuple | None = None        # (plan states, their version, the active mission ids)
+        self.plans: tuple | None = None         # (what they were built from, _Plans of the watched missions)
 
     def observe(self, t: float, ch: Changes) -> None:
         """Every SAMPLE_S of scenario time (a trend over minutes needs no finer samples),
@@ -49,37 +50,66 @@ class Projections(Detector):
         if dom.plan is None or t < self.next_t or float(dom.voi_cfg["projection_horizon_s"]) <= 0.0:
             return
         self.next_t = t + SAMPLE_S
-        self.due = self._watched()
-        rows = []   # (mission, its history, where it is now)
-        for m in self.due:
+        plans = self._plans()
+        self.due = plans.due
+        rows = []   # (index in due, its history, where it is now)
+        for i, m in enumerate(self.due):
             pos = dom.unit_now.get(m.unit)   # where reports up to a minute old put it now (dead-reckoned)
             if pos is None:
                 continue
-            h = self.hist.setdefault(m.id, deque())
-            if h and h[-1][0] >= t:
+            h = self.hist.get(m.id)
+            if h is None:
+                h = self.hist[m.id] = deque()
+            elif h and h[-1][0] >= t:
                 continue
-            rows.append((m, h, pos))
+            rows.append((i, h, pos))
         if not rows:
             return
-        for (m, h, _), off, to_go in zip(rows, *self._measure([m for m, _, _ in rows], [pos for _, _, pos in rows])):
+        if len(rows) == len(self.due):
+            measured = plans.measure([pos for _, _, pos in rows])
+        else:
+            measured = self._measure([self.due[i] for i, _, _ in rows], [pos for _, _, pos in rows])
+        old = t - KEEP_S
+        for (_, h, _), off, to_go in zip(rows, *measured):
             h.append((t, off, to_go))
-            while h and h[0][0] < t - KEEP_S:
+            while h and h[0][0] < old:
                 h.popleft()
+
+    def _plans(self) -> "_Plans":
+        """The watched missions and how each is measured, kept until a plan state, the
+        organization or a location monitor changes (the same scan of every active mission
+        at every sample otherwise)."""
+        dom = self.dom
+        state = dom.plan.state
+        version = getattr(state, "version", None)
+        loc = dom.location
+        c = self.plans
+        if (c is not None and version is not None and c[0] is dom.plan and c[1] is state and c[2] == version
+                and c[3] is dom.own_units and c[4] == loc._rev and c[5] is dom.missions):
+            return c[6]
+        due = self._watched()
+        plans = _Plans(due, *self._how(due))
+        self.plans = (dom.plan, state, version, dom.own_units, loc._rev, dom.missions, plans)
+        return plans
 
     def _measure(self, ms: list[Mission], where: list) -> tuple[list, list]:
         """Each mission's distance off its route (None without one) and still to go (along its
         route, then on to its destination; None without a destination and a deadline), with
         one vectorised GEOS call per kind of measure for all of them (per-call overhead is
         most of the cost for a few missions)."""
+        return _Plans(ms, *self._how(ms)).measure(where)
+
+    def _how(self, ms: list[Mission]) -> tuple[list, list]:
+        """How _measure measures the missions: plain distances from the position (index, to
+        which list, geometry) and along a route (index, its line, the route's length and its
+        end's distance to the destination)."""
         dom = self.dom
-        off: list[float | None] = [None] * len(ms)
-        to_go: list[float | None] = [None] * len(ms)
-        dist = []    # (index, which list, geometry): plain distances from the position
-        along = []   # (index, route line, the route's length and its end's distance to the destination)
+        dist = []
+        along = []
         for i, m in enumerate(ms):
             r = self._route(m)
             if r is not None:
-                dist.append((i, off, self._line(r)))
+                dist.append((i, "off", self._line(r)))
             dest = self._destination(m)
             if dest is None:
                 continue
@@ -87,19 +117,8 @@ class Projections(Detector):
                 line = dom.overlay[r[0]].geom
                 along.append((i, line, self._beyond(r[0], line, dest)))
             else:
-                dist.append((i, to_go, dom.overlay[dest].area))
-        pts = shapely.points(np.array(where, dtype=float))
-        if dist:
-            idx = [i for i, _, _ in dist]
-            ds = shapely.distance(np.array([g for _, _, g in dist], dtype=object), pts[idx]).tolist()
-            for (i, out, _), d in zip(dist, ds):
-                out[i] = d
-        if along:
-            idx = [i for i, _, _ in along]
-            at = shapely.line_locate_point(np.array([line for _, line, _ in along], dtype=object), pts[idx]).tolist()
-            for (i, _, (length, rest)), x in zip(along, at):
-                to_go[i] = length - x + rest
-        return off, to_go
+                dist.append((i, "to_go", dom.overlay[dest].area))
+        return dist, along
 
     def _beyond(self, rid: str, line, dest: str) -> tuple[float, float]:
         """A route's length and the distance from its end to the destination (fixed per pair)."""
@@ -231,3 +250,37 @@ class Projections(Detector):
                      "nlt_t": end, "late_s": None if math.isinf(late) else round(late, 1), "to_go_m": round(g1, 1),
                      "closing_mps": round(closing, 2), "threshold_s": thr_s, "places": [dest]},
             also=((("schedule", m.id, "end"), thr_s),), projection=True))
+
+
+_NAN_ALLOW = np.intc(0)   # shapely.lib.points' handle_nan: allow (shapely.points' default)
+
+
+class _Plans:
+    """How a list of missions is measured (Projections._how), with the index and geometry
+    arrays of its vectorised GEOS calls built once, called straight on shapely.lib (the
+    wrappers' overhead is a good part of a call on a few points)."""
+
+    def __init__(self, due: list[Mission], dist: list, along: list):
+        self.due = due
+        self.dist = [(i, which == "off") for i, which, _ in dist]
+        self.dist_idx = np.array([i for i, _, _ in dist], dtype=np.intp)
+        self.dist_geoms = np.array([g for _, _, g in dist], dtype=object)
+        self.along = [(i, length, rest) for i, _, (length, rest) in along]
+        self.along_idx = np.array([i for i, _, _ in along], dtype=np.intp)
+        self.along_lines = np.array([line for _, line, _ in along], dtype=object)
+
+    def measure(self, where: list) -> tuple[list, list]:
+        """Projections._measure of the missions at `where` (one position per mission)."""
+        n = len(where)
+        off: list[float | None] = [None] * n
+        to_go: list[float | None] = [None] * n
+        pts = shapely.lib.points(np.array(where, dtype=float), _NAN_ALLOW)
+        if self.dist:
+            ds = shapely.lib.distance(self.dist_geoms, pts[self.dist_idx]).tolist()
+            for (i, is_off), d in zip(self.dist, ds):
+                (off if is_off else to_go)[i] = d
+        if self.along:
+            at = shapely.lib.line_locate_point(self.along_lines, pts[self.along_idx]).tolist()
+            for (i, length, rest), x in zip(self.along, at):
+                to_go[i] = length - x + rest
+        return off, to_go
