@@ -9,7 +9,7 @@ from ea_agent.core.alert import Candidate
 from ..missions import Mission
 from ..render import km
 from .base import Changes, Detector
-from .geometry import judged_distance
+from .geometry import PointCoords, judged_distance
 
 
 class Coordination(Detector):
@@ -19,7 +19,7 @@ class Coordination(Detector):
 
     def reset(self) -> None:
         self.pending: dict[str, tuple[Mission, str, str, float]] = {}
-        self._points: dict[str, tuple] = {}   # measure -> (its geometry, its point's x, y or None)
+        self._point = PointCoords(self.dom)
 
     def post(self, m: Mission, partner: str, point: str, at: float, fuzz: float) -> None:
         dom = self.dom
@@ -54,15 +54,6 @@ class Coordination(Detector):
             if all(self._within(point, u, radius) for u in (m.unit, partner)):
                 dom.timers.occurred(("coord", mid), t)
                 del self.pending[mid]
-
-    def _point(self, point: str) -> tuple[float, float] | None:
-        """The measure's coordinates when it is a point (read once: shapely's accessors cost
-        microseconds), else None."""
-        g = self.dom.overlay[point].geom
-        hit = self._points.get(point)
-        if hit is None or hit[0] is not g:
-            hit = self._points[point] = (g, (g.x, g.y) if g.geom_type == "Point" else None)
-        return hit[1]
 
     def _within(self, point: str, unit: str, radius: float) -> bool:
         """Whether some element of `unit` is within `radius` of `point` (as judged_distance

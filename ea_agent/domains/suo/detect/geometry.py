@@ -85,3 +85,19 @@ class AreaIndex:
             if len(hit):
                 out[self.ids[k]] = hit
         return out
+
+
+class PointCoords:
+    """(x, y) of the overlay measures that are points, None for the others: read once per
+    geometry, as shapely's accessors cost microseconds and detectors ask every epoch."""
+
+    def __init__(self, dom) -> None:
+        self.dom = dom
+        self._hit: dict[str, tuple] = {}   # measure -> (its geometry, its x, y or None)
+
+    def __call__(self, point: str) -> tuple[float, float] | None:
+        g = self.dom.overlay[point].geom
+        hit = self._hit.get(point)
+        if hit is None or hit[0] is not g:
+            hit = self._hit[point] = (g, (g.x, g.y) if g.geom_type == "Point" else None)
+        return hit[1]

@@ -13,6 +13,7 @@ from ea_agent.core.alert import Candidate
 
 from ..missions import Mission
 from .base import Changes, Detector
+from .geometry import PointCoords
 
 
 NEAR_M = 1500.0   # a unit's elements are no farther than this from its centroid
@@ -24,22 +25,13 @@ class Presence(Detector):
     def reset(self) -> None:
         # mission -> [it, partner, point, lane or None, partner was at the point, relieving unit arrived, told]
         self.watch: dict[str, list] = {}
-        self._points: dict[str, tuple] = {}   # measure -> (its geometry, its point's x, y or None)
+        self._point = PointCoords(self.dom)
 
     def post(self, m: Mission, partner: str, point: str, lane: str | None) -> None:
         self.watch[m.id] = [m, partner, point, lane, False, False]
 
     def end_mission(self, mid: str) -> None:
         self.watch.pop(mid, None)
-
-    def _point(self, point: str) -> tuple[float, float] | None:
-        """The measure's coordinates when it is a point (read once: shapely's accessors cost
-        microseconds), else None."""
-        g = self.dom.overlay[point].geom
-        hit = self._points.get(point)
-        if hit is None or hit[0] is not g:
-            hit = self._points[point] = (g, (g.x, g.y) if g.geom_type == "Point" else None)
-        return hit[1]
 
     def _at(self, unit: str, point: str, radius: float) -> np.ndarray:
         """The unit's members (positions) within `radius` of `point` (from a point, GEOS's
