@@ -8,140 +8,31 @@ Geometry is written in local metres east/north of the generator's origin (UTM 11
 friendly units are two entities 20 m apart whose centroid is the given point."""
 from __future__ import annotations
 
-import json
 import re
 
 import pytest
 
-from ea_agent.core.geo import Projection
-from ea_agent.domains.suo.generator import ORIGIN_LONLAT
-from ea_agent.domains.suo.messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
+from ea_agent.domains.suo.messages import Order, Reorganization
 from ea_agent.domains.suo.detect.location import RECHECK_S
 from ea_agent.domains.suo.missions import REGISTRY
 from saim_mesh import cli
 from saim_mesh import scenario as S
 from saim_mesh.runner import config_for, make_ea
 
-EPSG = 32611
-PROJ = Projection(EPSG)
-OX, OY = PROJ.to_xy(*ORIGIN_LONLAT)
-EPOCH = 2.0   # configs/ea.toml manager.epoch_s: an alert found by a detector is dated at its epoch's end
-REPORT_S = 10.0
+from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, box, edited, end, line, mission, near, play, start,
+                        track, track_path)
 
-# BN > A > (A1, A2), BN > B > B1: platoons hold their two entities directly.
-ORG = {"BN": ("battalion", None), "A": ("company", "BN"), "A1": ("platoon", "A"), "A2": ("platoon", "A"),
-       "B": ("company", "BN"), "B1": ("platoon", "B")}
-ENTITIES = {u: (f"{u}E1", f"{u}E2") for u, (kind, _) in ORG.items() if kind == "platoon"}
-
-
-# ----------------------------------------------------------------------------- builders
-def ll(x: float, y: float) -> list[float]:
-    lon, lat = PROJ.to_lonlat(OX + x, OY + y)
-    return [float(lon), float(lat)]
-
-
-def box(fid: str, kind: str, x0: float, y0: float, x1: float, y1: float, **props) -> dict:
-    ring = [ll(x0, y0), ll(x1, y0), ll(x1, y1), ll(x0, y1), ll(x0, y0)]
-    return {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
-            "properties": {"id": fid, "kind": kind, **props}}
-
-
-def line(fid: str, kind: str, *pts: tuple[float, float], **props) -> dict:
-    return {"type": "Feature", "geometry": {"type": "LineString", "coordinates": [ll(x, y) for x, y in pts]},
-            "properties": {"id": fid, "kind": kind, **props}}
-
-
-def mission(mid: str, unit: str, typ: str, start: dict | None = None, end: dict | None = None, **params) -> dict:
-    m = {"id": mid, "unit": unit, "type": typ, "start": start or {"type": "ASAP"}, "params": params}
-    if end is not None:
-        m["end"] = end
-    return m
-
-
-def write(d, features: list[dict], missions: list[dict], events: list[dict] = (), attrs: dict | None = None):
-    """A scenario folder: the task organization above, `features`, one plan `main`."""
-    d.mkdir(parents=True, exist_ok=True)
-    org = []
-    for u, (kind, parent) in ORG.items():
-        org.append({"id": u, "name": u, "echelon": kind, "parent": parent, "entities": list(ENTITIES.get(u, ())),
-                    **(attrs or {}).get(u, {})})
-    (d / "scenario.json").write_text(json.dumps({"name": "check-families", "epsg": EPSG, "duration_s": 3600.0}))
-    (d / "overlay.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    (d / "plan.json").write_text(json.dumps({"task_organization": org, "plans": {"main": missions},
-                                             "initial_plan": "main"}))
-    (d / "events.jsonl").write_text("".join(json.dumps(e) + "\n" for e in events))
-    return d
-
-
-def scenario(tmp_path, features, missions, attrs=None):
-    return S.load(write(tmp_path / "sc", features, missions, attrs=attrs), events=False)
-
-
-def at(t: float, unit: str, x: float, y: float) -> list:
-    """Location reports putting `unit`'s centroid at (x, y)."""
-    a, b = ENTITIES[unit]
-    return [LocationReport(float(t), a, *ll(x - 10.0, y)), LocationReport(float(t), b, *ll(x + 10.0, y))]
+FORCE = Force(name="check-families")
+write, scenario, at, path = FORCE.write, FORCE.scenario, FORCE.at, FORCE.path
 
 
 def stays(unit: str, x: float, y: float, t0: float = 10.0, t1: float = 600.0) -> list:
-    """`unit` reporting every REPORT_S from t0 to t1 from the same place."""
-    out = []
-    t = t0
-    while t <= t1:
-        out += at(t, unit, x, y)
-        t += REPORT_S
-    return out
-
-
-def path(unit: str, t0: float, t1: float, where) -> list:
-    """`unit` reporting every REPORT_S from t0 to t1 at where(t)."""
-    out = []
-    t = t0
-    while t <= t1:
-        out += at(t, unit, *where(t))
-        t += REPORT_S
-    return out
-
-
-def track(t: float, k: str, x: float, y: float, strength: int = 4) -> SensorTrack:
-    lon, lat = ll(x, y)
-    return SensorTrack(float(t), k, lon, lat, strength, at=float(t))
-
-
-def track_path(k: str, t0: float, t1: float, where, every: float = REPORT_S, strength: int = 4) -> list:
-    out = []
-    t = t0
-    while t <= t1:
-        out.append(track(t, k, *where(t), strength))
-        t += every
-    return out
-
-
-def start(t: float, mid: str, unit: str) -> MissionConfirm:
-    return MissionConfirm(float(t), mid, unit, "start")
-
-
-def end(t: float, mid: str, unit: str) -> MissionConfirm:
-    return MissionConfirm(float(t), mid, unit, "end")
-
-
-def play(sc, msgs: list, until: float, owner: str = "A"):
-    """`owner`'s EA fed `msgs` up to `until` in time order (stable: a confirmation after the
-    reports of its instant), run to `until` on scenario time."""
-    ea = make_ea(sc, owner, config_for(sc, owner))
-    ea.start(0.0)
-    for m in sorted((m for m in msgs if m.t <= until), key=lambda m: m.t):
-        ea.submit(m)
-    ea.finish(until)
-    return ea
+    return FORCE.stays(unit, x, y, t0, t1)
 
 
 def of(ea, typ: str) -> list:
-    return [a for a in ea.alerts if a.type == typ]
-
-
-def near(t: float, want: float, tol: float = 2 * EPOCH) -> bool:
-    return want <= t <= want + tol
+    """Every alert of `typ`, the notifier's repeats included."""
+    return alerts_of(ea, typ, repeats=True)
 
 
 # ===================================================== 1. Check-Initial-Location, stationary units
@@ -657,14 +548,7 @@ ORDER_OK = {"kind": "order", "t": 50, "action": "start-mission", "plan": "main",
 
 
 def _edited(mid, **params):
-    out = json.loads(json.dumps(GOOD))
-    m = next(x for x in out if x["id"] == mid)
-    for k, v in params.items():
-        if v is None:
-            m["params"].pop(k, None)
-        else:
-            m["params"][k] = v
-    return out
+    return edited(GOOD, mid, **params)
 
 
 def test_the_well_formed_scenario_loads(tmp_path):

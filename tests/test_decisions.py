@@ -19,134 +19,37 @@ import numpy as np
 
 import pytest
 
-from ea_agent.core.geo import Projection
-from ea_agent.domains.suo.generator import ORIGIN_LONLAT
-from ea_agent.domains.suo.messages import LocationReport, MissionConfirm, SensorTrack
+from ea_agent.domains.suo.messages import MissionConfirm
 from saim_mesh import cli
 from saim_mesh import commands as C
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
 from saim_mesh.console.actions import BadRequest, CommandActions, validate
 from saim_mesh.console.state import State
-from saim_mesh.runner import config_for, make_ea
 
 from .conftest import BATTALION, SMALL
+from .synthetic import (EPOCH, EXPIRY_S, Force, alerts_of, box, end, feed, line, mission, near, play, start,
+                        track)
 
-EPSG = 32611
-PROJ = Projection(EPSG)
-OX, OY = PROJ.to_xy(*ORIGIN_LONLAT)
-EPOCH = 2.0        # configs/ea.toml manager.epoch_s: alerts are dated at their epoch's end
-REPORT_S = 10.0
 AHEAD_M = 1500.0   # configs/ea.toml voi.ahead_m
 WIDTH_M = 300.0    # voi.ahead_width_m
-EXPIRY_S = 720.0   # voa.expiry_s
 
-ORG = {"BN": ("battalion", None), "A": ("company", "BN"), "A1": ("platoon", "A"), "A2": ("platoon", "A"),
-       "B": ("company", "BN"), "B1": ("platoon", "B")}
-ENTITIES = {"A1": tuple(f"A1E{i}" for i in range(1, 7)), "A2": ("A2E1", "A2E2"), "B1": ("B1E1", "B1E2")}
-
-
-# ----------------------------------------------------------------------------- builders
-def ll(x: float, y: float) -> list[float]:
-    lon, lat = PROJ.to_lonlat(OX + x, OY + y)
-    return [float(lon), float(lat)]
-
-
-def box(fid: str, kind: str, x0: float, y0: float, x1: float, y1: float) -> dict:
-    ring = [ll(x0, y0), ll(x1, y0), ll(x1, y1), ll(x0, y1), ll(x0, y0)]
-    return {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
-            "properties": {"id": fid, "kind": kind}}
-
-
-def line(fid: str, kind: str, *pts: tuple[float, float]) -> dict:
-    return {"type": "Feature", "geometry": {"type": "LineString", "coordinates": [ll(x, y) for x, y in pts]},
-            "properties": {"id": fid, "kind": kind}}
-
-
-def mission(mid: str, unit: str, typ: str, start: dict | None = None, end: dict | None = None,
-            after: list[str] | None = None, **params) -> dict:
-    m = {"id": mid, "unit": unit, "type": typ, "start": start or {"type": "ASAP"}, "params": params}
-    if end is not None:
-        m["end"] = end
-    if after:
-        m["after"] = after
-    return m
-
-
-def write(d, features: list[dict], missions: list[dict]):
-    d.mkdir(parents=True, exist_ok=True)
-    org = [{"id": u, "name": u, "echelon": kind, "parent": parent, "entities": list(ENTITIES.get(u, ()))}
-           for u, (kind, parent) in ORG.items()]
-    (d / "scenario.json").write_text(json.dumps({"name": "decisions", "epsg": EPSG, "duration_s": 3600.0}))
-    (d / "overlay.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    (d / "plan.json").write_text(json.dumps({"task_organization": org, "plans": {"main": missions},
-                                             "initial_plan": "main"}))
-    (d / "events.jsonl").write_text("")
-    return d
+# A1 has six entities, the other platoons two
+FORCE = Force({"A1": tuple(f"A1E{i}" for i in range(1, 7)), "A2": ("A2E1", "A2E2"), "B1": ("B1E1", "B1E2")},
+              name="decisions")
+write, at, path = FORCE.write, FORCE.at, FORCE.path
 
 
 def scenario(tmp_path, missions, features=None):
-    return S.load(write(tmp_path / "sc", FEATURES if features is None else features, missions), events=False)
-
-
-def at(t: float, unit: str, x: float, y: float) -> list:
-    """Location reports putting `unit`'s centroid at (x, y)."""
-    es = ENTITIES[unit]
-    n = len(es)
-    return [LocationReport(float(t), e, *ll(x + 20.0 * (i - (n - 1) / 2), y)) for i, e in enumerate(es)]
-
-
-def path(unit: str, t0: float, t1: float, where) -> list:
-    """`unit` reporting every REPORT_S from t0 to t1 at where(t)."""
-    out, t = [], t0
-    while t <= t1:
-        out += at(t, unit, *where(t))
-        t += REPORT_S
-    return out
+    return FORCE.scenario(tmp_path, FEATURES if features is None else features, missions)
 
 
 def stays(unit: str, x: float, y: float, t0: float = 10.0, t1: float = 2000.0) -> list:
-    return path(unit, t0, t1, lambda t: (x, y))
-
-
-def track(t: float, k: str, x: float, y: float, strength: int = 4) -> SensorTrack:
-    return SensorTrack(float(t), k, *ll(x, y), strength, at=float(t))
-
-
-def start(t: float, mid: str, unit: str) -> MissionConfirm:
-    return MissionConfirm(float(t), mid, unit, "start")
-
-
-def end(t: float, mid: str, unit: str) -> MissionConfirm:
-    return MissionConfirm(float(t), mid, unit, "end")
-
-
-def feed(sc, msgs: list, until: float, owner: str = "A", ea=None, since: float = -1.0):
-    """`owner`'s EA (new, or `ea` going on) fed the messages dated in (since, until], in
-    time order (stable), and advanced to `until` (not finished: more may follow)."""
-    if ea is None:
-        ea = make_ea(sc, owner, config_for(sc, owner))
-        ea.start(0.0)
-    for m in sorted((m for m in msgs if since < m.t <= until), key=lambda m: m.t):
-        ea.submit(m)
-    ea.advance(until)
-    return ea
-
-
-def play(sc, msgs: list, until: float, owner: str = "A"):
-    ea = feed(sc, msgs, until, owner)
-    ea.finish(until)
-    return ea
+    return FORCE.stays(unit, x, y, t0, t1)
 
 
 def of(ea, typ: str, mission: str | None = None) -> list:
-    """Alerts of `typ` (not the notifier's repeats), of `mission` when given."""
-    return [a for a in ea.alerts if a.type == typ and "repeat_of" not in a.details
-            and (mission is None or a.details.get("mission") == mission)]
-
-
-def near(t: float, want: float, tol: float = 2 * EPOCH) -> bool:
-    return want <= t <= want + tol
+    return alerts_of(ea, typ, mission)
 
 
 # ----------------------------------------------------------------------------- the ground

@@ -11,138 +11,37 @@ Geometry is written in local metres east/north of the generator's origin (UTM 11
 friendly units are two entities 20 m apart whose centroid is the given point."""
 from __future__ import annotations
 
-import json
 
 import pytest
 
 from ea_agent.core.config import ConfigError
-from ea_agent.core.geo import Projection
-from ea_agent.domains.suo.generator import ORIGIN_LONLAT
-from ea_agent.domains.suo.messages import LocationReport, MissionConfirm, Order, SensorTrack
+from ea_agent.domains.suo.messages import Order
 from saim_mesh import scenario as S
 from saim_mesh.runner import config_for, make_ea
 
-EPSG = 32611
-PROJ = Projection(EPSG)
-OX, OY = PROJ.to_xy(*ORIGIN_LONLAT)
-EPOCH = 2.0        # configs/ea.toml manager.epoch_s: an alert found by a detector is dated at its epoch's end
-REPORT_S = 10.0
-EXPIRY_S = 720.0   # voa.expiry_s
+from .synthetic import (EPOCH, EXPIRY_S, REPORT_S, Force, alerts_of, box, edited, end, line, mission, play,
+                        point, start, track, track_path)
+from .synthetic import near as _near
 
-# BN > A > (A1, A2), BN > B > B1: platoons hold their two entities directly.
-ORG = {"BN": ("battalion", None), "A": ("company", "BN"), "A1": ("platoon", "A"), "A2": ("platoon", "A"),
-       "B": ("company", "BN"), "B1": ("platoon", "B")}
-ENTITIES = {u: (f"{u}E1", f"{u}E2") for u, (kind, _) in ORG.items() if kind == "platoon"}
-
-
-# ----------------------------------------------------------------------------- builders
-def ll(x: float, y: float) -> list[float]:
-    lon, lat = PROJ.to_lonlat(OX + x, OY + y)
-    return [float(lon), float(lat)]
-
-
-def box(fid: str, kind: str, x0: float, y0: float, x1: float, y1: float, **props) -> dict:
-    ring = [ll(x0, y0), ll(x1, y0), ll(x1, y1), ll(x0, y1), ll(x0, y0)]
-    return {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
-            "properties": {"id": fid, "kind": kind, **props}}
-
-
-def line(fid: str, kind: str, *pts: tuple[float, float], **props) -> dict:
-    return {"type": "Feature", "geometry": {"type": "LineString", "coordinates": [ll(x, y) for x, y in pts]},
-            "properties": {"id": fid, "kind": kind, **props}}
-
-
-def point(fid: str, x: float, y: float, kind: str = "checkpoint", **props) -> dict:
-    return {"type": "Feature", "geometry": {"type": "Point", "coordinates": ll(x, y)},
-            "properties": {"id": fid, "kind": kind, **props}}
-
-
-def mission(mid: str, unit: str, typ: str, start: dict | None = None, end: dict | None = None,
-            after: list[str] | None = None, **params) -> dict:
-    m = {"id": mid, "unit": unit, "type": typ, "start": start or {"type": "ASAP"}, "params": params}
-    if end is not None:
-        m["end"] = end
-    if after:
-        m["after"] = after
-    return m
-
-
-def write(d, features: list[dict], missions: list[dict]):
-    """A scenario folder: the task organization above, `features`, one plan `main`."""
-    d.mkdir(parents=True, exist_ok=True)
-    org = [{"id": u, "name": u, "echelon": kind, "parent": parent, "entities": list(ENTITIES.get(u, ()))}
-           for u, (kind, parent) in ORG.items()]
-    (d / "scenario.json").write_text(json.dumps({"name": "more-checks", "epsg": EPSG, "duration_s": 3600.0}))
-    (d / "overlay.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": features}))
-    (d / "plan.json").write_text(json.dumps({"task_organization": org, "plans": {"main": missions},
-                                             "initial_plan": "main"}))
-    (d / "events.jsonl").write_text("")
-    return d
+FORCE = Force(name="more-checks")
+write, at, path = FORCE.write, FORCE.at, FORCE.path
 
 
 def scenario(tmp_path, features, missions):
-    return S.load(write(tmp_path / "sc", features, missions), events=False)
-
-
-def at(t: float, unit: str, x: float, y: float) -> list:
-    """Location reports putting `unit`'s centroid at (x, y)."""
-    a, b = ENTITIES[unit]
-    return [LocationReport(float(t), a, *ll(x - 10.0, y)), LocationReport(float(t), b, *ll(x + 10.0, y))]
-
-
-def path(unit: str, t0: float, t1: float, where) -> list:
-    """`unit` reporting every REPORT_S from t0 to t1 at where(t)."""
-    out, t = [], t0
-    while t <= t1:
-        out += at(t, unit, *where(t))
-        t += REPORT_S
-    return out
+    return FORCE.scenario(tmp_path, features, missions)
 
 
 def stays(unit: str, x: float, y: float, t0: float = 10.0, t1: float = 2000.0) -> list:
-    return path(unit, t0, t1, lambda t: (x, y))
-
-
-def track(t: float, k: str, x: float, y: float, strength: int = 4) -> SensorTrack:
-    return SensorTrack(float(t), k, *ll(x, y), strength, at=float(t))
-
-
-def track_path(k: str, t0: float, t1: float, where, every: float = REPORT_S, strength: int = 4) -> list:
-    out, t = [], t0
-    while t <= t1:
-        out.append(track(t, k, *where(t), strength))
-        t += every
-    return out
-
-
-def start(t: float, mid: str, unit: str) -> MissionConfirm:
-    return MissionConfirm(float(t), mid, unit, "start")
-
-
-def end(t: float, mid: str, unit: str) -> MissionConfirm:
-    return MissionConfirm(float(t), mid, unit, "end")
-
-
-def play(sc, msgs: list, until: float, owner: str = "A", cfg: dict | None = None):
-    """`owner`'s EA (configured by `cfg`, else the defaults) fed `msgs` up to `until` in
-    time order (stable: a confirmation after the reports of its instant), run to `until`."""
-    ea = make_ea(sc, owner, cfg if cfg is not None else config_for(sc, owner))
-    ea.start(0.0)
-    for m in sorted((m for m in msgs if m.t <= until), key=lambda m: m.t):
-        ea.submit(m)
-    ea.finish(until)
-    return ea
+    return FORCE.stays(unit, x, y, t0, t1)
 
 
 def of(ea, typ: str, mission: str | None = None) -> list:
-    """Alerts of `typ` (not the notifier's repeats), of `mission` when given."""
-    return [a for a in ea.alerts if a.type == typ and "repeat_of" not in a.details
-            and (mission is None or a.details.get("mission") == mission)]
+    return alerts_of(ea, typ, mission)
 
 
 def near(t: float, want: float, tol: float = EPOCH) -> bool:
-    """At `want`, or by the end of the epoch after it."""
-    return want <= t <= want + tol
+    """At `want`, or by the end of the epoch it falls in."""
+    return _near(t, want, tol)
 
 
 def east(v: float, t0: float = 100.0, x0: float = 0.0, y: float = 0.0):
@@ -728,14 +627,7 @@ GOOD = [mission("A1-march", "A1", "tactical-road-march", route="RTE-1", destinat
 
 
 def _edited(mid, **params):
-    out = json.loads(json.dumps(GOOD))
-    m = next(x for x in out if x["id"] == mid)
-    for k, v in params.items():
-        if v is None:
-            m["params"].pop(k, None)
-        else:
-            m["params"][k] = v
-    return out
+    return edited(GOOD, mid, **params)
 
 
 def test_the_well_formed_scenario_loads(tmp_path):

@@ -10,7 +10,7 @@ import pytest
 from ea_agent.domains.suo.detect.recon import RECHECK_S
 from saim_mesh import scenario as S
 
-from .test_check_families import (EPOCH, at, box, end, mission, of, path, play, scenario, start, stays, write)
+from .test_check_families import EPOCH, box, end, mission, of, path, play, scenario, start, stays, write
 
 ZONE = box("ZONE-Z", "area", 0, 0, 2000, 1000)          # 2 km x 1 km: 8 x 4 cells of 250 m
 SCREEN = box("SCREEN-Z", "area", -100, -100, 2100, 1100)
