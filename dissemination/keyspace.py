@@ -19,12 +19,13 @@ SUO's families:
   <root>/clock                                 scenario-time ticks (ordering barrier)
   <root>/alert/<owner>/<type>                  alerts raised by an EA
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
+  <root>/rtr/<router>/<zid>                    a router's liveliness token (a link or router lost)
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
   <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing)
   <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
   <root>/cmd/<unit>/<kind>/<by>                a command to a unit's EA from the console of unit <by>
   <root>/cmdlog/<unit>                         the EA's answer to every command (CmdResult)
-  <root>/store/log                             the situation store (queryable)
+  <root>/store/log/<source>                    the situation store, per replay source (queryable)
   <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
 UV (robot team): <root>/st/<block>/<cell>/<robot>, <root>/sgt/<block>/<cell>/<robot>/<target>,
 <root>/agm/<to>/<sender> (docs/uv-domain.md).
@@ -218,6 +219,10 @@ class KeySpace:
     def alive(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/alive/{unit}/{peer}"
 
+    def router(self, name: str, zid: str = "*") -> str:
+        """A router's liveliness token: its DELETE on the far side means the router or the link to it is gone."""
+        return f"{self.root}/rtr/{name}/{zid}"
+
     def fusion_store(self, group: str) -> str:
         return f"{self.root}/store/fusion/{group}"
 
@@ -233,8 +238,10 @@ class KeySpace:
     def bye(self, unit: str) -> str:
         return f"{self.root}/bye/{unit}"
 
-    def store(self) -> str:
-        return f"{self.root}/store/log"
+    def store(self, source: str = "*") -> str:
+        """The situation store: one queryable per source of the replay (per router behind
+        routers, `main` on a flat mesh); a query on the default asks them all."""
+        return f"{self.root}/store/log/{source}"
 
     def cmd(self, unit: str, kind: str = "*", by: str = "*") -> str:
         """Commands to `unit`'s EA (ack, silence, unsilence, set, confirm, cff) from the

@@ -194,8 +194,15 @@ def cmd_replay(a) -> int:
     from .zconf import config
     sc = S.load(a.scenario)
     root = a.root or f"saim/{sc.name}"
-    return main_replay(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "replay", sc, root), root,
-                       a.speed, a.wait_peers or [], a.linger, a.until, a.window, a.state)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "replay", sc, root, **_zmode(a))
+    sources, topo = None, None
+    if a.topology:   # one client session per router: each unit's reports enter at its own command post
+        from .topology import read_resolved
+        topo, eps = read_resolved(a.topology)
+        sources = {n: config(None, [ep], a.zenoh_config, False, a.pki, "replay", sc, root, mode="client",
+                             routers=sorted(eps)) for n, ep in eps.items()}
+    return main_replay(sc, conf, root, a.speed, a.wait_peers or [], a.linger, a.until, a.window, a.state,
+                       sources, topo)
 
 
 def cmd_peer(a) -> int:
@@ -205,8 +212,8 @@ def cmd_peer(a) -> int:
     if a.unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
-    return main_peer(sc, a.unit, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc,
-                                        root), root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc, root, **_zmode(a))
+    return main_peer(sc, a.unit, conf, root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed)
 
 
 def cmd_fusion(a) -> int:
@@ -216,8 +223,36 @@ def cmd_fusion(a) -> int:
     if a.group not in sc.meta.get("fusion", {}).get("groups", {}):
         raise KeyError(f"unknown fusion group {a.group!r}: not in {sc.name}'s scenario.json")
     root = a.root or f"saim/{sc.name}"
-    return main_fusion(sc, a.group, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"fusion.{a.group}",
-                                           sc, root), root, a.shuffle)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"fusion.{a.group}", sc, root,
+                  **_zmode(a))
+    return main_fusion(sc, a.group, conf, root, a.shuffle)
+
+
+def cmd_router(a) -> int:
+    from .router import main_router
+    from .zconf import config
+    sc = S.load(a.scenario, events=False)
+    root = a.root or f"saim/{sc.name}"
+    routers = _zmode(a)["routers"] or [a.name]
+    if a.name not in routers:
+        raise KeyError(f"router {a.name!r} is not in the topology {a.topology} ({', '.join(routers)})")
+    conf = config(a.listen, a.connect, a.zenoh_config, False, a.pki, f"router.{a.name}", sc, root, mode="router",
+                  routers=routers)
+    return main_router(a.name, conf, root)
+
+
+def cmd_topology(a) -> int:
+    from . import topology as T
+    sc = S.load(a.scenario, events=False)
+    topo = T.load(a.file, sc.taskorg) if a.file else T.derive(sc.taskorg)
+    if a.out:
+        T.write(topo, a.out)
+    units = __import__("saim_mesh.mesh", fromlist=["mesh_units"]).mesh_units(sc)
+    for n, r in sorted(topo.routers.items()):
+        leaves = [u for u in units if topo.router_of(u, sc.taskorg) == n]
+        print(f"{n:>10}  cp {r.cp:<6} links {','.join(r.links) or '-':<10} {len(leaves):>3} EA peers: "
+              f"{' '.join(leaves)}")
+    return 0
 
 
 def cmd_mesh(a) -> int:
@@ -227,8 +262,16 @@ def cmd_mesh(a) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
-             console=a.console, console_linger=a.console_linger, tak=_tak_args(a))
+             console=a.console, console_linger=a.console_linger, tak=_tak_args(a),
+             topology=a.topology, link=_link_args(a))
     return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
+
+
+def _link_args(a) -> dict | None:
+    """`mesh up --topology ... --link-delay-ms D --link-loss P`: every router link emulated."""
+    if a.topology is None:
+        return None
+    return {"delay_ms": a.link_delay_ms, "loss": a.link_loss}
 
 
 def _tak_args(a) -> list[str] | None:
@@ -244,7 +287,8 @@ def cmd_tak(a) -> int:
     from .zconf import config
     sc = S.load(a.scenario, events=False)
     root = a.root or f"saim/{sc.name}"
-    return main_tak(sc, config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root), root, a)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root, **_zmode(a))
+    return main_tak(sc, conf, root, a)
 
 
 def cmd_certs(a) -> int:
@@ -312,7 +356,7 @@ def cmd_console(a) -> int:
     if unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
-    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"console.{unit}", sc, root)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"console.{unit}", sc, root, **_zmode(a))
     return main_console(sc, conf, root, unit, a.port, a.linger)
 
 
@@ -336,6 +380,15 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
+def _zmode(a) -> dict:
+    """--mode and the routers of --topology (a resolved topology written by `mesh up`)."""
+    routers: list[str] = []
+    if getattr(a, "topology", None):
+        from .topology import routers_of_resolved
+        routers = routers_of_resolved(a.topology)
+    return {"mode": getattr(a, "mode", None), "routers": routers}
+
+
 def _zenoh_args(p) -> None:
     p.add_argument("--listen", nargs="*", metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
     p.add_argument("--connect", nargs="*", metavar="ENDPOINT")
@@ -343,6 +396,10 @@ def _zenoh_args(p) -> None:
     p.add_argument("--multicast", action="store_true",
                    help="discover peers by UDP multicast scouting (a LAN) instead of configured endpoints only")
     p.add_argument("--root", help="key-expression root (default saim/<scenario name>)")
+    p.add_argument("--mode", choices=["peer", "client"], default=None,
+                   help="Zenoh mode: client when attached to a router (mesh up --topology), peer otherwise")
+    p.add_argument("--topology", metavar="JSON", help="the resolved topology `mesh up --topology` wrote "
+                   "(its routers' identities are accepted as relays)")
     p.add_argument("--pki", metavar="DIR", help="secure mode: mutual TLS with this folder's certificates "
                    "(saim-mesh certs) and the mesh's access-control rules; endpoints are then tls/...")
 
@@ -443,6 +500,26 @@ def main(argv: list[str] | None = None) -> int:
     me.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
                     help="seconds the console stays up after the scenario's end")
     me.set_defaults(fn=cmd_mesh)
+    me.add_argument("--topology", nargs="?", const="derive", default=None, metavar="TOML",
+                    help="routers at command posts (a topology file; without FILE: one router per battalion "
+                    "command post and one at the top, from the task organization); leaves attach as clients")
+    me.add_argument("--link-delay-ms", type=_seconds, default=0.0, metavar="MS",
+                    help="with --topology: one-way delay of every emulated router link")
+    me.add_argument("--link-loss", type=float, default=0.0, metavar="P",
+                    help="with --topology: share of segments lost (then retransmitted) on every router link")
+
+    ro = sub.add_parser("router", help="a Zenoh router (router mode) for one command post")
+    ro.add_argument("--scenario", required=True)
+    ro.add_argument("--name", required=True, help="the router's name in the topology")
+    _zenoh_args(ro)
+    ro.set_defaults(fn=cmd_router)
+
+    tp = sub.add_parser("topology", help="show (or write) a scenario's router topology")
+    tp.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    tp.add_argument("--file", metavar="TOML", help="check and show this topology instead of the derived one")
+    tp.add_argument("--out", metavar="TOML", help="write the topology as TOML")
+    tp.set_defaults(fn=cmd_topology)
+
     ce = sub.add_parser("certs", help="make a test CA and a certificate per identity of a scenario's mesh")
     ce.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     ce.add_argument("--out", default="out/pki")

@@ -26,8 +26,9 @@ def _sec(pki: str | Path | None) -> list[str]:
 
 def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed: str = "max",
                  linger: float = 30.0, window: float = 20.0, pki=None, log_dir=None, state=None,
-                 name: str = "replay") -> Proc:
-    return Proc(name, [*py(), "replay", scenario, "--listen", endpoint, "--root", root, "--speed", speed,
+                 name: str = "replay", net: list[str] | None = None) -> Proc:
+    """`net`: the Zenoh arguments when not listening on `endpoint` (behind routers)."""
+    return Proc(name, [*py(), "replay", scenario, *(net or ["--listen", endpoint]), "--root", root, "--speed", speed,
                        "--linger", str(linger), "--window", str(window), *_sec(pki),
                        *(["--state", str(state)] if state else []), "--wait-peers", *wait],
                 env=clean_env(), log_dir=log_dir)
@@ -37,17 +38,22 @@ def _listen(endpoint: str) -> str:
     return ("tls" if endpoint.startswith("tls/") else "tcp") + "/127.0.0.1:0"
 
 
+def _net(endpoint: str) -> list[str]:
+    """A peer of the flat mesh: connect to the replay, listen for the others."""
+    return ["--connect", endpoint, "--listen", _listen(endpoint)]
+
+
 def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Path, name: str | None = None,
-               extra: list[str] = (), pki=None, log_dir=None) -> Proc:
-    return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, "--connect", endpoint,
-                               "--listen", _listen(endpoint), "--root", root, "--out", str(out), *_sec(pki), *extra],
+               extra: list[str] = (), pki=None, log_dir=None, net: list[str] | None = None) -> Proc:
+    return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, *(net or _net(endpoint)),
+                               "--root", root, "--out", str(out), *_sec(pki), *extra],
                 env=clean_env(), log_dir=log_dir)
 
 
 def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: int | None = None, pki=None,
-                 log_dir=None) -> Proc:
-    return Proc(f"fusion-{group}", [*py(), "fusion", "--scenario", scenario, "--group", group, "--connect", endpoint,
-                                    "--listen", _listen(endpoint), "--root", root, *_sec(pki)]
+                 log_dir=None, net: list[str] | None = None) -> Proc:
+    return Proc(f"fusion-{group}", [*py(), "fusion", "--scenario", scenario, "--group", group,
+                                    *(net or _net(endpoint)), "--root", root, *_sec(pki)]
                 + (["--shuffle", str(shuffle)] if shuffle is not None else []), env=clean_env(), log_dir=log_dir)
 
 
@@ -99,14 +105,18 @@ class Supervisor:
             os.replace(tmp, self.pids_path)
 
     def stop(self) -> None:
-        for p in self.procs.values():
+        for p in reversed(list(self.procs.values())):   # leaves before the routers they hang on
             p.stop()
 
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 900.0,
        root: str | None = None, echo=print, window: float = 20.0, insecure: bool = False,
        pki: Path | None = None, max_restarts: int = 10, console: int | None = None,
-       console_linger: float = 30.0, tak: list[str] | None = None) -> dict:
+       console_linger: float = 30.0, tak: list[str] | None = None, topology: str | None = None,
+       link: dict | None = None) -> dict:
+    """`topology`: a topology file, or "derive" (one router per battalion command post
+    and one at the top); leaves then attach to their routers as clients, and every
+    router link goes through an emulated radio link (`link`: delay_ms, loss)."""
     from . import scenario as S
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
@@ -117,6 +127,11 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     for f in logs.glob("*.log"):
         f.unlink()
     root = root or f"saim/{sc.name}/{os.getpid()}"
+    topo = None
+    if topology is not None:
+        from . import topology as T
+        procs = {"replay", "tak", "console", *(f"fusion-{g}" for g in groups)}
+        topo = T.derive(sc.taskorg) if topology == "derive" else T.load(topology, sc.taskorg, procs)
     if insecure:
         echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
              "feed this mesh orders, positions and tracks")
@@ -124,7 +139,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     else:
         from .security.pki import make_pki, names_for
         pki = Path(pki or out_dir / "pki")
-        make_pki(pki, names_for(sc, consoles=True))
+        make_pki(pki, names_for(sc, consoles=True) + [f"router.{n}" for n in (topo.routers if topo else ())])
         endpoint = f"tls/127.0.0.1:{free_port()}"
     state = out_dir / "replay.state"
     state.unlink(missing_ok=True)
@@ -132,23 +147,34 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     t0 = time.monotonic()
     summaries: dict[str, dict] = {}
     con: Proc | None = None
+    link_files: dict[str, Path] = {}
+    net = lambda who: _net(endpoint)   # noqa: E731  (flat mesh: everyone links to the replay)
+    replay_net = None
     try:
+        if topo is not None:
+            from . import routed
+            eps, link_files, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
+            client = ["--mode", "client", "--topology", str(resolved)]
+            net = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], *client]   # noqa: E731
+            replay_net = client   # one session per router: each unit's reports enter at its own router
         replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
-                                      window=window, pki=pki, log_dir=logs, state=state))
+                                      window=window, pki=pki, log_dir=logs, state=state, net=replay_net))
         replay.wait_for("ready", 60)
         if tak is not None:   # before the EA peers: it must hear their first alerts (supervised: restarted)
-            sup.add(Proc("tak", [*py(), "tak", scenario, "--connect", endpoint, "--listen", _listen(endpoint),
+            sup.add(Proc("tak", [*py(), "tak", scenario, *net("tak"),
                                  "--root", root, *_sec(pki), *tak], env=clean_env(), log_dir=logs))
             sup.procs["tak"].wait_for("tak ready", 60)
         for g in groups:
-            sup.add(start_fusion(scenario, g, endpoint, root, pki=pki, log_dir=logs))
+            sup.add(start_fusion(scenario, g, endpoint, root, pki=pki, log_dir=logs, net=net(f"fusion-{g}")))
         for u in units:
             (out_dir / f"{u}.jsonl").unlink(missing_ok=True)
             (out_dir / f"{u}.cmdlog").unlink(missing_ok=True)
             armed = ["--armed"] if console is not None else []   # the console watches: urgent alerts repeat until acked
-            sup.add(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl", extra=armed, pki=pki, log_dir=logs))
+            sup.add(start_peer(scenario, u, endpoint, root, out_dir / f"{u}.jsonl", extra=armed, pki=pki, log_dir=logs,
+                               net=net(u)))
         if console is not None:   # the top unit's commander's console (not supervised: it ends after its linger)
-            con = Proc("console", [*py(), "console", scenario, "--connect", endpoint, "--root", root,
+            con_net = net("console") if topo is not None else ["--connect", endpoint]
+            con = Proc("console", [*py(), "console", scenario, *con_net, "--root", root,
                                    "--port", str(console), "--linger", str(console_linger), *_sec(pki)],
                        env=clean_env(), log_dir=logs)
             echo(con.wait_for("console http", 60).split(" ", 1)[1] + "  <- the commander's console", flush=True)
@@ -186,5 +212,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         echo(f"  {e['process']} exited ({e['exit_code']}): {' | '.join(e['last_lines'][-2:])}")
     result = {"peers": summaries, "wall_s": wall, "events": sup.events, "replay": replay.lines,
               "secure": not insecure, "given_up": sorted(sup.given_up)}
+    if topo is not None:
+        from .routed import link_stats
+        result["topology"] = topo.to_dict()
+        result["links"] = link_stats(link_files)
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
     return result

@@ -26,6 +26,7 @@ from dissemination.keyspace import KeySpace
 from . import cmdlog
 from . import commands as C
 from . import messages as M
+from . import storeq
 from . import wire as W
 from .alertlog import AlertLog
 from .cmdlog import CommandLog
@@ -106,6 +107,7 @@ class Peer:
         self.seen_t = 0.0      # latest scenario time among received replay messages
         self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
         self.tick_n: int | None = None   # number of the last clock tick taken
+        self.tick_parts: dict[int, set[str]] = {}   # tick n -> sources that gave it (behind routers)
         self.gaps = 0
         self.silences = 0
         self.next_health = self.reject_alert
@@ -175,13 +177,8 @@ class Peer:
         return dom.taskorg.version, hash(states), len(self.ea.changes)   # a threshold may widen what we need
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
-        req = W.encode(W.make(W.StoreQuery, since=since, keys=keys))
-        for r in self.session.get(self.ks.store(), payload=req, timeout=timeout):
-            if r.ok is not None:
-                rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
-                if rep is not None:
-                    return rep.t, rep.entries
-        return 0.0, []
+        rep = storeq.query(self.session, self.ks, self.gate, since, keys, timeout)
+        return (rep.t, rep.entries) if rep is not None else (0.0, [])
 
     def _reject(self, kind: str, field: str, problem: str, key: str) -> None:
         self.gate.rejects.add(M.MessageError(kind, field, problem), key)
@@ -299,6 +296,28 @@ class Peer:
             return False   # a restarted replay repeats its last tick, or the store took us past it
         return True
 
+    def _whole(self, tick: W.Tick) -> bool:
+        """Behind routers each of the replay's sources ticks: a tick is whole once all of
+        them gave it (their messages came by different paths, each in order)."""
+        if tick.of == 1:
+            return True
+        parts = self.tick_parts.setdefault(tick.n, set())
+        parts.add(tick.src)
+        if len(parts) < tick.of:
+            if len(self.tick_parts) > 4096:   # sources that never complete: forget the oldest
+                del self.tick_parts[min(self.tick_parts)]
+            return False
+        for n in [n for n in self.tick_parts if n <= tick.n]:
+            del self.tick_parts[n]
+        return True
+
+    def _waiting_for(self) -> str:
+        """Which sources' ticks are missing (named in a system-problem alert)."""
+        if not self.tick_parts:
+            return ""
+        n = min(self.tick_parts)
+        return f" (tick {n} came only from {', '.join(sorted(self.tick_parts[n]))}: a router link may be down)"
+
     def _next_ticks(self, clock: queue.SimpleQueue) -> list[W.Tick]:
         """Block for the next tick(s); a silent source is an alert, then an exit at the deadline."""
         last = time.monotonic()
@@ -318,7 +337,8 @@ class Peer:
                     said = True
                     self.silences += 1
                     self.system_alert("SAIM", "immediate", f"no clock from the source (replay) for "
-                                      f"{self.silence_s:.0f} s: the picture is not moving", event="source-silent")
+                                      f"{self.silence_s:.0f} s: the picture is not moving{self._waiting_for()}",
+                                      event="source-silent")
                 if self.deadline_s is not None and quiet > self.deadline_s:
                     raise SourceLost(f"no clock from the source for {self.deadline_s:.0f} s: giving up")
                 continue
@@ -332,8 +352,19 @@ class Peer:
                 if payload is None:
                     continue
                 tick = self.gate.control(W.Tick, payload, self.ks.clock())
-                if tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n):
+                if (tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n)
+                        and self._whole(tick)):
                     ticks.append(tick)
+            if not ticks:   # only parts of ticks: still waiting for some source
+                raw = []
+                if time.monotonic() - last > self.silence_s and not said:
+                    said = True
+                    self.silences += 1
+                    self.system_alert("SAIM", "immediate", f"the clock is incomplete for {self.silence_s:.0f} s: "
+                                      f"the picture is not moving{self._waiting_for()}", event="source-silent")
+                if self.deadline_s is not None and time.monotonic() - last > self.deadline_s:
+                    raise SourceLost(f"no whole clock tick for {self.deadline_s:.0f} s: giving up")
+                continue
             if said and ticks:
                 self.system_alert("SAIM", "routine", "the source's clock is back", event="source-back")
             if ticks:

@@ -14,6 +14,7 @@ from typing import Callable
 from dissemination.keyspace import KeySpace
 
 from . import messages as M
+from . import storeq
 from . import wire as W
 
 
@@ -94,20 +95,13 @@ class MeshReader:
         if self.session is None:
             return False
         keys = sorted({self.ks.data(c) for c in self.classes})
-        req = W.encode(W.make(W.StoreQuery, since=0, keys=keys))
         try:
-            replies = list(self.session.get(self.ks.store(), payload=req, timeout=timeout))
+            rep = storeq.query(self.session, self.ks, self.gate, 0, keys, timeout)
         except Exception as e:   # no store reachable (access control, no replay): live data only
             self.log(f"{self.NAME}: no catch-up from the store ({type(e).__name__})", flush=True)
             return False
-        for r in replies:
-            if r.ok is None:
-                continue
-            rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
-            if rep is None:
-                continue
-            ms = [m for _, p in rep.entries if (m := self.gate.data(p, "store")) is not None
-                  and type(m) in self.classes]
-            self.stored(ms, rep.t)
-            return True
-        return False
+        if rep is None:
+            return False
+        ms = [m for _, p in rep.entries if (m := self.gate.data(p, "store")) is not None and type(m) in self.classes]
+        self.stored(ms, rep.t)
+        return True

@@ -6,9 +6,16 @@ Every event carries a sequence number (Zenoh attachment). After every 2 s of
 scenario time a clock tick says "everything up to seq N has been sent": one
 publisher session and one priority keep Zenoh's delivery in order, so a peer that
 sees the tick has every earlier message in its channels.
+
+Behind routers (`mesh up --topology`) the replay stands in for every command post's
+own sources: it opens one client session per router (a *source*), publishes each
+unit's reports through its own command post's router (so they start inside their
+battalion) and serves the store per source there. Every source ticks; a peer takes a
+tick once every source gave it (each source's path keeps its own order).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -42,14 +49,22 @@ class Replay:
     def __init__(self, sc: Scenario, conf: zenoh.Config, root: str, speed: float | None = None,
                  wait_peers: list[str] = (), wait_timeout: float = 60.0,
                  linger_s: float = 30.0, log=print, until: float | None = None, window_s: float = 20.0,
-                 state_path: str | Path | None = None, max_bytes: int = 65536):
+                 state_path: str | Path | None = None, max_bytes: int = 65536,
+                 sources: dict[str, zenoh.Config] | None = None, topo=None):
+        """`sources`: router name -> client config (behind routers; `topo` says which
+        unit's reports go through which); without them one session with `conf`."""
         self.sc, self.conf = sc, conf
+        self.confs = dict(sources) if sources else {"main": conf}
+        self.topo = topo
+        self.top = topo.top if topo is not None and sources else next(iter(self.confs))
         self.ks = KeySpace.of(sc, root)
         self.speed, self.wait_peers = speed, list(wait_peers)
         self.tick_s = W.TICK_S   # peers check that tick n is at n x TICK_S
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
         self.entries: list[tuple[int, bytes]] = []
-        self.by_key: dict[str, list[int]] = {}   # key -> its seqs: queries test each key once
+        # per source: key -> its seqs (queries test each key once), and all its seqs
+        self.by_key: dict[str, dict[str, list[int]]] = {n: {} for n in self.confs}
+        self.src_seqs: dict[str, list[int]] = {n: [] for n in self.confs}
         self.t = 0.0
         self.n_ticks = 0
         self.until = until
@@ -61,30 +76,52 @@ class Replay:
         self.ingested = 0   # live reports taken in from ingest/** (a TAK gateway)
         self.entity_unit = {e: u.id for u in sc.taskorg.units.values() for e in u.entities}
 
-    def _serve(self, q) -> None:
+    def _add(self, src: str, key: str, payload: bytes) -> int:
+        """Into the store (as source `src` serves it); returns the entry's seq."""
+        n = len(self.entries) + 1
+        self.entries.append((n, payload))
+        self.by_key[src].setdefault(key, []).append(n)
+        self.src_seqs[src].append(n)
+        return n
+
+    def _source(self, ev, taskorg) -> str:
+        """The source (router) an event enters by: its unit's command post's; the
+        top's for what belongs to no unit (tracks of the brigade's sensors)."""
+        if self.topo is None or len(self.confs) == 1:
+            return self.top
+        for f in ("entity", "unit", "issuer", "requester"):
+            v = getattr(ev, f, None)
+            if v is not None:
+                unit = v if v in taskorg.units else taskorg.entity_unit.get(v)
+                if unit is not None:
+                    return self.topo.router_of(unit, taskorg)
+        return self.top
+
+    def _serve(self, q, src: str) -> None:
         """Answer store queries: entries after `since` whose key matches one of `keys`
         (all when keys is None), the scenario time the log has reached and how far each
         fusion node's tracks are out. A malformed query is counted and answered with nothing."""
         while (query := q.try_recv()) is not None:
             req = self.gate.control(W.StoreQuery, query.payload.to_bytes() if query.payload is not None
-                                    else W.encode(W.make(W.StoreQuery)), self.ks.store())
+                                    else W.encode(W.make(W.StoreQuery)), self.ks.store(src))
             if req is not None:
                 try:
-                    entries = self._entries(req)
+                    entries = self._entries(req, src)
                 except ValueError as e:   # a key expression Zenoh will not parse
-                    self.gate.rejects.add(M.MessageError("storequery", "keys", str(e)[:160]), self.ks.store())
+                    self.gate.rejects.add(M.MessageError("storequery", "keys", str(e)[:160]), self.ks.store(src))
                     entries = None
                 if entries is not None:
-                    query.reply(self.ks.store(), W.encode(W.make(W.StoreReply, t=self.t, entries=entries,
+                    query.reply(self.ks.store(src), W.encode(W.make(W.StoreReply, t=self.t, entries=entries,
                                                                        fusion=dict(self.fusion_t))),
                                 priority=STORE_PRIORITY)   # overtakes the data queued ahead of it
             del query   # a query kept alive makes the asker wait out its timeout
 
-    def _entries(self, req: W.StoreQuery) -> list[tuple[int, bytes]]:
+    def _entries(self, req: W.StoreQuery, src: str) -> list[tuple[int, bytes]]:
         if req.keys is None:
-            return self.entries[req.since:]
+            ns = self.src_seqs[src]
+            return [self.entries[n - 1] for n in ns[bisect_right(ns, req.since):]]
         match = matcher(req.keys)
-        seqs = sorted(n for k, ns in self.by_key.items() if match(k) for n in ns[bisect_right(ns, req.since):])
+        seqs = sorted(n for k, ns in self.by_key[src].items() if match(k) for n in ns[bisect_right(ns, req.since):])
         return [self.entries[n - 1] for n in seqs]
 
     def _take_fusion_ticks(self, sub) -> None:
@@ -107,12 +144,13 @@ class Replay:
     def _missing(self, s) -> list[str]:
         return sorted((Counter(self.wait_peers) - self._present(s)).elements())
 
-    def _tick(self, s, t: float, end: bool = False) -> None:
+    def _tick(self, sess: dict, t: float, end: bool = False) -> None:
         self.t = t
         self.n_ticks += 1
-        tick = W.make(W.Tick, t=t, n=self.n_ticks, seq=len(self.entries), end=end, w=time.time())
-        s.put(self.ks.clock(), W.encode(tick),
-              congestion_control=BLOCK)
+        w = time.time()
+        for src, s in sess.items():   # every source: a peer takes the tick once all gave it
+            tick = W.make(W.Tick, t=t, n=self.n_ticks, seq=len(self.entries), end=end, w=w, src=src, of=len(sess))
+            s.put(self.ks.clock(), W.encode(tick), congestion_control=BLOCK)
         if self.state_path is not None:   # where a restarted replay resumes
             tmp = self.state_path.with_suffix(".tmp")
             tmp.write_text(json.dumps({"n": self.n_ticks, "t": t, "seq": len(self.entries),
@@ -136,12 +174,11 @@ class Replay:
             m = replace(m, t=now)
             x, y = self.sc.projection.to_xy(m.lon, m.lat)
             k = self.ks.key(m, self.sc.taskorg, self.sc.projection, (float(x), float(y)))
-            self.entries.append((len(self.entries) + 1, M.encode(m)))
-            self.by_key.setdefault(k, []).append(len(self.entries))
-            s.put(k, self.entries[-1][1], attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
+            n = self._add(self.top, k, M.encode(m))
+            s.put(k, self.entries[-1][1], attachment=seq_bytes(n), congestion_control=BLOCK)
             self.ingested += 1
 
-    def _prepare(self, end_t: float) -> list[tuple[object, str, bytes]]:
+    def _prepare(self, end_t: float) -> list[tuple[object, str, bytes, str]]:
         """Keys and payloads for the whole script, before the clock starts: one bulk
         projection, and the task organization as it will be at each event's time."""
         sc = self.sc
@@ -159,7 +196,7 @@ class Replay:
                 to.resubordinate(unit, parent)
             if type(ev) is M.Reorganization:
                 to.resubordinate(ev.unit, ev.new_parent)
-            out.append((ev, self.ks.key(ev, to, sc.projection, (x, y)), M.encode(ev)))
+            out.append((ev, self.ks.key(ev, to, sc.projection, (x, y)), M.encode(ev), self._source(ev, to)))
         return out
 
     def run(self) -> dict:
@@ -167,13 +204,20 @@ class Replay:
         end_t = sc.duration_s if self.until is None else min(self.until, sc.duration_s)
         script = self._prepare(end_t)
         start = self._resume(script)
-        with zenoh.open(self.conf) as s:
-            q = s.declare_queryable(self.ks.store(), zenoh.handlers.FifoChannel(64))
+        with contextlib.ExitStack() as stack:
+            sess = {n: stack.enter_context(zenoh.open(c)) for n, c in sorted(self.confs.items())}
+            s = sess[self.top]
+            qs = {n: x.declare_queryable(self.ks.store(n), zenoh.handlers.FifoChannel(64)) for n, x in sess.items()}
             fticks = s.declare_subscriber(self.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
             ingest = s.declare_subscriber(self.ks.ingest("*"), zenoh.handlers.FifoChannel(10_000))
-            serve = lambda: (self._take_fusion_ticks(fticks), self._serve(q))
-            # one declared publisher per key: a put then skips parsing and resolving the key
-            pubs = {k: s.declare_publisher(k, congestion_control=BLOCK) for k in sorted({k for _, k, _ in script})}
+
+            def serve() -> None:
+                self._take_fusion_ticks(fticks)
+                for n, q in qs.items():
+                    self._serve(q, n)
+            # one declared publisher per key (on its source's session): a put then skips parsing the key
+            pubs = {(k, src): sess[src].declare_publisher(k, congestion_control=BLOCK)
+                    for k, src in sorted({(k, src) for _, k, _, src in script})}
             self.log(f"ready {s.info.zid()}", flush=True)
             deadline = time.monotonic() + self.wait_timeout
             while self.wait_peers and (missing := self._missing(s)):
@@ -186,11 +230,11 @@ class Replay:
             self.log("start" + (f" resumed n={self.n_ticks} t={self.t:.0f}" if self.resumed_from else ""), flush=True)
             t0 = time.monotonic() - (self.t / self.speed if self.speed else 0.0)
             next_tick = self.t + self.tick_s
-            for ev, key, payload in script[start:]:
+            for ev, key, payload, src in script[start:]:
                 while ev.t >= next_tick:
                     if pacer:
                         pacer.wait(next_tick)
-                    self._tick(s, next_tick)
+                    self._tick(sess, next_tick)
                     serve()
                     if int(next_tick) % 100 == 0 and next_tick == int(next_tick):
                         self.log(f"t={next_tick:.0f}", flush=True)
@@ -203,10 +247,8 @@ class Replay:
                 self._ingest(s, ingest, max(self.t, min(ev.t, next_tick)))
                 if radios is not None and radios.silent(ev):
                     continue
-                self.entries.append((len(self.entries) + 1, payload))
-                self.by_key.setdefault(key, []).append(len(self.entries))
-                pubs[key].put(payload, attachment=seq_bytes(len(self.entries)))
-            self._tick(s, end_t, end=True)
+                pubs[key, src].put(payload, attachment=seq_bytes(self._add(src, key, payload)))
+            self._tick(sess, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
             while time.monotonic() < linger and set(self._present(s)) & set(self.wait_peers or ["?"]):
@@ -232,9 +274,8 @@ class Replay:
             raise ValueError(f"{self.state_path}: unreadable replay state ({e}); remove it to start over") from None
         if not (0 <= seq <= len(script) and 0 <= t <= self.sc.duration_s and n >= 0):
             raise ValueError(f"{self.state_path}: replay state n={n} t={t} seq={seq} does not fit this scenario")
-        for ev, key, payload in script[:seq]:
-            self.entries.append((len(self.entries) + 1, payload))
-            self.by_key.setdefault(key, []).append(len(self.entries))
+        for ev, key, payload, src in script[:seq]:
+            self._add(src, key, payload)
         self.n_ticks, self.t, self.fusion_t = n, t, fusion
         self.resumed_from = st
         self.log(f"resuming after tick n={n} t={t:.0f} seq={seq}", flush=True)
@@ -309,8 +350,9 @@ class Pacer:
 
 
 def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None,
-                window_s: float = 20.0, state_path=None) -> int:
+                window_s: float = 20.0, state_path=None, sources=None, topo=None) -> int:
     res = Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
-                 state_path=state_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout)).run()
+                 state_path=state_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
+                 sources=sources, topo=topo).run()
     print("summary " + json.dumps(res), flush=True)
     return 0

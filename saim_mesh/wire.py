@@ -37,12 +37,17 @@ class _Wire(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tru
 
 class Tick(_Wire, kw_only=True):
     """The replay's clock: scenario time `t` reached, tick number `n` (a missing number
-    means we were cut off), every message up to `seq` sent; `w` is the wall clock."""
+    means we were cut off), every message up to `seq` sent; `w` is the wall clock.
+    Behind routers the replay publishes through one source per router: each source
+    ticks (`src`), and a tick is whole once all `of` sources gave it (each source's
+    messages travel its own path, in order with its own ticks)."""
     t: Time
     n: Seq
     seq: Seq
     end: bool = False
     w: Annotated[float, msgspec.Meta(ge=0.0, le=1e11)] | None = None
+    src: Annotated[str, msgspec.Meta(max_length=64)] = ""
+    of: Annotated[int, msgspec.Meta(ge=1, le=256)] = 1
 
 
 class Ack(_Wire, kw_only=True):

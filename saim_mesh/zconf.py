@@ -18,12 +18,26 @@ def free_port() -> int:
 
 def config(listen: list[str] | None = None, connect: list[str] | None = None,
            path: str | Path | None = None, multicast: bool = False, pki: str | Path | None = None,
-           name: str | None = None, sc=None, root: str | None = None) -> zenoh.Config:
+           name: str | None = None, sc=None, root: str | None = None, mode: str | None = None,
+           routers: list[str] = ()) -> zenoh.Config:
     """The JSON5 file, with endpoints chosen at run time; `multicast` turns on UDP
     multicast scouting (the file's default is off: tests and CI stay on loopback).
     With `pki` (a folder made by `saim-mesh certs`), the session is `name`'s identity
-    over mutual TLS and carries the mesh's access-control rules, made from scenario `sc`."""
+    over mutual TLS and carries the mesh's access-control rules, made from scenario `sc`.
+    `mode` "client" (a leaf behind a router) or "router" (`saim-mesh router`): no
+    scouting at all, so the hierarchy of routers stays as the topology says (gossip
+    would let routers link around it); `routers` are the router identities whose
+    relayed traffic the access-control rules accept."""
     conf = zenoh.Config.from_file(str(path or DEFAULT))
+    if mode is not None:
+        if mode not in ("peer", "client", "router"):
+            raise ValueError(f"zenoh mode {mode!r}: expected peer, client or router")
+        conf.insert_json5("mode", json.dumps(mode))
+        if mode != "peer":
+            conf.insert_json5("scouting/gossip/enabled", "false")
+            conf.insert_json5("transport/shared_memory/enabled", "false")   # it would bypass an emulated link
+        if mode == "client":
+            listen = []
     if multicast:
         conf.insert_json5("scouting/multicast/enabled", "true")
     if listen is not None:
@@ -34,5 +48,5 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None,
         from .mesh import mesh_units
         from .security.acl import secure_config
         groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
-        conf = secure_config(conf, pki, name, root, mesh_units(sc), groups, sc.taskorg)
+        conf = secure_config(conf, pki, name, root, mesh_units(sc), groups, sc.taskorg, routers)
     return conf

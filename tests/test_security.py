@@ -183,15 +183,15 @@ def test_access_control_is_well_formed(small_sc, pki):
     for cn, msg, key, ok in [
         ("replay", "put", f"{r}/ord/BN", True), ("replay", "put", f"{r}/clock", True),
         ("replay", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2S1/e1", True), ("replay", "put", f"{r}/alert/A2/x", False),
-        ("replay", "reply", f"{r}/store/log", True), ("replay", "liveliness_token", f"{r}/alive/replay/z", True),
+        ("replay", "reply", f"{r}/store/log/main", True), ("replay", "liveliness_token", f"{r}/alive/replay/z", True),
         ("ea.C", "put", f"{r}/ord/BN", False), ("ea.C", "put", f"{r}/clock", False),
         ("ea.C", "put", f"{r}/ord/C", True), ("ea.C", "put", f"{r}/alert/C/late", True),
         ("ea.C", "put", f"{r}/alert/A2/late", False), ("ea.C", "put", f"{r}/ack/C/zid1", True),
         ("ea.C", "put", f"{r}/ack/A2/zid1", False), ("ea.C", "put", f"{r}/msn/C/m1", True),
         ("ea.C", "put", f"{r}/bye/C", True), ("ea.C", "put", f"{r}/bye/A2", False),
         ("ea.C", "liveliness_token", f"{r}/alive/A2/x", False), ("ea.C", "liveliness_token", f"{r}/alive/C/x", True),
-        ("ea.C", "declare_queryable", f"{r}/store/log", False), ("ea.C", "reply", f"{r}/store/log", False),
-        ("ea.C", "query", f"{r}/store/log", True), ("ea.C", "declare_subscriber", f"{r}/**", True),
+        ("ea.C", "declare_queryable", f"{r}/store/log/main", False), ("ea.C", "reply", f"{r}/store/log/main", False),
+        ("ea.C", "query", f"{r}/store/log/main", True), ("ea.C", "declare_subscriber", f"{r}/**", True),
         ("ea.C", "delete", f"{r}/ord/C", False), ("ea.C", "put", f"{r}/trk/X1Y1/x4y4/t1", False),
         ("fusion.N", "put", f"{r}/trk/X1Y1/x4y4/t1", True), ("fusion.N", "put", f"{r}/fusion-tick/N", True),
         ("fusion.N", "put", f"{r}/fusion-tick/F", False), ("fusion.N", "reply", f"{r}/store/fusion/N", True),
@@ -199,7 +199,7 @@ def test_access_control_is_well_formed(small_sc, pki):
         ("fusion.N", "liveliness_token", f"{r}/alive/fusion-N/z", True),
         ("observer", "declare_subscriber", f"{r}/alert/**", True), ("observer", "declare_subscriber", f"{r}/**", False),
         ("observer", "declare_liveliness_subscriber", f"{r}/alive/**", True),
-        ("observer", "declare_subscriber", f"{r}/ord/**", False), ("observer", "query", f"{r}/store/log", False),
+        ("observer", "declare_subscriber", f"{r}/ord/**", False), ("observer", "query", f"{r}/store/log/main", False),
         ("observer", "put", f"{r}/alert/A2/x", False), ("console", "put", f"{r}/cmd/A2", True),
         ("console", "declare_subscriber", f"{r}/clock", False), ("mallory", "declare_subscriber", f"{r}/**", False),
         ("ea.C", "put", f"{r}/health/C", True), ("ea.C", "put", f"{r}/health/A2", False),
@@ -365,8 +365,8 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
         assert sample(obs_alert.get())[:2] == (f"{root}/alert/C/mark", "C mark")
 
         # --- a forged store (queryable) by ea.C is never consulted
-        keep += [c.declare_queryable(f"{root}/store/log", lambda q: q.reply(f"{root}/store/log", b"forged store")),
-                 replay.declare_queryable(f"{root}/store/log", lambda q: q.reply(f"{root}/store/log", b"store"))]
+        keep += [c.declare_queryable(f"{root}/store/log/main", lambda q: q.reply(f"{root}/store/log/main", b"forged store")),
+                 replay.declare_queryable(f"{root}/store/log/main", lambda q: q.reply(f"{root}/store/log/main", b"store"))]
 
         # --- liveliness: C's token on A2's key is dropped; A2's own is seen by the observer
         a2_alive, obs_alive = Q(), Q()
@@ -400,13 +400,13 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
 
         # --- the store: ea.A2's query answered by the replay only; the observer's dropped
         t = time.monotonic()
-        qa2 = a2.declare_querier(f"{root}/store/log", timeout=WAIT,
+        qa2 = a2.declare_querier(f"{root}/store/log/main", timeout=WAIT,
                                  consolidation=zenoh.ConsolidationMode.NONE)
         wait_matching(qa2)
         replies = [r.ok.payload.to_bytes() if r.ok else r.err for r in qa2.get()]
         assert replies == [b"store"]
         report["a2_query_s"] = time.monotonic() - t
-        qobs = obs.declare_querier(f"{root}/store/log", timeout=1.0)
+        qobs = obs.declare_querier(f"{root}/store/log/main", timeout=1.0)
         wait_matching(qobs)   # the observer does see the replay's queryable ...
         t = time.monotonic()
         assert list(qobs.get()) == []   # ... but the replay drops its query

@@ -18,6 +18,7 @@ import zenoh
 
 from dissemination.keyspace import KeySpace, matcher
 from saim_mesh import messages as M
+from saim_mesh import storeq
 from saim_mesh import wire as W
 from saim_mesh.scenario import Scenario
 
@@ -79,24 +80,19 @@ class FusionPeer:
 
     def _resume(self, s) -> None:
         """Take the store's hits and our predecessor's progress; replay them silently."""
-        req = W.encode(W.make(W.StoreQuery, since=0, keys=[self.ks.data(M.SensorHit, group=self.group)]))
-        for r in s.get(self.ks.store(), payload=req, timeout=10.0):
-            if r.ok is None:
-                continue
-            rep = self.gate.control(W.StoreReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
-            if rep is None:
-                continue
-            done = rep.fusion.get(self.group, -1.0)
-            for seq, p in rep.entries:
-                self._take_hit(seq, p, None)
-            if done < 0:
-                return
-            while self.heap and self.heap[0][1].t < done:   # what our predecessor had fused and sent
-                self.node.add(heapq.heappop(self.heap)[1])
-            self.node.flush(done)
-            self.done_t, self.resumed = done, True
-            self.log(f"resumed fusion-{self.group} at t={done:.0f} (track numbers from {self.node.seq})", flush=True)
+        rep = storeq.query(s, self.ks, self.gate, 0, [self.ks.data(M.SensorHit, group=self.group)])
+        if rep is None:
             return
+        done = rep.fusion.get(self.group, -1.0)
+        for seq, p in rep.entries:
+            self._take_hit(seq, p, None)
+        if done < 0:
+            return
+        while self.heap and self.heap[0][1].t < done:   # what our predecessor had fused and sent
+            self.node.add(heapq.heappop(self.heap)[1])
+        self.node.flush(done)
+        self.done_t, self.resumed = done, True
+        self.log(f"resumed fusion-{self.group} at t={done:.0f} (track numbers from {self.node.seq})", flush=True)
 
     def run(self) -> dict:
         def stop(*_):

@@ -13,7 +13,7 @@ rules and the keys cannot drift apart.
 
 | subject | ingress allowed, besides reading |
 |---|---|
-| `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log; query store/**; token alive/replay/* |
+| `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log/*; query store/**; token alive/replay/* |
 | `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>; token alive/<U>/*; query store/** |
 | `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
 | `observer` | reading alert/** and alive/** only |
@@ -71,15 +71,16 @@ def data_families() -> list[str]:
     return sorted({template(c).family for c in M.MESSAGE_TYPES.values()} - {template(M.Alert).family})
 
 
-def identities(units, groups, taskorg=None) -> list[str]:
+def identities(units, groups, taskorg=None, routers=()) -> list[str]:
     """Every certificate CN the rules know (one subject each); `console.<U>` per unit
-    when the task organization is known (a commander's console acts for U's subtree)."""
+    when the task organization is known (a commander's console acts for U's subtree);
+    `router.<R>` per router of the topology."""
     consoles = [f"console.{u}" for u in units] if taskorg is not None else []
     return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, "tak",
-            *consoles]
+            *consoles, *(f"router.{r}" for r in routers)]
 
 
-def access_control(root: str, units, groups, taskorg=None) -> dict:
+def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     """The full `access_control` section for a mesh under ROOT with an EA per unit of
     UNITS and a fusion node per group of GROUPS (names, or a dict group -> sensors).
     With TASKORG, a `console.<U>` identity per unit may send commands as U's console; the
@@ -143,6 +144,14 @@ def access_control(root: str, units, groups, taskorg=None) -> dict:
         for u in units:
             subject(f"console.{u}", [out, read_public, read_cmdlog, read_seen, query_store,
                                      rule(f"console.{u}.put", ["put"], [ks.cmd("*", "*", u)])])
+    # a router relays what others sent: its link carries every role's traffic, so a
+    # receiver behind it sees the router's CN (zenoh-security.md). Each router enforces
+    # the rules above on its own ingress, where it still sees the sender's certificate,
+    # and authority is signed end to end (security/sign.py).
+    if routers:
+        relay = rule("router_relay", SENT, [f"{r}/**"])
+        for name in sorted(dict.fromkeys(_chunk("router", x) for x in routers)):
+            subject(f"router.{name}", [out, relay])
     for kind, items in (("rule", rules), ("subject", subjects), ("policy", policies)):
         ids = [x["id"] for x in items]
         if len(ids) != len(set(ids)):
@@ -162,11 +171,11 @@ def _endpoints(conf: zenoh.Config, path: str) -> list[str]:
 
 
 def secure_config(conf: zenoh.Config, pki_dir: str | Path, name: str, root: str, units, groups,
-                  taskorg=None) -> zenoh.Config:
+                  taskorg=None, routers=()) -> zenoh.Config:
     """Insert mTLS as NAME (certificates checked first: Zenoh's connecting side is silent
     about bad files), `transport/link/protocols: ["tls"]` (else a plain-tcp peer found
     by scouting joins) and the access-control rules into CONF; returns CONF."""
-    if name not in identities(units, groups, taskorg):
+    if name not in identities(units, groups, taskorg, routers):
         raise SecurityError(f"identity {name!r} has no subject in the access-control rules "
                             f"(units: {', '.join(units)}; fusion groups: {', '.join(groups) or 'none'})")
     for path in ("listen/endpoints", "connect/endpoints"):
@@ -174,7 +183,7 @@ def secure_config(conf: zenoh.Config, pki_dir: str | Path, name: str, root: str,
         if plain:
             raise SecurityError(f"{path}: {', '.join(plain)} not TLS (use endpoint_tls(port))")
     link = tls_config(pki_dir, name)
-    acl = access_control(root, units, groups, taskorg)
+    acl = access_control(root, units, groups, taskorg, routers)
     conf.insert_json5("transport/link/protocols", json.dumps(link["protocols"]))
     for k, v in link["tls"].items():
         conf.insert_json5(f"transport/link/tls/{k}", json.dumps(v))

@@ -1,0 +1,73 @@
+"""Start a topology's routers and the emulated radio links between them (`mesh up
+--topology`): the top router first, then each router below once the one it links to
+is up, each lower router connecting through a `saim-mesh link` process that delays,
+loses and counts what crosses (bytes per router link come from there)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from . import topology as T
+from .proc import Proc, clean_env, py
+from .zconf import free_port
+
+
+def _ep(port: int, secure: bool) -> str:
+    return f"{'tls' if secure else 'tcp'}/127.0.0.1:{port}"
+
+
+def start(scenario: str, topo: T.Topology, out_dir: Path, root: str, sup, pki=None, link: dict | None = None,
+          echo=print) -> tuple[dict[str, str], dict[str, Path], Path]:
+    """Start every router and link under `sup`; returns the router endpoints leaves
+    connect to, each link's stats file, and the resolved topology file."""
+    logs = out_dir / "logs"
+    link = link or {}
+    ports = {n: free_port() for n in topo.routers}
+    eps = {n: _ep(p, pki is not None) for n, p in ports.items()}
+    resolved = out_dir / "topology.json"
+    T.resolve(topo, eps, resolved)
+    sec = ["--pki", str(pki)] if pki else []
+    stats: dict[str, Path] = {}
+    order = sorted(topo.routers, key=lambda n: len(_path_up(topo, n)))   # parents before children
+    for n in order:
+        r = topo.routers[n]
+        connect = []
+        for up in r.links:
+            lp = free_port()
+            name = f"link-{n}-{up}"
+            stats[f"{n}->{up}"] = st = out_dir / f"{name}.json"
+            st.unlink(missing_ok=True)
+            args = [*py(), "link", "--listen", str(lp), "--to", str(ports[up]),
+                    "--delay-ms", str(link.get("delay_ms", 0.0)), "--loss", str(link.get("loss", 0.0)),
+                    "--seed", str(len(stats)), "--stats", str(st)]
+            sup.add(Proc(name, args, env=clean_env(), log_dir=logs)).wait_for("link ready", 30)
+            connect.append(_ep(lp, pki is not None))
+        p = sup.add(Proc(n, [*py(), "router", "--scenario", scenario, "--name", n, "--root", root,
+                             "--listen", eps[n], "--topology", str(resolved), *sec,
+                             *(["--connect", *connect] if connect else [])], env=clean_env(), log_dir=logs))
+        p.wait_for("router ready", 60)
+    echo(f"topology: {len(topo.routers)} routers ({', '.join(order)}), {len(stats)} links"
+         + (f" at {link.get('delay_ms', 0):g} ms / {100 * link.get('loss', 0):g} % loss" if link else ""))
+    return eps, stats, resolved
+
+
+def _path_up(topo: T.Topology, n: str) -> list[str]:
+    out, seen = [], {n}
+    while topo.routers[n].links:
+        n = topo.routers[n].links[0]
+        if n in seen:
+            break
+        seen.add(n)
+        out.append(n)
+    return out
+
+
+def link_stats(stats: dict[str, Path]) -> dict[str, dict]:
+    """Each link's counters (what its `saim-mesh link` process wrote)."""
+    out = {}
+    for name, path in stats.items():
+        try:
+            out[name] = json.loads(path.read_text())
+        except (OSError, ValueError):
+            out[name] = None
+    return out
