@@ -269,9 +269,11 @@ def cmd_mesh(a) -> int:
 
 def _link_args(a) -> dict | None:
     """`mesh up --topology ... --link-delay-ms D --link-loss P`: every router link emulated."""
-    if a.topology is None:
+    if a.topology is None or a.link_delay_ms is None and a.link_loss is None:
         return None
-    return {"delay_ms": a.link_delay_ms, "loss": a.link_loss}
+    if not 0.0 <= (a.link_loss or 0.0) < 1.0:
+        raise ValueError(f"--link-loss {a.link_loss}: expected a share in [0, 1)")
+    return {"delay_ms": a.link_delay_ms or 0.0, "loss": a.link_loss or 0.0}
 
 
 def _tak_args(a) -> list[str] | None:
@@ -503,9 +505,9 @@ def main(argv: list[str] | None = None) -> int:
     me.add_argument("--topology", nargs="?", const="derive", default=None, metavar="TOML",
                     help="routers at command posts (a topology file; without FILE: one router per battalion "
                     "command post and one at the top, from the task organization); leaves attach as clients")
-    me.add_argument("--link-delay-ms", type=_seconds, default=0.0, metavar="MS",
+    me.add_argument("--link-delay-ms", type=_seconds, default=None, metavar="MS",
                     help="with --topology: one-way delay of every emulated router link")
-    me.add_argument("--link-loss", type=float, default=0.0, metavar="P",
+    me.add_argument("--link-loss", type=float, default=None, metavar="P",
                     help="with --topology: share of segments lost (then retransmitted) on every router link")
 
     ro = sub.add_parser("router", help="a Zenoh router (router mode) for one command post")

@@ -18,10 +18,10 @@ def _ep(port: int, secure: bool) -> str:
 
 def start(scenario: str, topo: T.Topology, out_dir: Path, root: str, sup, pki=None, link: dict | None = None,
           echo=print) -> tuple[dict[str, str], dict[str, Path], Path]:
-    """Start every router and link under `sup`; returns the router endpoints leaves
-    connect to, each link's stats file, and the resolved topology file."""
+    """Start every router and link under `sup` (`link` None: routers connect directly,
+    nothing emulated or counted); returns the router endpoints leaves connect to, each
+    link's stats file, and the resolved topology file."""
     logs = out_dir / "logs"
-    link = link or {}
     ports = {n: free_port() for n in topo.routers}
     eps = {n: _ep(p, pki is not None) for n, p in ports.items()}
     resolved = out_dir / "topology.json"
@@ -33,6 +33,9 @@ def start(scenario: str, topo: T.Topology, out_dir: Path, root: str, sup, pki=No
         r = topo.routers[n]
         connect = []
         for up in r.links:
+            if link is None:   # no emulated link: straight to the router above
+                connect.append(eps[up])
+                continue
             lp = free_port()
             name = f"link-{n}-{up}"
             stats[f"{n}->{up}"] = st = out_dir / f"{name}.json"
@@ -47,7 +50,8 @@ def start(scenario: str, topo: T.Topology, out_dir: Path, root: str, sup, pki=No
                              *(["--connect", *connect] if connect else [])], env=clean_env(), log_dir=logs))
         p.wait_for("router ready", 60)
     echo(f"topology: {len(topo.routers)} routers ({', '.join(order)}), {len(stats)} links"
-         + (f" at {link.get('delay_ms', 0):g} ms / {100 * link.get('loss', 0):g} % loss" if link else ""))
+         + (f" at {link.get('delay_ms', 0):g} ms / {100 * link.get('loss', 0):g} % loss" if link is not None else
+            " (direct)"))
     return eps, stats, resolved
 
 
