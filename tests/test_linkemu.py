@@ -274,3 +274,102 @@ def test_the_process_rejects_bad_arguments(args, word, capsys):
         main(["link", *args])
     assert e.value.code == 2
     assert word in capsys.readouterr().err
+
+
+# ---- real Zenoh through the link: a router and a client, as a radio link joins them ----
+LEASE_MS = 2000
+
+
+def zconf(mode: str, listen: str | None = None, connect: str | None = None):
+    """Loopback only, no multicast, no shared memory (it would bypass the link), a 2 s lease.
+    A client retries its router every second at most, so it is back soon after a heal."""
+    import zenoh
+    c = zenoh.Config()
+    c.insert_json5("mode", json.dumps(mode))
+    c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("transport/shared_memory/enabled", "false")
+    c.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+    if listen:
+        c.insert_json5("listen/endpoints", json.dumps([listen]))
+    if connect:
+        c.insert_json5("connect/endpoints", json.dumps([connect]))
+        c.insert_json5("connect/retry", "{period_init_ms: 500, period_max_ms: 1000, period_increase_factor: 2}")
+    return c
+
+
+def drain(sub, until, timeout: float, what: str) -> list:
+    """Samples from a channel subscriber until `until(samples)` holds, within a deadline."""
+    got: list = []
+    end = time.monotonic() + timeout
+    while not until(got):
+        if time.monotonic() > end:
+            raise AssertionError(f"within {timeout} s: {what}; got {len(got)}")
+        s = sub.try_recv()
+        if s is None:
+            time.sleep(0.005)
+        else:
+            got.append(s)
+    return got
+
+
+def publish_and_check(pub, sub, n: int, start: int = 0, timeout: float = 60.0) -> None:
+    """n numbered messages, BLOCK: every one arrives once, in order."""
+    for i in range(start, start + n):
+        pub.put(struct.pack(">I", i))
+    got = drain(sub, lambda g: len(g) >= n, timeout, f"{n} messages through the link")
+    assert [struct.unpack(">I", s.payload.to_bytes())[0] for s in got] == list(range(start, start + n))
+
+
+@pytest.fixture
+def zlink():
+    """A router session and a client session joined through a 50 ms / 1 % link."""
+    import zenoh
+    rport = free_port()
+    with Link(free_port(), rport, delay_ms=50, loss=0.01, seed=1) as link, \
+            zenoh.open(zconf("router", listen=f"tcp/127.0.0.1:{rport}")) as router, \
+            zenoh.open(zconf("client", connect=f"tcp/127.0.0.1:{link.listen_port}")) as client:
+        yield link, router, client
+
+
+def test_zenoh_pubsub_through_a_lossy_link_arrives_complete_in_order(zlink):
+    import zenoh
+    link, router, client = zlink
+    sub = router.declare_subscriber("test/data", zenoh.handlers.FifoChannel(1000))
+    pub = client.declare_publisher("test/data", congestion_control=zenoh.CongestionControl.BLOCK)
+    wait_until(lambda: pub.matching_status.matching, 20, "the client's publisher sees the subscriber")
+    publish_and_check(pub, sub, 500)
+    st = link.stats()
+    assert st["up"]["connections"] == st["down"]["connections"] == 1
+    assert st["up"]["bytes"] > 500 * 4 and st["down"]["bytes"] > 0
+
+
+def test_zenoh_reconnects_after_a_cut_longer_than_the_lease(zlink):
+    """Cut for 4 leases: the router sees the client's token go (DELETE); after the heal the
+    client reconnects by itself, the token is back (PUT) and pub/sub works again."""
+    import zenoh
+    link, router, client = zlink
+    alive = router.liveliness().declare_subscriber("test/alive/**", zenoh.handlers.FifoChannel(100),
+                                                   history=True)
+    token = client.liveliness().declare_token("test/alive/client")
+    sub = router.declare_subscriber("test/data", zenoh.handlers.FifoChannel(1000))
+    pub = client.declare_publisher("test/data", congestion_control=zenoh.CongestionControl.BLOCK)
+    kinds = lambda g: [(s.kind, str(s.key_expr)) for s in g]   # noqa: E731
+    first = drain(alive, lambda g: len(g) >= 1, 20, "the client's token seen at the router")
+    assert kinds(first) == [(zenoh.SampleKind.PUT, "test/alive/client")]
+    wait_until(lambda: pub.matching_status.matching, 20, "the publisher sees the subscriber")
+    publish_and_check(pub, sub, 50)
+
+    link.cut()
+    cut_at = time.monotonic()
+    gone = drain(alive, lambda g: len(g) >= 1, 4 * LEASE_MS / 1000, "the token gone during the cut")
+    assert kinds(gone) == [(zenoh.SampleKind.DELETE, "test/alive/client")]
+    assert time.monotonic() - cut_at >= 0.5 * LEASE_MS / 1000   # the lease, not a closed socket
+    time.sleep(max(0.0, cut_at + 4 * LEASE_MS / 1000 - time.monotonic()))   # the cut lasts 4 leases
+    link.heal()
+    back = drain(alive, lambda g: len(g) >= 1, 30, "the token back after the heal")
+    assert kinds(back) == [(zenoh.SampleKind.PUT, "test/alive/client")]
+    wait_until(lambda: pub.matching_status.matching, 20, "the publisher sees the subscriber again")
+    publish_and_check(pub, sub, 50, start=1000)
+    st = link.stats()
+    assert st["cuts"] == 1 and st["up"]["connections"] >= 2   # Zenoh's own reconnect, through the link
+    token.undeclare()
