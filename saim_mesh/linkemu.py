@@ -119,6 +119,9 @@ class Link:
         return self._healed is not None and not self._healed.is_set()
 
     def stats(self) -> dict:
+        """Settings, cut state and, per direction (`up`: listen side -> target, `down`: back),
+        bytes and chunks delivered, chunks that waited a retransmission timeout (`lost`),
+        connections opened that way, and bytes held now (`queued`)."""
         return {"listen": self.listen_port, "target": self.target_port,
                 "delay_ms": self.delay * 1000, "loss": self.loss, "rate_bps": self.rate_bps,
                 "seed": self.seed, "cut": self.is_cut, "cuts": self.cuts,
@@ -182,6 +185,7 @@ class Link:
         return t
 
     async def _accept(self, c_reader: asyncio.StreamReader, c_writer: asyncio.StreamWriter) -> None:
+        """One client: reach the target (once healed), then pipe both ways until both end."""
         self._tasks.add(asyncio.current_task())   # cancelled by stop() too
         self._writers.add(c_writer)
         self.counters["up"].connections += 1
