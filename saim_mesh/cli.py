@@ -569,6 +569,11 @@ def main(argv: list[str] | None = None) -> int:
     tak_arguments(tk)
     _zenoh_args(tk)
     tk.set_defaults(fn=cmd_tak)
+    from .linkemu import add_arguments as link_arguments, cmd_link
+    li = sub.add_parser("link", help="an emulated radio link: a TCP proxy on loopback with delay, loss, "
+                                     "cut (SIGUSR1) and heal (SIGUSR2)")
+    link_arguments(li)
+    li.set_defaults(fn=cmd_link)
     rep = sub.add_parser("report", help="a PNG of alerts by type per EA and a timeline by priority")
     rep.add_argument("out", help="the PNG to write")
     rep.add_argument("alerts", nargs="+", help="alert files (JSON lines) or folders of them (a mesh's out dir)")
