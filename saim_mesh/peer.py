@@ -108,7 +108,9 @@ class Peer:
         self.max_lead = 0.0    # how far the replay ran ahead of us (pacing keeps it small)
         self.tick_n: int | None = None   # number of the last clock tick taken
         self.tick_parts: dict[int, set[str]] = {}   # tick n -> sources that gave it (behind routers)
+        self.n_sources = 1                          # how many sources tick (and serve the store)
         self.gaps = 0
+        self.gap: tuple[float, float] | None = None   # set while a tick after a gap is processed
         self.silences = 0
         self.next_health = self.reject_alert
         self.presence: Presence | None = None
@@ -125,6 +127,10 @@ class Peer:
             if self.alog is None or not self.alog.restarted or self.alog.already(a):
                 return
             a = replace(a, details={**a.details, "late": True, "raised_at_t": self.joined_t})
+            self.late += 1
+        elif self.gap is not None:   # due while we were cut off from part of the mesh: raised now, marked
+            cut = [round(self.gap[0], 1), round(self.gap[1], 1)]
+            a = replace(a, details={**a.details, "late": True, "cut_off": cut})
             self.late += 1
         if self.alog:
             self.alog.write(a)
@@ -150,7 +156,7 @@ class Peer:
         if new and buf is not None:
             self._catch_up(new, buf)
 
-    def _catch_up(self, keys: list[str], buf: list, tracks_after: float = -1.0) -> None:
+    def _catch_up(self, keys: list[str] | None, buf: list, tracks_after: float = -1.0) -> None:
         """Fetch what was published on `keys` after the last message we took, from the
         situation store (duplicates are dropped by seq later) and the fusion nodes
         (their tracks carry no seq: only those after `tracks_after` are taken)."""
@@ -177,7 +183,7 @@ class Peer:
         return dom.taskorg.version, hash(states), len(self.ea.changes)   # a threshold may widen what we need
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
-        rep = storeq.query(self.session, self.ks, self.gate, since, keys, timeout)
+        rep = storeq.query(self.session, self.ks, self.gate, since, keys, timeout, self.n_sources)
         return (rep.t, rep.entries) if rep is not None else (0.0, [])
 
     def _reject(self, kind: str, field: str, problem: str, key: str) -> None:
@@ -299,6 +305,7 @@ class Peer:
     def _whole(self, tick: W.Tick) -> bool:
         """Behind routers each of the replay's sources ticks: a tick is whole once all of
         them gave it (their messages came by different paths, each in order)."""
+        self.n_sources = tick.of
         if tick.of == 1:
             return True
         parts = self.tick_parts.setdefault(tick.n, set())
@@ -380,7 +387,11 @@ class Peer:
             # link) and everything sent meanwhile is lost. Take it from the store.
             self.log(f"gap t={self.t:.0f}..{tick.t:.0f}: catching up", flush=True)
             self.gaps += 1
-            self._catch_up(sorted(self.subs), buf, tracks_after=self.t)
+            self.gap = (self.t, tick.t)   # what this tick raises was due while we were cut off: marked late
+            # everything, not just what we subscribe to now: our interest moved on while
+            # we were cut off (a link-up partner, a new sector), and the EA takes the gap
+            # in one go; extra data only brings it closer to seeing everything
+            self._catch_up(None, buf, tracks_after=self.t)
         if self.evicted:   # what we dropped to stay bounded comes back from the store
             self.evicted = False
             self._catch_up(sorted(self.subs), buf)
@@ -399,10 +410,13 @@ class Peer:
         self.t, self.tick_n = tick.t, tick.n
         self.presence.take()
         n_alerts = len(self.ea.alerts)
-        if tick.end:
-            self.ea.finish(tick.t)
-        else:
-            self.ea.advance(tick.t)
+        try:
+            if tick.end:
+                self.ea.finish(tick.t)
+            else:
+                self.ea.advance(tick.t)
+        finally:
+            self.gap = None
         if tick.w is not None:   # wall-clock latency from the tick's publication to its processing
             lat = time.time() - tick.w
             self.tick_lat.append(lat)

@@ -65,6 +65,7 @@ class Replay:
         # per source: key -> its seqs (queries test each key once), and all its seqs
         self.by_key: dict[str, dict[str, list[int]]] = {n: {} for n in self.confs}
         self.src_seqs: dict[str, list[int]] = {n: [] for n in self.confs}
+        self.last_tick: dict[str, bytes] = {}   # per source: the last tick published (repeated while lingering)
         self.t = 0.0
         self.n_ticks = 0
         self.until = until
@@ -150,7 +151,8 @@ class Replay:
         w = time.time()
         for src, s in sess.items():   # every source: a peer takes the tick once all gave it
             tick = W.make(W.Tick, t=t, n=self.n_ticks, seq=len(self.entries), end=end, w=w, src=src, of=len(sess))
-            s.put(self.ks.clock(), W.encode(tick), congestion_control=BLOCK)
+            self.last_tick[src] = W.encode(tick)
+            s.put(self.ks.clock(), self.last_tick[src], congestion_control=BLOCK)
         if self.state_path is not None:   # where a restarted replay resumes
             tmp = self.state_path.with_suffix(".tmp")
             tmp.write_text(json.dumps({"n": self.n_ticks, "t": t, "seq": len(self.entries),
@@ -252,6 +254,8 @@ class Replay:
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
             while time.monotonic() < linger and set(self._present(s)) & set(self.wait_peers or ["?"]):
+                for src, x in sess.items():   # the end again: a peer cut off when it went out still gets it
+                    x.put(self.ks.clock(), self.last_tick[src], congestion_control=BLOCK)
                 look = time.monotonic() + 0.5          # answer queries promptly, ask who is there less often
                 while time.monotonic() < look:
                     serve()
@@ -331,6 +335,9 @@ class Pacer:
                 continue
             self.done[p] = max(self.done.get(p, -1.0), ack.t)
             self.moved[p] = time.monotonic()
+            if p in self.ignored:   # it moves again (a link healed): wait for it again
+                self.ignored.discard(p)
+                self.log(f"pacing: peer {p} is making progress again", flush=True)
 
     def wait(self, t: float) -> None:
         need = t - self.window_s
