@@ -213,7 +213,16 @@ def cmd_peer(a) -> int:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc, root, **_zmode(a))
-    return main_peer(sc, a.unit, conf, root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed)
+    misplaced = None
+    if a.topology:   # attached to another command post's router: it works, but its reports cross a radio link
+        from .topology import read_resolved
+        topo, eps = read_resolved(a.topology)
+        own = topo.router_of(a.unit, sc.taskorg)
+        if eps[own] not in (a.connect or []):
+            where = next((n for n, ep in eps.items() if ep in (a.connect or [])), "no router of the topology")
+            misplaced = (f"EA of {sc.taskorg.units[a.unit].name} is attached to {where}, not to its command post's "
+                         f"router {own}: its traffic crosses radio links it should not")
+    return main_peer(sc, a.unit, conf, root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed, misplaced)
 
 
 def cmd_fusion(a) -> int:

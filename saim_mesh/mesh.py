@@ -26,11 +26,12 @@ def _sec(pki: str | Path | None) -> list[str]:
 
 def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed: str = "max",
                  linger: float = 30.0, window: float = 20.0, pki=None, log_dir=None, state=None,
-                 name: str = "replay", net: list[str] | None = None) -> Proc:
+                 name: str = "replay", net: list[str] | None = None, until: float | None = None) -> Proc:
     """`net`: the Zenoh arguments when not listening on `endpoint` (behind routers)."""
     return Proc(name, [*py(), "replay", scenario, *(net or ["--listen", endpoint]), "--root", root, "--speed", speed,
                        "--linger", str(linger), "--window", str(window), *_sec(pki),
-                       *(["--state", str(state)] if state else []), "--wait-peers", *wait],
+                       *(["--state", str(state)] if state else []), *(["--until", str(until)] if until else []),
+                       "--wait-peers", *wait],
                 env=clean_env(), log_dir=log_dir)
 
 
@@ -113,7 +114,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
        root: str | None = None, echo=print, window: float = 20.0, insecure: bool = False,
        pki: Path | None = None, max_restarts: int = 10, console: int | None = None,
        console_linger: float = 30.0, tak: list[str] | None = None, topology: str | None = None,
-       link: dict | None = None) -> dict:
+       link: dict | None = None, until: float | None = None) -> dict:
     """`topology`: a topology file, or "derive" (one router per battalion command post
     and one at the top); leaves then attach to their routers as clients, and every
     router link goes through an emulated radio link (`link`: delay_ms, loss)."""
@@ -158,7 +159,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
             net = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], *client]   # noqa: E731
             replay_net = client   # one session per router: each unit's reports enter at its own router
         replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
-                                      window=window, pki=pki, log_dir=logs, state=state, net=replay_net))
+                                      window=window, pki=pki, log_dir=logs, state=state, net=replay_net,
+                                      until=until))
         replay.wait_for("ready", 60)
         if tak is not None:   # before the EA peers: it must hear their first alerts (supervised: restarted)
             sup.add(Proc("tak", [*py(), "tak", scenario, *net("tak"),

@@ -117,6 +117,7 @@ class Peer:
         self.cmdq: queue.SimpleQueue = queue.SimpleQueue()   # (key, payload) of commands, taken between ticks
         self._wake = lambda: None                           # wakes the clock wait when a command comes
         self.n_cmds = 0
+        self.misplaced: str | None = None   # attached to the wrong router (said once joined)
         C.tap(self.ea)   # a `cff confirm` needs the call for fire the EA saw
 
     # -- sinks -------------------------------------------------------------------------
@@ -527,6 +528,8 @@ class Peer:
                 ack_key = self.ks.ack(self.unit, str(s.info.zid()))
                 self.log(f"ready {self.unit} joined_t={self.joined_t}" + (f" late_alerts={self.late}" if self.late
                                                                            else ""), flush=True)
+                if self.misplaced:
+                    self.system_alert(self.unit, "priority", self.misplaced, event="wrong-router")
                 done = False
                 next_interest = 0.0
                 last_sig = self._plan_signature()
@@ -563,7 +566,8 @@ class Peer:
         return self.summary(t_wall, t_first)
 
     def summary(self, t_wall: float, t_first: float | None) -> dict:
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        ru = resource.getrusage(resource.RUSAGE_SELF)
+        rss = ru.ru_maxrss / 1024.0
         by_p: dict[str, int] = {}
         for a in self.ea.alerts:
             by_p[a.priority] = by_p.get(a.priority, 0) + 1
@@ -571,7 +575,8 @@ class Peer:
                 "late_alerts": self.late, "restarted": bool(self.alog and self.alog.restarted),
                 "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
-                "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
+                "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
+                "cpu_s": round(ru.ru_utime + ru.ru_stime, 2), "max_lead_s": round(self.max_lead, 1),
                 "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
@@ -612,13 +617,18 @@ def _pcts(xs: list[float]) -> dict:
 
 def main_peer(sc: Scenario, unit: str, conf, root: str, out: str | None, config_path=None,
               radius_m: float | None = None, deadline_s: float | None = None, connect: list[str] | None = None,
-              armed: bool = False) -> int:
+              armed: bool = False, misplaced: str | None = None) -> int:
     p = Peer(sc, unit, conf, root, out, config_path, radius_m, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
              deadline_s=deadline_s, connect=connect, armed=armed)
+    p.misplaced = misplaced
     try:
         summary = p.run()
     except SourceLost as e:
         print(f"saim-mesh peer {unit}: {e}", file=sys.stderr, flush=True)
         return 3
+    except zenoh.ZError as e:   # its router (or the replay) is not there: say so; the supervisor retries
+        print(f"saim-mesh peer {unit}: cannot join the mesh at {', '.join(connect or []) or 'no endpoint'}: "
+              f"{str(e).split(' at /')[0]}", file=sys.stderr, flush=True)
+        return 4
     print("summary " + json.dumps(summary), flush=True)
     return 0

@@ -358,8 +358,13 @@ class Pacer:
 
 def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None,
                 window_s: float = 20.0, state_path=None, sources=None, topo=None) -> int:
-    res = Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
-                 state_path=state_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
-                 sources=sources, topo=topo).run()
+    try:
+        res = Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
+                     state_path=state_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
+                     sources=sources, topo=topo).run()
+    except zenoh.ZError as e:   # a source's router is not there: say which; the supervisor retries
+        print(f"saim-mesh replay: cannot reach a router of the topology: {str(e).split(' at /')[0]}",
+              file=sys.stderr, flush=True)
+        return 4
     print("summary " + json.dumps(res), flush=True)
     return 0

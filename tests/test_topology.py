@@ -6,8 +6,11 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
+import uuid
 from types import SimpleNamespace
 
 import pytest
@@ -17,10 +20,11 @@ from saim_mesh import scenario as S
 from saim_mesh import topology as T
 from saim_mesh import wire as W
 from saim_mesh.mesh import up
+from saim_mesh.proc import Proc
 from saim_mesh.peer import Peer
 from saim_mesh.runner import run
 from saim_mesh.security.acl import access_control, identities
-from saim_mesh.zconf import config
+from saim_mesh.zconf import config, free_port
 
 from .conftest import SMALL
 
@@ -210,3 +214,37 @@ def test_a_cut_radio_link_is_noticed_on_both_sides_and_no_alert_is_lost(tmp_path
         assert silent and "a router link may be down" in silent[0]["message"], u
     assert res["peers"]["A"]["gaps"] >= 1 or res["peers"]["BN"]["gaps"] >= 1
     assert res["links"]["r-A->r-BN"]["cuts"] == 1
+
+
+def test_a_leaf_whose_router_is_down_at_start_says_so_and_exits(tmp_path):
+    port = free_port()   # nobody listens there
+    p = subprocess.run([sys.executable, "-m", "saim_mesh", "peer", "--scenario", SC, "--unit", "A", "--mode", "client",
+                        "--connect", f"tcp/127.0.0.1:{port}", "--root", "t/x"], capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 4
+    assert f"cannot join the mesh at tcp/127.0.0.1:{port}" in p.stderr
+
+
+@pytest.mark.timeout(120)
+def test_a_peer_on_the_wrong_router_raises_a_system_problem(tmp_path):
+    topo = T.load(topo_file(tmp_path, SMALL_TOPO), S.load(SMALL, events=False).taskorg)
+    eps = {n: f"tcp/127.0.0.1:{free_port()}" for n in topo.routers}
+    T.resolve(topo, eps, tmp_path / "resolved.json")
+    root = f"t/{uuid.uuid4().hex[:8]}"
+    router = Proc("r-BN", [sys.executable, "-m", "saim_mesh", "router", "--scenario", SC, "--name", "r-BN", "--root",
+                           root, "--listen", eps["r-BN"], "--topology", str(tmp_path / "resolved.json")],
+                  log_dir=tmp_path)
+    try:
+        router.wait_for("router ready", 60)
+        peer = Proc("A", [sys.executable, "-m", "saim_mesh", "peer", "--scenario", SC, "--unit", "A", "--mode",
+                          "client", "--connect", eps["r-BN"], "--topology", str(tmp_path / "resolved.json"),
+                          "--root", root, "--out", str(tmp_path / "A.jsonl"), "--deadline", "3"], log_dir=tmp_path)
+        try:
+            peer.wait_for("presence A wrong-router", 60)
+        finally:
+            peer.stop()
+    finally:
+        router.stop()
+    alerts = [json.loads(x) for x in open(tmp_path / "A.jsonl")]
+    wrong = [a for a in alerts if a["details"].get("event") == "wrong-router"]
+    assert wrong and "attached to r-BN, not to its command post's router r-A" in wrong[0]["message"]

@@ -1,0 +1,215 @@
+"""The brigade on routers across emulated radio links, on this machine, all in one run:
+
+1. `mesh up --topology` (one router per battalion command post and one at brigade,
+   each router link through `saim-mesh link`) at max speed with an EA peer per unit:
+   wall time against scenario time, CPU and peak PSS/RSS per process, bytes per
+   router link, and every peer's alerts against the in-process run's;
+2. the flood baseline in the same run: the same routers, links and replay with one
+   subscriber to everything behind each router (what each link would carry if every
+   report went everywhere), counted per key family;
+3. report-to-alert latency at 1x over the first minutes of the scenario.
+
+Writes bench/results/scale.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import time
+import uuid
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+import zenoh
+
+from . import routed
+from . import topology as T
+from .mesh import Supervisor, mesh_units, start_replay, up
+from .proc import Proc, clean_env
+from .procstat import Sampler
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _inproc(args: tuple[str, list[str]]) -> dict[str, list[str]]:
+    from . import scenario as S
+    from .runner import run
+    scenario, units = args
+    return {ea.owner: [json.dumps(a.to_json_dict(), sort_keys=True) for a in ea.alerts]
+            for ea in run(S.load(scenario), units)}
+
+
+def in_process(scenario: str, units: list[str], workers: int = 2) -> dict[str, list[str]]:
+    """Every unit's alerts from the in-process run (units split over `workers` processes)."""
+    chunks = [units[i::workers] for i in range(workers)]
+    out: dict[str, list[str]] = {}
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as ex:
+        for part in ex.map(_inproc, [(scenario, c) for c in chunks if c]):
+            out.update(part)
+    return out
+
+
+def plan_lines(path: Path) -> list[str]:
+    """A peer's alerts as the in-process run raises them (no system notes, no late marks)."""
+    out = []
+    for line in open(path):
+        a = json.loads(line)
+        if a["category"] == "system-problem":
+            continue
+        for k in ("late", "cut_off"):
+            a["details"].pop(k, None)
+        out.append(json.dumps(a, sort_keys=True))
+    return out
+
+
+def role_tap(connect: str, root: str, conf_args: list[str]) -> None:
+    """Subscribe to everything behind one router and count it per key family until SIGTERM."""
+    from .zconf import config
+    conf = config(None, [connect], mode="client")
+    counts: Counter = Counter()
+    nbytes: Counter = Counter()
+    n = len(root) + 1
+
+    def take(s):
+        fam = str(s.key_expr)[n:].split("/", 1)[0]
+        counts[fam] += 1
+        nbytes[fam] += len(s.payload.to_bytes())
+    stop = [False]
+    signal.signal(signal.SIGTERM, lambda *_: stop.__setitem__(0, True))
+    with zenoh.open(conf) as s:
+        sub = s.declare_subscriber(f"{root}/**", take)
+        print("tap ready", flush=True)
+        while not stop[0]:
+            time.sleep(0.1)
+        sub.undeclare()
+    print("tap " + json.dumps({"messages": dict(counts), "bytes": dict(nbytes)}), flush=True)
+
+
+def flood(scenario: str, out: Path, link: dict) -> dict:
+    """Routers, links and the replay (no EA peers) with a subscriber to everything behind
+    each router: what a flood would put on each link, in the same run as the real thing."""
+    from . import scenario as S
+    sc = S.load(scenario, events=False)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "logs").mkdir(exist_ok=True)
+    topo = T.derive(sc.taskorg)
+    root = f"bench/{uuid.uuid4().hex[:8]}"
+    sup = Supervisor(lambda *a, **k: None, 0, pids_path=out / "pids.json")
+    try:
+        eps, link_files, resolved = routed.start(scenario, topo, out, root, sup, None, link)
+        taps = {n: sup.add(Proc(f"tap-{n}", [sys.executable, "-m", "saim_mesh.bench_scale", "--role", "tap",
+                                             "--connect", ep, "--root", root], env=clean_env(),
+                                log_dir=out / "logs")) for n, ep in eps.items()}
+        for p in taps.values():
+            p.wait_for("tap ready", 60)
+        t0 = time.monotonic()
+        rp = sup.add(start_replay(scenario, "", root, [], "max", linger=0, log_dir=out / "logs",
+                                  net=["--mode", "client", "--topology", str(resolved)]))
+        rp.wait_for("end ", 3600)
+        wall = time.monotonic() - t0
+        rp.p.wait(60)
+        for p in taps.values():
+            p.p.send_signal(signal.SIGTERM)
+        got = {n: json.loads(p.wait_for("tap ", 60)[4:]) for n, p in taps.items()}
+    finally:
+        sup.stop()
+    return {"wall_s": round(wall, 1), "links": routed.link_stats(link_files), "received_behind_router": got}
+
+
+def _pcts(xs: list[float]) -> dict:
+    if not xs:
+        return {}
+    ys = sorted(xs)
+    return {"n": len(ys), "p50": ys[len(ys) // 2], "p99": ys[min(len(ys) - 1, int(0.99 * len(ys)))], "max": ys[-1]}
+
+
+def _link_bytes(links: dict) -> dict:
+    return {n: {"up_bytes": s["up"]["bytes"], "down_bytes": s["down"]["bytes"],
+                "total_bytes": s["up"]["bytes"] + s["down"]["bytes"]} for n, s in links.items() if s}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--role", choices=["tap"])
+    ap.add_argument("--connect")
+    ap.add_argument("--root")
+    ap.add_argument("--scenario", help="default: the brigade, generated on demand into out/scenarios")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "scale.json"))
+    ap.add_argument("--tmp", default=str(ROOT / "out" / "bench-scale"))
+    ap.add_argument("--latency-s", type=float, default=120.0, help="scenario seconds run at 1x for latency")
+    ap.add_argument("--insecure", action="store_true")
+    ap.add_argument("--skip", nargs="*", default=[], choices=["flood", "latency", "inproc"])
+    a = ap.parse_args(argv)
+    if a.role == "tap":
+        role_tap(a.connect, a.root, [])
+        return 0
+    from . import scenario as S
+    from .ondemand import ensure
+    scenario = a.scenario or str(ensure("brigade", ROOT / "out" / "scenarios"))
+    tmp = Path(a.tmp)
+    sc = S.load(scenario, events=False)
+    units = mesh_units(sc)
+    link = {"delay_ms": 0.0, "loss": 0.0}
+    res_path = tmp / "brigade"
+    print(f"brigade: {len(units)} EA peers, {len(sc.taskorg.entity_unit)} entities, "
+          f"{sc.duration_s:.0f} s of scenario", flush=True)
+    with Sampler(res_path / "pids.json") as smp:
+        res = up(scenario, None, res_path, "max", topology="derive", link=link, insecure=a.insecure,
+                 timeout=7200, echo=lambda *x, **k: print(*x, **{kk: v for kk, v in k.items() if kk == "flush"}))
+    peers = res["peers"]
+    procs = smp.report()
+    for u, s in peers.items():   # a peer's own CPU count is exact (the sampler's misses its last second)
+        procs.setdefault(u, {})["cpu_s"] = s.get("cpu_s", procs.get(u, {}).get("cpu_s"))
+    replay_sum = next((json.loads(x[8:]) for x in res["replay"] if x.startswith("summary ")), {})
+    out: dict = {
+        "scenario": Path(scenario).name, "entities": len(sc.taskorg.entity_unit), "ea_peers": len(peers),
+        "routers": len(res["topology"]["routers"]), "scenario_s": sc.duration_s,
+        "events": replay_sum.get("events"), "wall_s": round(res["wall_s"], 1),
+        "times_real_time": round(sc.duration_s / res["wall_s"], 1), "secure": res["secure"],
+        "crashes": [e for e in res["events"] if "exit_code" in e], "given_up": res["given_up"],
+        "links": _link_bytes(res["links"]), "processes": procs,
+    }
+    ea = {u: procs.get(u, {}) for u in peers}
+    pss = [p["pss_mb"] for p in ea.values() if p.get("pss_mb")]
+    out["ea_peer_pss_mb"] = {"max": max(pss, default=None), "mean": round(sum(pss) / len(pss), 1) if pss else None}
+    out["ea_peer_rss_mb"] = {"max": max((p["rss_mb"] for p in ea.values() if p.get("rss_mb")), default=None)}
+    out["cpu_s_total"] = round(sum(p.get("cpu_s") or 0 for p in procs.values()), 1)
+    print(json.dumps({k: out[k] for k in ("wall_s", "times_real_time", "ea_peers", "events", "cpu_s_total",
+                                          "ea_peer_pss_mb")}), flush=True)
+    if "flood" not in a.skip:
+        fl = flood(scenario, tmp / "flood", link)
+        out["flood"] = {"wall_s": fl["wall_s"], "links": _link_bytes(fl["links"]),
+                        "received_behind_router": fl["received_behind_router"]}
+        narrow = sum(v["total_bytes"] for v in out["links"].values())
+        wide = sum(v["total_bytes"] for v in out["flood"]["links"].values())
+        out["link_bytes_share_of_flood"] = round(narrow / wide, 3) if wide else None
+        print(f"router links: {narrow / 1e6:.1f} MB against {wide / 1e6:.1f} MB flooded", flush=True)
+    if "latency" not in a.skip:   # report-to-alert at 1x over the first minutes
+        lat = up(scenario, None, tmp / "latency", "1", topology="derive", link=link, insecure=a.insecure,
+                 timeout=a.latency_s + 600, until=a.latency_s, echo=lambda *x, **k: None)
+        xs = [v for s in lat["peers"].values() for v in s.get("alert_latencies_ms", [])]
+        ticks = [s["tick_latency_ms"].get("p99") for s in lat["peers"].values() if s.get("tick_latency_ms")]
+        out["latency_1x"] = {"scenario_s": a.latency_s, "alert_latency_ms": _pcts(xs),
+                             "tick_latency_p99_ms_worst_peer": max(ticks, default=None)}
+        print(f"1x: report-to-alert {out['latency_1x']['alert_latency_ms']}", flush=True)
+    if "inproc" not in a.skip:
+        want = in_process(scenario, sorted(peers))
+        same = {u: plan_lines(res_path / f"{u}.jsonl") == want[u] for u in sorted(peers)}
+        out["alerts_equal_in_process"] = all(same.values())
+        out["alerts_differ"] = sorted(u for u, ok in same.items() if not ok)
+        out["alerts"] = sum(len(v) for v in want.values())
+        print(f"alerts equal in process: {sum(same.values())}/{len(same)}", flush=True)
+    out["targets"] = {"times_real_time": 10.0, "ea_peer_pss_mb": 40.0}
+    out["machine"] = {"cores": os.cpu_count()}
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
