@@ -322,7 +322,7 @@ def test_junk_carrying_the_next_sequence_numbers_is_contested_and_settled_by_the
     Only seqs whose real message is on a key A2 hears are used: junk carrying the seq of
     a message A2 never receives cannot be told from the real thing in insecure mode."""
     ep, root, procs = launch(tmp_path, [("A2", "A2")], speed="300")
-    script = Replay(sc, None, root)._prepare(sc.duration_s)   # the replay's (event, key, payload), seq = index + 1
+    script = Replay(sc, None, root)._prepare(sc.duration_s)   # (event, key, payload, source); seq = index + 1
     mine = lambda k: k.startswith(f"{root}/msn/A2/") or (k.startswith(f"{root}/pos/") and A2_PATH in k)
     sent: dict[int, object] = {}   # seq -> the junk sent with it
     try:
@@ -331,9 +331,9 @@ def test_junk_carrying_the_next_sequence_numbers_is_contested_and_settled_by_the
             # one matched publisher per subscription of A2's we aim at: the session then
             # routes any key under them to the peer
             hold = [matched(s, f"{root}/msn/A2/probe"),
-                    matched(s, next(k for _, k, _ in script if mine(k) and "/pos/" in k))]
+                    matched(s, next(k for _, k, _, _ in script if mine(k) and "/pos/" in k))]
             tick = next_tick(s, root)
-            window = [(seq, ev, k) for seq, (ev, k, _) in enumerate(script, 1)
+            window = [(seq, ev, k) for seq, (ev, k, _, _) in enumerate(script, 1)
                       if seq > tick.seq and tick.t + 40 <= ev.t <= tick.t + 500 and mine(k)]
             targets = [x for x in window if type(x[1]) is M.MissionConfirm] + \
                       [x for x in window if type(x[1]) is M.LocationReport][:20]
