@@ -13,6 +13,8 @@ import uuid
 import msgspec
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from dissemination.keyspace import KeySpace
 from saim_mesh import commands as C
@@ -94,6 +96,15 @@ def test_tampered_key(keys):
     # signed for ord/A1 with an order issued by A2 inside (what the key claims is checked)
     assert "differs from the key" in rejected(g, signed_order(keys, n=3, key=other), other)
     assert g.rejects.by_kind == {"signed": 3}
+
+
+@pytest.mark.parametrize("bad", [f"{ROOT}/ord/*", f"{ROOT}/ord/**", f"{ROOT}//ord/A2", f"{ROOT}/ord/A2/",
+                                 f"{ROOT}/ord/$*", "/", "**"])
+def test_a_signed_key_that_is_no_concrete_key_is_refused(keys, bad):
+    g = gate(keys)
+    assert "not one concrete key" in rejected(g, signed_order(keys, key=bad), "store")
+    assert "not one concrete key" in rejected(g, signed_order(keys, key=bad), bad)
+    assert g.rejects.by_kind == {"signed": 2}
 
 
 def test_unknown_signer_and_signer_not_allowed(keys):
@@ -277,3 +288,22 @@ def test_a_peer_takes_signed_commands_only(pki, sc):
     assert "console.B may not sign" in peer.gate.rejects.recent[-1]
 
 
+
+
+@settings(max_examples=300, deadline=None)
+@given(head=st.sampled_from([0x96, 0x90, 0x9F, 0xDC, 0xDD]), rest=st.binary(max_size=400))
+def test_arbitrary_envelope_bytes_are_counted_never_raised(keys, head, rest):
+    g = gate(keys)
+    assert g.data(bytes([head]) + rest, ORDER_KEY) is None
+    assert g.control(W.AckCmd, bytes([head]) + rest, KS.cmd("A2", "ack", "A"), signed=True) is None
+    assert g.errors == 2 and g.rejects.by_kind == {"signed": 2}
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data())
+def test_a_real_envelope_with_any_byte_changed_is_refused(keys, data):
+    env = bytearray(signed_order(keys))
+    i = data.draw(st.integers(0, len(env) - 1))
+    env[i] ^= data.draw(st.integers(1, 255))
+    g = gate(keys)
+    assert g.data(bytes(env), ORDER_KEY) is None and g.errors == 1

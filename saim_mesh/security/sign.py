@@ -31,7 +31,7 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
-from dissemination.keyspace import KeySpace, matcher, template
+from dissemination.keyspace import KeySpace, template
 from saim_mesh import messages as M
 from saim_mesh import wire as W
 
@@ -137,6 +137,27 @@ def rules_for(identities: Iterable[str]) -> dict[str, list[str]]:
     return out
 
 
+def _rule(expr: str) -> Callable[[str], bool]:
+    """A test of concrete keys against one rule: `*` is one chunk, a trailing `**` any rest.
+    Our own, not Zenoh's: a signed key is attacker input, and it must not raise."""
+    parts = expr.split("/")
+    deep = parts[-1] == "**"
+    if deep:
+        parts = parts[:-1]
+
+    def match(key: str) -> bool:
+        chunks = key.split("/")
+        if len(chunks) < len(parts) or not deep and len(chunks) != len(parts):
+            return False
+        return all(p == "*" or p == c for p, c in zip(parts, chunks))
+    return match
+
+
+def _any(exprs: list[str]) -> Callable[[str], bool]:
+    tests = [_rule(e) for e in exprs]
+    return lambda key: any(t(key) for t in tests)
+
+
 class _Window:
     """The last `size` counters taken from one signer: a counter seen again, or older than
     all of them once the window is full, is a replay. Memory: `size` integers."""
@@ -172,7 +193,7 @@ class Verifier:
         self.ks = KeySpace(root)
         self.keys = dict(keys)
         self.allowed: dict[str, Callable[[str], bool]] = {
-            who: matcher([f"{self.ks.root}/{e}" for e in exprs]) for who, exprs in rules.items()}
+            who: _any([f"{self.ks.root}/{e}" for e in exprs]) for who, exprs in rules.items()}
         self.require, self.window = require, int(window)
         self.windows: dict[str, _Window] = {}
         self._data_prefix, self._store_prefix = self.ks.root + "/", self.ks.root + "/store/"
@@ -190,6 +211,8 @@ class Verifier:
             raise _err("(envelope)", str(e)[:200]) from None
         except Exception as e:   # a decoder bug must not kill a peer either
             raise _err("(envelope)", f"undecodable: {type(e).__name__}") from None
+        if any(c in env.key for c in "*$?#") or "//" in env.key or env.key.endswith("/"):
+            raise _err("key", f"signed for {env.key[:80]!r}: not one concrete key")
         pub = self.keys.get(env.by)
         if pub is None:
             raise _err("by", f"unknown signer {env.by[:64]!r}")
