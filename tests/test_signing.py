@@ -28,6 +28,8 @@ from saim_mesh.security import sign as G
 from saim_mesh.zconf import config
 
 from .conftest import SMALL
+from .test_mesh import inproc, key, load, reap  # noqa: F401  (inproc: a fixture)
+from .test_mesh_attacks import attacker, in_process_a2, keys_of, launch, matched, next_tick, summary_of, wait_link
 
 pytestmark = pytest.mark.timeout(120)
 ROOT = "test/sign"
@@ -307,3 +309,45 @@ def test_a_real_envelope_with_any_byte_changed_is_refused(keys, data):
     env[i] ^= data.draw(st.integers(1, 255))
     g = gate(keys)
     assert g.data(bytes(env), ORDER_KEY) is None and g.errors == 1
+
+
+# ---------------------------------------------------------------------------- end to end
+
+@pytest.mark.timeout(240)
+def test_an_insider_cannot_forge_or_replay_authority(tmp_path, sc, pki, inproc):
+    """A secure replay and A2's peer; mid-run a session as `ea.A2` (whose access control
+    lets it put on msn/A2/*, as any relay would) puts an unsigned confirmation, one signed
+    with its own key, and a real signed confirmation taken from the store again. A2's peer
+    refuses all three, says why, counts them, and its alerts are the in-process run's."""
+    ep, root, procs = launch(tmp_path, [("A2", "A2")], pki=pki)
+    ks = KeySpace(root)
+    try:
+        procs[0].wait_for("t=400", 120)
+        with attacker(ep, root, sc, pki, "ea.A2") as s:
+            wait_link(s, "ea.A2")
+            t = next_tick(s, root).t
+            req = W.encode(W.make(W.StoreQuery, since=0, keys=[f"{root}/msn/A2/**"]))
+            rep = next(W.decode_control(W.StoreReply, r.ok.payload.to_bytes(), 1 << 24)
+                       for r in s.get(ks.store(), payload=req, timeout=10.0) if r.ok is not None)
+            real = [p for _, p in rep.entries if G.is_signed(p)]
+            assert real, "the store holds A2's signed confirmations"
+            fake = M.MissionConfirm(t, "A2-attack", "A2", "start")   # 2000 s early: changes A2's alerts
+            k = KS.key(fake, None, None).replace(ROOT, root, 1)
+            pub, listener = matched(s, k)
+            pub.put(M.encode(fake))
+            procs[1].wait_for(f"reject mission on {k}", 30)
+            pub.put(G.load_signer(pki, "ea.A2").sign(k, M.encode(fake)))
+            procs[1].wait_for(f"reject signed on {k}", 30)
+            old, listener2 = matched(s, msgspec.msgpack.decode(real[0])[3])
+            old.put(real[0])   # its own key, a valid signature: refused only as a replay
+        summary = summary_of(procs[1])
+        procs[0].p.wait(60)
+    finally:
+        reap(procs)
+    assert summary["rejects"] == {"mission": 1, "signed": 2}, summary
+    lines = procs[1].lines
+    assert any("ea.A2 may not sign on 'msn'" in x for x in lines)
+    assert any("an unsigned mission message" in x for x in lines)
+    assert keys_of(load(tmp_path / "A2.jsonl")) == [key(a) for a in inproc["A2"]]
+    events = sorted([*sc.events, M.MissionConfirm(400.0, "A2-attack", "A2", "start")], key=lambda e: e.t)
+    assert in_process_a2(events) != [key(a) for a in inproc["A2"]]   # the forgery would have mattered
