@@ -173,7 +173,8 @@ CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionRep
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
 KINDS = (frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}
          | {"signed"})   # what rejects are counted under ("signed": a forged or replayed envelope)
-ENVELOPE_HEADS = frozenset(bytes([b]) for b in (*range(0x90, 0xA0), 0xDC, 0xDD))   # a signed envelope
+# a signed envelope is a msgpack ext (security/sign.py): no message, control or batch is one
+ENVELOPE_HEADS = frozenset(bytes([b]) for b in (0xC7, 0xC8, 0xC9, *range(0xD4, 0xD9)))
 _ENCODER = msgspec.msgpack.Encoder()
 
 
@@ -237,9 +238,9 @@ class Gate:
 
     `t_max` is the scenario's end: a message dated after it can only be a forgery or
     a fault, and holding it would cost memory until the end of time. `verifier`
-    (security.sign.Verifier) opens signed envelopes (a msgpack array, where a message is
-    a map) and, in secure mode, refuses authority that comes unsigned; without one a
-    signed envelope cannot be checked and is refused."""
+    (security.sign.Verifier) opens signed envelopes (a msgpack ext, where a message is a
+    map) and, in secure mode, refuses authority that comes unsigned; without one a signed
+    envelope cannot be checked and is refused."""
 
     def __init__(self, t_max: float, max_bytes: int = 65536, max_reply_bytes: int = 256 * 2**20, log=None,
                  verifier=None):

@@ -5,9 +5,10 @@ the publisher's (../shared/notes/zenoh-security.md), so an order, a reorganizati
 mission confirmation, a robot's task delegation or a commander's command is also signed
 with the sender's own key and checked by the receiver itself.
 
-A `Signed` envelope is a msgpack *array* (a data message is a map: one byte tells them
-apart) of (v, by, n, key, body, sig); `sig` covers a canonical encoding of (by, n, key,
-body), so a signed message cannot be moved to another key or claimed by another signer.
+A `Signed` envelope, (v, by, n, key, body, sig), travels as msgpack ext type 83 (a data
+message is a map, a control message or batch a map or an array: the first byte tells them
+apart); `sig` covers a canonical encoding of (by, n, key, body), so a signed message
+cannot be moved to another key or claimed by another signer.
 `n` is a counter strictly new per signer: the replay uses each event's place in the
 script (the same after a restart that resumes from its state file), consoles a time-based
 counter. A `Verifier` rejects, with a `MessageError` of kind "signed" naming why: an
@@ -39,6 +40,7 @@ from .pki import NAME_RE, SecurityError, _load_key, _read, _write
 
 VERSION = 1
 KIND = "signed"                  # what a rejected envelope is counted under (wire.Rejects)
+EXT = 83                         # msgpack ext type of an envelope ('S')
 SIGNERS_FILE = "signers.json"
 SIGN_SUFFIX = ".sign.pem"
 MAX_BODY = 1 << 20               # the Gate's size bound on the whole envelope comes first
@@ -72,19 +74,31 @@ class SignersFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 _ENC = msgspec.msgpack.Encoder()
 _DEC = msgspec.msgpack.Decoder(Signed)
-
-
-def is_signed(payload: bytes) -> bool:
-    """An envelope (a msgpack array), not a bare message (a map): one byte decides."""
-    return payload[:1] in W.ENVELOPE_HEADS
-
-
-def _canonical(by: str, n: int, key: str, body: bytes) -> bytes:
-    return _ENC.encode((_DOMAIN, by, n, key, body))
+_EXT_DEC = msgspec.msgpack.Decoder(msgspec.msgpack.Ext)
 
 
 def _err(field: str, problem: str) -> M.MessageError:
     return M.MessageError(KIND, field, problem)
+
+
+def is_signed(payload: bytes) -> bool:
+    """An envelope (a msgpack ext), not a bare message: one byte decides."""
+    return payload[:1] in W.ENVELOPE_HEADS
+
+
+def envelope(payload: bytes) -> Signed:
+    """The envelope in `payload`, not yet checked; MessageError when there is none."""
+    try:
+        ext = _EXT_DEC.decode(payload)
+        if ext.code != EXT:
+            raise _err("(envelope)", f"msgpack ext type {ext.code}, not a signed envelope ({EXT})")
+        return _DEC.decode(ext.data)
+    except (msgspec.ValidationError, msgspec.DecodeError) as e:
+        raise _err("(envelope)", str(e)[:200]) from None
+
+
+def _canonical(by: str, n: int, key: str, body: bytes) -> bytes:
+    return _ENC.encode((_DOMAIN, by, n, key, body))
 
 
 class Signer:
@@ -112,7 +126,8 @@ class Signer:
         if len(body) > MAX_BODY or not 1 <= len(key) <= W.KEY_LIMIT:
             raise ValueError(f"cannot sign {len(body)} bytes for a key of {len(key)} characters")
         sig = self._key.sign(_canonical(self.name, n, key, body))
-        return _ENC.encode(Signed(v=VERSION, by=self.name, n=n, key=key, body=body, sig=sig))
+        return _ENC.encode(msgspec.msgpack.Ext(EXT, _ENC.encode(Signed(v=VERSION, by=self.name, n=n, key=key,
+                                                                      body=body, sig=sig))))
 
 
 def seal(signer: Signer | None, key: str, msg, payload: bytes, n: int) -> bytes:
@@ -206,9 +221,9 @@ class Verifier:
         is remembered but not refused again: the replay answers the store, its readers
         drop repeats by sequence number, and a peer re-fetches there what it dropped."""
         try:
-            env = _DEC.decode(payload)
-        except (msgspec.ValidationError, msgspec.DecodeError) as e:
-            raise _err("(envelope)", str(e)[:200]) from None
+            env = envelope(payload)
+        except M.MessageError:
+            raise
         except Exception as e:   # a decoder bug must not kill a peer either
             raise _err("(envelope)", f"undecodable: {type(e).__name__}") from None
         if any(c in env.key for c in "*$?#") or "//" in env.key or env.key.endswith("/"):
