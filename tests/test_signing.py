@@ -264,10 +264,10 @@ def test_the_replays_signed_order_is_decoded_by_a_peers_gate(pki, sc):
     replay = Replay(sc, config(["tls/127.0.0.1:0"], None, pki=pki, name="replay", sc=sc, root=root), root,
                     log=lambda *a, **k: None)
     script = replay._prepare(sc.duration_s)
-    signed = [(ev, k, p) for ev, k, p in script if G.is_signed(p)]
+    signed = [(ev, k, p) for ev, k, p, _ in script if G.is_signed(p)]
     assert {type(ev) for ev, _, _ in signed} == {M.Order, M.MissionConfirm}
     assert len(signed) == sum(type(e) in G.AUTHORITY for e in sc.events)
-    assert not any(G.is_signed(p) for ev, _, p in script if type(ev) not in G.AUTHORITY)
+    assert not any(G.is_signed(p) for ev, _, p, _ in script if type(ev) not in G.AUTHORITY)
     peer = Peer(sc, "A2", config(["tls/127.0.0.1:0"], None, pki=pki, name="ea.A2", sc=sc, root=root), root,
                 log=lambda *a, **k: None)
     for ev, k, p in signed:
@@ -282,7 +282,7 @@ def test_the_replays_signed_order_is_decoded_by_a_peers_gate(pki, sc):
     # the same scenario restarted signs the same bytes (counters from the script, not the clock)
     again = Replay(sc, config(["tls/127.0.0.1:0"], None, pki=pki, name="replay", sc=sc, root=root), root,
                    log=lambda *a, **k: None)._prepare(sc.duration_s)
-    assert [p for _, _, p in again] == [p for _, _, p in script]
+    assert [x[2] for x in again] == [x[2] for x in script]
 
 
 def test_a_peer_takes_signed_commands_only(pki, sc):
