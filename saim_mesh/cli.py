@@ -352,9 +352,11 @@ def cmd_command(a) -> int:
     cmd = C.make(kind, **fields)
     root = a.root or f"saim/{sc.name}"
     name = a.as_ or (f"console.{a.unit}" if a.unit in mesh_units(sc) else f"console.{sc.taskorg.root}")
+    from .security.sign import signer_for
     conf = config(None, a.connect, a.zenoh_config, a.multicast, a.pki, name, sc, root)
+    signer = signer_for(conf)   # secure mode: signed as `name`
     with zenoh.open(conf) as session:
-        res = C.send(session, KeySpace.of(sc, root), a.unit, cmd, C.by_of(name, a.unit), a.timeout)
+        res = C.send(session, KeySpace.of(sc, root), a.unit, cmd, C.by_of(name, a.unit), a.timeout, signer)
     print(json.dumps(C.to_dict(res)))
     return 0 if res.ok else 2
 

@@ -168,20 +168,22 @@ def by_of(identity: str, unit: str) -> str:
     return identity.removeprefix("console.") if identity.startswith("console.") else unit
 
 
-def send(session, ks, unit: str, cmd, by: str, timeout: float = 10.0) -> W.CmdResult:
+def send(session, ks, unit: str, cmd, by: str, timeout: float = 10.0, signer=None) -> W.CmdResult:
     """Publish `cmd` to `unit`'s EA as the console of unit `by` and wait for its answer
     (same `req`). No answer in time (no EA peer, or access control dropped the command)
-    is a failed result, not an error."""
+    is a failed result, not an error. `signer` (security.sign.signer_for, secure mode)
+    signs it: the EA checks who sent it even through a router."""
     kind = KIND_OF[type(cmd)]
     end = time.monotonic() + timeout
     answers: queue.SimpleQueue = queue.SimpleQueue()
     gate = W.Gate(W.T_LIMIT)
     sub = session.declare_subscriber(ks.cmdlog(unit), lambda s: answers.put(s.payload.to_bytes()))
-    pub = session.declare_publisher(ks.cmd(unit, kind, by), congestion_control=zenoh.CongestionControl.BLOCK)
+    key = ks.cmd(unit, kind, by)
+    pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     try:
         if not _wait_matching(pub, end):
             return result(cmd, False, 0.0, f"no EA of {unit} listening within {timeout:.0f} s")
-        pub.put(W.encode(cmd))
+        pub.put(W.encode(cmd) if signer is None else signer.sign(key, W.encode(cmd)))
         while (left := end - time.monotonic()) > 0:
             try:
                 payload = answers.get(timeout=left)

@@ -34,6 +34,7 @@ from .fusion.barrier import TrackBarrier
 from .presence import Presence
 from .runner import config_for, make_ea
 from .scenario import Scenario
+from .security.sign import verifier_for
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
@@ -73,7 +74,8 @@ class Peer:
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         dis, mesh = self.cfg["dissemination"], self.cfg["mesh"]
         self.interest = Interest(self.ks, radius_m or dis["radius_m"], int(dis["block_share"]))
-        self.gate = W.Gate(sc.duration_s, int(mesh["max_payload_bytes"]), log=log)
+        self.gate = W.Gate(sc.duration_s, int(mesh["max_payload_bytes"]), log=log,
+                           verifier=verifier_for(conf, root))   # secure mode: authority must come signed
         self.max_ahead, self.silence_s = float(mesh["max_ahead_s"]), float(mesh["clock_silence_s"])
         self.reject_alert = int(mesh["reject_alert"])
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
@@ -456,7 +458,7 @@ class Peer:
                    f"unknown command kind {kind[:32]!r}" if cls is None else "no sender unit in the key")
             self._reject("cmd", "(key)", why, key)
             return self._refusal(payload, kind, why)
-        cmd = self.gate.control(cls, payload, key)
+        cmd = self.gate.control(cls, payload, key, signed=True)
         if cmd is None:
             return self._refusal(payload, kind, self.gate.rejects.recent[-1] if self.gate.rejects.recent else "bad")
         refused = C.authority(getattr(self.ea.domain, "taskorg", None), by, self.unit)

@@ -36,6 +36,7 @@ from . import messages as M
 from . import wire as W
 from .radios import Radios
 from .scenario import Scenario
+from .security import sign
 
 BLOCK = zenoh.CongestionControl.BLOCK
 STORE_PRIORITY = zenoh.Priority.INTERACTIVE_HIGH
@@ -76,6 +77,7 @@ class Replay:
         self.resumed_from: dict | None = None
         self.ingested = 0   # live reports taken in from ingest/** (a TAK gateway)
         self.entity_unit = {e: u.id for u in sc.taskorg.units.values() for e in u.entities}
+        self.signer = sign.signer_for(conf)   # secure mode: authority goes out signed as `replay`
 
     def _add(self, src: str, key: str, payload: bytes) -> int:
         """Into the store (as source `src` serves it); returns the entry's seq."""
@@ -192,13 +194,14 @@ class Replay:
         planned = getattr(domains.of(sc), "org_changes", None)   # a domain with a changing hierarchy
         reorgs = planned(sc) if planned else []
         out = []
-        for ev, x, y in zip(evs, xs.tolist(), ys.tolist()):
+        for i, (ev, x, y) in enumerate(zip(evs, xs.tolist(), ys.tolist())):
             while reorgs and reorgs[0][0] <= ev.t:
                 _, unit, parent = reorgs.pop(0)
                 to.resubordinate(unit, parent)
             if type(ev) is M.Reorganization:
                 to.resubordinate(ev.unit, ev.new_parent)
-            out.append((ev, self.ks.key(ev, to, sc.projection, (x, y)), M.encode(ev), self._source(ev, to)))
+            k = self.ks.key(ev, to, sc.projection, (x, y))   # signed with its place in the script: n = i + 1
+            out.append((ev, k, sign.seal(self.signer, k, ev, M.encode(ev), i + 1), self._source(ev, to)))
         return out
 
     def run(self) -> dict:

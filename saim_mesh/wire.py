@@ -171,7 +171,10 @@ COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": 
 CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health,
            *COMMANDS.values(), CmdResult)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
-KINDS = frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}   # what rejects are counted under
+KINDS = (frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}
+         | {"signed"})   # what rejects are counted under ("signed": a forged or replayed envelope)
+# a signed envelope is a msgpack ext (security/sign.py): no message, control or batch is one
+ENVELOPE_HEADS = frozenset(bytes([b]) for b in (0xC7, 0xC8, 0xC9, *range(0xD4, 0xD9)))
 _ENCODER = msgspec.msgpack.Encoder()
 
 
@@ -234,10 +237,15 @@ class Gate:
     """Every payload in: size bound, then typed decoding, then times inside the clock.
 
     `t_max` is the scenario's end: a message dated after it can only be a forgery or
-    a fault, and holding it would cost memory until the end of time."""
+    a fault, and holding it would cost memory until the end of time. `verifier`
+    (security.sign.Verifier) opens signed envelopes (a msgpack ext, where a message is a
+    map) and, in secure mode, refuses authority that comes unsigned; without one a signed
+    envelope cannot be checked and is refused."""
 
-    def __init__(self, t_max: float, max_bytes: int = 65536, max_reply_bytes: int = 256 * 2**20, log=None):
+    def __init__(self, t_max: float, max_bytes: int = 65536, max_reply_bytes: int = 256 * 2**20, log=None,
+                 verifier=None):
         self.t_max = float(t_max)
+        self.verifier = verifier
         self.max_bytes, self.max_reply_bytes = max_bytes, max_reply_bytes
         self.rejects = Rejects(log)
         self.ok = 0
@@ -253,7 +261,14 @@ class Gate:
                 raise M.MessageError("?", "(bytes)", "no payload")
             if len(payload) > self.max_bytes:
                 raise M.MessageError("?", "(bytes)", f"{len(payload)} bytes, over the {self.max_bytes} limit")
-            m = M.decode(payload)
+            if payload[:1] in ENVELOPE_HEADS:
+                signed_key, body = self._open(payload, key)
+                m = M.decode(body)
+                self.verifier.bind(signed_key, m)
+            else:
+                m = M.decode(payload)
+                if self.verifier is not None:
+                    self.verifier.unsigned(m)
             self._bound(m.KIND, m.t)
         except M.MessageError as e:
             self.rejects.add(e, key)
@@ -261,12 +276,24 @@ class Gate:
         self.ok += 1
         return m
 
-    def control(self, cls: type, payload: bytes | None, key: str = ""):
-        """A control message of type `cls`, or None (counted) when it is bad."""
+    def _open(self, payload: bytes, key: str) -> tuple[str, bytes]:
+        if self.verifier is None:
+            raise M.MessageError("signed", "(envelope)", "a signed message, and no signers' keys here to check it")
+        return self.verifier.open(payload, key)
+
+    def control(self, cls: type, payload: bytes | None, key: str = "", signed: bool = False):
+        """A control message of type `cls`, or None (counted) when it is bad. `signed`
+        (a command): an envelope is opened, and required in secure mode."""
         big = cls in (StoreReply, FusionReply)
         try:
             if payload is None:
                 raise M.MessageError(cls.__name__.lower(), "(bytes)", "no payload")
+            if signed and len(payload) <= self.max_bytes:
+                if payload[:1] in ENVELOPE_HEADS:
+                    _, payload = self._open(payload, key)
+                elif self.verifier is not None and self.verifier.require:
+                    raise M.MessageError(cls.__name__.lower(), "(signature)",
+                                         "an unsigned command: commands must be signed in secure mode")
             m = decode_control(cls, payload, self.max_reply_bytes if big else self.max_bytes)
             t = getattr(m, "t", None)
             if t is not None:

@@ -95,7 +95,9 @@ def test_make_pki_is_idempotent_and_completes(tmp_path):
     lines = []
     again = make_pki(tmp_path, ["replay", "ea.A2", "ea.C"], echo=lines.append)
     assert again["replay"] == first["replay"]
-    assert all((tmp_path / n).read_bytes() == b for n, b in before.items())   # CA and leaves kept
+    kept = {n: b for n, b in before.items() if n != "signers.json"}   # it gains ea.C's public key
+    assert all((tmp_path / n).read_bytes() == b for n, b in kept.items())   # CA, leaves, signing keys kept
+    assert set(json.loads((tmp_path / "signers.json").read_text())["keys"]) == {"replay", "ea.A2", "ea.C"}
     assert [ln.split()[0] for ln in lines] == ["kept", "kept", "kept", "made"]
     cert(again["ea.C"][0]).verify_directly_issued_by(cert(tmp_path / "ca.pem"))
     # a damaged leaf is made again, the CA and the others stay

@@ -77,10 +77,14 @@ class MeshFeed(MeshReader):
 
 def mesh_actions(feed: MeshFeed, timeout: float = 10.0) -> CommandActions:
     """Commands on the mesh, sent as this console's unit (the EA checks it commands it);
-    their results come back on cmdlog/** to every console."""
+    their results come back on cmdlog/** to every console. Signed as this console's
+    identity in secure mode."""
+    from ..security.sign import signer_for
+    signer = signer_for(feed.conf)
+
     def run(unit: str, cmd):
         from .. import commands
-        return commands.send(feed.session, feed.ks, unit, cmd, feed.state.unit, timeout)
+        return commands.send(feed.session, feed.ks, unit, cmd, feed.state.unit, timeout, signer)
     return CommandActions(run, feed.state, push=False)
 
 

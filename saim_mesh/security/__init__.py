@@ -2,14 +2,16 @@
 generated from the scenario: `pki` makes the certificates, `acl` the configuration.
 
 Roles and certificate common names: `replay`, `ea.<unit>`, `fusion.<group>`,
-`observer` (read-only: alerts and presence), `console` (observer + commands)."""
+`observer` (read-only: alerts and presence), `console` (observer + commands). `sign`
+signs what carries authority with each identity's own Ed25519 key (it survives relays)."""
 from __future__ import annotations
 
 import importlib
 
 _WHERE = {"SecurityError": "pki", "check_files": "pki", "check_identity": "pki", "make_pki": "pki",
           "names_for": "pki", "access_control": "acl", "endpoint_tls": "acl", "secure_config": "acl",
-          "tls_config": "acl"}
+          "tls_config": "acl", "Signer": "sign", "Verifier": "sign", "signer_for": "sign",
+          "verifier_for": "sign"}
 
 __all__ = sorted(_WHERE)
 

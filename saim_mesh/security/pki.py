@@ -4,6 +4,8 @@
   ca.pem, ca.key        self-signed CA (CA:true, keyCertSign)
   NAME.pem, NAME.key    leaf: CN=NAME, SAN IP:127.0.0.1 + DNS:localhost,
                         EKU serverAuth + clientAuth (every peer listens and connects)
+  NAME.sign.pem         NAME's Ed25519 signing key (authority that survives relays: sign.py)
+  signers.json          every identity's Ed25519 public key
 
 Key files are PKCS#8 PEM, unencrypted (Zenoh cannot read encrypted keys), mode 600.
 `make_pki` is idempotent: it keeps the CA and every leaf that is still valid, signed by
@@ -234,6 +236,8 @@ def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: 
     (remove both files to start a new one). A leaf is kept when it is valid for at least
     another hour, signed by this CA and matches its key; otherwise it is made again,
     valid `days` days (never past the CA, valid `ca_days`, default max(365, days)).
+    Each name also gets an Ed25519 signing key (kept when readable) and signers.json
+    lists every one (`sign.make_keys`).
     Returns {name: (NAME.pem, NAME.key)} as absolute paths; `echo` gets one line per file."""
     say = echo or (lambda _line: None)
     for n in names:
@@ -270,6 +274,8 @@ def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: 
             _write(cert_p, cert.public_bytes(serialization.Encoding.PEM), 0o644)
             say(f"made {n} {cert_p}")
         out[n] = (cert_p, key_p)
+    from .sign import make_keys
+    make_keys(d, list(out))
     return out
 
 
