@@ -71,6 +71,9 @@ def test_every_battalion_gets_incidents_of_its_own():
     assert all(p.sim.order is None for p in b.battalions)   # no battalion switches the brigade's plan
     for pre in B.BATTALIONS:
         assert any(h.startswith(pre + "H") for h in b.hostiles), pre
+    # what the oracle reads of the orders is renamed as the events are: 1BN orders 1M's march at 2150
+    assert {"t": 2150.0, "mission": "1M-march", "phase": "start", "issuer": "1BN"} in b.mission_orders
+    assert all(o["mission"][0] == o["issuer"][0] in B.BATTALIONS for o in b.mission_orders)
     other = B.build(small=False, seed=8)
     assert other.battalions[1].sim.drawn != b.battalions[1].sim.drawn
 

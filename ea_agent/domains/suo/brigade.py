@@ -146,6 +146,7 @@ class BrigadeSim:
     hostiles: dict[str, G.Hostile] = field(default_factory=dict)
     confirmations: list[tuple[float, str, str, str]] = field(default_factory=list)
     cffs: list[dict] = field(default_factory=list)
+    mission_orders: list[dict] = field(default_factory=list)   # ON-ORDER missions ordered to start or end
     _where: dict[str, tuple[Part, str]] = field(default_factory=dict)   # global leaf or entity -> (part, local)
 
     @property
@@ -205,9 +206,12 @@ def build(small: bool = False, seed: int = 7) -> BrigadeSim:
             b.hostiles[part.gid(h.id)] = G.Hostile(part.gid(h.id), h.ts, [x + part.dx for x in h.xs], h.ys,
                                                    h.strength, h.appear, h.vanish)
         b.confirmations += [(t, part.gid(m), part.gid(u), ph) for t, m, u, ph in part.sim.confirmations]
+        b.mission_orders += [dict(o, mission=part.gid(o["mission"]), issuer=part.gid(o["issuer"]))
+                             for o in part.sim.mission_orders]
         b.cffs += [dict(c, cff=part.gid(c["cff"]), requester=part.gid(c["requester"]), x=c["x"] + part.dx)
                    for c in part.sim.cffs]
     b.confirmations.sort()
+    b.mission_orders.sort(key=lambda o: (o["t"], o["mission"]))
     b.cffs.sort(key=lambda c: (c["t"], c["cff"], c["kind"]))
     return b
 
