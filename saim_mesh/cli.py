@@ -152,7 +152,16 @@ def cmd_generate(a) -> int:
     from ea_agent import domains
     dom = domains.get(a.domain)
     extra = {"small": a.small, "sensors": a.sensors, "incidents": a.incidents} if a.domain == "suo" else {}
-    print(json.dumps(dom.generate(Path(a.out), seed=a.seed, **extra)))
+    if a.brigade:
+        if a.domain != "suo":
+            print("generate: --brigade is an SUO scenario: leave out --domain uv", file=sys.stderr)
+            return 2
+        extra["brigade"] = True
+    try:
+        print(json.dumps(dom.generate(Path(a.out), seed=a.seed, **extra)))
+    except ValueError as e:
+        print(f"generate: {e}", file=sys.stderr)
+        return 2
     return 0
 
 
@@ -450,6 +459,8 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("out")
     g.add_argument("--domain", default="suo", choices=["suo", "uv"])
     g.add_argument("--small", action="store_true", help="small fast variant for tests")
+    g.add_argument("--brigade", action="store_true",
+                   help="suo: a brigade (three battalions and brigade troops, ~4,000 entities; with --small ~350)")
     g.add_argument("--seed", type=int, default=7)
     g.add_argument("--sensors", action="store_true", help="raw sensor hits instead of ready-made tracks")
     g.add_argument("--incidents", default="scripted", choices=["scripted", "random"],

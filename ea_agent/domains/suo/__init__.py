@@ -40,11 +40,20 @@ def default_eas(sc) -> list[str]:
 
 
 def mesh_units(sc) -> list[str]:
-    """Battalion, companies and platoons: every unit above squad level has a peer."""
-    return sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("battalion", "company", "platoon"))
+    """Brigade, battalions, companies (brigade troops too) and platoons: every unit above
+    squad level has a peer."""
+    return sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("brigade", "battalion", "company", "platoon"))
 
 
-def generate(out, seed: int = 7, small: bool = False, sensors: bool = False, incidents: str = "scripted") -> dict:
+def generate(out, seed: int = 7, small: bool = False, sensors: bool = False, incidents: str = "scripted",
+             brigade: bool = False) -> dict:
+    """The battalion scenario, or (`brigade`) the brigade: three battalions and brigade troops."""
+    if brigade:
+        if sensors or incidents != "scripted":
+            raise ValueError("the brigade draws its own battles and has no sensors: "
+                             "leave out --sensors and --incidents with --brigade")
+        from .brigade import write as write_brigade
+        return write_brigade(out, small=small, seed=seed)
     from .generator import write
     return write(out, small=small, seed=seed, sensors=sensors, incidents=incidents)
 

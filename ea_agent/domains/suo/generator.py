@@ -195,13 +195,21 @@ def _units(small: bool) -> list[dict]:
     return u
 
 
-def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -> Sim:
+def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted", mult: int = 1,
+              plan_switch: bool = True, report_s: float | None = None) -> Sim:
     """The true battle. `incidents`: "scripted" (the labelled INCIDENTS, the same for
     every seed: the seed moves offsets and noise) or "random" (draw_battle: each seed a
-    different battle)."""
+    different battle). `mult` scales entities per leaf; `plan_switch=False` drops a drawn
+    order to execute the withdrawal plan (a plan switch is scenario-wide: a brigade's
+    battalion cannot make it alone); `report_s` overrides the report interval."""
+    if mult < 1:
+        raise ValueError(f"mult must be a positive whole number, not {mult!r}")
     rng = np.random.default_rng(seed)
-    sim = Sim(small=small, seed=seed, report_s=60.0 if small else 30.0, incidents=incidents)
+    sim = Sim(small=small, seed=seed, report_s=report_s or (60.0 if small else 30.0), incidents=incidents)
     sim.units = _units(small)
+    for u in sim.units:
+        if "n" in u:
+            u["n"] *= mult
     for u in sim.units:
         for k in range(u.get("n", 0)):
             e = f"{u['id']}E{k + 1:02d}"
@@ -212,6 +220,9 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted") -
     if incidents == "random":
         from .random_battle import draw_battle   # it builds on this module's Sim
         draw_battle(sim, np.random.default_rng([seed, 11]))
+        if not plan_switch:
+            sim.order, sim.withdraw = None, {}
+            sim.drawn = [d for d in sim.drawn if d["kind"] != "order"]
     elif incidents == "scripted":
         sim.strays = {"A2": ([900, 1200, 1400, 1700], [0, 2300, 2300, 0])}
         sim.detours = {"B1S4": ([], []), "C2S4": ([3800, 3980, 4100, 4300], [0, 440, 440, 0]),
@@ -464,7 +475,7 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
         last_true = None
         last_rep = None
         t = phase[e]
-        while t < DURATION:
+        while t < sim.duration:
             x, y = sim.entity_pos(e, t)
             if sim.reports_at(e, t):
                 moved = last_true is None or np.hypot(x - last_true[0], y - last_true[1]) > 0.5
@@ -481,14 +492,14 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
         ev.append((t, seq, d))
     for h in ([] if sensors else sim.hostiles.values()):
         t = h.appear + 3.0
-        while t < min(h.vanish, DURATION):
+        while t < min(h.vanish, sim.duration):
             x, y = h.pos(t)
             lon, lat = ll(x, y)
             seq += 1
             ev.append((round(t, 2), seq, {"kind": "track", "t": round(t, 2), "track": h.id, "lon": lon, "lat": lat,
                                            "strength": h.strength, "source": "fusion"}))
             t += 10.0
-        if h.appear < h.vanish < DURATION:
+        if h.appear < h.vanish < sim.duration:
             x, y = h.pos(h.vanish - 1e-6)
             lon, lat = ll(x, y)
             seq += 1
@@ -514,6 +525,28 @@ def events(sim: Sim, proj: Projection, ox: float, oy: float, sensors: bool = Fal
     return [e[2] for e in ev]
 
 
+def lonlat_features(feats: list[dict], proj: Projection, ox: float, oy: float) -> list[dict]:
+    """The overlay's features from local metres (origin at ox, oy) to rounded lon/lat."""
+    def to_ll(coords):
+        if isinstance(coords[0], (int, float)):
+            lon, lat = proj.to_lonlat(coords[0] + ox, coords[1] + oy)
+            return [round(float(lon), 7), round(float(lat), 7)]
+        return [to_ll(c) for c in coords]
+    return [{**f, "geometry": {"type": f["geometry"]["type"], "coordinates": to_ll(f["geometry"]["coordinates"])}}
+            for f in feats]
+
+
+def write_events(out: Path, evs) -> None:
+    """events.jsonl.gz, byte-identical for the same events (no time stamp in the gzip header)."""
+    buf = io.BytesIO()
+    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz:
+        for e in evs:
+            gz.write((json.dumps(e, separators=(",", ":")) + "\n").encode())
+    for stale in ("events.jsonl", "events.jsonl.gz"):
+        (out / stale).unlink(missing_ok=True)
+    (out / "events.jsonl.gz").write_bytes(buf.getvalue())
+
+
 def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False, incidents: str = "scripted") -> dict:
     """Generate the scenario folder `out`; returns a summary."""
     from . import oracle
@@ -523,15 +556,8 @@ def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False, 
     sim = build_sim(small, seed, incidents)
     if sensors:   # the oracle holds the EAs to what the sensors could see
         sim.sensors = [(sid, rng_m) for sid, _g, _o, _k, rng_m, *_ in SENSORS]
-
-    def to_ll(coords):
-        if isinstance(coords[0], (int, float)):
-            lon, lat = proj.to_lonlat(coords[0] + ox, coords[1] + oy)
-            return [round(float(lon), 7), round(float(lat), 7)]
-        return [to_ll(c) for c in coords]
     feats = overlay_features()
-    ll_feats = [{**f, "geometry": {"type": f["geometry"]["type"], "coordinates": to_ll(f["geometry"]["coordinates"])}}
-                for f in feats]
+    ll_feats = lonlat_features(feats, proj, ox, oy)
     meta = {"name": ("battalion-small" if small else "battalion") + ("-sensors" if sensors else "")
             + (f"-random-{seed}" if incidents == "random" else ""),
             "epsg": EPSG, "duration_s": DURATION,
@@ -548,13 +574,7 @@ def write(out: Path, small: bool = False, seed: int = 7, sensors: bool = False, 
     plan = plan_doc(sim)
     (out / "plan.json").write_text(json.dumps(plan, indent=1) + "\n")
     evs = events(sim, proj, ox, oy, sensors)
-    buf = io.BytesIO()
-    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0) as gz:
-        for e in evs:
-            gz.write((json.dumps(e, separators=(",", ":")) + "\n").encode())
-    for stale in ("events.jsonl", "events.jsonl.gz"):
-        (out / stale).unlink(missing_ok=True)
-    (out / "events.jsonl.gz").write_bytes(buf.getvalue())
+    write_events(out, evs)
     truth = oracle.ground_truth(sim, feats, plan, meta["default_eas"])
     truth["incidents_injected"] = INCIDENTS if incidents == "scripted" else sim.drawn
     (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")

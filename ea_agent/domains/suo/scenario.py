@@ -25,7 +25,7 @@ from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError,
 from . import messages as M
 from .missions import REGISTRY, ContingentMission, ReorganizationMission
 
-ECHELONS = ("battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
+ECHELONS = ("brigade", "battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
 AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
 LINE_KINDS = {"route", "phase-line", "avenue-of-approach", "obstacle"}
 POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon

@@ -35,6 +35,8 @@ def ground_truth(sim, feats: list[dict], plan: dict, owners: list[str]) -> dict:
                  tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families, tr.presence):
         step()
     key = lambda d: (d["owner"], d["t0"], d.get("type", ""), d["subjects"])
-    return {"owners": owners, "tick_s": TICK, "incidents": sorted(tr.incidents, key=key),
-            "situations": sorted(tr.situations, key=key)}
+    # what would happen after the battle's end (a deadline past it) is nobody's to tell
+    ran = lambda items: [d for d in items if d["t0"] <= sim.duration]   # noqa: E731
+    return {"owners": owners, "tick_s": TICK, "incidents": sorted(ran(tr.incidents), key=key),
+            "situations": sorted(ran(tr.situations), key=key)}
 

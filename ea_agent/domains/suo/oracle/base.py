@@ -51,6 +51,7 @@ class TruthBase:
         self.leaf_xy = {leaf: np.array([sim.leaf_center(leaf, t) for t in self.ticks]) for leaf in self.leaves}
         self.offsets = {leaf: np.array([sim.entity_off[e] for e in self.units[leaf]["entities"]]) for leaf in self.leaves}
         self._sub_cache: dict = {}
+        self._everyone: tuple = (-1, None)
         self.started = {}
         self.ended = {}
         for m in self.missions.values():   # executed by the EA itself at its start time
@@ -104,6 +105,14 @@ class TruthBase:
     def member_points(self, unit: str, k: int) -> np.ndarray:
         st = self.subtree(unit, self.ticks[k])
         return np.concatenate([self.leaf_xy[leaf][k] + self.offsets[leaf] for leaf in self.leaves if leaf in st])
+
+    def everyone(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Every member's true x and y at tick k (cached for the tick last asked: a brigade
+        has thousands, and each held position asks of every one)."""
+        if self._everyone[0] != k:
+            pts = np.concatenate([self.leaf_xy[leaf][k] + self.offsets[leaf] for leaf in self.leaves])
+            self._everyone = (k, (pts[:, 0].copy(), pts[:, 1].copy()))
+        return self._everyone[1]
 
     def judged(self, geom, unit: str, k: int, rule: str) -> float:
         pts = self.member_points(unit, k)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapely
 from shapely.geometry import LineString, Point
 
 from .spec import (
@@ -65,14 +66,16 @@ class Tasks:
         near its edge (reports lag) either answer is fair."""
         near_g = self.area[position].buffer(FRIENDLY_ERR_M)
         deep = self.area[position].buffer(-FRIENDLY_ERR_M)
+        shapely.prepare(near_g)
+        shapely.prepare(deep)
         sure, maybe = [], []
         for k, t in enumerate(self.ticks):
             if not s <= t < e:
                 continue
-            pts = [Point(q) for leaf in self.leaves for q in self.leaf_xy[leaf][k] + self.offsets[leaf]]
-            if not any(near_g.contains(q) for q in pts):
+            xs, ys = self.everyone(k)
+            if not shapely.contains_xy(near_g, xs, ys).any():
                 sure.append(t)
-            if deep.is_empty or not any(deep.contains(q) for q in pts):
+            if deep.is_empty or not shapely.contains_xy(deep, xs, ys).any():
                 maybe.append(t)
         for a, b in _runs(sure):
             if b - a >= 30:

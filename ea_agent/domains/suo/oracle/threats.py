@@ -42,26 +42,25 @@ class Threats:
                 c = pts.mean(axis=0)
                 info.append((leaf, c, b, self.area[self.units[b]["boundary"]] if b else None,
                              self.units[leaf].get("weapons_range_m") or self._range(leaf, par)))
-            for i in range(len(info)):
+            # the pairs within weapons range, in the order of a loop over i < j (a brigade has
+            # thousands of pairs of leaves; few are that near)
+            cs = np.array([x[1] for x in info])
+            rs = np.array([x[4] for x in info], dtype=float)
+            d = np.hypot(cs[:, None, 0] - cs[None, :, 0], cs[:, None, 1] - cs[None, :, 1])
+            for i, j in zip(*np.nonzero(np.triu(d <= np.maximum(rs[:, None], rs[None, :]), 1))):
                 a, ca, ba, pa_, ra = info[i]
-                if ba is None:
+                b, cb, bb, pb_, rb = info[j]
+                if ba is None or bb is None or bb == ba:
                     continue
                 in_own_a = pa_.contains(Point(ca))
-                for j in range(i + 1, len(info)):
-                    b, cb, bb, pb_, rb = info[j]
-                    if bb is None or bb == ba:
-                        continue
-                    d = float(np.hypot(*(ca - cb)))
-                    if d > max(ra, rb):
-                        continue
-                    in_own_b = pb_.contains(Point(cb))
-                    if ((not in_own_a and pb_.contains(Point(ca))) or (not in_own_b and pa_.contains(Point(cb)))
-                            or (not in_own_a and not in_own_b)) and not passing(a, ca, b) and not passing(b, cb, a):
-                        pla, plb = sorted([self.platoon_of(a, t), self.platoon_of(b, t)])
-                        for o in self.owners:
-                            st = self.subtree(o, t)
-                            if a in st or b in st:
-                                hits[(o, pla, plb)].append(t)
+                in_own_b = pb_.contains(Point(cb))
+                if ((not in_own_a and pb_.contains(Point(ca))) or (not in_own_b and pa_.contains(Point(cb)))
+                        or (not in_own_a and not in_own_b)) and not passing(a, ca, b) and not passing(b, cb, a):
+                    pla, plb = sorted([self.platoon_of(a, t), self.platoon_of(b, t)])
+                    for o in self.owners:
+                        st = self.subtree(o, t)
+                        if a in st or b in st:
+                            hits[(o, pla, plb)].append(t)
         for (o, pla, plb), ts in hits.items():
             for a, b in _runs(ts):
                 if b - a >= 30:
