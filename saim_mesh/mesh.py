@@ -161,7 +161,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         replay = sup.add(start_replay(scenario, endpoint, root, units + [f"fusion-{g}" for g in groups], speed,
                                       window=window, pki=pki, log_dir=logs, state=state, net=replay_net,
                                       until=until))
-        replay.wait_for("ready", 60)
+        replay.wait_for("ready", 600)   # a brigade takes a while to load and key (754k events)
         if tak is not None:   # before the EA peers: it must hear their first alerts (supervised: restarted)
             sup.add(Proc("tak", [*py(), "tak", scenario, *net("tak"),
                                  "--root", root, *_sec(pki), *tak], env=clean_env(), log_dir=logs))

@@ -362,7 +362,9 @@ class Pacer:
 def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None,
                 window_s: float = 20.0, state_path=None, sources=None, topo=None) -> int:
     try:
-        res = Replay(sc, conf, root, speed, wait_peers, linger_s=linger_s, until=until, window_s=window_s,
+        # a brigade's 57 peers take a while to start on two cores: a few seconds each
+        res = Replay(sc, conf, root, speed, wait_peers, wait_timeout=max(60.0, 5.0 * len(wait_peers)),
+                     linger_s=linger_s, until=until, window_s=window_s,
                      state_path=state_path, log=lambda *a, **k: print(*a, **k, file=sys.stdout),
                      sources=sources, topo=topo).run()
     except zenoh.ZError as e:   # a source's router is not there: say which; the supervisor retries
