@@ -27,6 +27,7 @@ from ea_agent import domains
 
 from . import messages as M
 from . import wire as W
+from .batch import Batcher, groups_of
 from .radios import Radios
 from .scenario import Scenario
 
@@ -60,6 +61,7 @@ class Replay:
         self.resumed_from: dict | None = None
         self.ingested = 0   # live reports taken in from ingest/** (a TAK gateway)
         self.entity_unit = {e: u.id for u in sc.taskorg.units.values() for e in u.entities}
+        self.batcher: Batcher | None = None   # batched families go out per group and tick (batch.py)
 
     def _serve(self, q) -> None:
         """Answer store queries: entries after `since` whose key matches one of `keys`
@@ -138,7 +140,8 @@ class Replay:
             k = self.ks.key(m, self.sc.taskorg, self.sc.projection, (float(x), float(y)))
             self.entries.append((len(self.entries) + 1, M.encode(m)))
             self.by_key.setdefault(k, []).append(len(self.entries))
-            s.put(k, self.entries[-1][1], attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
+            if self.batcher is None or not self.batcher.add(k, len(self.entries), self.entries[-1][1]):
+                s.put(k, self.entries[-1][1], attachment=seq_bytes(len(self.entries)), congestion_control=BLOCK)
             self.ingested += 1
 
     def _prepare(self, end_t: float) -> list[tuple[object, str, bytes]]:
@@ -173,7 +176,9 @@ class Replay:
             ingest = s.declare_subscriber(self.ks.ingest("*"), zenoh.handlers.FifoChannel(10_000))
             serve = lambda: (self._take_fusion_ticks(fticks), self._serve(q))
             # one declared publisher per key: a put then skips parsing and resolving the key
-            pubs = {k: s.declare_publisher(k, congestion_control=BLOCK) for k in sorted({k for _, k, _ in script})}
+            self.batcher = batcher = Batcher(s, groups_of(self.ks.root), self.gate.max_bytes)
+            pubs = {k: s.declare_publisher(k, congestion_control=BLOCK) for k in sorted({k for _, k, _ in script})
+                    if batcher.groups.group(k) is None}
             self.log(f"ready {s.info.zid()}", flush=True)
             deadline = time.monotonic() + self.wait_timeout
             while self.wait_peers and (missing := self._missing(s)):
@@ -188,6 +193,7 @@ class Replay:
             next_tick = self.t + self.tick_s
             for ev, key, payload in script[start:]:
                 while ev.t >= next_tick:
+                    batcher.flush()
                     if pacer:
                         pacer.wait(next_tick)
                     self._tick(s, next_tick)
@@ -205,7 +211,9 @@ class Replay:
                     continue
                 self.entries.append((len(self.entries) + 1, payload))
                 self.by_key.setdefault(key, []).append(len(self.entries))
-                pubs[key].put(payload, attachment=seq_bytes(len(self.entries)))
+                if not batcher.add(key, len(self.entries), payload):
+                    pubs[key].put(payload, attachment=seq_bytes(len(self.entries)))
+            batcher.flush()
             self._tick(s, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
@@ -215,6 +223,7 @@ class Replay:
                     serve()
                     time.sleep(0.002)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors,
+                    "batches": batcher.sent, "batched": batcher.entries,
                     "ingested": self.ingested,
                     "silenced": radios.silenced if radios else 0}
 
