@@ -100,6 +100,16 @@ class Template:
             raise ValueError(f"key template {text!r} has two variable-depth placeholders")
         self.family = self.ops[0][1]
         self.names = {a if op == "field" else op for op, a in self.ops if op != "lit"}
+        self._chunk_ops: tuple[list[tuple[str, str]], int | None] | None = None
+
+    def chunk_ops(self) -> tuple[list[tuple[str, str]], int | None]:
+        """One operation per key chunk (a place is two) and the index of the path, if any."""
+        if self._chunk_ops is None:
+            ops: list[tuple[str, str]] = []
+            for op, a in self.ops:
+                ops += [("any", ""), ("any", "")] if op == "place" else [(op, a)]
+            self._chunk_ops = ops, next((i for i, (op, _) in enumerate(ops) if op == "path"), None)
+        return self._chunk_ops
 
     def expr(self, bind: dict[str, str]) -> str:
         """A key expression selecting this template's keys with the placeholders in
@@ -182,10 +192,7 @@ class KeySpace:
         tpl = _TEMPLATES.get(type(msg)) or template(type(msg))
         if chunks[0] != tpl.family:
             return f"a {msg.KIND} message on {chunks[0]}/ keys"
-        ops: list[tuple[str, str]] = []
-        for op, a in tpl.ops:   # a place is two chunks
-            ops += [("any", ""), ("any", "")] if op == "place" else [(op, a)]
-        var = next((i for i, (op, _) in enumerate(ops) if op == "path"), None)
+        ops, var = tpl.chunk_ops()
         if var is None:
             if len(chunks) != len(ops):
                 return f"key {key[:80]!r} has {len(chunks)} chunks, not {len(ops)}"
