@@ -28,8 +28,9 @@ class Sampler:
     """Peak PSS and RSS per process name, read every `every_s` from a pids file
     (`{name: pid}`, written by mesh.Supervisor) until stopped."""
 
-    def __init__(self, pids_path: Path, every_s: float = 0.25):
+    def __init__(self, pids_path: Path, every_s: float = 0.25, extra=None):
         self.pids_path, self.every_s = Path(pids_path), every_s
+        self.extra = extra or (lambda: {})   # () -> {name: pid} of processes not in the file (a zygote)
         self.peak: dict[str, dict[str, float]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="pss-sampler", daemon=True)
@@ -45,7 +46,7 @@ class Sampler:
     def _run(self) -> None:
         while not self._stop.wait(self.every_s):
             try:
-                pids = json.loads(self.pids_path.read_text())
+                pids = {**json.loads(self.pids_path.read_text()), **self.extra()}
             except (OSError, ValueError):
                 continue
             for name, pid in pids.items():
