@@ -558,6 +558,7 @@ class Peer:
                 "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "zenoh_subscriptions": len(self.zsubs), **self.flow,
+                "cpu_s": round(sum(resource.getrusage(resource.RUSAGE_SELF)[:2]), 2),
                 "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
                 "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),
                 "wall_s": round(time.monotonic() - t_wall, 2),

@@ -29,6 +29,7 @@ from . import messages as M
 from . import wire as W
 from .batch import Batcher, groups_of
 from .radios import Radios
+from .store import KeyIndex, Log
 from .scenario import Scenario
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -49,8 +50,8 @@ class Replay:
         self.speed, self.wait_peers = speed, list(wait_peers)
         self.tick_s = W.TICK_S   # peers check that tick n is at n x TICK_S
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
-        self.entries: list[tuple[int, bytes]] = []
-        self.by_key: dict[str, list[int]] = {}   # key -> its seqs: queries test each key once
+        self.entries = Log()        # (seq, payload) of everything published, in a file (store.py)
+        self.by_key = KeyIndex()    # key -> its seqs: queries test each key once
         self.t = 0.0
         self.n_ticks = 0
         self.until = until

@@ -147,3 +147,20 @@ def test_exact_filter_on_odd_expressions_agrees_with_zenoh():
     want = exact(exprs, ROOT)
     for k in keys:
         assert want(k) == any(zenoh.KeyExpr(e).intersects(zenoh.KeyExpr(k)) for e in exprs), k
+
+
+def test_store_log_answers_like_the_list_it_replaces():
+    from saim_mesh.store import KeyIndex, Log
+    log, ref = Log(), []
+    for i in range(1, 2001):
+        e = (i, bytes([i % 251]) * (i % 97))
+        log.append(e)
+        ref.append(e)
+    assert len(log) == 2000 and log[0] == ref[0] and log[-1] == ref[-1] and log[1234] == ref[1234]
+    assert log[0:] == ref and log[1500:] == ref[1500:] and log[2000:] == [] and log[10:20] == ref[10:20]
+    with pytest.raises(ValueError):
+        log.append((5, b"x"))     # seqs follow each other: the store's seq is its position
+    idx = KeyIndex()
+    for n, k in enumerate(["a", "b", "a"], 1):
+        idx.setdefault(k, []).append(n)
+    assert list(idx["a"]) == [1, 3] and idx.nbytes == 12 and log.nbytes == 16000
