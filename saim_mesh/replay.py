@@ -225,6 +225,7 @@ class Replay:
                     time.sleep(0.002)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors,
                     "batches": batcher.sent, "batched": batcher.entries,
+                    "store_index_bytes": self.entries.nbytes + self.by_key.nbytes,
                     "ingested": self.ingested,
                     "silenced": radios.silenced if radios else 0}
 
