@@ -16,6 +16,7 @@ from .keyspace import Template
 
 BATCH_CHUNK = "_b"
 GROUP_DEPTH = 2            # command-path chunks in a group key: BN/A (a company's subtree)
+CACHE_MAX = 50_000
 BATCHED = frozenset({"pos", "st"})   # families the replay batches; hits and authority messages stay single
 
 
@@ -41,8 +42,17 @@ class Groups:
         self.n = len(root) + 1
         self.layout = {fam: lay for fam, tpl in templates.items() if (lay := _layout(tpl)) is not None}
         self.placed = frozenset(fam for fam, tpl in templates.items() if "place" in tpl.names)
+        self._cache: dict[str, str | None] = {}   # an entity's key repeats until it changes cell
 
     def group(self, key: str) -> str | None:
+        g = self._cache.get(key, False)
+        if g is False:
+            if len(self._cache) >= CACHE_MAX:
+                self._cache.clear()
+            g = self._cache[key] = self._group(key)
+        return g
+
+    def _group(self, key: str) -> str | None:
         chunks = key[self.n:].split("/")
         lay = self.layout.get(chunks[0])
         if lay is None or len(chunks) < 3:
