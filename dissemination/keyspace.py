@@ -101,6 +101,25 @@ class Template:
             raise ValueError(f"key template {text!r} has two variable-depth placeholders")
         self.family = self.ops[0][1]
         self.names = {a if op == "field" else op for op, a in self.ops if op != "lit"}
+        self._checks: tuple[int, list[tuple[int, str]]] | None = None
+
+    def field_checks(self) -> tuple[int, list[tuple[int, str]]]:
+        """What `KeySpace.mismatch` checks: the key's chunk count (negative: at least that
+        many, a path being any depth) and (chunk index, field) pairs, counted from the
+        end after a path."""
+        if self._checks is None:
+            ops: list[tuple[str, str]] = []
+            for op, a in self.ops:   # a place is two chunks
+                ops += [("any", ""), ("any", "")] if op == "place" else [(op, a)]
+            var = next((i for i, (op, _) in enumerate(ops) if op == "path"), None)
+            if var is None:
+                self._checks = len(ops), [(i, a) for i, (op, a) in enumerate(ops) if op == "field"]
+            else:
+                left, right = ops[:var], ops[var + 1:]
+                self._checks = (-(len(left) + len(right) + 1),
+                                [(i, a) for i, (op, a) in enumerate(left) if op == "field"]
+                                + [(i - len(right), a) for i, (op, a) in enumerate(right) if op == "field"])
+        return self._checks
 
     def expr(self, bind: dict[str, str]) -> str:
         """A key expression selecting this template's keys with the placeholders in
@@ -183,21 +202,14 @@ class KeySpace:
         tpl = _TEMPLATES.get(type(msg)) or template(type(msg))
         if chunks[0] != tpl.family:
             return f"a {msg.KIND} message on {chunks[0]}/ keys"
-        ops: list[tuple[str, str]] = []
-        for op, a in tpl.ops:   # a place is two chunks
-            ops += [("any", ""), ("any", "")] if op == "place" else [(op, a)]
-        var = next((i for i, (op, _) in enumerate(ops) if op == "path"), None)
-        if var is None:
-            if len(chunks) != len(ops):
-                return f"key {key[:80]!r} has {len(chunks)} chunks, not {len(ops)}"
-            pairs = zip(ops, chunks)
-        else:
-            left, right = ops[:var], ops[var + 1:]
-            if len(chunks) < len(left) + len(right) + 1:
-                return f"key {key[:80]!r} has too few chunks"
-            pairs = [*zip(left, chunks), *zip(right, chunks[len(chunks) - len(right):])]
-        for (op, a), c in pairs:
-            if op == "field" and c != getattr(msg, a):
+        count, checks = tpl.field_checks()
+        if count > 0 and len(chunks) != count:
+            return f"key {key[:80]!r} has {len(chunks)} chunks, not {count}"
+        if count < 0 and len(chunks) < -count:
+            return f"key {key[:80]!r} has too few chunks"
+        for i, a in checks:
+            c = chunks[i]
+            if c != getattr(msg, a):
                 return f"field '{a}' {str(getattr(msg, a))[:40]!r} differs from the key's {c[:40]!r}"
         return None
 

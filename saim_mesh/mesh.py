@@ -10,6 +10,7 @@ import os
 import time
 from pathlib import Path
 
+from . import zygote
 from .proc import Proc, clean_env, py
 from .zconf import free_port
 
@@ -48,7 +49,8 @@ def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Pa
                extra: list[str] = (), pki=None, log_dir=None, net: list[str] | None = None) -> Proc:
     return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, *(net or _net(endpoint)),
                                "--root", root, "--out", str(out), *_sec(pki), *extra],
-                env=clean_env(), log_dir=log_dir)
+                env=clean_env(), log_dir=log_dir,
+                spawner=zygote.spawner())   # EA peers fork from one zygote (saim_mesh/zygote.py)
 
 
 def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: int | None = None, pki=None,

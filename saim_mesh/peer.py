@@ -20,12 +20,15 @@ from dataclasses import replace
 import msgspec
 import zenoh
 
+from dissemination.coarse import coarse
+from dissemination.exact import exact
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 
 from . import cmdlog
 from . import commands as C
 from . import messages as M
+from . import batch as B
 from . import storeq
 from . import wire as W
 from .alertlog import AlertLog
@@ -90,7 +93,11 @@ class Peer:
         self.last_seq = 0
         self.t = 0.0
         self.clock_t = 0.0         # the latest valid tick received (bounds how far ahead data may be)
-        self.subs: dict[str, object] = {}
+        self.subs: dict[str, None] = {}      # the fine interest (key expressions the EA needs)
+        self.zsubs: dict[str, object] = {}   # coarse, non-overlapping Zenoh subscriptions covering it
+        self.want = lambda key: False         # exact test of a received key against the fine interest
+        self.groups = B.groups_of(root)
+        self.flow = {"samples": 0, "batches": 0, "entries": 0, "dropped": 0}   # what the coarse subscriptions cost
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
         self.pending = Held()                 # seq -> payload, waiting for its tick
@@ -152,10 +159,16 @@ class Peer:
         change of subscriptions never loses data (duplicates are dropped by seq)."""
         want = self.interest.keys(self.ea.domain) - {self.ks.clock()}
         new = sorted(want - self.subs.keys())
-        for k in new:   # declare new ones before dropping old ones
-            self.subs[k] = self.session.declare_subscriber(k, zenoh.handlers.FifoChannel(1_000_000))
-        for k in sorted(self.subs.keys() - want):
-            self.subs.pop(k).undeclare()
+        if want != self.subs.keys():
+            taskorg = getattr(self.ea.domain, "taskorg", None)
+            paths = [taskorg.path(u) for u in taskorg.units] if taskorg is not None else []
+            zwant = coarse(want, self.ks.root, self.groups, paths)
+            for k in sorted(zwant - self.zsubs.keys()):   # declare new ones before dropping old ones
+                self.zsubs[k] = self.session.declare_subscriber(k, zenoh.handlers.FifoChannel(1_000_000))
+            for k in sorted(self.zsubs.keys() - zwant):
+                self.zsubs.pop(k).undeclare()
+            self.subs = dict.fromkeys(sorted(want))
+            self.want = exact(want, self.ks.root)
         if new and buf is not None:
             self._catch_up(new, buf)
 
@@ -203,51 +216,69 @@ class Peer:
         heapq.heappush(self.direct, (m.t, self.n_direct, m))
 
     def _drain(self, buf: list) -> None:
-        """Move received samples into the seq-ordered heap. A message that came twice
-        (overlapping subscriptions) is decoded once; a seq that came with two different
-        payloads is contested and settled by the store; a message that does not belong
-        on its key, or is dated far ahead of the clock, is rejected, never held."""
-        pending, gate, ks, ahead = self.pending, self.gate, self.ks, self.clock_t + self.max_ahead
-        for sub in self.subs.values():
+        """Move received samples into the seq-ordered heap. A batch is unpacked and each
+        entry taken like a single message; whatever our coarse subscriptions let
+        through beyond the EA's exact interest is dropped (counted) before decoding."""
+        flow, groups, gate = self.flow, self.groups, self.gate
+        for sub in self.zsubs.values():
             while (s := sub.try_recv()) is not None:
-                payload = s.payload.to_bytes()
+                key = str(s.key_expr)
+                flow["samples"] += 1
+                if groups.is_batch(key):
+                    flow["batches"] += 1
+                    for seq, k, p in B.unpack(gate, groups, s.payload.to_bytes(), key):
+                        flow["entries"] += 1
+                        self._take(seq, k, p, buf)
+                    continue
                 att = s.attachment
+                seq = None
                 if att is not None:
                     raw = att.to_bytes()
                     seq = int.from_bytes(raw, "big") if len(raw) == 8 else -1
-                    if seq <= self.last_seq:
-                        if seq < 0:
-                            self._reject("?", "(seq)", f"attachment of {len(raw)} bytes is no sequence number",
-                                         str(s.key_expr))
+                    if seq < 0:
+                        self._reject("?", "(seq)", f"attachment of {len(raw)} bytes is no sequence number", key)
                         continue
-                    prev = pending.get(seq)
-                    if prev is not None:
-                        if prev != payload:
-                            self.contested.add(seq)
-                        continue
-                    if seq > self.tick_seq + self.max_seq_ahead:
-                        self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
-                                     f"clock's {self.tick_seq}", str(s.key_expr))
-                        continue
-                    if pending.bytes + len(payload) > self.max_held:
-                        self._evict(buf)
-                key = str(s.key_expr)
-                m = gate.data(payload, key)
-                if m is None:
-                    continue
-                if m.t > ahead:
-                    self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
-                    continue
-                if (why := ks.mismatch(key, m)) is not None:
-                    self._reject(m.KIND, "(key)", why, key)
-                    continue
-                if att is None:   # not from the replay (fused tracks): held until their time comes
-                    self._hold(m)
-                    continue
-                pending[seq] = payload
-                heapq.heappush(buf, (seq, m))
-                if m.t > self.seen_t:
-                    self.seen_t = m.t
+                self._take(seq, key, s.payload.to_bytes(), buf)
+
+    def _take(self, seq: int | None, key: str, payload: bytes, buf: list) -> None:
+        """One message (seq None: outside the replay's sequence, a fused track). A seq
+        that came with two different payloads is contested and settled by the store; a
+        message that does not belong on its key, or is dated far ahead of the clock, is
+        rejected, never held."""
+        pending = self.pending
+        if seq is not None:
+            if seq <= self.last_seq:
+                return
+            prev = pending.get(seq)
+            if prev is not None:
+                if prev != payload:
+                    self.contested.add(seq)
+                return
+            if seq > self.tick_seq + self.max_seq_ahead:
+                self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
+                             f"clock's {self.tick_seq}", key)
+                return
+        if not self.want(key):
+            self.flow["dropped"] += 1
+            return
+        if seq is not None and pending.bytes + len(payload) > self.max_held:
+            self._evict(buf)
+        m = self.gate.data(payload, key)
+        if m is None:
+            return
+        if m.t > self.clock_t + self.max_ahead:
+            self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
+            return
+        if (why := self.ks.mismatch(key, m)) is not None:
+            self._reject(m.KIND, "(key)", why, key)
+            return
+        if seq is None:   # not from the replay (fused tracks): held until their time comes
+            self._hold(m)
+            return
+        pending[seq] = payload
+        heapq.heappush(buf, (seq, m))
+        if m.t > self.seen_t:
+            self.seen_t = m.t
 
     def _evict(self, buf: list) -> None:
         """Held messages passed `max_held_mb` (a flood of plausible junk): drop every one
@@ -577,8 +608,9 @@ class Peer:
                 "late_alerts": self.late, "restarted": bool(self.alog and self.alog.restarted),
                 "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
-                "subscriptions": len(self.subs), "peak_rss_mb": round(rss, 1),
-                "cpu_s": round(ru.ru_utime + ru.ru_stime, 2), "max_lead_s": round(self.max_lead, 1),
+                "subscriptions": len(self.subs), "zenoh_subscriptions": len(self.zsubs), **self.flow,
+                "cpu_s": round(ru.ru_utime + ru.ru_stime, 2),
+                "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
                 "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),

@@ -15,8 +15,9 @@ def py() -> list[str]:
 
 
 class Proc:
-    def __init__(self, name: str, args: list[str], env=None, log_dir: str | Path | None = None):
+    def __init__(self, name: str, args: list[str], env=None, log_dir: str | Path | None = None, spawner=None):
         self.name, self.args, self.env = name, list(args), env
+        self.spawner = spawner   # (args, log path, env) -> a Popen-like child (zygote.py), else a subprocess
         self.log_dir = Path(log_dir) if log_dir else Path(tempfile.mkdtemp(prefix="saim-"))
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = self.log_dir / f"{name}.log"
@@ -34,6 +35,9 @@ class Proc:
         self._pos = self._log.tell()
         self._partial = b""
         self.lines = []
+        if self.spawner is not None:
+            self.p = self.spawner(self.args, self.log_path, self.env)
+            return
         self.p = subprocess.Popen(self.args, stdout=self._log, stderr=subprocess.STDOUT, env=self.env,
                                   stdin=subprocess.DEVNULL)
 

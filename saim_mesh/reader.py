@@ -13,6 +13,7 @@ from typing import Callable
 
 from dissemination.keyspace import KeySpace
 
+from . import batch as B
 from . import messages as M
 from . import storeq
 from . import wire as W
@@ -30,6 +31,7 @@ class MeshReader:
         self.session = None
         self.caught_up = False
         self.subs: list = []
+        self.groups = B.groups_of(root)
         self.thread = threading.Thread(target=self._loop, name=f"{self.NAME}-feed", daemon=True)
 
     def keys(self) -> list[str]:
@@ -80,7 +82,11 @@ class MeshReader:
             if item is None:
                 return
             try:
-                self.take(*item)
+                if self.groups.is_batch(item[0]):   # a tick's reports of one group: each taken alone
+                    for _, k, p in B.unpack(self.gate, self.groups, item[1], item[0]):
+                        self.take(k, p)
+                else:
+                    self.take(*item)
             except Exception as e:   # a bug here must not end the feed: said, counted, skipped
                 self.gate.rejects.add(M.MessageError("?", f"({self.NAME})", f"{type(e).__name__}: {e}"[:200]),
                                       item[0])

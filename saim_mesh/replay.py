@@ -16,6 +16,7 @@ tick once every source gave it (each source's path keeps its own order).
 from __future__ import annotations
 
 import contextlib
+from array import array
 import json
 import os
 import sys
@@ -34,7 +35,9 @@ from ea_agent import domains
 
 from . import messages as M
 from . import wire as W
+from .batch import Batcher, groups_of
 from .radios import Radios
+from .store import KeyIndex, Log
 from .scenario import Scenario
 from .security import sign
 
@@ -62,10 +65,10 @@ class Replay:
         self.speed, self.wait_peers = speed, list(wait_peers)
         self.tick_s = W.TICK_S   # peers check that tick n is at n x TICK_S
         self.wait_timeout, self.linger_s, self.log = wait_timeout, linger_s, log
-        self.entries: list[tuple[int, bytes]] = []
+        self.entries = Log()        # (seq, payload) of everything published, in a file (store.py)
         # per source: key -> its seqs (queries test each key once), and all its seqs
-        self.by_key: dict[str, dict[str, list[int]]] = {n: {} for n in self.confs}
-        self.src_seqs: dict[str, list[int]] = {n: [] for n in self.confs}
+        self.by_key: dict[str, KeyIndex] = {n: KeyIndex() for n in self.confs}
+        self.src_seqs: dict[str, array] = {n: array("I") for n in self.confs}
         self.last_tick: dict[str, bytes] = {}   # per source: the last tick published (repeated while lingering)
         self.t = 0.0
         self.n_ticks = 0
@@ -78,6 +81,12 @@ class Replay:
         self.ingested = 0   # live reports taken in from ingest/** (a TAK gateway)
         self.entity_unit = {e: u.id for u in sc.taskorg.units.values() for e in u.entities}
         self.signer = sign.signer_for(conf)   # secure mode: authority goes out signed as `replay`
+        self.batchers: dict[str, Batcher] = {}   # per source: batched families go out per group and tick (batch.py)
+
+    def _flush(self) -> None:
+        """Every source's batches out, before the tick that covers them."""
+        for b in self.batchers.values():
+            b.flush()
 
     def _add(self, src: str, key: str, payload: bytes) -> int:
         """Into the store (as source `src` serves it); returns the entry's seq."""
@@ -179,7 +188,9 @@ class Replay:
             x, y = self.sc.projection.to_xy(m.lon, m.lat)
             k = self.ks.key(m, self.sc.taskorg, self.sc.projection, (float(x), float(y)))
             n = self._add(self.top, k, M.encode(m))
-            s.put(k, self.entries[-1][1], attachment=seq_bytes(n), congestion_control=BLOCK)
+            batcher = self.batchers.get(self.top)
+            if batcher is None or not batcher.add(k, n, self.entries[-1][1]):
+                s.put(k, self.entries[-1][1], attachment=seq_bytes(n), congestion_control=BLOCK)
             self.ingested += 1
 
     def _prepare(self, end_t: float) -> list[tuple[object, str, bytes, str]]:
@@ -220,9 +231,11 @@ class Replay:
                 self._take_fusion_ticks(fticks)
                 for n, q in qs.items():
                     self._serve(q, n)
-            # one declared publisher per key (on its source's session): a put then skips parsing the key
+            groups = groups_of(self.ks.root)
+            self.batchers = batchers = {n: Batcher(x, groups, self.gate.max_bytes) for n, x in sess.items()}
+            # one declared publisher per key not batched (on its source's session): a put then skips parsing the key
             pubs = {(k, src): sess[src].declare_publisher(k, congestion_control=BLOCK)
-                    for k, src in sorted({(k, src) for _, k, _, src in script})}
+                    for k, src in sorted({(k, src) for _, k, _, src in script}) if groups.group(k) is None}
             self.log(f"ready {s.info.zid()}", flush=True)
             deadline = time.monotonic() + self.wait_timeout
             while self.wait_peers and (missing := self._missing(s)):
@@ -237,6 +250,7 @@ class Replay:
             next_tick = self.t + self.tick_s
             for ev, key, payload, src in script[start:]:
                 while ev.t >= next_tick:
+                    self._flush()
                     if pacer:
                         pacer.wait(next_tick)
                     self._tick(sess, next_tick)
@@ -252,7 +266,10 @@ class Replay:
                 self._ingest(s, ingest, max(self.t, min(ev.t, next_tick)))
                 if radios is not None and radios.silent(ev):
                     continue
-                pubs[key, src].put(payload, attachment=seq_bytes(self._add(src, key, payload)))
+                n = self._add(src, key, payload)
+                if not batchers[src].add(key, n, payload):
+                    pubs[key, src].put(payload, attachment=seq_bytes(n))
+            self._flush()
             self._tick(sess, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
@@ -264,6 +281,10 @@ class Replay:
                     serve()
                     time.sleep(0.002)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors,
+                    "batches": sum(b.sent for b in batchers.values()),
+                    "batched": sum(b.entries for b in batchers.values()),
+                    "store_index_bytes": self.entries.nbytes + sum(k.nbytes for k in self.by_key.values())
+                    + sum(a.itemsize * len(a) for a in self.src_seqs.values()),
                     "ingested": self.ingested,
                     "silenced": radios.silenced if radios else 0}
 

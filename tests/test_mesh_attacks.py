@@ -22,6 +22,7 @@ import pytest
 import zenoh
 
 from dissemination.keyspace import KeySpace
+from saim_mesh import batch as B
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
@@ -122,6 +123,15 @@ def next_tick(s, root: str) -> W.Tick:
         sub.undeclare()
 
 
+def report(root: str, k: str, payload: bytes, seq: int) -> tuple[str, bytes, bytes | None]:
+    """(key, payload, attachment) as the replay sends a report on K: a batched family's
+    as a one-entry batch on its group key, others alone with their seq attached."""
+    g = B.groups_of(root).group(k)
+    if g is None:
+        return k, payload, seq.to_bytes(8, "big")
+    return g, W.encode(B.Batch(v=W.VERSION, entries=[(seq, k, payload)])), None
+
+
 def summary_of(proc) -> dict:
     return json.loads(proc.wait_for("summary ", RUN)[len("summary "):])
 
@@ -169,7 +179,8 @@ def insecure_run(tmp_path_factory, sc):
     try:
         procs[0].wait_for("t=300", RUN)
         with attacker(ep, root, sc) as s:
-            pubs = {k: matched(s, k) for k in (ks.clock(), pos_key, f"{root}/ord/BN", f"{root}/msn/A2/flood")}
+            pos_group = report(root, pos_key, b"", 0)[0]
+            pubs = {k: matched(s, k) for k in (ks.clock(), pos_group, f"{root}/ord/BN", f"{root}/msn/A2/flood")}
             pub = lambda k: pubs[k][0]
             tick = next_tick(s, root)
             info["tick"] = tick
@@ -180,7 +191,8 @@ def insecure_run(tmp_path_factory, sc):
             for t, seq in ((sc.duration_s - 1, tick.seq + 200), (1e15, tick.seq + 201)):
                 m = M.LocationReport(t, entity, far.lon, far.lat)
                 assert ks.key(m, sc.taskorg, sc.projection) == pos_key
-                pub(pos_key).put(M.encode(m), attachment=seq.to_bytes(8, "big"))
+                k, payload, att = report(root, pos_key, M.encode(m), seq)
+                pub(k).put(payload, attachment=att)
             # 4. an order on the battalion's key that says it was issued by A
             pub(f"{root}/ord/BN").put(M.encode(M.Order(tick.t + 10, "abort-plan", "BN-plan", "A")))
             # 6. oversized payloads on a key A2 subscribes to
@@ -257,13 +269,15 @@ def test_flood_of_small_valid_messages_with_far_future_seqs_is_not_held(tmp_path
         with attacker(ep, root, sc) as s:
             tick = next_tick(s, root)
             m = M.LocationReport(tick.t + 100, entity, p0.lon, p0.lat)
-            pub, listener = matched(s, ks.key(m, sc.taskorg, sc.projection))
+            k = ks.key(m, sc.taskorg, sc.projection)
+            pub, listener = matched(s, report(root, k, b"", 0)[0])
             d = msgpack.unpackb(M.encode(m))
             d["pad"] = "x" * 60_000
             payload = msgpack.packb(d)
-            assert len(payload) < 65536 and M.decode(payload) == m
+            assert len(report(root, k, payload, 10**12)[1]) < 65536 and M.decode(payload) == m
             for i in range(3000):
-                pub.put(payload, attachment=(10**12 + i).to_bytes(8, "big"))
+                _, p, att = report(root, k, payload, 10**12 + i)
+                pub.put(p, attachment=att)
             summary = summary_of(procs[1])
             del listener
         procs[0].p.wait(60)
@@ -294,12 +308,14 @@ def test_flood_of_plausible_seqs_is_evicted_and_the_real_messages_come_from_the_
         with attacker(ep, root, sc) as s:
             tick = next_tick(s, root)
             m = M.LocationReport(tick.t + 100, entity, p0.lon + 0.3, p0.lat)
-            pub, listener = matched(s, ks.key(m, sc.taskorg, sc.projection))
+            k = ks.key(m, sc.taskorg, sc.projection)
+            pub, listener = matched(s, report(root, k, b"", 0)[0])
             d = msgpack.unpackb(M.encode(m))
             d["pad"] = "x" * 60_000
             payload = msgpack.packb(d)
             for i in range(2000):
-                pub.put(payload, attachment=(n_events + 1000 + i).to_bytes(8, "big"))
+                _, p, att = report(root, k, payload, n_events + 1000 + i)
+                pub.put(p, attachment=att)
             summary = summary_of(procs[1])
             del listener
         procs[0].p.wait(60)
@@ -331,7 +347,8 @@ def test_junk_carrying_the_next_sequence_numbers_is_contested_and_settled_by_the
             # one matched publisher per subscription of A2's we aim at: the session then
             # routes any key under them to the peer
             hold = [matched(s, f"{root}/msn/A2/probe"),
-                    matched(s, next(k for _, k, _, _ in script if mine(k) and "/pos/" in k))]
+                    matched(s, report(root, next(k for _, k, _, _ in script if mine(k) and "/pos/" in k),
+                                      b"", 0)[0])]
             tick = next_tick(s, root)
             window = [(seq, ev, k) for seq, (ev, k, _, _) in enumerate(script, 1)
                       if seq > tick.seq and tick.t + 40 <= ev.t <= tick.t + 500 and mine(k)]
@@ -343,7 +360,8 @@ def test_junk_carrying_the_next_sequence_numbers_is_contested_and_settled_by_the
                     junk = M.MissionConfirm(ev.t, ev.mission, ev.unit, "start" if ev.phase == "end" else "end")
                 else:                             # the entity far away from where it is
                     junk = M.LocationReport(ev.t, ev.entity, ev.lon + 0.3, ev.lat + 0.3)
-                s.put(k, M.encode(junk), attachment=seq.to_bytes(8, "big"), congestion_control=BLOCK)
+                k, payload, att = report(root, k, M.encode(junk), seq)   # on A2's keys as the replay sends them
+                s.put(k, payload, attachment=att, congestion_control=BLOCK)
                 sent[seq] = junk
             procs[1].wait_for("contested seqs", WAIT)
             summary = summary_of(procs[1])

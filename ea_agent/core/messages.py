@@ -4,14 +4,23 @@ A message is a frozen dataclass with a `KIND` tag and a validating `from_dict`;
 a domain registers its classes here (`register`) so that one decoder serves every
 domain. `from_dict` raises `MessageError` naming the offending field, so a bad
 message is counted and dropped instead of crashing a peer.
+
+A class whose fields are annotated with bounded types (`Time`, `Lon`, `Lat`, `Text`,
+`Finite`, `Literal[...]`: `TYPED = True`) is decoded straight from msgpack into a typed
+msgspec struct (about 0.4 us against 3-4 us for dict-then-fields) and becomes the same
+dataclass. The typed decoder is never more lenient than `from_dict`: anything it
+refuses goes through `from_dict`, which accepts it or names the bad field.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
-from typing import Any
+import sys
+import typing
+from dataclasses import asdict, fields
+from typing import Annotated, Any, Literal
 
 import msgpack
+import msgspec
 
 VERSION = 1
 
@@ -68,6 +77,20 @@ def text(d: dict, kind: str, name: str, choices: tuple[str, ...] | None = None, 
 
 
 NUMERIC = (float, int)
+FLOAT_MAX = sys.float_info.max
+
+# Bounded field types for typed decoding (NaN and infinities fail every bound).
+Finite = Annotated[float, msgspec.Meta(ge=-FLOAT_MAX, le=FLOAT_MAX)]
+Time = Annotated[float, msgspec.Meta(ge=0.0, le=FLOAT_MAX)]
+Lon = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+Lat = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+Text = Annotated[str, msgspec.Meta(min_length=1)]
+Count = Annotated[int, msgspec.Meta(ge=0)]
+
+
+def bounded(lo: float, hi: float = FLOAT_MAX) -> Any:
+    """A float field within [lo, hi]."""
+    return Annotated[float, msgspec.Meta(ge=lo, le=hi)]
 
 
 def time_of(d: dict, kind: str) -> float:
@@ -80,14 +103,49 @@ def lonlat(d: dict, kind: str) -> tuple[float, float]:
 
 
 MESSAGE_TYPES: dict[str, type] = {}
+_TYPED: dict[type, type] = {}          # typed struct -> the dataclass it becomes
+_RULED: set[type] = set()              # typed classes with rules between fields (`valid`)
+_typed_decoder: msgspec.msgpack.Decoder | None = None
 
 
 def register(*classes: type) -> None:
-    """Make message classes decodable; a kind may be registered once (by one class)."""
+    """Make message classes decodable; a kind may be registered once (by one class).
+    Classes marked `TYPED` get a typed struct (their fields' annotations, every plain
+    float made finite) in the one tagged decoder; such a class has `valid()`, its rules
+    between fields (False sends the message through `from_dict`, which names the field)."""
+    global _typed_decoder
     for c in classes:
         old = MESSAGE_TYPES.setdefault(c.KIND, c)
         if old is not c:
             raise ValueError(f"message kind {c.KIND!r} already registered by {old.__name__}")
+        if getattr(c, "TYPED", False) and c not in _TYPED.values():
+            _TYPED[_struct_of(c)] = c
+            if any("valid" in vars(k) for k in c.__mro__[:-1] if getattr(k, "KIND", None)):
+                _RULED.add(c)
+    if _TYPED:
+        _typed_decoder = msgspec.msgpack.Decoder(typing.Union[tuple(_TYPED)])   # type: ignore[misc]
+
+
+def _finite(tp: Any) -> Any:
+    """A plain float (alone or in an optional) becomes a finite one: `from_dict` refuses NaN."""
+    if tp is float:
+        return Finite
+    args = typing.get_args(tp)
+    if typing.get_origin(tp) in (typing.Union, getattr(__import__("types"), "UnionType", None)) and float in args:
+        return typing.Union[tuple(Finite if a is float else a for a in args)]
+    return tp
+
+
+def _struct_of(cls: type) -> type:
+    hints = typing.get_type_hints(cls, include_extras=True)
+    spec = []
+    for f in fields(cls):
+        tp = _finite(hints[f.name])
+        spec.append((f.name, tp) if f.default is f.default_factory else (f.name, tp, f.default))   # type: ignore[misc]
+    spec.append(("v", Literal[VERSION]))
+    st = msgspec.defstruct(f"{cls.__name__}Wire", spec, kw_only=True, tag_field="kind", tag=cls.KIND,
+                           array_like=False)
+    return st
 
 
 Message = Any   # an instance of one of MESSAGE_TYPES
@@ -129,6 +187,16 @@ def encode(msg: Message) -> bytes:
 
 def decode(data: bytes) -> Message:
     """Parse and validate wire bytes; raises MessageError on anything malformed."""
+    if _typed_decoder is not None:
+        try:
+            s = _typed_decoder.decode(data)
+        except Exception:   # refused: the dict path below accepts it or names the field
+            pass
+        else:
+            cls = _TYPED[type(s)]
+            m = cls(*msgspec.structs.astuple(s)[:-1])   # the struct's fields, then `v`
+            if cls not in _RULED or m.valid():   # rules between fields (no `at` after `t`...)
+                return m
     try:
         d = msgpack.unpackb(data, raw=False, strict_map_key=True)
     except Exception as e:  # msgpack raises several unrelated types

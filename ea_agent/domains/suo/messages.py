@@ -3,11 +3,25 @@ sensor hits, mission confirmations, orders, calls for fire and reorganizations."
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Literal
 
-from ea_agent.core.messages import MessageError, integer, lonlat, NUMERIC, number, text, time_of, register
+from ea_agent.core.messages import (Count, Lat, Lon, MessageError, Text, Time, bounded, integer, lonlat, NUMERIC,
+                                    number, register, text, time_of)
 
 DOMAINS = ("ground", "air")
+Heading = bounded(0.0, 360.0)
+Speed = bounded(0.0)
+Alt = bounded(-500.0, 30000.0)
+Radius = bounded(1.0, 100_000.0)
+
+
+class _Typed:
+    """Decoded straight into a typed struct (ea_agent.core.messages); no rule between fields."""
+    TYPED: ClassVar[bool] = True
+    __slots__ = ()
+
+    def valid(self) -> bool:
+        return True
 
 
 def _drop_defaults(msg, names: tuple[str, ...], defaults: tuple) -> dict:
@@ -21,14 +35,14 @@ def _drop_defaults(msg, names: tuple[str, ...], defaults: tuple) -> dict:
 
 
 @dataclass(slots=True, frozen=True)
-class LocationReport:
+class LocationReport(_Typed):
     """A friendly entity's GPS position (from SAIM's network)."""
     KIND: ClassVar[str] = "location"
     KEY: ClassVar[str] = "pos/{place}/{path:entity}/{entity}"
-    t: float
-    entity: str
-    lon: float
-    lat: float
+    t: Time
+    entity: Text
+    lon: Lon
+    lat: Lat
 
     @classmethod
     def from_dict(cls, d: dict) -> "LocationReport":
@@ -44,22 +58,25 @@ class LocationReport:
 
 
 @dataclass(slots=True, frozen=True)
-class SensorTrack:
+class SensorTrack(_Typed):
     """A fused hostile track: position, strength (entity count) and kinematics."""
     KIND: ClassVar[str] = "track"
     KEY: ClassVar[str] = "trk/{place}/{track}"
-    t: float
-    track: str
-    lon: float
-    lat: float
-    strength: int
-    heading: float | None = None
-    speed: float | None = None
-    source: str = "fusion"
-    alt: float | None = None      # metres above ground, when the sensors give it
-    domain: str = "ground"        # "ground" | "air": ground-only rules ignore air tracks
-    at: float | None = None       # the time the position describes (its last hit), at or before t;
-    #                               t is when the report was issued (a fusion window's close)
+    t: Time
+    track: Text
+    lon: Lon
+    lat: Lat
+    strength: Count
+    heading: Heading | None = None
+    speed: Speed | None = None
+    source: Text = "fusion"
+    alt: Alt | None = None      # metres above ground, when the sensors give it
+    domain: Literal["ground", "air"] = "ground"   # ground-only rules ignore air tracks
+    at: Time | None = None       # the time the position describes (its last hit), at or before t;
+    #                              t is when the report was issued (a fusion window's close)
+
+    def valid(self) -> bool:
+        return self.at is None or self.at <= self.t
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorTrack":
@@ -77,15 +94,15 @@ class SensorTrack:
 
 
 @dataclass(slots=True, frozen=True)
-class SensorHit:
+class SensorHit(_Typed):
     """One raw detection by one sensor (before fusion): where something was seen."""
     KIND: ClassVar[str] = "hit"
     KEY: ClassVar[str] = "hit/{group:sensor}/{sensor}"
-    t: float
-    sensor: str
-    lon: float
-    lat: float
-    alt: float | None = None      # metres above ground, when the sensor measures it
+    t: Time
+    sensor: Text
+    lon: Lon
+    lat: Lat
+    alt: Alt | None = None      # metres above ground, when the sensor measures it
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorHit":
@@ -98,15 +115,15 @@ class SensorHit:
 
 
 @dataclass(slots=True, frozen=True)
-class MissionConfirm:
+class MissionConfirm(_Typed):
     """Confirmation that a unit started or ended a mission (from its EA, or local)."""
     KIND: ClassVar[str] = "mission"
     KEY: ClassVar[str] = "msn/{unit}/{mission}"
-    t: float
-    mission: str
-    unit: str
-    phase: str  # "start" | "end"
-    source: str = "message"  # "message" | "local"
+    t: Time
+    mission: Text
+    unit: Text
+    phase: Literal["start", "end"]
+    source: Literal["message", "local"] = "message"
 
     @classmethod
     def from_dict(cls, d: dict) -> "MissionConfirm":
@@ -117,17 +134,20 @@ class MissionConfirm:
 
 
 @dataclass(slots=True, frozen=True)
-class Order:
+class Order(_Typed):
     """An order from a superior: execute a (new) plan, abort the current one, or start or
     end one ON-ORDER mission by id (`mission`; `plan` names the plan it belongs to)."""
     KIND: ClassVar[str] = "order"
     KEY: ClassVar[str] = "ord/{issuer}"
     ACTIONS: ClassVar[tuple[str, ...]] = ("execute-plan", "abort-plan", "start-mission", "end-mission")
-    t: float
-    action: str
-    plan: str
-    issuer: str
-    mission: str | None = None
+    t: Time
+    action: Literal["execute-plan", "abort-plan", "start-mission", "end-mission"]
+    plan: Text
+    issuer: Text
+    mission: Text | None = None
+
+    def valid(self) -> bool:
+        return self.mission is not None or not self.action.endswith("-mission")
 
     @classmethod
     def from_dict(cls, d: dict) -> "Order":
@@ -143,16 +163,16 @@ class Order:
 
 
 @dataclass(slots=True, frozen=True)
-class CallForFire:
+class CallForFire(_Typed):
     """A request for indirect fire on a target; `radius_m` is the danger radius."""
     KIND: ClassVar[str] = "cff"
     KEY: ClassVar[str] = "cff/{place}/{requester}/{cff}"
-    t: float
-    cff: str
-    requester: str
-    lon: float
-    lat: float
-    radius_m: float
+    t: Time
+    cff: Text
+    requester: Text
+    lon: Lon
+    lat: Lat
+    radius_m: Radius
 
     @classmethod
     def from_dict(cls, d: dict) -> "CallForFire":
@@ -169,13 +189,13 @@ class CallForFireConfirm(CallForFire):
 
 
 @dataclass(slots=True, frozen=True)
-class Reorganization:
+class Reorganization(_Typed):
     """Resubordinate `unit` under `new_parent` (task organization change)."""
     KIND: ClassVar[str] = "reorg"
     KEY: ClassVar[str] = "org/{unit}"
-    t: float
-    unit: str
-    new_parent: str
+    t: Time
+    unit: Text
+    new_parent: Text
 
     @classmethod
     def from_dict(cls, d: dict) -> "Reorganization":

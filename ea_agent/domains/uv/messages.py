@@ -7,13 +7,28 @@ the mesh and the loader agree with the EA on where a message is published.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated, ClassVar, Literal
 
-from ea_agent.core.messages import MessageError, NUMERIC, lonlat, number, register, text, time_of
+import msgspec
+
+from ea_agent.core.messages import (Lat, Lon, MessageError, NUMERIC, Text, Time, bounded, lonlat, number, register,
+                                    text, time_of)
 
 MAX_SPEED_MPS = 100.0
 MODES = ("moving", "paused", "waiting-gps")
 ACTS = ("delegate", "accept", "success", "failure")
+Speed = bounded(0.0, MAX_SPEED_MPS)
+Heading = Annotated[float, msgspec.Meta(ge=0.0, lt=360.0)]   # 360 itself is not a heading (it is 0)
+Sigma = bounded(0.0, 1e6)
+
+
+class _Typed:
+    """Decoded straight into a typed struct (ea_agent.core.messages); no rule between fields."""
+    TYPED: ClassVar[bool] = True
+    __slots__ = ()
+
+    def valid(self) -> bool:
+        return True
 
 
 def heading_of(d: dict, kind: str) -> float:
@@ -25,18 +40,18 @@ def heading_of(d: dict, kind: str) -> float:
 
 
 @dataclass(slots=True, frozen=True)
-class UvState:
+class UvState(_Typed):
     """A robot's own state report: position, speed, heading, GPS error and mode."""
     KIND: ClassVar[str] = "uv-state"
     KEY: ClassVar[str] = "st/{place}/{robot}"
-    t: float
-    robot: str
-    lon: float
-    lat: float
-    speed_mps: float
-    heading_deg: float
-    sigma_m: float
-    mode: str
+    t: Time
+    robot: Text
+    lon: Lon
+    lat: Lat
+    speed_mps: Speed
+    heading_deg: Heading
+    sigma_m: Sigma
+    mode: Literal["moving", "paused", "waiting-gps"]
 
     @classmethod
     def from_dict(cls, d: dict) -> "UvState":
@@ -58,16 +73,16 @@ class UvState:
 
 
 @dataclass(slots=True, frozen=True)
-class UvSighting:
+class UvSighting(_Typed):
     """`robot`'s sensor sees `target` at (lon, lat) with error `sigma_m`."""
     KIND: ClassVar[str] = "uv-sighting"
     KEY: ClassVar[str] = "sgt/{place}/{robot}/{target}"
-    t: float
-    robot: str
-    target: str
-    lon: float
-    lat: float
-    sigma_m: float
+    t: Time
+    robot: Text
+    target: Text
+    lon: Lon
+    lat: Lat
+    sigma_m: Sigma
 
     @classmethod
     def from_dict(cls, d: dict) -> "UvSighting":
@@ -79,17 +94,17 @@ class UvSighting:
 
 
 @dataclass(slots=True, frozen=True)
-class UvAgent:
+class UvAgent(_Typed):
     """An agent-to-agent task message (paper 7.2): `sender` delegates `task` to `to`,
     `to` accepts it, or reports success/failure. `target` names a pursued target."""
     KIND: ClassVar[str] = "uv-agent"
     KEY: ClassVar[str] = "agm/{to}/{sender}"
-    t: float
-    sender: str
-    to: str
-    act: str
-    task: str
-    target: str | None = None
+    t: Time
+    sender: Text
+    to: Text
+    act: Literal["delegate", "accept", "success", "failure"]
+    task: Text
+    target: Text | None = None
 
     @classmethod
     def from_dict(cls, d: dict) -> "UvAgent":

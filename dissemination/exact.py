@@ -1,0 +1,89 @@
+"""The peer's exact interest: a received key tested against its fine key expressions.
+
+Coarse subscriptions (`coarse.py`) let through more than the EA asked for; this is
+the cheap test that drops the rest. The fine set changes every re-registration (as
+units move), so building the test must cost little too: expressions are indexed by
+family and second chunk (a place's block), and a key is compared chunk by chunk with
+the few that can match it; answers are cached until the next re-registration."""
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Callable
+
+CACHE_MAX = 50_000
+ANY = "*"
+
+
+def _chunks_match(pat: tuple[str, ...], key: list[str], i: int = 0, j: int = 0) -> bool:
+    """Zenoh's matching of one concrete key against one expression (`*` one chunk,
+    `**` any number of chunks, `$*` part of a chunk)."""
+    while i < len(pat):
+        p = pat[i]
+        if p == "**":
+            if i == len(pat) - 1:
+                return True
+            return any(_chunks_match(pat, key, i + 1, k) for k in range(j, len(key) + 1))
+        if j >= len(key):
+            return False
+        if p != key[j] and p != ANY and not ("$*" in p and _dollar(p, key[j])):
+            return False
+        i += 1
+        j += 1
+    return j == len(key)
+
+
+def _dollar(p: str, chunk: str) -> bool:
+    parts = p.split("$*")
+    if not chunk.startswith(parts[0]) or not chunk.endswith(parts[-1]) or len(chunk) < len(parts[0]) + len(parts[-1]):
+        return False
+    pos = len(parts[0])
+    for mid in parts[1:-1]:
+        k = chunk.find(mid, pos, len(chunk) - len(parts[-1]))
+        if k < 0:
+            return False
+        pos = k + len(mid)
+    return True
+
+
+def exact(exprs: set[str] | list[str], root: str) -> Callable[[str], bool]:
+    """A test of concrete keys under `root` against the fine expressions."""
+    n = len(root) + 1
+    exact_keys: set[str] = set()
+    by_second: dict[tuple[str, str], list[tuple[str, ...]]] = defaultdict(list)   # (family, chunk 1)
+    by_family: dict[str, list[tuple[str, ...]]] = defaultdict(list)               # (family, wildcard chunk 1)
+    other: list[tuple[str, ...]] = []                                             # no family under our root
+    for e in exprs:
+        if "*" not in e:
+            exact_keys.add(e)
+            continue
+        if not e.startswith(root + "/"):
+            other.append(tuple(e.split("/")))
+            continue
+        c = tuple(e[n:].split("/"))
+        if "*" in c[0]:
+            other.append(tuple(e.split("/")))
+        elif len(c) > 1 and "*" not in c[1]:
+            by_second[(c[0], c[1])].append(c)
+        else:
+            by_family[c[0]].append(c)
+    cache: dict[str, bool] = {}
+
+    def match(key: str) -> bool:
+        hit = cache.get(key)
+        if hit is not None:
+            return hit
+        ok = key in exact_keys
+        if not ok and key.startswith(root) and key[n - 1:n] == "/":
+            c = key[n:].split("/")
+            cands = by_family.get(c[0], ())
+            if len(c) > 1:
+                cands = [*by_second.get((c[0], c[1]), ()), *cands]
+            ok = any(_chunks_match(p, c) for p in cands)
+        if not ok and other:
+            full = key.split("/")
+            ok = any(_chunks_match(p, full) for p in other)
+        if len(cache) >= CACHE_MAX:
+            cache.clear()
+        cache[key] = ok
+        return ok
+    return match

@@ -1,0 +1,242 @@
+"""A fork server for mesh processes: it imports the heavy modules once (numpy,
+shapely, pyproj, zenoh, the EA and its domains: ~30 MB of private heap in every
+peer), freezes them out of the garbage collector's reach, and forks each peer from
+itself, so 15 peers share those pages copy-on-write instead of holding 15 copies.
+
+Zenoh is imported but never opened here (a fork after `zenoh.open` hangs); each
+child opens its own session. The launcher talks to the zygote over its stdin and
+stdout (JSON lines); a forked child is handled through `Forked`, which answers like
+a `subprocess.Popen` (pid, poll, wait, signals), its exit status reported by the
+zygote that reaps it. `SAIM_ZYGOTE=0` turns it off (plain subprocesses)."""
+from __future__ import annotations
+
+import atexit
+import gc
+import importlib
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "msgspec", "msgpack",
+           "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer",
+           "ea_agent.domains.suo.domain", "ea_agent.domains.uv.domain")
+
+
+# -- the zygote process ------------------------------------------------------------------
+def _child(req: dict) -> None:
+    """In the forked child: become the requested command, then exit with its code."""
+    code = 1
+    try:
+        os.setpgid(0, 0)   # its own group: a signal to it is not a signal to its siblings
+        for s in (signal.SIGTERM, signal.SIGINT, signal.SIGCHLD):
+            signal.signal(s, signal.SIG_DFL)
+        fd = os.open(req["log"], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.close(fd)
+        os.close(null)
+        sys.stdin = open(0, closefd=False)
+        sys.stdout = open(1, "w", buffering=1, closefd=False)
+        sys.stderr = open(2, "w", buffering=1, closefd=False)
+        os.environ.clear()
+        os.environ.update(req["env"])
+        gc.unfreeze()
+        sys.argv = ["saim-mesh", *req["argv"]]
+        from saim_mesh.cli import main
+        code = main(req["argv"]) or 0
+    except SystemExit as e:
+        code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+    except BaseException:   # noqa: BLE001 -- whatever it was, the child says it and exits
+        import traceback
+        traceback.print_exc()
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
+
+
+def serve() -> None:
+    """The zygote's loop: fork on request, report every child's pid and exit status."""
+    for m in PRELOAD:
+        importlib.import_module(m)
+    gc.collect()
+    gc.freeze()   # imported objects stay out of the collector's passes: their pages stay shared
+    out = sys.stdout
+    out.write("ready\n")
+    out.flush()
+    live: set[int] = set()
+    buf = b""
+    while True:
+        r, _, _ = select.select([0], [], [], 0.05)
+        if r:
+            data = os.read(0, 65536)
+            if not data:   # the launcher is gone: so are we (children live on)
+                return
+            buf += data
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                req = json.loads(line)
+                pid = os.fork()
+                if pid == 0:
+                    _child(req)
+                live.add(pid)
+                out.write(json.dumps({"id": req["id"], "pid": pid}) + "\n")
+                out.flush()
+        for pid in list(live):
+            try:
+                done, status = os.waitpid(pid, os.WNOHANG)
+            except ChildProcessError:
+                live.discard(pid)
+                continue
+            if done:
+                live.discard(pid)
+                out.write(json.dumps({"exit": pid, "code": os.waitstatus_to_exitcode(status)}) + "\n")
+                out.flush()
+
+
+# -- the launcher's side -------------------------------------------------------------------
+class Forked:
+    """A child of the zygote, handled like a `subprocess.Popen`."""
+
+    def __init__(self, zygote: "Zygote", pid: int):
+        self.z, self.pid = zygote, pid
+        self.args: list[str] = []
+
+    @property
+    def returncode(self) -> int | None:
+        return self.z.codes.get(self.pid)
+
+    def poll(self) -> int | None:
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        end = None if timeout is None else time.monotonic() + timeout
+        with self.z.cond:
+            while self.pid not in self.z.codes:
+                left = None if end is None else end - time.monotonic()
+                if left is not None and left <= 0:
+                    raise subprocess.TimeoutExpired(self.args, timeout)
+                if not self.z.alive():   # no zygote to reap it: ask the kernel whether it is there
+                    if not _exists(self.pid):
+                        self.z.codes[self.pid] = -9
+                        break
+                self.z.cond.wait(0.05 if left is None else min(left, 0.05))
+        return self.z.codes[self.pid]
+
+    def send_signal(self, sig: int) -> None:
+        if self.returncode is None:
+            try:
+                os.kill(self.pid, sig)
+            except ProcessLookupError:
+                pass
+
+    def terminate(self) -> None:
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+        return True
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+
+
+class Zygote:
+    def __init__(self, env: dict | None = None):
+        env = dict(env or os.environ)
+        env.setdefault("OPENBLAS_NUM_THREADS", "1")   # no thread pool to fork under
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        self.p = subprocess.Popen([sys.executable, "-m", "saim_mesh.zygote"], stdin=subprocess.PIPE,
+                                  stdout=subprocess.PIPE, env=env)
+        if self.p.stdout.readline().strip() != b"ready":
+            self.p.kill()
+            raise RuntimeError("the zygote did not start")
+        self.cond = threading.Condition()
+        self.codes: dict[int, int] = {}
+        self.pids: dict[int, int] = {}
+        self.next_id = 0
+        self.lock = threading.Lock()
+        threading.Thread(target=self._read, name="zygote-reader", daemon=True).start()
+
+    def alive(self) -> bool:
+        return self.p.poll() is None
+
+    def _read(self) -> None:
+        for line in self.p.stdout:
+            msg = json.loads(line)
+            with self.cond:
+                if "exit" in msg:
+                    self.codes[msg["exit"]] = msg["code"]
+                else:
+                    self.pids[msg["id"]] = msg["pid"]
+                self.cond.notify_all()
+        with self.cond:
+            self.cond.notify_all()
+
+    def spawn(self, args: list[str], log_path: str, env: dict | None) -> Forked:
+        """Fork `saim-mesh ARGS...` (args as given to subprocess: `python -m saim_mesh ...`)."""
+        argv = args[3:] if args[1:3] == ["-m", "saim_mesh"] else args
+        with self.lock:
+            self.next_id += 1
+            rid = self.next_id
+            self.p.stdin.write((json.dumps({"id": rid, "argv": argv, "log": str(log_path),
+                                            "env": dict(env or os.environ)}) + "\n").encode())
+            self.p.stdin.flush()
+        with self.cond:
+            if not self.cond.wait_for(lambda: rid in self.pids or not self.alive(), 30):
+                raise RuntimeError("the zygote did not fork")
+        if rid not in self.pids:
+            raise RuntimeError("the zygote died")
+        f = Forked(self, self.pids.pop(rid))
+        f.args = list(args)
+        return f
+
+    def close(self) -> None:
+        if self.alive():
+            self.p.stdin.close()
+            try:
+                self.p.wait(5)
+            except subprocess.TimeoutExpired:
+                self.p.kill()
+                self.p.wait()
+
+
+_shared: Zygote | None = None
+_shared_lock = threading.Lock()
+
+
+def shared() -> Zygote | None:
+    """The launcher's zygote, started on first use (None when SAIM_ZYGOTE=0 or it cannot start)."""
+    global _shared
+    if os.environ.get("SAIM_ZYGOTE", "1") == "0":
+        return None
+    with _shared_lock:
+        if _shared is None or not _shared.alive():
+            _shared = Zygote()
+            atexit.register(_shared.close)
+        return _shared
+
+
+def spawner():
+    """What `Proc(spawner=...)` takes: the shared zygote's `spawn`, or None (plain subprocesses)."""
+    z = shared()
+    return z.spawn if z is not None else None
+
+
+if __name__ == "__main__":
+    serve()
