@@ -14,7 +14,7 @@ from collections import defaultdict
 
 import zenoh
 
-from .groups import BATCH_CHUNK, GROUP_DEPTH, Groups
+from .groups import BATCH_CHUNK, Groups
 
 SINGLE_FAMILY_MAX = 8   # more fine expressions than this on a low-rate family: take it whole
 
@@ -31,17 +31,18 @@ def coarse(fine: set[str], root: str, groups: Groups, paths: list[str]) -> set[s
             continue
         chunks = e[n:].split("/")
         by_fam[chunks[0]].append(chunks)
-    tree = _tree(paths)
+    depth = groups.depth
+    tree = _tree(paths, depth)
     for fam, exprs in by_fam.items():
         lay = groups.layout.get(fam)
         if lay is not None:
-            out |= _batched(root, fam, exprs, lay[0] >= 0, tree)
+            out |= _batched(root, fam, exprs, lay[0] >= 0, tree, depth)
         else:
             out |= _single(root, fam, exprs, fam in groups.placed)
     return _drop_included(out)
 
 
-def _batched(root: str, fam: str, exprs: list[list[str]], has_path: bool, tree: dict) -> set[str]:
+def _batched(root: str, fam: str, exprs: list[list[str]], has_path: bool, tree: dict, depth: int) -> set[str]:
     base = f"{root}/{fam}"
     blocks: set[str] = set()
     covered: set[tuple[str, ...]] = set()
@@ -56,11 +57,11 @@ def _batched(root: str, fam: str, exprs: list[list[str]], has_path: bool, tree: 
             rest = rest[:-1]
         if not has_path or not rest or "*" in "".join(rest):
             return {f"{base}/*/{BATCH_CHUNK}/**"}
-        covered.add(tuple(rest[:GROUP_DEPTH]))
+        covered.add(tuple(rest[:depth]))
     out = set()
     for g in covered:
         g_expr = "/".join(g)
-        out.add(f"{base}/*/{BATCH_CHUNK}/{g_expr}" + ("/**" if len(g) < GROUP_DEPTH else ""))
+        out.add(f"{base}/*/{BATCH_CHUNK}/{g_expr}" + ("/**" if len(g) < depth else ""))
     for b in sorted(blocks):
         head = f"{base}/{b}/{BATCH_CHUNK}"
         if not has_path:
@@ -68,21 +69,21 @@ def _batched(root: str, fam: str, exprs: list[list[str]], has_path: bool, tree: 
         elif not covered:
             out.add(f"{head}/**")
         else:
-            out |= {f"{head}/{x}" for x in _complement(tree, covered, ())}
+            out |= {f"{head}/{x}" for x in _complement(tree, covered, (), depth)}
     return out
 
 
-def _tree(paths: list[str]) -> dict[tuple[str, ...], set[str]]:
-    """Children of every group node (tuples of at most GROUP_DEPTH chunks); () holds the roots."""
+def _tree(paths: list[str], depth: int) -> dict[tuple[str, ...], set[str]]:
+    """Children of every group node (tuples of at most `depth` chunks); () holds the roots."""
     kids: dict[tuple[str, ...], set[str]] = defaultdict(set)
     for p in [*paths, "unknown"]:
-        chunks = tuple(p.split("/")[:GROUP_DEPTH])
+        chunks = tuple(p.split("/")[:depth])
         for i in range(len(chunks)):
             kids[chunks[:i]].add(chunks[i])
     return kids
 
 
-def _complement(tree, covered: set[tuple[str, ...]], node: tuple[str, ...]) -> list[str]:
+def _complement(tree, covered: set[tuple[str, ...]], node: tuple[str, ...], depth: int) -> list[str]:
     """Key-expression tails selecting every group under `node` outside the covered subtrees."""
     out = []
     for child in sorted(tree.get(node, ())):
@@ -91,9 +92,9 @@ def _complement(tree, covered: set[tuple[str, ...]], node: tuple[str, ...]) -> l
             continue
         if any(c[:len(n)] == n for c in covered):
             out.append("/".join(n))          # the node's own group (entities attached to it)
-            out += _complement(tree, covered, n)
+            out += _complement(tree, covered, n, depth)
         else:
-            out.append("/".join(n) + ("/**" if len(n) < GROUP_DEPTH else ""))
+            out.append("/".join(n) + ("/**" if len(n) < depth else ""))
     return out
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 from .keyspace import Template
 
 BATCH_CHUNK = "_b"
-GROUP_DEPTH = 2            # command-path chunks in a group key: BN/A (a company's subtree)
+GROUP_DEPTH = 2            # command-path chunks in a group key: BN/A (a company's subtree) in a battalion
 CACHE_MAX = 50_000
 BATCHED = frozenset({"pos", "st"})   # families the replay batches; hits and authority messages stay single
 
@@ -34,11 +34,19 @@ def _layout(tpl: Template) -> tuple[int, int] | None:
     return i, len(chunks) - i - 1
 
 
+def group_depth(taskorg) -> int:
+    """Command-path chunks per group: a company's subtree whatever sits above it (2 in a
+    battalion, BN/A; 3 in a brigade, BDE/1BN/1A): the hierarchy's height less two."""
+    height = max((len(taskorg.path(u).split("/")) for u in taskorg.units), default=3)
+    return max(1, height - 2)
+
+
 class Groups:
     """Maps a concrete data key (under `root`) to its group key, or None when single."""
 
-    def __init__(self, root: str, templates: dict[str, Template]):
+    def __init__(self, root: str, templates: dict[str, Template], depth: int = GROUP_DEPTH):
         self.root = root
+        self.depth = depth
         self.n = len(root) + 1
         self.layout = {fam: lay for fam, tpl in templates.items() if (lay := _layout(tpl)) is not None}
         self.placed = frozenset(fam for fam, tpl in templates.items() if "place" in tpl.names)
@@ -61,7 +69,7 @@ class Groups:
         i, after = lay
         if i < 0:
             return head
-        path = chunks[i:len(chunks) - after][:GROUP_DEPTH]
+        path = chunks[i:len(chunks) - after][:self.depth]
         return f"{head}/{'/'.join(path)}" if path else None
 
     def is_batch(self, key: str) -> bool:

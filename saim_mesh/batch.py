@@ -15,7 +15,7 @@ from typing import Annotated
 import msgspec
 import zenoh
 
-from dissemination.groups import Groups
+from dissemination.groups import GROUP_DEPTH, Groups
 from dissemination.keyspace import template
 
 from . import messages as M
@@ -34,14 +34,15 @@ class Batch(W._Wire, kw_only=True):
 _DECODER = msgspec.msgpack.Decoder(Batch)
 
 
-def groups_of(root: str) -> Groups:
-    """The group layout of every registered message class with a key template."""
+def groups_of(root: str, depth: int = GROUP_DEPTH) -> Groups:
+    """The group layout of every registered message class with a key template (`depth`:
+    `group_depth` of the scenario's task organization; replay and peers must agree)."""
     tpls = {}
     for cls in M.MESSAGE_TYPES.values():
         if getattr(cls, "KEY", None):
             t = template(cls)
             tpls.setdefault(t.family, t)
-    return Groups(root, tpls)
+    return Groups(root, tpls, depth)
 
 
 def decode(payload: bytes, max_bytes: int) -> Batch:

@@ -22,6 +22,7 @@ import zenoh
 
 from dissemination.coarse import coarse
 from dissemination.exact import exact
+from dissemination.groups import group_depth
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 
@@ -96,7 +97,7 @@ class Peer:
         self.subs: dict[str, None] = {}      # the fine interest (key expressions the EA needs)
         self.zsubs: dict[str, object] = {}   # coarse, non-overlapping Zenoh subscriptions covering it
         self.want = lambda key: False         # exact test of a received key against the fine interest
-        self.groups = B.groups_of(root)
+        self.groups = B.groups_of(root, group_depth(sc.taskorg))
         self.flow = {"samples": 0, "batches": 0, "entries": 0, "dropped": 0}   # what the coarse subscriptions cost
         self.joined_t = 0.0
         self.tick_lat: list[float] = []

@@ -11,6 +11,7 @@ import queue
 import threading
 from typing import Callable
 
+from dissemination.groups import group_depth
 from dissemination.keyspace import KeySpace
 
 from . import batch as B
@@ -31,7 +32,7 @@ class MeshReader:
         self.session = None
         self.caught_up = False
         self.subs: list = []
-        self.groups = B.groups_of(root)
+        self.groups = B.groups_of(root, group_depth(sc.taskorg))   # as the replay cut them
         self.thread = threading.Thread(target=self._loop, name=f"{self.NAME}-feed", daemon=True)
 
     def keys(self) -> list[str]:

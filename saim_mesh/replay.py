@@ -29,6 +29,7 @@ from collections import Counter
 import numpy as np
 import zenoh
 
+from dissemination.groups import group_depth
 from dissemination.keyspace import KeySpace, matcher
 
 from ea_agent import domains
@@ -231,7 +232,7 @@ class Replay:
                 self._take_fusion_ticks(fticks)
                 for n, q in qs.items():
                     self._serve(q, n)
-            groups = groups_of(self.ks.root)
+            groups = groups_of(self.ks.root, group_depth(sc.taskorg))
             self.batchers = batchers = {n: Batcher(x, groups, self.gate.max_bytes) for n, x in sess.items()}
             # one declared publisher per key not batched (on its source's session): a put then skips parsing the key
             pubs = {(k, src): sess[src].declare_publisher(k, congestion_control=BLOCK)
