@@ -115,10 +115,39 @@ def flood(scenario: str, out: Path, link: dict) -> dict:
         rp.p.wait(60)
         for p in taps.values():
             p.p.send_signal(signal.SIGTERM)
-        got = {n: json.loads(p.wait_for("tap ", 60)[4:]) for n, p in taps.items()}
+        got = {n: json.loads(p.wait_for("tap {", 60)[4:]) for n, p in taps.items()}
     finally:
         sup.stop()
     return {"wall_s": round(wall, 1), "links": routed.link_stats(link_files), "received_behind_router": got}
+
+
+def link_classes(trace_dir: Path, topo: T.Topology, taskorg, units: list[str]) -> dict:
+    """Messages and payload bytes per router link, direction and key family, as the
+    receivers saw them: a message crossed a link downwards when a peer below it took it
+    from the wire and it entered above (its source's router is on the other side), and
+    upwards the other way round. Each is counted once per link however many peers
+    below took it (a router forwards it once)."""
+    import numpy as np
+    tr = np.load(trace_dir / "replay-trace.npz")
+    src_names, fams = [str(x) for x in tr["sources"]], [str(x) for x in tr["families"]]
+    recv = {u: np.fromfile(trace_dir / f"{u}.recv", dtype=np.uint32) for u in units
+            if (trace_dir / f"{u}.recv").exists()}
+    where = {u: topo.router_of(u, taskorg) for u in recv}
+    out = {}
+    for lower, upper in topo.links():
+        side = topo.side((lower, upper))
+        inside = np.array([n in side for n in src_names])
+        row = {}
+        for direction, takers, from_inside in (("down", [u for u in recv if where[u] in side], False),
+                                               ("up", [u for u in recv if where[u] not in side], True)):
+            seqs = np.unique(np.concatenate([recv[u] for u in takers])) if takers else np.zeros(0, np.uint32)
+            seqs = seqs[seqs < len(tr["src"])]
+            seqs = seqs[inside[tr["src"][seqs]] == from_inside]
+            fam = tr["fam"][seqs]
+            row[direction] = {fams[i]: {"messages": int((fam == i).sum()), "bytes": int(tr["nbytes"][seqs][fam == i].sum())}
+                              for i in np.unique(fam).tolist()}
+        out[f"{lower}->{upper}"] = row
+    return out
 
 
 def _pcts(xs: list[float]) -> dict:
@@ -158,9 +187,15 @@ def main(argv=None) -> int:
     res_path = tmp / "brigade"
     print(f"brigade: {len(units)} EA peers, {len(sc.taskorg.entity_unit)} entities, "
           f"{sc.duration_s:.0f} s of scenario", flush=True)
+    trace = tmp / "trace"
+    trace.mkdir(parents=True, exist_ok=True)
+    for f in trace.glob("*"):
+        f.unlink()
+    os.environ["SAIM_TRACE"] = str(trace)   # peers and the replay say what they took from the wire
     with Sampler(res_path / "pids.json") as smp:
         res = up(scenario, None, res_path, "max", topology="derive", link=link, insecure=a.insecure,
                  timeout=7200, echo=lambda *x, **k: print(*x, **{kk: v for kk, v in k.items() if kk == "flush"}))
+    os.environ.pop("SAIM_TRACE", None)
     peers = res["peers"]
     procs = smp.report()
     for u, s in peers.items():   # a peer's own CPU count is exact (the sampler's misses its last second)
@@ -174,6 +209,11 @@ def main(argv=None) -> int:
         "crashes": [e for e in res["events"] if "exit_code" in e], "given_up": res["given_up"],
         "links": _link_bytes(res["links"]), "processes": procs,
     }
+    try:
+        topo, _ = T.read_resolved(res_path / "topology.json")
+        out["links_by_family"] = link_classes(trace, topo, sc.taskorg, sorted(peers))
+    except (OSError, ValueError, KeyError) as e:   # a trace missing (a peer that died): say so, keep the rest
+        out["links_by_family"] = {"error": f"{type(e).__name__}: {e}"}
     ea = {u: procs.get(u, {}) for u in peers}
     pss = [p["pss_mb"] for p in ea.values() if p.get("pss_mb")]
     out["ea_peer_pss_mb"] = {"max": max(pss, default=None), "mean": round(sum(pss) / len(pss), 1) if pss else None}

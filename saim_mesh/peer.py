@@ -8,6 +8,7 @@ stop it: a bad message is counted, a lost source or fusion node is an alert.
 from __future__ import annotations
 
 import heapq
+from array import array
 import json
 import os
 import queue
@@ -16,6 +17,7 @@ import signal
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import msgspec
 import zenoh
@@ -42,6 +44,7 @@ from .security.sign import verifier_for
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
+ACK_EVERY_S = 4.0   # scenario seconds between pacing acks (the replay's window is 20 s)
 
 
 class Held(dict):
@@ -128,6 +131,9 @@ class Peer:
         self._wake = lambda: None                           # wakes the clock wait when a command comes
         self.n_cmds = 0
         self.misplaced: str | None = None   # attached to the wrong router (said once joined)
+        # SAIM_TRACE=DIR (bench_scale): every seq that reached us from the wire, written to
+        # DIR/<unit>.recv at the end: what crossed each router link, per key family
+        self.trace: array | None = array("I") if os.environ.get("SAIM_TRACE") else None
         C.tap(self.ea)   # a `cff confirm` needs the call for fire the EA saw
 
     # -- sinks -------------------------------------------------------------------------
@@ -220,7 +226,7 @@ class Peer:
         """Move received samples into the seq-ordered heap. A batch is unpacked and each
         entry taken like a single message; whatever our coarse subscriptions let
         through beyond the EA's exact interest is dropped (counted) before decoding."""
-        flow, groups, gate = self.flow, self.groups, self.gate
+        flow, groups, gate, trace = self.flow, self.groups, self.gate, self.trace
         for sub in self.zsubs.values():
             while (s := sub.try_recv()) is not None:
                 key = str(s.key_expr)
@@ -229,6 +235,8 @@ class Peer:
                     flow["batches"] += 1
                     for seq, k, p in B.unpack(gate, groups, s.payload.to_bytes(), key):
                         flow["entries"] += 1
+                        if trace is not None:
+                            trace.append(seq)
                         self._take(seq, k, p, buf)
                     continue
                 att = s.attachment
@@ -239,6 +247,8 @@ class Peer:
                     if seq < 0:
                         self._reject("?", "(seq)", f"attachment of {len(raw)} bytes is no sequence number", key)
                         continue
+                    if trace is not None and 0 < seq < 2**32:
+                        trace.append(seq)
                 self._take(seq, key, s.payload.to_bytes(), buf)
 
     def _take(self, seq: int | None, key: str, payload: bytes, buf: list) -> None:
@@ -567,6 +577,7 @@ class Peer:
                 done = False
                 next_interest = 0.0
                 last_sig = self._plan_signature()
+                next_ack = 0.0
                 while not done:
                     # Take every tick already queued: one drain of the subscriber channels
                     # serves them all (every message up to the last tick's seq is already in it).
@@ -585,14 +596,18 @@ class Peer:
                             next_interest, last_sig = tick.t + self.interest_s, sig
                     self._report_health()
                     self._commands()
-                    if not done:
-                        s.put(ack_key, W.encode(W.make(W.Ack, t=self.t)))   # lets a max-speed replay pace itself
+                    if not done and self.t >= next_ack:   # lets a max-speed replay pace itself (window 20 s):
+                        s.put(ack_key, W.encode(W.make(W.Ack, t=self.t)))   # every 4 s is often enough
+                        next_ack = self.t + ACK_EVERY_S
                 s.put(self.ks.bye(self.unit), W.encode(W.make(W.Bye, unit=self.unit)))   # a clean leave is no lost peer
                 token.undeclare()
                 cmds.undeclare()
                 clock.undeclare()
                 self.session = None
         finally:
+            if self.trace is not None:
+                with open(Path(os.environ["SAIM_TRACE"]) / f"{self.unit}.recv", "wb") as f:
+                    self.trace.tofile(f)
             if self.alog:
                 self.alog.close()
             if self.clog:

@@ -99,4 +99,7 @@ class Proc:
 def clean_env() -> dict:
     env = dict(os.environ)
     env.setdefault("PYTHONUNBUFFERED", "1")
+    # dozens of small processes per machine: two malloc arenas each, not one per thread
+    # (zenoh's threads would otherwise each grow their own and keep them)
+    env.setdefault("MALLOC_ARENA_MAX", "2")
     return env

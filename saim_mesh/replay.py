@@ -71,6 +71,7 @@ class Replay:
         self.by_key: dict[str, KeyIndex] = {n: KeyIndex() for n in self.confs}
         self.src_seqs: dict[str, array] = {n: array("I") for n in self.confs}
         self.last_tick: dict[str, bytes] = {}   # per source: the last tick published (repeated while lingering)
+        self.trace_len: array | None = array("I") if os.environ.get("SAIM_TRACE") else None
         self.t = 0.0
         self.n_ticks = 0
         self.until = until
@@ -95,7 +96,23 @@ class Replay:
         self.entries.append((n, payload))
         self.by_key[src].setdefault(key, []).append(n)
         self.src_seqs[src].append(n)
+        if self.trace_len is not None:
+            self.trace_len.append(len(payload))
         return n
+
+    def _write_trace(self) -> None:
+        """SAIM_TRACE=DIR: each seq's source, key family and size (bench_scale reads what
+        crossed each router link from this and the peers' received seqs)."""
+        import numpy as np
+        n = len(self.entries) + 1
+        src, fam = np.zeros(n, np.uint8), np.zeros(n, np.uint8)
+        srcs, fams = sorted(self.by_key), sorted({self.ks.family(k) for idx in self.by_key.values() for k in idx})
+        for si, name in enumerate(srcs):
+            for k, seqs in self.by_key[name].items():
+                ix = np.frombuffer(seqs, dtype=np.uint32) if isinstance(seqs, array) else np.array(seqs)
+                src[ix], fam[ix] = si, fams.index(self.ks.family(k))
+        np.savez(Path(os.environ["SAIM_TRACE"]) / "replay-trace.npz", src=src, fam=fam,
+                 nbytes=np.array([0, *self.trace_len], np.uint32), sources=np.array(srcs), families=np.array(fams))
 
     def _source(self, ev, taskorg) -> str:
         """The source (router) an event enters by: its unit's command post's; the
@@ -273,6 +290,8 @@ class Replay:
             self._flush()
             self._tick(sess, end_t, end=True)
             self.log(f"end events={len(self.entries)} wall_s={time.monotonic() - t0:.2f}", flush=True)
+            if self.trace_len is not None:
+                self._write_trace()
             linger = time.monotonic() + self.linger_s   # keep serving the store while peers finish
             while time.monotonic() < linger and set(self._present(s)) & set(self.wait_peers or ["?"]):
                 for src, x in sess.items():   # the end again: a peer cut off when it went out still gets it
