@@ -248,3 +248,41 @@ def test_a_peer_on_the_wrong_router_raises_a_system_problem(tmp_path):
     alerts = [json.loads(x) for x in open(tmp_path / "A.jsonl")]
     wrong = [a for a in alerts if a["details"].get("event") == "wrong-router"]
     assert wrong and "attached to r-BN, not to its command post's router r-A" in wrong[0]["message"]
+
+
+@pytest.mark.timeout(120)
+def test_a_router_enforces_the_role_rules_on_its_own_ingress(tmp_path):
+    """Behind a router a receiver's access control sees only the router's certificate: the
+    router itself must drop what a sender may not publish. An EA's session forges a
+    clock tick and an order of another unit through it; a reader behind the same router
+    gets neither, but gets the EA's own alert."""
+    from saim_mesh.security.pki import make_pki, names_for
+    sc = S.load(SMALL, events=False)
+    pki = tmp_path / "pki"
+    make_pki(pki, names_for(sc) + ["router.r-BN"])
+    root = f"t/{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    router = Proc("r-BN", [sys.executable, "-m", "saim_mesh", "router", "--scenario", SC, "--name", "r-BN",
+                           "--root", root, "--listen", f"tls/127.0.0.1:{port}", "--pki", str(pki)], log_dir=tmp_path)
+    try:
+        router.wait_for("router ready", 60)
+        leaf = lambda name: config(None, [f"tls/127.0.0.1:{port}"], pki=pki, name=name, sc=sc, root=root,  # noqa
+                                   mode="client", routers=["r-BN"])
+        import zenoh
+        got: list[str] = []
+        with zenoh.open(leaf("ea.BN")) as reader, zenoh.open(leaf("ea.A")) as forger:
+            reader.declare_subscriber(f"{root}/**", lambda smp: got.append(str(smp.key_expr)))
+            ok = forger.declare_publisher(f"{root}/alert/A/contact")
+            end = time.monotonic() + 20
+            while not ok.matching_status.matching and time.monotonic() < end:   # the reader's interest arrived
+                time.sleep(0.02)
+            forger.put(f"{root}/clock", b"forged tick")
+            forger.put(f"{root}/ord/B", b"forged order")
+            ok.put(b"a real alert")   # after the forgeries, on the same path: when it is here, they would be
+            end = time.monotonic() + 20
+            while f"{root}/alert/A/contact" not in got and time.monotonic() < end:
+                time.sleep(0.02)
+    finally:
+        router.stop()
+    assert f"{root}/alert/A/contact" in got
+    assert f"{root}/clock" not in got and f"{root}/ord/B" not in got
