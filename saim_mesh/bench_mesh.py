@@ -27,7 +27,7 @@ from . import messages as M
 from . import scenario as S
 from . import wire as W
 from . import zygote
-from .memory import Sampler
+from .procstat import Sampler
 from .mesh import Proc, start_peer, up
 from .runner import config_for, make_ea, run
 from .zconf import config, free_port
@@ -204,7 +204,7 @@ def main(argv=None) -> int:
     lat = one_peer(a.scenario, "BN", f"{speed:.3f}", None, tmp / "lat")   # a peer takes no early end tick
     print(f"latency at 1,000 events/s: tick {lat['tick_latency_ms']}, alert {lat['alert_latency_ms']}", flush=True)
     zyg = lambda: {"zygote": zygote._shared.p.pid} if zygote._shared is not None and zygote._shared.alive() else {}
-    with Sampler(tmp / "battalion" / "pids.json", extra=zyg) as mem:
+    with Sampler(tmp / "battalion" / "pids.json", every_s=0.25, extra=zyg) as mem:
         res = up(a.scenario, None, tmp / "battalion", "max")
     peers = res["peers"]
     ea_mem = {u: mem.peak[u] for u in peers if u in mem.peak}
@@ -241,7 +241,7 @@ def main(argv=None) -> int:
         "peak_rss_mb": max(s["peak_rss_mb"] for s in peers.values()),
         "peak_rss_mb_by_peer": {u: s["peak_rss_mb"] for u, s in peers.items()},
         "peak_pss_mb_per_ea_peer": max(m["pss_mb"] for m in ea_mem.values()),
-        "memory_by_process": mem.peak, "flow_by_peer": flow,
+        "memory_by_process": mem.peak_memory, "flow_by_peer": flow,
         "alerts_equal_in_process": same, "events": n_ev,
         "sensors_wall_s": round(rs["wall_s"], 2) if sens_same is not None else None,
         "sensors_alerts_equal_in_process": sens_same,

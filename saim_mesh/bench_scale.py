@@ -215,7 +215,9 @@ def main(argv=None) -> int:
     for f in trace.glob("*"):
         f.unlink()
     os.environ["SAIM_TRACE"] = str(trace)   # peers and the replay say what they took from the wire
-    with Sampler(res_path / "pids.json") as smp:
+    from . import zygote
+    zyg = lambda: {"zygote": zygote._shared.p.pid} if zygote._shared is not None and zygote._shared.alive() else {}  # noqa
+    with Sampler(res_path / "pids.json", extra=zyg) as smp:
         res = up(scenario, None, res_path, "max", topology="derive", link=link, insecure=a.insecure,
                  timeout=7200, echo=lambda *x, **k: print(*x, **{kk: v for kk, v in k.items() if kk == "flush"}))
     os.environ.pop("SAIM_TRACE", None)

@@ -28,8 +28,9 @@ class Sampler:
     """Samples every process named in a mesh's pids.json (restarts pick up new pids)
     every `every_s` until stopped; keeps per name the peak PSS/RSS and the last CPU."""
 
-    def __init__(self, pids_path: Path, every_s: float = 1.0):
+    def __init__(self, pids_path: Path, every_s: float = 1.0, extra=None):
         self.pids_path, self.every_s = Path(pids_path), every_s
+        self.extra = extra or (lambda: {})   # () -> {name: pid} of processes not in the file (a zygote)
         self.peak: dict[str, dict] = {}
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._run, daemon=True)
@@ -48,7 +49,7 @@ class Sampler:
 
     def once(self) -> None:
         try:
-            pids = json.loads(self.pids_path.read_text())
+            pids = {**json.loads(self.pids_path.read_text()), **self.extra()}
         except (OSError, ValueError):
             return
         for name, pid in pids.items():
@@ -59,6 +60,12 @@ class Sampler:
             p["cpu_s"] = max(p["cpu_s"], s["cpu_s"])
             p["pss_mb"] = max(p["pss_mb"], s["pss_mb"])
             p["rss_mb"] = max(p["rss_mb"], s["rss_mb"])
+
+    @property
+    def peak_memory(self) -> dict[str, dict]:
+        """Peak PSS and RSS per process name (MB, one decimal)."""
+        return {n: {"pss_mb": round(p["pss_mb"], 1), "rss_mb": round(p["rss_mb"], 1)}
+                for n, p in sorted(self.peak.items())}
 
     def report(self) -> dict[str, dict]:
         return {n: {k: round(v, 2) for k, v in p.items()} for n, p in sorted(self.peak.items())}
