@@ -27,6 +27,7 @@ from . import messages as M
 from . import scenario as S
 from . import wire as W
 from . import zygote
+from .bench_ea import feed
 from .procstat import Sampler
 from .mesh import Proc, start_peer, up
 from .runner import config_for, make_ea, run
@@ -155,14 +156,7 @@ def one_peer(scenario: str, unit: str, speed: str, until: float | None, tmp: Pat
 
 def in_process(sc, unit: str) -> float:
     """Seconds for the in-process EA (the peer's configuration) to take every event."""
-    ea = make_ea(sc, unit, config_for(sc, unit, None), sinks=[])
-    ea.start(0.0)
-    submit = ea.submit
-    t0 = time.perf_counter()
-    for ev in sc.events:
-        submit(ev)
-    ea.finish(sc.duration_s)
-    return time.perf_counter() - t0
+    return feed(make_ea(sc, unit, config_for(sc, unit, None), sinks=[]), sc)
 
 
 def main(argv=None) -> int:
