@@ -35,6 +35,7 @@ def _child(req: dict) -> None:
         os.setpgid(0, 0)   # its own group: a signal to it is not a signal to its siblings
         for s in (signal.SIGTERM, signal.SIGINT, signal.SIGCHLD):
             signal.signal(s, signal.SIG_DFL)
+        _die_with_parent()   # the zygote gone (its launcher killed): no orphan peers
         fd = os.open(req["log"], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
@@ -64,8 +65,19 @@ def _child(req: dict) -> None:
             os._exit(code)
 
 
+def _die_with_parent() -> None:
+    """SIGTERM when our parent dies (Linux prctl PR_SET_PDEATHSIG): a launcher killed
+    outright takes the zygote with it, and the zygote its children."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)   # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):   # not Linux: orphans are reaped by whoever stops the mesh
+        pass
+
+
 def serve() -> None:
     """The zygote's loop: fork on request, report every child's pid and exit status."""
+    _die_with_parent()
     for m in PRELOAD:
         importlib.import_module(m)
     gc.collect()
