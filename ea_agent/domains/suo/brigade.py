@@ -102,14 +102,7 @@ def _troops(small: bool, seed: int, duration: float) -> tuple[TroopSim, list[dic
                 u.append({"id": f"{p}S{s}", "name": f"{s} SQD, {i} PLT, {name}", "echelon": "squad",
                           "parent": p, "n": per_squad})
                 sim.centers[f"{p}S{s}"] = (x + G.SQUAD_DX[s - 1], y + G.SQUAD_DY[s - 1])
-    rng = np.random.default_rng([seed, 14, 99])
-    for x in u:
-        for k in range(x.get("n", 0)):
-            e = f"{x['id']}E{k + 1:02d}"
-            sim.entity_leaf[e] = x["id"]
-            sim.entity_off[e] = (float(rng.uniform(-25, 25)), float(rng.uniform(-25, 25)))
-    for e in sorted(sim.entity_leaf):
-        sim.report_phase[e] = float(rng.uniform(0, sim.report_s))
+    G.place_entities(sim, u, np.random.default_rng([seed, 14, 99]))
     sim.confirmations = sorted((0.0, m["id"], m["unit"], "start") for m in missions)
     return sim, feats, missions
 

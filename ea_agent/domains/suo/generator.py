@@ -195,6 +195,18 @@ def _units(small: bool) -> list[dict]:
     return u
 
 
+def place_entities(sim: "Sim", units: list[dict], rng) -> None:
+    """Each unit's `n` entities: a random offset within 25 m of its leaf's centre and a
+    random phase of the report period (the order of draws is part of the seed's output)."""
+    for u in units:
+        for k in range(u.get("n", 0)):
+            e = f"{u['id']}E{k + 1:02d}"
+            sim.entity_leaf[e] = u["id"]
+            sim.entity_off[e] = (float(rng.uniform(-25, 25)), float(rng.uniform(-25, 25)))
+    for e in sorted(sim.entity_leaf):
+        sim.report_phase[e] = float(rng.uniform(0, sim.report_s))
+
+
 def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted", mult: int = 1,
               plan_switch: bool = True, report_s: float | None = None) -> Sim:
     """The true battle. `incidents`: "scripted" (the labelled INCIDENTS, the same for
@@ -210,13 +222,7 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted", m
     for u in sim.units:
         if "n" in u:
             u["n"] *= mult
-    for u in sim.units:
-        for k in range(u.get("n", 0)):
-            e = f"{u['id']}E{k + 1:02d}"
-            sim.entity_leaf[e] = u["id"]
-            sim.entity_off[e] = (float(rng.uniform(-25, 25)), float(rng.uniform(-25, 25)))
-    for e in sorted(sim.entity_leaf):
-        sim.report_phase[e] = float(rng.uniform(0, sim.report_s))
+    place_entities(sim, sim.units, rng)
     if incidents == "random":
         from .random_battle import draw_battle   # it builds on this module's Sim
         draw_battle(sim, np.random.default_rng([seed, 11]))
