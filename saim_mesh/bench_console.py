@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from .proc import Proc, clean_env, py
+from . import results
 
 ROOT = Path(__file__).resolve().parents[1]
 LONGTASKS = """window.__longTasks = [];
@@ -116,9 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench-console-") as tmp:
         res = run(Path(a.scenario), Path(tmp), a.speed, Path(a.screenshot) if a.screenshot else None)
     res["machine"] = {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()}
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(res, indent=1) + "\n")
-    print(json.dumps(res, indent=1))
+    results.write(a.out, res, echo=True)
     return 0
 
 

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from .proc import Proc, clean_env, py
+from . import results
 
 OUT = Path(__file__).resolve().parents[1] / "bench" / "results" / "link.json"
 
@@ -126,9 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         res = {"throughput": throughput(args.mb, tmp),
                "latency_50ms_1pct": latency(args.messages, args.rate, 50, 0.01, tmp),
                "machine": f"{os.cpu_count()} cores, loopback; other work running on it"}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(res, indent=1) + "\n")
-    print(json.dumps(res, indent=1))
+    results.write(args.out, res, echo=True)
     return 0
 
 

@@ -20,6 +20,7 @@ from dissemination.keyspace import KeySpace
 from . import messages as M
 from . import wire as W
 from .security import sign as G
+from . import results
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -80,9 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     res = {"what": "CPU microseconds per message, best of rounds", "n": a.n, "rounds": a.rounds,
            "python": platform.python_version(), "cryptography": cryptography.__version__,
            **measure(a.n, a.rounds)}
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(res, indent=1) + "\n")
-    print(json.dumps(res, indent=1))
+    results.write(a.out, res, echo=True)
     return 0
 
 

@@ -12,7 +12,6 @@ Measured in one run (written to bench/results/tak.json):
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from datetime import datetime, timezone
@@ -22,6 +21,7 @@ from . import messages as M
 from . import scenario as S
 from .tak import cot as C
 from .tak.picture import Options, Picture
+from . import results
 
 ROOT = Path(__file__).resolve().parents[1]
 EPOCH = datetime(2026, 5, 1, 6, 0, 0, tzinfo=timezone.utc)
@@ -100,9 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{sc.duration_s / 3600:.1f} h of {sc.name}, units and entities every {a.period:g} s); "
                       f"baseline ElementTree {b['elementtree_events_per_s']}/s, takproto "
                       f"{b['takproto_events_per_s']}/s for one fixed event")
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(res, indent=2) + "\n")
-    print(json.dumps(res, indent=2))
+    results.write(a.out, res, echo=True, indent=2)
     return 0
 
 
