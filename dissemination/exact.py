@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Callable
 
-CACHE_MAX = 50_000
+CACHE_MAX = 8192   # about twice the keys a brigade EA hears at once (an entity's key changes with its cell): a few MB
 ANY = "*"
 
 

@@ -16,7 +16,7 @@ from .keyspace import Template
 
 BATCH_CHUNK = "_b"
 GROUP_DEPTH = 2            # command-path chunks in a group key: BN/A (a company's subtree) in a battalion
-CACHE_MAX = 50_000
+CACHE_MAX = 8192   # about twice the keys a brigade EA hears at once (an entity's key changes with its cell): a few MB
 BATCHED = frozenset({"pos", "st"})   # families the replay batches; hits and authority messages stay single
 
 

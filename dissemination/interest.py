@@ -4,6 +4,7 @@ Recomputed as the EA's state changes; the peer re-registers when the set differs
 Nothing here knows a domain: the keys come from the domain's message templates."""
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 
 from .keyspace import KeySpace, Template, block_of, cells_of_bounds, cells_within
@@ -15,12 +16,31 @@ class Interest:
         self.radius = radius_m   # handed to the domain: how far around its units it listens
         self.block_share = block_share   # take a whole block when we need this many of its 16 cells
         self._tpl: dict[str, Template] = {}
+        self._last: tuple[tuple, frozenset[str]] | None = None   # (what the keys depend on, the keys)
 
     def keys(self, dom) -> set[str]:
         """Key expressions for one EA's domain state."""
         return self.of(dom.needs(self.radius))
 
     def of(self, needs) -> set[str]:
+        """Recomputed only when the cells the needs cover or what they bind changed:
+        units move metres between re-registrations, cells are kilometres wide."""
+        memo = self._memo_key(needs)
+        if self._last is not None and self._last[0] == memo:
+            return set(self._last[1])
+        out = self._of(needs)
+        self._last = (memo, frozenset(out))
+        return out
+
+    def _memo_key(self, needs) -> tuple:
+        size = self.ks.cell_m
+        fl = math.floor
+        spans = tuple((fl((x - r) / size), fl((x + r) / size), fl((y - r) / size), fl((y + r) / size))
+                      for x, y, r in needs.circles)
+        boxes = tuple((fl(b[0] / size), fl(b[1] / size), fl(b[2] / size), fl(b[3] / size)) for b in needs.boxes)
+        return (needs.templates, tuple(sorted(needs.by.items())), needs.whole, spans, boxes)
+
+    def _of(self, needs) -> set[str]:
         r = self.ks.root
         out = {self.ks.clock()} | {f"{r}/{fam}/**" for fam in needs.whole}
         places = self._places(needs)

@@ -51,7 +51,7 @@ class Tick(_Wire, kw_only=True):
 
 
 class Ack(_Wire, kw_only=True):
-    """An EA peer has processed every tick up to scenario time `t` (replay pacing)."""
+    """An EA peer has taken in every tick up to scenario time `t` (replay pacing)."""
     t: Time
 
 
