@@ -205,8 +205,11 @@ class Peer:
         """Changes when a reorganization, a mission transition or a threshold set by the
         commander may change our interest."""
         dom = self.ea.domain
-        states = tuple(sorted(dom.plan.state.items())) if getattr(dom, "plan", None) else ()
-        return dom.taskorg.version, hash(states), len(self.ea.changes)   # a threshold may widen what we need
+        plan = getattr(dom, "plan", None)
+        st = plan.state if plan else {}
+        ver = getattr(st, "version", None)   # counts its changes: asked after every tick
+        states = (id(st), ver) if ver is not None else hash(tuple(sorted(st.items())))
+        return dom.taskorg.version, states, len(self.ea.changes)   # a threshold may widen what we need
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
         rep = storeq.query(self.session, self.ks, self.gate, since, keys, timeout, self.n_sources)

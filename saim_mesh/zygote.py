@@ -48,7 +48,8 @@ def _child(req: dict) -> None:
         sys.stderr = open(2, "w", buffering=1, closefd=False)
         os.environ.clear()
         os.environ.update(req["env"])
-        gc.unfreeze()
+        # the zygote's imports stay frozen: a full collection would write to every one of
+        # their headers and copy their pages into this child (what it allocates is collected)
         sys.argv = ["saim-mesh", *req["argv"]]
         from saim_mesh.cli import main
         code = main(req["argv"]) or 0

@@ -8,8 +8,10 @@ message is counted and dropped instead of crashing a peer.
 A class whose fields are annotated with bounded types (`Time`, `Lon`, `Lat`, `Text`,
 `Finite`, `Literal[...]`: `TYPED = True`) is decoded straight from msgpack into a typed
 msgspec struct (about 0.4 us against 3-4 us for dict-then-fields) and becomes the same
-dataclass. The typed decoder is never more lenient than `from_dict`: anything it
-refuses goes through `from_dict`, which accepts it or names the bad field.
+dataclass. Where every field is bounded already, msgspec builds the dataclass itself
+after a look at the kind (0.7 us against 1.3 us for struct-then-dataclass: the hot path
+of every position report). The typed decoders are never more lenient than `from_dict`:
+anything they refuse goes through `from_dict`, which accepts it or names the bad field.
 """
 from __future__ import annotations
 
@@ -124,6 +126,26 @@ def register(*classes: type) -> None:
                 _RULED.add(c)
     if _TYPED:
         _typed_decoder = msgspec.msgpack.Decoder(typing.Union[tuple(_TYPED)])   # type: ignore[misc]
+        for c in _TYPED.values():
+            if c.KIND not in _DIRECT and _bounded(c):
+                _DIRECT[c.KIND] = msgspec.msgpack.Decoder(c)
+
+
+class _Head(msgspec.Struct):
+    """A message's kind and version, the rest skipped: which direct decoder to use."""
+    kind: str
+    v: Literal[VERSION]   # type: ignore[valid-type]
+
+
+_head = msgspec.msgpack.Decoder(_Head)
+_DIRECT: dict[str, msgspec.msgpack.Decoder] = {}   # kind -> a decoder straight into its dataclass
+
+
+def _bounded(cls: type) -> bool:
+    """Every field's annotation is already what the typed struct checks (no plain float
+    to make finite): msgspec can then build the dataclass itself, at half the cost."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    return all(_finite(hints[f.name]) is hints[f.name] for f in fields(cls))
 
 
 def _finite(tp: Any) -> Any:
@@ -187,6 +209,14 @@ def encode(msg: Message) -> bytes:
 
 def decode(data: bytes) -> Message:
     """Parse and validate wire bytes; raises MessageError on anything malformed."""
+    if _DIRECT:
+        try:
+            m = _DIRECT[_head.decode(data).kind].decode(data)
+        except Exception:   # refused (or a kind without one): the paths below name the field
+            pass
+        else:
+            if type(m) not in _RULED or m.valid():
+                return m
     if _typed_decoder is not None:
         try:
             s = _typed_decoder.decode(data)
