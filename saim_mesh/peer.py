@@ -44,6 +44,7 @@ from .security.sign import verifier_for
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
+NAP_MIN_S, NAP_MAX_S = 0.0001, 0.002   # polling the clock channel: at most 2 ms late at 1x
 ACK_EVERY_S = 4.0   # scenario seconds between pacing acks (the replay's window is 20 s)
 
 
@@ -131,7 +132,6 @@ class Peer:
         self.next_health = self.reject_alert
         self.presence: Presence | None = None
         self.cmdq: queue.SimpleQueue = queue.SimpleQueue()   # (key, payload) of commands, taken between ticks
-        self._wake = lambda: None                           # wakes the clock wait when a command comes
         self.n_cmds = 0
         self.misplaced: str | None = None   # attached to the wrong router (said once joined)
         # SAIM_TRACE=DIR (bench_scale): every seq that reached us from the wire, written to
@@ -418,21 +418,30 @@ class Peer:
         n = min(self.tick_parts)
         return f" (tick {n} came only from {', '.join(sorted(self.tick_parts[n]))}: a router link may be down)"
 
-    def _next_ticks(self, clock: queue.SimpleQueue) -> list[W.Tick]:
-        """Block for the next tick(s); a silent source is an alert, then an exit at the deadline."""
+    def _next_ticks(self, clock) -> list[W.Tick]:
+        """Block for the next tick(s); a silent source is an alert, then an exit at the deadline.
+
+        The clock is a channel we poll (a nap of 0.1 ms doubling to 2 ms while it is
+        empty), not a callback: a callback takes the interpreter lock from Zenoh's thread
+        on every tick and so preempts the EA thousands of times a run."""
         last = time.monotonic()
         said = False
+        nap, look = NAP_MIN_S, last + 0.5
         while True:
-            try:
-                raw = [clock.get(timeout=0.5)]
-            except queue.Empty:
-                raw = []
-            if None in raw or not raw:   # a command woke us (None), or a quiet half second
-                self._commands()
-                raw = [p for p in raw if p is not None]
+            raw = []
+            while len(raw) < 64 and (smp := clock.try_recv()) is not None:
+                raw.append(smp.payload.to_bytes())
             if not raw:
+                if self.cmdq.qsize():
+                    self._commands()
+                now = time.monotonic()
+                if now < look:
+                    time.sleep(nap)
+                    nap = min(2 * nap, NAP_MAX_S)
+                    continue
+                look = now + 0.5   # a quiet half second: who is there, and is the source silent?
                 self.presence.take()
-                quiet = time.monotonic() - last
+                quiet = now - last
                 if quiet > self.silence_s and not said:
                     said = True
                     self.silences += 1
@@ -442,21 +451,14 @@ class Peer:
                 if self.deadline_s is not None and quiet > self.deadline_s:
                     raise SourceLost(f"no clock from the source for {self.deadline_s:.0f} s: giving up")
                 continue
-            while len(raw) < 64:
-                try:
-                    raw.append(clock.get_nowait())
-                except queue.Empty:
-                    break
+            nap = NAP_MIN_S
             ticks = []
             for payload in raw:
-                if payload is None:
-                    continue
                 tick = self.gate.control(W.Tick, payload, self.ks.clock())
                 if (tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n)
                         and self._whole(tick)):
                     ticks.append(tick)
             if not ticks:   # only parts of ticks: still waiting for some source
-                raw = []
                 if time.monotonic() - last > self.silence_s and not said:
                     said = True
                     self.silences += 1
@@ -465,12 +467,11 @@ class Peer:
                 if self.deadline_s is not None and time.monotonic() - last > self.deadline_s:
                     raise SourceLost(f"no whole clock tick for {self.deadline_s:.0f} s: giving up")
                 continue
-            if said and ticks:
+            if said:
                 self.system_alert("SAIM", "routine", "the source's clock is back", event="source-back")
-            if ticks:
-                self.clock_t = max(self.clock_t, ticks[-1].t)
-                self.tick_seq = max(self.tick_seq, ticks[-1].seq)
-                return ticks
+            self.clock_t = max(self.clock_t, ticks[-1].t)
+            self.tick_seq = max(self.tick_seq, ticks[-1].seq)
+            return ticks
 
     def _on_tick(self, tick: W.Tick, buf: list) -> bool:
         """Feed the EA every message up to the tick's seq, in seq order, then advance it to
@@ -518,9 +519,8 @@ class Peer:
 
     # -- a commander's commands (docs/console.md 1) ---------------------------------------
     def _on_cmd(self, smp) -> None:
-        """Zenoh's thread: queue the command for the main loop and wake it."""
+        """Zenoh's thread: queue the command for the main loop (taken between ticks)."""
         self.cmdq.put((str(smp.key_expr), smp.payload.to_bytes()))
-        self._wake()
 
     def _commands(self) -> None:
         """Apply every queued command at our current scenario time and answer each on
@@ -600,15 +600,13 @@ class Peer:
         signal.signal(signal.SIGTERM, stop)
         self.ea.start(0.0)
         t_wall = time.monotonic()
-        clockq: queue.SimpleQueue = queue.SimpleQueue()
         t_first = None
         try:
             with zenoh.open(self.conf) as s:
                 self.session = s
-                # a callback into our own queue: waiting on it has a timeout (a lost source is
-                # noticed); Zenoh has put every sample before a tick into its channel already
-                clock = s.declare_subscriber(self.ks.clock(), lambda smp: clockq.put(smp.payload.to_bytes()))
-                self._wake = lambda: clockq.put(None)
+                # a channel we poll (`_next_ticks`): Zenoh has put every sample before a tick
+                # into its channel already when the tick is in this one
+                clock = s.declare_subscriber(self.ks.clock(), zenoh.handlers.FifoChannel(100_000))
                 cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"), self._on_cmd)
                 self._check_connected(s)
                 self._resubscribe()
@@ -631,7 +629,7 @@ class Peer:
                     # Take every tick already queued: one drain of the subscriber channels
                     # serves them all (every message up to the last tick's seq is already in it).
                     c0 = time.perf_counter()
-                    ticks = self._next_ticks(clockq)
+                    ticks = self._next_ticks(clock)
                     t_first = t_first or time.monotonic()
                     self.barrier.wait(ticks[-1].t)
                     c1 = time.perf_counter()
@@ -682,7 +680,7 @@ class Peer:
             by_p[a.priority] = by_p.get(a.priority, 0) + 1
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "by_priority": by_p, "joined_t": self.joined_t,
                 "late_alerts": self.late, "restarted": bool(self.alog and self.alog.restarted),
-                "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "bad_messages": self.gate.errors + self.ea.stats["errors"],
+                "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "ea_stats": dict(self.ea.stats), "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "zenoh_subscriptions": len(self.zsubs), **self.flow,
                 "cpu_s": round(ru.ru_utime + ru.ru_stime, 2),
