@@ -229,6 +229,8 @@ def main(argv=None) -> int:
         "ea_flow": {k: bn.get(k) for k in ("zenoh_subscriptions", "subscriptions", "samples", "batches", "entries",
                                             "dropped", "messages")},
         "ea_samples_per_event": round(bn["samples"] / n_ev, 4),
+        "ea_stage_s": bn.get("stage_s"),   # where the peer's time went: waiting, receiving, ticks (the EA), interest
+        "ea_active_s": bn["active_s"], "in_process_s": round(n_ev / inproc_rate, 3),
         "latency_p50_ms": lat["tick_latency_ms"].get("p50"), "latency_p99_ms": lat["tick_latency_ms"].get("p99"),
         "alert_latency_ms": lat["alert_latency_ms"], "latency_events_per_s": 1000,
         "battalion_wall_s": round(res["wall_s"], 2), "peers": len(peers),
