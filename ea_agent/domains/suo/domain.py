@@ -33,6 +33,9 @@ D = TypeVar("D", bound=Detector)
 
 
 class SuoDomain:
+    # reports wait in the manager's batch; any other fact (its handler reads the picture) goes in at once
+    BULK_FACTS = (LocationReport, SensorTrack)
+
     def __init__(self, owner: str, taskorg: TaskOrg, plans: dict[str, PlanSpec], initial_plan: str,
                  overlay: dict, proj: Projection, cfg: dict):
         if owner not in taskorg.units:
@@ -423,18 +426,29 @@ class SuoDomain:
         if len(locs) == len(facts):   # the usual batch: location reports only
             self.dirty_leaves |= self.pic.apply_locations(locs)
             return
-        if locs:
-            self.dirty_leaves |= self.pic.apply_locations(locs)
-        tracks = [f for f in facts if type(f) is SensorTrack]
-        if tracks:
-            self.dirty_tracks |= self.pic.apply_tracks(tracks)
-        if len(locs) + len(tracks) == len(facts):
-            return
+        run: list = []   # reports (locations, tracks) since the last other fact
         for f in facts:
+            k = type(f)
+            if k is LocationReport or k is SensorTrack:
+                run.append(f)
+                continue
+            self._apply_reports(run)   # a confirmation or a call for fire reads the picture:
+            run = []                   # the reports before it, and none after (batches differ per peer)
             try:
                 self._apply_one(f)
             except (KeyError, ValueError) as e:   # bad order/confirmation: counted, the rest goes on
                 self.ea.error(f"{type(f).__name__} at t={f.t}: {e}")
+        self._apply_reports(run)
+
+    def _apply_reports(self, reports: list) -> None:
+        """Location reports and tracks (independent parts of the picture), each kind in one call."""
+        if not reports:
+            return
+        locs = [f for f in reports if type(f) is LocationReport]
+        if locs:
+            self.dirty_leaves |= self.pic.apply_locations(locs)
+        if len(locs) < len(reports):
+            self.dirty_tracks |= self.pic.apply_tracks([f for f in reports if type(f) is SensorTrack])
 
     def _apply_one(self, f) -> None:
         k = type(f)
