@@ -123,15 +123,19 @@ class Template:
 
     def expr(self, bind: dict[str, str]) -> str:
         """A key expression selecting this template's keys with the placeholders in
-        `bind` fixed (others are wildcards); everything after a path is `**`."""
+        `bind` fixed (others are wildcards); everything after a path is `**`, unless a
+        field after it is fixed (`pos/*/*/**/<entity>`: one entity, wherever it is)."""
         out = []
-        for op, a in self.ops:
+        for i, (op, a) in enumerate(self.ops):
             if op == "lit":
                 out.append(a)
             elif op == "place":
                 out.append(bind.get("place", "*/*"))
             elif op == "path":
                 out.append(f"{bind['path']}/**" if "path" in bind else "**")
+                if not any(o == "field" and b in bind for o, b in self.ops[i + 1:]):
+                    break
+                out += [bind.get(b, "*") if o == "field" else "*" for o, b in self.ops[i + 1:]]
                 break
             else:
                 out.append(bind.get(a if op == "field" else op, "*"))

@@ -23,7 +23,7 @@ from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Chang
                      Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
                      Presence, ReconProgress, ScheduleMonitors, Standoffs, ThreatsAhead)
 from .detect.ahead import branches_for
-from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
+from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
 from .picture import Picture, Watchman
 
@@ -118,6 +118,14 @@ class SuoDomain:
         """What this EA must hear, for dissemination (imported here: the EA itself never needs it)."""
         from .needs import needs
         return needs(self, radius_m)
+
+    def needs_before(self, msg):
+        """What must be up to date before `msg` is applied (a call for fire's surroundings);
+        asked of every message a peer takes: the common answer costs one type test."""
+        if type(msg) is not CallForFire:
+            return None
+        from .needs import needs_before
+        return needs_before(self, msg)
 
     def _org_changed(self) -> None:
         """Recompute everything that depends on the command hierarchy."""
