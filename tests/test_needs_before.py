@@ -143,3 +143,14 @@ def test_the_watchman_drops_a_report_older_than_one_it_took(small):
     ea.advance(12.0)
     pic = ea.domain.pic
     assert pic.lon[pic.eidx["A2S1E01"]] == -116.60 and ea.domain.watchman.stats["stale"] == 1
+
+
+def test_the_store_matcher_takes_an_entity_wherever_it_is_as_zenoh_does():
+    import zenoh
+    exprs = ["r/pos/*/*/**/E1", "r/pos/X1Y1/x1y1/**", "r/pos/*/*/BN/A/**/E2"]
+    keys = ["r/pos/X0Y0/x0y0/BN/A/A1/E1", "r/pos/X0Y0/x0y0/E1", "r/pos/X0Y0/E1", "r/trk/X0Y0/x0y0/E1",
+            "r/pos/X0Y0/x0y0/BN/B/E2", "r/pos/X0Y0/x0y0/BN/A/A1/E2", "r/pos/X1Y1/x1y1/BN/E3", "r/pos/X0Y0/x0y0/BN/E11"]
+    match = matcher(exprs)
+    kes = [zenoh.KeyExpr(e) for e in exprs]
+    for k in keys:
+        assert match(k) == any(zenoh.KeyExpr(k).intersects(x) for x in kes), k
