@@ -123,15 +123,19 @@ class Template:
 
     def expr(self, bind: dict[str, str]) -> str:
         """A key expression selecting this template's keys with the placeholders in
-        `bind` fixed (others are wildcards); everything after a path is `**`."""
+        `bind` fixed (others are wildcards); everything after a path is `**`, unless a
+        field after it is fixed (`pos/*/*/**/<entity>`: one entity, wherever it is)."""
         out = []
-        for op, a in self.ops:
+        for i, (op, a) in enumerate(self.ops):
             if op == "lit":
                 out.append(a)
             elif op == "place":
                 out.append(bind.get("place", "*/*"))
             elif op == "path":
                 out.append(f"{bind['path']}/**" if "path" in bind else "**")
+                if not any(o == "field" and b in bind for o, b in self.ops[i + 1:]):
+                    break
+                out += [bind.get(b, "*") if o == "field" else "*" for o, b in self.ops[i + 1:]]
                 break
             else:
                 out.append(bind.get(a if op == "field" else op, "*"))
@@ -273,12 +277,18 @@ class KeySpace:
 
 def matcher(exprs: list[str]):
     """A fast test of concrete keys against key expressions: the `prefix/**` and
-    `prefix/*` forms our subscriptions use are string checks; others go to Zenoh."""
+    `prefix/*` forms our subscriptions use are string checks; others go to Zenoh, those
+    ending in a literal chunk (`pos/*/*/**/<entity>`, one entity wherever it is) only
+    for keys ending in it (a store scans every key it holds)."""
     deep, one, other = [], [], []
+    by_last: dict[str, list] = {}
     for e in exprs:
         head = e[:-3] if e.endswith("/**") else e[:-2] if e.endswith("/*") else None
+        last = e.rsplit("/", 1)[-1]
         if head is not None and "*" not in head:
             (deep if e.endswith("/**") else one).append(head + "/")
+        elif "*" not in last and "$" not in last:
+            by_last.setdefault(last, []).append(zenoh.KeyExpr(e))
         else:
             other.append(zenoh.KeyExpr(e))
     deep_t, one_t = tuple(deep), tuple(one)
@@ -288,5 +298,9 @@ def matcher(exprs: list[str]):
             return True
         if one_t and k.startswith(one_t) and any(k.startswith(h) and "/" not in k[len(h):] for h in one_t):
             return True
+        if by_last and (xs := by_last.get(k[k.rfind("/") + 1:])):
+            kx = zenoh.KeyExpr(k)
+            if any(kx.intersects(x) for x in xs):
+                return True
         return bool(other) and any(zenoh.KeyExpr(k).intersects(x) for x in other)
     return match

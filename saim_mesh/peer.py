@@ -138,6 +138,8 @@ class Peer:
         # DIR/<unit>.recv at the end: what crossed each router link, per key family
         self.trace: array | None = array("I") if os.environ.get("SAIM_TRACE") else None
         C.tap(self.ea)   # a `cff confirm` needs the call for fire the EA saw
+        self.needs_before = getattr(self.ea.domain, "needs_before", None)   # places to bring up to date first
+        self.prefetched = 0   # messages fed for them
 
     # -- sinks -------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
@@ -372,14 +374,31 @@ class Peer:
 
     def _feed(self, items) -> None:
         """Submit in seq order; a fused track goes in before the first message of its
-        time or later, where the in-process run puts it."""
+        time or later, where the in-process run puts it. A message the domain judges on
+        places beyond our interest (`needs_before`) has them brought up to date first."""
         direct, submit = self.direct, self.ea.submit
+        before = None if self.replaying else self.needs_before   # a late join feeds everything anyway
         for seq, m in sorted(items, key=lambda x: x[0]):
             if seq > self.last_seq:
                 self.last_seq = seq
                 while direct and direct[0][0] <= m.t:
                     submit(heapq.heappop(direct)[2])
+                if before is not None and (needs := before(m)) is not None:
+                    self._prefetch(needs, seq)
                 submit(m)
+
+    def _prefetch(self, needs, seq: int) -> None:
+        """Feed the latest message before `seq` on each key of `needs`, from the situation
+        store: what an in-process EA, which hears everything, knew there. Some we may
+        have had already: the domain drops a report it has or has a newer one of."""
+        keys = sorted(self.interest.of(needs) - {self.ks.clock()})
+        if not keys or self.session is None:
+            return
+        rep = storeq.query(self.session, self.ks, self.gate, 0, keys, 10.0, self.n_sources, before=seq, latest=True)
+        for _, p in rep.entries if rep is not None else ():
+            if (m := self.gate.data(p, "store")) is not None:
+                self.prefetched += 1
+                self.ea.submit(m)
 
     # -- clock --------------------------------------------------------------------------
     def _valid_tick(self, tick: W.Tick) -> bool:
@@ -683,6 +702,7 @@ class Peer:
                 "messages": self.ea.n_in, "facts": self.ea.stats["facts"], "ea_stats": dict(self.ea.stats), "bad_messages": self.gate.errors + self.ea.stats["errors"],
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "zenoh_subscriptions": len(self.zsubs), **self.flow,
+                "prefetched": self.prefetched,
                 "cpu_s": round(ru.ru_utime + ru.ru_stime, 2),
                 "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
                 "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),

@@ -23,7 +23,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections import Counter
 
 import numpy as np
@@ -147,12 +147,19 @@ class Replay:
             del query   # a query kept alive makes the asker wait out its timeout
 
     def _entries(self, req: W.StoreQuery, src: str) -> list[tuple[int, bytes]]:
-        if req.keys is None:
+        if req.keys is None and not req.before and not req.latest:
             ns = self.src_seqs[src]
             return [self.entries[n - 1] for n in ns[bisect_right(ns, req.since):]]
-        match = matcher(req.keys)
-        seqs = sorted(n for k, ns in self.by_key[src].items() if match(k) for n in ns[bisect_right(ns, req.since):])
-        return [self.entries[n - 1] for n in seqs]
+        match = matcher(req.keys) if req.keys is not None else (lambda k: True)
+        seqs = []
+        for k, ns in self.by_key[src].items():
+            if not match(k):
+                continue
+            lo = bisect_right(ns, req.since)
+            hi = bisect_left(ns, req.before) if req.before else len(ns)
+            if lo < hi:
+                seqs += [ns[hi - 1]] if req.latest else ns[lo:hi]
+        return [self.entries[n - 1] for n in sorted(seqs)]
 
     def _take_fusion_ticks(self, sub) -> None:
         """Remember how far each fusion node's tracks are out: a restarted node resumes there."""

@@ -11,13 +11,14 @@ from . import wire as W
 
 
 def query(session, ks, gate: W.Gate, since: int = 0, keys: list[str] | None = None,
-          timeout: float = 10.0, expect: int = 1) -> W.StoreReply | None:
+          timeout: float = 10.0, expect: int = 1, before: int = 0, latest: bool = False) -> W.StoreReply | None:
     """Every store's entries after `since` on `keys` (all when None), merged; None when
     no store answered. `t` is the earliest time any store reached (a store behind a slow
     link may lag), and fusion progress the latest any store knows. With `expect` stores
     (the replay's sources), ask again until all answered or `timeout` passed: right after
-    a link heals, the far stores' queryables may not be declared here yet."""
-    req = W.encode(W.make(W.StoreQuery, since=since, keys=keys))
+    a link heals, the far stores' queryables may not be declared here yet. `before`,
+    `latest`: see `wire.StoreQuery` (a key's entries all enter by one source)."""
+    req = W.encode(W.make(W.StoreQuery, since=since, keys=keys, before=before, latest=latest))
     end = time.monotonic() + timeout
     got: dict[str, W.StoreReply] = {}
     while True:

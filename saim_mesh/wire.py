@@ -56,9 +56,13 @@ class Ack(_Wire, kw_only=True):
 
 
 class StoreQuery(_Wire, kw_only=True):
-    """Entries after `since` on `keys` (every key when None)."""
+    """Entries after `since` on `keys` (every key when None). `before` (when not 0): only
+    entries before that seq; `latest`: only the last such entry of each key (a peer
+    bringing a place up to date before it judges a message, `Peer._prefetch`)."""
     since: Seq = 0
     keys: KeyExprs | None = None
+    before: Seq = 0
+    latest: bool = False
 
 
 class StoreReply(_Wire, kw_only=True):

@@ -38,6 +38,7 @@ class Domain(Protocol):
     def next_wakeup(self) -> float: ...                         # next time detect must run anyway
     def merge(self, key, cands: list[Candidate]) -> Candidate: ...
     def to_alert(self, c: Candidate) -> Alert: ...
+    # optional: BULK_FACTS, the fact types that may wait in a batch (see ExecutionAssistant.submit)
 
 
 class ExecutionAssistant:
@@ -62,6 +63,8 @@ class ExecutionAssistant:
         self.notify = Notifier(owner, cfg)
         self.changes = self.notify.changes   # threshold changes made at run time, as applied
         self._watch = domain.watch    # bound once: this is the per-message hot path
+        bulk = getattr(domain, "BULK_FACTS", None)   # None: every fact may wait in a batch
+        self._bulk: frozenset | None = None if bulk is None else frozenset(bulk)
         domain.bind(self)
 
     # -- input -----------------------------------------------------------------------
@@ -84,7 +87,11 @@ class ExecutionAssistant:
             return
         if fact is not None:
             self.pending.append(fact)
-            if len(self.pending) >= self.batch:
+            # a fact not of the domain's bulk kinds (a confirmation, a call for fire) is
+            # applied at once: its handler reads the picture, which must hold exactly the
+            # reports before it, wherever the batch boundaries fall (a peer hears fewer
+            # messages than an in-process EA: its batches are not the same)
+            if len(self.pending) >= self.batch or self._bulk is not None and type(fact) not in self._bulk:
                 self.process()
 
     def error(self, text: str) -> None:

@@ -13,7 +13,13 @@ class Needs:
     command paths of subtrees we follow, "unit": units whose mission messages we need,
     "issuer": units whose orders we obey, ...): a template is subscribed once per value
     of each placeholder it has. `circles` (x, y, r) and `boxes` (x0, y0, x1, y1), in
-    projected metres, select by `{place}`. `whole` names families taken entirely."""
+    projected metres, select by `{place}`. `whole` names families taken entirely.
+
+    A domain may also say, per message, what must be up to date before the EA applies
+    it: `domain.needs_before(msg) -> Needs | None` (a call for fire is judged on every
+    position near its target, wherever that is). A peer then feeds the latest message
+    on each of those keys before this one, as an in-process EA, which hears
+    everything, would have had them."""
     templates: tuple[str, ...]
     by: dict[str, frozenset[str]] = field(default_factory=dict)
     circles: tuple[tuple[float, float, float], ...] = ()

@@ -23,7 +23,7 @@ from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Chang
                      Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
                      Presence, ReconProgress, ScheduleMonitors, Standoffs, ThreatsAhead)
 from .detect.ahead import branches_for
-from .messages import LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
+from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
 from .picture import Picture, Watchman
 
@@ -33,6 +33,9 @@ D = TypeVar("D", bound=Detector)
 
 
 class SuoDomain:
+    # reports wait in the manager's batch; any other fact (its handler reads the picture) goes in at once
+    BULK_FACTS = (LocationReport, SensorTrack)
+
     def __init__(self, owner: str, taskorg: TaskOrg, plans: dict[str, PlanSpec], initial_plan: str,
                  overlay: dict, proj: Projection, cfg: dict):
         if owner not in taskorg.units:
@@ -115,6 +118,14 @@ class SuoDomain:
         """What this EA must hear, for dissemination (imported here: the EA itself never needs it)."""
         from .needs import needs
         return needs(self, radius_m)
+
+    def needs_before(self, msg):
+        """What must be up to date before `msg` is applied (a call for fire's surroundings);
+        asked of every message a peer takes: the common answer costs one type test."""
+        if type(msg) is not CallForFire:
+            return None
+        from .needs import needs_before
+        return needs_before(self, msg)
 
     def _org_changed(self) -> None:
         """Recompute everything that depends on the command hierarchy."""
@@ -423,18 +434,29 @@ class SuoDomain:
         if len(locs) == len(facts):   # the usual batch: location reports only
             self.dirty_leaves |= self.pic.apply_locations(locs)
             return
-        if locs:
-            self.dirty_leaves |= self.pic.apply_locations(locs)
-        tracks = [f for f in facts if type(f) is SensorTrack]
-        if tracks:
-            self.dirty_tracks |= self.pic.apply_tracks(tracks)
-        if len(locs) + len(tracks) == len(facts):
-            return
+        run: list = []   # reports (locations, tracks) since the last other fact
         for f in facts:
+            k = type(f)
+            if k is LocationReport or k is SensorTrack:
+                run.append(f)
+                continue
+            self._apply_reports(run)   # a confirmation or a call for fire reads the picture:
+            run = []                   # the reports before it, and none after (batches differ per peer)
             try:
                 self._apply_one(f)
             except (KeyError, ValueError) as e:   # bad order/confirmation: counted, the rest goes on
                 self.ea.error(f"{type(f).__name__} at t={f.t}: {e}")
+        self._apply_reports(run)
+
+    def _apply_reports(self, reports: list) -> None:
+        """Location reports and tracks (independent parts of the picture), each kind in one call."""
+        if not reports:
+            return
+        locs = [f for f in reports if type(f) is LocationReport]
+        if locs:
+            self.dirty_leaves |= self.pic.apply_locations(locs)
+        if len(locs) < len(reports):
+            self.dirty_tracks |= self.pic.apply_tracks([f for f in reports if type(f) is SensorTrack])
 
     def _apply_one(self, f) -> None:
         k = type(f)

@@ -4,6 +4,8 @@ confirmations of every unit its plan names; by geography, what is reported near 
 units and in the control measures it watches."""
 from __future__ import annotations
 
+import numpy as np
+
 from ea_agent.core.needs import Needs
 
 from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
@@ -36,3 +38,21 @@ def needs(dom, radius_m: float) -> Needs:
                                 "requester": frozenset({dom.owner}),
                                 "unit": frozenset(units)},
                  circles=tuple(circles), boxes=boxes, whole=("org",))
+
+
+def needs_before(dom, msg) -> Needs | None:
+    """What must be up to date before `msg` is applied: for a call for fire we make, every
+    position near its target (CallsForFire judges it on every position we know, and the
+    target is rarely within our geographic interest): the latest report in the cells
+    around it, and of every entity we believe there (it may have left since we heard it).
+    Own entities are always heard. Older reports than ours are dropped by the watchman."""
+    if type(msg) is not CallForFire or msg.requester != dom.owner:
+        return None
+    pic = dom.pic
+    x, y = pic.proj.to_xy(msg.lon, msg.lat)
+    r = float(msg.radius_m)
+    with np.errstate(invalid="ignore"):
+        near = np.nonzero(np.hypot(pic.xy[:, 0] - x, pic.xy[:, 1] - y) <= r)[0].tolist()
+    believed = frozenset(pic.ents[i] for i in near if pic.ent_leaf[i] not in dom.own_leaves)
+    return Needs((LocationReport.KEY,), by={"entity": believed} if believed else {},
+                 circles=((float(x), float(y), r),))

@@ -250,7 +250,8 @@ class Watchman:
 
     A location report that did not move is dropped (its time still counts: the unit
     is not silent). Reports of other units far from ours update the picture but are
-    not passed on. Unknown entities raise KeyError, which the manager counts.
+    not passed on. A report older than one taken for its entity is stale, dropped.
+    Unknown entities raise KeyError, which the manager counts.
     """
 
     def __init__(self, picture: Picture, cfg: dict):
@@ -263,13 +264,13 @@ class Watchman:
         self.bbox = (-math.inf, -math.inf, math.inf, math.inf)
         self.quiet: list[LocationReport] = []
         # plain int counters: a Counter update per message is measurable on the hot path
-        self.n_unchanged = self.n_irrelevant = self.n_passed = 0
+        self.n_unchanged = self.n_irrelevant = self.n_passed = self.n_stale = 0
 
     @property
     def stats(self) -> Counter:
         """What the watchman did with the messages it saw."""
         return Counter({k: v for k, v in (("passed", self.n_passed), ("unchanged", self.n_unchanged),
-                                          ("irrelevant", self.n_irrelevant)) if v})
+                                          ("irrelevant", self.n_irrelevant), ("stale", self.n_stale)) if v})
 
     def set_own(self, own_leaves: set[str]) -> None:
         self.own = [u in own_leaves for u in self.p.ent_leaf]
@@ -297,6 +298,9 @@ class Watchman:
             seen = self.seen
             if t > seen[i]:
                 seen[i] = t
+            elif t < seen[i]:   # older than one we took (a peer bringing a place up to date): stale
+                self.n_stale += 1
+                return None
             eps = self.eps
             plon = self.lon
             plat = self.lat
