@@ -20,15 +20,15 @@ class Interest:
 
     def keys(self, dom) -> set[str]:
         """Key expressions for one EA's domain state."""
-        return self.of(dom.needs(self.radius))
+        return self.cached(dom.needs(self.radius))
 
-    def of(self, needs) -> set[str]:
-        """Recomputed only when the cells the needs cover or what they bind changed:
+    def cached(self, needs) -> set[str]:
+        """`of`, recomputed only when the cells the needs cover or what they bind changed:
         units move metres between re-registrations, cells are kilometres wide."""
         memo = self._memo_key(needs)
         if self._last is not None and self._last[0] == memo:
             return set(self._last[1])
-        out = self._of(needs)
+        out = self.of(needs)
         self._last = (memo, frozenset(out))
         return out
 
@@ -40,7 +40,7 @@ class Interest:
         boxes = tuple((fl(b[0] / size), fl(b[1] / size), fl(b[2] / size), fl(b[3] / size)) for b in needs.boxes)
         return (needs.templates, tuple(sorted(needs.by.items())), needs.whole, spans, boxes)
 
-    def _of(self, needs) -> set[str]:
+    def of(self, needs) -> set[str]:
         r = self.ks.root
         out = {self.ks.clock()} | {f"{r}/{fam}/**" for fam in needs.whole}
         places = self._places(needs)

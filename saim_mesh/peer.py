@@ -44,7 +44,8 @@ from .security.sign import verifier_for
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
-NAP_MIN_S, NAP_MAX_S = 0.0001, 0.002   # polling the clock channel: at most 2 ms late at 1x
+NAP_MIN_S, NAP_MAX_S = 0.0001, 0.002   # polling the clock channel: a tick is at most 2 ms late...
+NAP_LONG_AFTER_S, NAP_LONG_S = 0.2, 0.01   # ...or 10 ms once the clock was quiet for 0.2 s (1x: a tick every 2 s)
 ACK_EVERY_S = 4.0   # scenario seconds between pacing acks (the replay's window is 20 s)
 
 
@@ -209,8 +210,8 @@ class Peer:
         dom = self.ea.domain
         plan = getattr(dom, "plan", None)
         st = plan.state if plan else {}
-        ver = getattr(st, "version", None)   # counts its changes: asked after every tick
-        states = (id(st), ver) if ver is not None else hash(tuple(sorted(st.items())))
+        ver = getattr(st, "version", None)   # changes with every state set, unique across plans: asked every tick
+        states = ver if ver is not None else hash(tuple(sorted(st.items())))
         return dom.taskorg.version, states, len(self.ea.changes)   # a threshold may widen what we need
 
     def _query_store(self, since: int, keys: list[str] | None, timeout: float = 10.0):
@@ -244,7 +245,7 @@ class Peer:
                     flow["batches"] += 1
                     flow["entries"] += len(entries)
                     if trace is not None:
-                        trace.extend(e[0] for e in entries)
+                        trace.extend(e[0] for e in entries if 0 < e[0] < 2**32)
                     self._take_entries(entries, buf)
                     continue
                 att = s.attachment
@@ -447,16 +448,16 @@ class Peer:
         said = False
         nap, look = NAP_MIN_S, last + 0.5
         while True:
+            if self.cmdq.qsize():   # a commander's command is taken while we wait, whatever the clock sends
+                self._commands()
             raw = []
             while len(raw) < 64 and (smp := clock.try_recv()) is not None:
                 raw.append(smp.payload.to_bytes())
             if not raw:
-                if self.cmdq.qsize():
-                    self._commands()
                 now = time.monotonic()
                 if now < look:
-                    time.sleep(nap)
-                    nap = min(2 * nap, NAP_MAX_S)
+                    time.sleep(nap)   # quiet for long (1x, a pacer's wait): longer naps, less idle CPU
+                    nap = min(2 * nap, NAP_MAX_S if now - last < NAP_LONG_AFTER_S else NAP_LONG_S)
                     continue
                 look = now + 0.5   # a quiet half second: who is there, and is the source silent?
                 self.presence.take()
@@ -477,7 +478,8 @@ class Peer:
                 if (tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n)
                         and self._whole(tick)):
                     ticks.append(tick)
-            if not ticks:   # only parts of ticks: still waiting for some source
+            if not ticks:   # only parts of ticks (or junk): still waiting for some source
+                time.sleep(nap)
                 if time.monotonic() - last > self.silence_s and not said:
                     said = True
                     self.silences += 1

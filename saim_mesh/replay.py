@@ -338,8 +338,9 @@ class Replay:
 
 
 class Pacer:
-    """At max speed, keep the replay at most `window_s` of scenario time ahead of the
-    slowest EA peer. Without it the replay runs far ahead: tens of thousands of messages
+    """At max speed, keep the replay at most `window_s` of scenario time ahead of what the
+    slowest EA peer has taken in (a peer acks ticks as it takes them, before working
+    through them: up to two windows ahead of what it has processed). Without it the replay runs far ahead: tens of thousands of messages
     sit in flight, a catch-up answer queues behind them, and peers' memory fills up.
 
     EA peers (liveliness tokens of task-organization units; fusion nodes do not count)
@@ -357,7 +358,7 @@ class Pacer:
         for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):   # those here now, for sure
             if r.ok is not None and (p := self._ea(str(r.ok.key_expr))):
                 self.live.add(p)
-        self.done: dict[str, float] = {}     # peer -> last tick it processed
+        self.done: dict[str, float] = {}     # peer -> last tick it took in
         self.moved = {z: time.monotonic() for z in self.live}   # peer -> wall time of its last progress
         self.ignored: set[str] = set()
 

@@ -48,10 +48,10 @@ def _entries(script) -> list[tuple[int, str, bytes]]:
     (s1, k1, p1, e1), (s2, k2, _, e2) = script[40], script[41]
     bad = [
         (s1, k1, p1),                                                    # the same seq again: a duplicate
-        (s1 + 1000, k1, M.encode(replace(e1, t=e1.t + 0.5))),            # far ahead of the clock's seq
+        (s1 + 1000, k1, M.encode(replace(e1, t=e1.t + 0.5))),            # ahead of the clock's seq: held
         (s2, k2, M.encode(replace(e2, lon=e2.lon + 0.001))),             # a seq already held, other bytes: contested
         (3, k1, p1),                                                     # already fed
-        (301_000, k1, p1),
+        (301_000, k1, p1),                                                # too far ahead of the clock's seq
         (390, k1, M.encode(replace(e1, t=999.0))),                       # dated far ahead of the clock
         (391, k2, p1),                                                   # another entity's report on this key
         (392, k1, b"\xc1junk"),                                          # undecodable
@@ -113,7 +113,119 @@ def test_the_interest_memo_gives_what_a_fresh_computation_gives(sc):
         centres = [(x + rng.uniform(-step, step), y + rng.uniform(-step, step)) for x, y in centres]
         n = _needs(rng, centres)
         before = memo._last
-        got = memo.of(n)
+        got = memo.cached(n)
         hits += memo._last is before
         assert got == Interest(ks, 3000.0, 10).of(n)
     assert 50 < hits < 200   # the memo served some, and moves across cells were recomputed
+
+
+def test_eviction_on_the_batch_path_matches_one_by_one(sc, script):
+    entries = [(seq, k, p) for seq, k, p, _ in script[:300] if seq <= 380]
+    entries.insert(10, (entries[9][0], entries[9][1], b""))   # an empty payload on a held seq: contested
+    peers = [_peer(sc, {k for _, k, _ in entries}) for _ in range(2)]
+    bufs: list[list] = [[], []]
+    for p in peers:
+        p.tick_seq, p.max_held = 60, 2000
+    for seq, k, x in entries:
+        peers[0]._take(seq, k, x, bufs[0])
+    peers[1]._take_entries(entries, bufs[1])
+    one, many = peers
+    assert sorted(bufs[0], key=lambda x: x[0]) == sorted(bufs[1], key=lambda x: x[0])
+    assert dict(one.pending) == dict(many.pending) and one.pending.bytes == many.pending.bytes
+    assert one.evicted and many.evicted and one.contested == many.contested
+    assert one.gate.rejects.by_kind == many.gate.rejects.by_kind
+
+
+# -- the clock: a channel polled between naps ---------------------------------------------
+class _Sample:
+    def __init__(self, payload: bytes):
+        self.payload = self
+        self._b = payload
+
+    def to_bytes(self) -> bytes:
+        return self._b
+
+
+class _Clock:
+    """A Zenoh FIFO channel's `try_recv`, fed by the test (or by `feed` on a schedule)."""
+
+    def __init__(self, feed=None):
+        self.q: list[bytes] = []
+        self.feed = feed
+
+    def try_recv(self):
+        if not self.q and self.feed is not None:
+            self.feed(self)
+        return _Sample(self.q.pop(0)) if self.q else None
+
+
+class _NoPresence:
+    def take(self) -> None:
+        pass
+
+
+def _tick(n: int, seq: int, **kw) -> bytes:
+    from saim_mesh import wire as W
+    return W.encode(W.make(W.Tick, t=2.0 * n, n=n, seq=seq, **kw))
+
+
+def _clock_peer(sc) -> Peer:
+    p = _peer(sc, set())
+    p.presence = _NoPresence()
+    p.tick_n, p.t, p.clock_t, p.tick_seq = None, 0.0, 0.0, 0
+    return p
+
+
+def test_the_clock_channel_gives_every_whole_tick_in_order(sc):
+    p = _clock_peer(sc)
+    ch = _Clock()
+    ch.q = [_tick(1, 10), _tick(2, 20), b"junk", _tick(3, 30, src="r-A", of=2), _tick(3, 31, src="r-B", of=2)]
+    got = p._next_ticks(ch)
+    assert [(t.n, t.seq) for t in got] == [(1, 10), (2, 20), (3, 31)]
+    assert p.tick_seq == 31 and p.clock_t == 6.0
+    assert p.gate.rejects.by_kind.get("tick") == 1   # the junk, counted
+
+
+def test_a_silent_clock_is_an_alert_then_an_exit_and_commands_are_taken_while_waiting(sc):
+    from saim_mesh.peer import SourceLost
+    p = _clock_peer(sc)
+    p.silence_s, p.deadline_s = 0.3, 0.8
+    taken = []
+    p._commands = lambda: taken.append(p.cmdq.get_nowait())
+    p.cmdq.put(("k", b"cmd"))
+    with pytest.raises(SourceLost):
+        p._next_ticks(_Clock())
+    assert taken == [("k", b"cmd")]
+    assert [a.details.get("event") for a in p.ea.alerts] == ["source-silent"]
+
+
+def test_a_partial_tick_waits_for_its_other_source_and_names_the_one_that_came(sc):
+    p = _clock_peer(sc)
+    p.silence_s, p.deadline_s = 0.3, 5.0
+    sent = []
+
+    def feed(ch):   # the other source's part of tick 1 comes after the silence alert
+        if p.ea.alerts and not sent:
+            sent.append(1)
+            ch.q.append(_tick(1, 11, src="r-B", of=2))
+    ch = _Clock(feed)
+    ch.q = [_tick(1, 10, src="r-A", of=2)]
+    got = p._next_ticks(ch)
+    assert [(t.n, t.src) for t in got] == [(1, "r-B")]
+    texts = [a.message for a in p.ea.alerts]
+    assert "not moving" in texts[0] and "came only from r-A" in texts[0] and "clock is back" in texts[1]
+
+
+def test_a_replaced_plan_changes_the_signature_even_with_the_same_states(sc):
+    p = _peer(sc, set())
+    dom = p.ea.domain
+    p.ea.start(0.0)
+    name = dom.initial_plan
+    before = p._plan_signature()
+    for _ in range(20):   # the same plan again: a new state object, often at the freed one's address
+        dom.execute_plan(name, 0.0)
+        now = p._plan_signature()
+        assert now != before
+        before = now
+    dom.plan.state[next(iter(dom.plan.state))] = "ready"
+    assert p._plan_signature() != before

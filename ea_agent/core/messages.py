@@ -209,15 +209,17 @@ def encode(msg: Message) -> bytes:
 
 def decode(data: bytes) -> Message:
     """Parse and validate wire bytes; raises MessageError on anything malformed."""
+    direct = None
     if _DIRECT:
         try:
-            m = _DIRECT[_head.decode(data).kind].decode(data)
-        except Exception:   # refused (or a kind without one): the paths below name the field
+            direct = _DIRECT.get(_head.decode(data).kind)
+            if direct is not None:
+                m = direct.decode(data)
+                if type(m) not in _RULED or m.valid():
+                    return m
+        except Exception:   # refused: the dict path below names the field
             pass
-        else:
-            if type(m) not in _RULED or m.valid():
-                return m
-    if _typed_decoder is not None:
+    if _typed_decoder is not None and direct is None:   # the typed struct would say what the direct decoder said
         try:
             s = _typed_decoder.decode(data)
         except Exception:   # refused: the dict path below accepts it or names the field

@@ -2,6 +2,7 @@
 order with start/end temporal constraints, and the traversal state of a plan."""
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any, Iterable
 
@@ -181,13 +182,19 @@ class PlanSpec:
         return None
 
 
+_VERSIONS = itertools.count(1)   # one sequence for every plan's states: a replaced plan never repeats a version
+
+
 class _States(dict):
     """Mission id -> state, counting its changes (what is derived from it is cached by them)."""
-    version = 0
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.version = next(_VERSIONS)
 
     def __setitem__(self, key: str, value: str) -> None:
         dict.__setitem__(self, key, value)
-        self.version += 1
+        self.version = next(_VERSIONS)
 
 
 class PlanState:
