@@ -44,8 +44,6 @@ from .security.sign import verifier_for
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
-NAP_MIN_S, NAP_MAX_S = 0.0001, 0.002   # polling the clock channel: a tick is at most 2 ms late...
-NAP_LONG_AFTER_S, NAP_LONG_S = 0.2, 0.01   # ...or 10 ms once the clock was quiet for 0.2 s (1x: a tick every 2 s)
 ACK_EVERY_S = 4.0   # scenario seconds between pacing acks (the replay's window is 20 s)
 
 
@@ -133,6 +131,7 @@ class Peer:
         self.next_health = self.reject_alert
         self.presence: Presence | None = None
         self.cmdq: queue.SimpleQueue = queue.SimpleQueue()   # (key, payload) of commands, taken between ticks
+        self._wake = lambda: None                           # wakes the clock wait when a command comes
         self.n_cmds = 0
         self.misplaced: str | None = None   # attached to the wrong router (said once joined)
         # SAIM_TRACE=DIR (bench_scale): every seq that reached us from the wire, written to
@@ -438,30 +437,30 @@ class Peer:
         n = min(self.tick_parts)
         return f" (tick {n} came only from {', '.join(sorted(self.tick_parts[n]))}: a router link may be down)"
 
-    def _next_ticks(self, clock) -> list[W.Tick]:
+    def _next_ticks(self, clock: queue.SimpleQueue) -> list[W.Tick]:
         """Block for the next tick(s); a silent source is an alert, then an exit at the deadline.
 
-        The clock is a channel we poll (a nap of 0.1 ms doubling to 2 ms while it is
-        empty), not a callback: a callback takes the interpreter lock from Zenoh's thread
-        on every tick and so preempts the EA thousands of times a run."""
+        `clock` is filled by a callback on Zenoh's thread (tick payloads; None when a
+        command came): a blocking wait costs nothing while idle, where polling a channel
+        costs every waiting peer hundreds of wake-ups a second (57 peers on 2 cores)."""
         last = time.monotonic()
         said = False
-        nap, look = NAP_MIN_S, last + 0.5
         while True:
             if self.cmdq.qsize():   # a commander's command is taken while we wait, whatever the clock sends
                 self._commands()
-            raw = []
-            while len(raw) < 64 and (smp := clock.try_recv()) is not None:
-                raw.append(smp.payload.to_bytes())
+            try:
+                raw = [clock.get(timeout=0.5)]
+            except queue.Empty:
+                raw = []
+            while raw and len(raw) < 64:
+                try:
+                    raw.append(clock.get_nowait())
+                except queue.Empty:
+                    break
+            raw = [x for x in raw if x is not None]   # None: a command woke us
             if not raw:
-                now = time.monotonic()
-                if now < look:
-                    time.sleep(nap)   # quiet for long (1x, a pacer's wait): longer naps, less idle CPU
-                    nap = min(2 * nap, NAP_MAX_S if now - last < NAP_LONG_AFTER_S else NAP_LONG_S)
-                    continue
-                look = now + 0.5   # a quiet half second: who is there, and is the source silent?
                 self.presence.take()
-                quiet = now - last
+                quiet = time.monotonic() - last
                 if quiet > self.silence_s and not said:
                     said = True
                     self.silences += 1
@@ -471,7 +470,6 @@ class Peer:
                 if self.deadline_s is not None and quiet > self.deadline_s:
                     raise SourceLost(f"no clock from the source for {self.deadline_s:.0f} s: giving up")
                 continue
-            nap = NAP_MIN_S
             ticks = []
             for payload in raw:
                 tick = self.gate.control(W.Tick, payload, self.ks.clock())
@@ -479,7 +477,6 @@ class Peer:
                         and self._whole(tick)):
                     ticks.append(tick)
             if not ticks:   # only parts of ticks (or junk): still waiting for some source
-                time.sleep(nap)
                 if time.monotonic() - last > self.silence_s and not said:
                     said = True
                     self.silences += 1
@@ -540,8 +537,9 @@ class Peer:
 
     # -- a commander's commands (docs/console.md 1) ---------------------------------------
     def _on_cmd(self, smp) -> None:
-        """Zenoh's thread: queue the command for the main loop (taken between ticks)."""
+        """Zenoh's thread: queue the command for the main loop and wake it."""
         self.cmdq.put((str(smp.key_expr), smp.payload.to_bytes()))
+        self._wake()
 
     def _commands(self) -> None:
         """Apply every queued command at our current scenario time and answer each on
@@ -621,13 +619,15 @@ class Peer:
         signal.signal(signal.SIGTERM, stop)
         self.ea.start(0.0)
         t_wall = time.monotonic()
+        clockq: queue.SimpleQueue = queue.SimpleQueue()
         t_first = None
         try:
             with zenoh.open(self.conf) as s:
                 self.session = s
-                # a channel we poll (`_next_ticks`): Zenoh has put every sample before a tick
-                # into its channel already when the tick is in this one
-                clock = s.declare_subscriber(self.ks.clock(), zenoh.handlers.FifoChannel(100_000))
+                # a callback into our own queue (`_next_ticks`): Zenoh has put every sample
+                # before a tick into its channel already when the tick is in this queue
+                clock = s.declare_subscriber(self.ks.clock(), lambda smp: clockq.put(smp.payload.to_bytes()))
+                self._wake = lambda: clockq.put(None)
                 cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"), self._on_cmd)
                 self._check_connected(s)
                 self._resubscribe()
@@ -650,7 +650,7 @@ class Peer:
                     # Take every tick already queued: one drain of the subscriber channels
                     # serves them all (every message up to the last tick's seq is already in it).
                     c0 = time.perf_counter()
-                    ticks = self._next_ticks(clock)
+                    ticks = self._next_ticks(clockq)
                     t_first = t_first or time.monotonic()
                     self.barrier.wait(ticks[-1].t)
                     c1 = time.perf_counter()

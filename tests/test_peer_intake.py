@@ -3,7 +3,9 @@ reports one by one (the batch path is the per-report loop unrolled), and the int
 is only recomputed when the cells it covers change, giving the keys a fresh one would."""
 from __future__ import annotations
 
+import queue
 import random
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -136,27 +138,27 @@ def test_eviction_on_the_batch_path_matches_one_by_one(sc, script):
     assert one.gate.rejects.by_kind == many.gate.rejects.by_kind
 
 
-# -- the clock: a channel polled between naps ---------------------------------------------
-class _Sample:
-    def __init__(self, payload: bytes):
-        self.payload = self
-        self._b = payload
-
-    def to_bytes(self) -> bytes:
-        return self._b
-
-
+# -- the clock: a queue filled by Zenoh's thread -------------------------------------------
 class _Clock:
-    """A Zenoh FIFO channel's `try_recv`, fed by the test (or by `feed` on a schedule)."""
+    """The peer's clock queue (payloads; None when a command woke it), fed by the test, or
+    by `feed` when it runs dry; `get` returns at once where the real one would wait."""
 
     def __init__(self, feed=None):
-        self.q: list[bytes] = []
+        self.q: list[bytes | None] = []
         self.feed = feed
 
-    def try_recv(self):
+    def get(self, timeout: float):
         if not self.q and self.feed is not None:
             self.feed(self)
-        return _Sample(self.q.pop(0)) if self.q else None
+        if not self.q:
+            time.sleep(min(timeout, 0.05))   # the real queue blocks for `timeout`: a shorter wait, same outcome
+            raise queue.Empty
+        return self.q.pop(0)
+
+    def get_nowait(self):
+        if not self.q:
+            raise queue.Empty
+        return self.q.pop(0)
 
 
 class _NoPresence:
@@ -179,7 +181,7 @@ def _clock_peer(sc) -> Peer:
 def test_the_clock_channel_gives_every_whole_tick_in_order(sc):
     p = _clock_peer(sc)
     ch = _Clock()
-    ch.q = [_tick(1, 10), _tick(2, 20), b"junk", _tick(3, 30, src="r-A", of=2), _tick(3, 31, src="r-B", of=2)]
+    ch.q = [_tick(1, 10), None, _tick(2, 20), b"junk", _tick(3, 30, src="r-A", of=2), _tick(3, 31, src="r-B", of=2)]
     got = p._next_ticks(ch)
     assert [(t.n, t.seq) for t in got] == [(1, 10), (2, 20), (3, 31)]
     assert p.tick_seq == 31 and p.clock_t == 6.0
