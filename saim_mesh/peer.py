@@ -37,10 +37,12 @@ from . import wire as W
 from .alertlog import AlertLog
 from .cmdlog import CommandLog
 from .fusion.barrier import TrackBarrier
+from .intake import Held, Intake
 from .presence import Presence
 from .runner import config_for, make_ea
 from .scenario import Scenario
 from .security.sign import verifier_for
+from .tickwait import SourceLost, TickWait
 
 BLOCK = zenoh.CongestionControl.BLOCK
 DEBUG = bool(os.environ.get("SAIM_DEBUG"))
@@ -60,31 +62,9 @@ def _malloc_trim():
 ACK_EVERY_S = 4.0   # scenario seconds between pacing acks (the replay's window is 20 s)
 
 
-class Held(dict):
-    """seq -> payload waiting for its tick, and the bytes they hold (bounded by the peer)."""
-
-    def __init__(self):
-        super().__init__()
-        self.bytes = 0
-
-    def __setitem__(self, seq: int, payload: bytes) -> None:
-        old = super().get(seq)
-        self.bytes += len(payload) - (len(old) if old is not None else 0)
-        super().__setitem__(seq, payload)
-
-    def pop(self, seq: int, default=None):
-        v = super().pop(seq, None)
-        if v is None:
-            return default
-        self.bytes -= len(v)
-        return v
-
-
-class SourceLost(RuntimeError):
-    """No clock tick for longer than the peer's deadline."""
-
-
-class Peer:
+class Peer(Intake, TickWait):
+    """The EA, its subscriptions, its clock and its commands; receiving (`intake.Intake`)
+    and waiting for ticks (`tickwait.TickWait`) are halves of it in their own modules."""
     def __init__(self, sc: Scenario, unit: str, conf: zenoh.Config, root: str, out_path: str | None = None,
                  config_path=None, radius_m: float | None = None, log=print, deadline_s: float | None = None,
                  connect: list[str] | None = None, armed: bool = False):
@@ -243,148 +223,6 @@ class Peer:
         self.n_direct += 1
         heapq.heappush(self.direct, (m.t, self.n_direct, m))
 
-    def _drain(self, buf: list) -> None:
-        """Move received samples into the seq-ordered heap. A batch is unpacked and each
-        entry taken like a single message; whatever our coarse subscriptions let
-        through beyond the EA's exact interest is dropped (counted) before decoding."""
-        flow, groups, gate, trace = self.flow, self.groups, self.gate, self.trace
-        for sub in self.zsubs.values():
-            while (s := sub.try_recv()) is not None:
-                key = str(s.key_expr)
-                flow["samples"] += 1
-                if groups.is_batch(key):
-                    entries = B.unpack(gate, groups, s.payload.to_bytes(), key)
-                    flow["batches"] += 1
-                    flow["entries"] += len(entries)
-                    if trace is not None:
-                        trace.extend(e[0] for e in entries if 0 < e[0] < 2**32)
-                    self._take_entries(entries, buf)
-                    continue
-                att = s.attachment
-                seq = None
-                if att is not None:
-                    raw = att.to_bytes()
-                    seq = int.from_bytes(raw, "big") if len(raw) == 8 else -1
-                    if seq < 0:
-                        self._reject("?", "(seq)", f"attachment of {len(raw)} bytes is no sequence number", key)
-                        continue
-                    if trace is not None and 0 < seq < 2**32:
-                        trace.append(seq)
-                self._take(seq, key, s.payload.to_bytes(), buf)
-
-    def _take(self, seq: int | None, key: str, payload: bytes, buf: list) -> None:
-        """One message (seq None: outside the replay's sequence, a fused track). A seq
-        that came with two different payloads is contested and settled by the store; a
-        message that does not belong on its key, or is dated far ahead of the clock, is
-        rejected, never held."""
-        pending = self.pending
-        if seq is not None:
-            if seq <= self.last_seq:
-                return
-            prev = pending.get(seq)
-            if prev is not None:
-                if prev != payload:
-                    self.contested.add(seq)
-                return
-            if seq > self.tick_seq + self.max_seq_ahead:
-                self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
-                             f"clock's {self.tick_seq}", key)
-                return
-        if not self.want(key):
-            self.flow["dropped"] += 1
-            return
-        if seq is not None and pending.bytes + len(payload) > self.max_held:
-            self._evict(buf)
-        m = self.gate.data(payload, key)
-        if m is None:
-            return
-        if m.t > self.clock_t + self.max_ahead:
-            self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
-            return
-        if (why := self.ks.mismatch(key, m)) is not None:
-            self._reject(m.KIND, "(key)", why, key)
-            return
-        if seq is None:   # not from the replay (fused tracks): held until their time comes
-            self._hold(m)
-            return
-        pending[seq] = payload
-        heapq.heappush(buf, (seq, m))
-        if m.t > self.seen_t:
-            self.seen_t = m.t
-
-    def _take_entries(self, entries: list[tuple[int, str, bytes]], buf: list) -> None:
-        """A batch's entries: `_take` for each, its loop unrolled (the per-report hot path)."""
-        pending, want, data, mismatch = self.pending, self.want, self.gate.data, self.ks.mismatch
-        held = super(Held, pending).__setitem__
-        hi = self.tick_seq + self.max_seq_ahead
-        t_hi = self.clock_t + self.max_ahead
-        seen_t = self.seen_t
-        dropped = 0
-        for seq, key, payload in entries:
-            if seq <= self.last_seq:
-                continue
-            prev = pending.get(seq)
-            if prev is not None:
-                if prev != payload:
-                    self.contested.add(seq)
-                continue
-            if seq > hi:
-                self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
-                             f"clock's {self.tick_seq}", key)
-                continue
-            if not want(key):
-                dropped += 1
-                continue
-            if pending.bytes + len(payload) > self.max_held:
-                self._evict(buf)
-            m = data(payload, key)
-            if m is None:
-                continue
-            if m.t > t_hi:
-                self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
-                continue
-            if (why := mismatch(key, m)) is not None:
-                self._reject(m.KIND, "(key)", why, key)
-                continue
-            held(seq, payload)
-            pending.bytes += len(payload)
-            heapq.heappush(buf, (seq, m))
-            if m.t > seen_t:
-                seen_t = m.t
-        self.seen_t = seen_t
-        self.flow["dropped"] += dropped
-
-    def _evict(self, buf: list) -> None:
-        """Held messages passed `max_held_mb` (a flood of plausible junk): drop every one
-        not yet due; when their ticks come, the store gives back the real ones."""
-        due = self.tick_seq
-        for q in [q for q in self.pending if q > due]:
-            self.pending.pop(q)
-        buf[:] = [(q, m) for q, m in buf if q <= due]
-        heapq.heapify(buf)
-        if not self.evicted:
-            self._reject("?", "(held)", f"over {self.max_held >> 20} MB of messages waiting for their tick: "
-                         f"dropped, to be taken from the store", "")
-        self.evicted = True
-
-    def _settle(self, buf: list, upto: int) -> None:
-        """Contested seqs (junk that carried a real message's number) take the store's version."""
-        now = sorted(q for q in self.contested if q <= upto)
-        if not now:
-            return
-        self.log(f"contested seqs {now[:5]}{'...' if len(now) > 5 else ''}: taking the store's version", flush=True)
-        _, entries = self._query_store(now[0] - 1, sorted(self.subs))
-        truth = {seq: p for seq, p in entries if seq in self.contested}
-        keep = [(q, m) for q, m in buf if q not in self.contested or q > upto]
-        for q in now:
-            self.contested.discard(q)
-            self.pending.pop(q, None)
-            if q in truth and (m := self.gate.data(truth[q], "store")) is not None:
-                self.pending[q] = truth[q]
-                keep.append((q, m))
-        buf[:] = keep
-        heapq.heapify(buf)
-
     def _feed(self, items) -> None:
         """Submit in seq order; a fused track goes in before the first message of its
         time or later, where the in-process run puts it. A message the domain judges on
@@ -414,96 +252,6 @@ class Peer:
                 self.ea.submit(m)
 
     # -- clock --------------------------------------------------------------------------
-    def _valid_tick(self, tick: W.Tick) -> bool:
-        if tick.end and tick.t < self.sc.duration_s:
-            self._reject("tick", "end", f"an end tick at t={tick.t} before the scenario's end", self.ks.clock())
-            return False
-        # tick n is at n x TICK_S (the end tick may come early in number): a forged number
-        # would make every real tick look stale
-        if tick.n > tick.t / W.TICK_S + 1.5 or not tick.end and tick.n < tick.t / W.TICK_S - 1.5:
-            self._reject("tick", "n", f"tick number {tick.n} does not fit its time {tick.t}", self.ks.clock())
-            return False
-        if self.tick_n is not None and tick.n <= self.tick_n or tick.t < self.t:
-            return False   # a restarted replay repeats its last tick, or the store took us past it
-        return True
-
-    def _whole(self, tick: W.Tick) -> bool:
-        """Behind routers each of the replay's sources ticks: a tick is whole once all of
-        them gave it (their messages came by different paths, each in order)."""
-        self.n_sources = tick.of
-        if tick.of == 1:
-            return True
-        parts = self.tick_parts.setdefault(tick.n, set())
-        parts.add(tick.src)
-        if len(parts) < tick.of:
-            if len(self.tick_parts) > 4096:   # sources that never complete: forget the oldest
-                del self.tick_parts[min(self.tick_parts)]
-            return False
-        for n in [n for n in self.tick_parts if n <= tick.n]:
-            del self.tick_parts[n]
-        return True
-
-    def _waiting_for(self) -> str:
-        """Which sources' ticks are missing (named in a system-problem alert)."""
-        if not self.tick_parts:
-            return ""
-        n = min(self.tick_parts)
-        return f" (tick {n} came only from {', '.join(sorted(self.tick_parts[n]))}: a router link may be down)"
-
-    def _next_ticks(self, clock: queue.SimpleQueue) -> list[W.Tick]:
-        """Block for the next tick(s); a silent source is an alert, then an exit at the deadline.
-
-        `clock` is filled by a callback on Zenoh's thread (tick payloads; None when a
-        command came): a blocking wait costs nothing while idle, where polling a channel
-        costs every waiting peer hundreds of wake-ups a second (57 peers on 2 cores)."""
-        last = time.monotonic()
-        said = False
-        while True:
-            if self.cmdq.qsize():   # a commander's command is taken while we wait, whatever the clock sends
-                self._commands()
-            try:
-                raw = [clock.get(timeout=0.5)]
-            except queue.Empty:
-                raw = []
-            while raw and len(raw) < 64:
-                try:
-                    raw.append(clock.get_nowait())
-                except queue.Empty:
-                    break
-            raw = [x for x in raw if x is not None]   # None: a command woke us
-            if not raw:
-                self.presence.take()
-                quiet = time.monotonic() - last
-                if quiet > self.silence_s and not said:
-                    said = True
-                    self.silences += 1
-                    self.system_alert("SAIM", "immediate", f"no clock from the source (replay) for "
-                                      f"{self.silence_s:.0f} s: the picture is not moving{self._waiting_for()}",
-                                      event="source-silent")
-                if self.deadline_s is not None and quiet > self.deadline_s:
-                    raise SourceLost(f"no clock from the source for {self.deadline_s:.0f} s: giving up")
-                continue
-            ticks = []
-            for payload in raw:
-                tick = self.gate.control(W.Tick, payload, self.ks.clock())
-                if (tick is not None and self._valid_tick(tick) and (not ticks or tick.n > ticks[-1].n)
-                        and self._whole(tick)):
-                    ticks.append(tick)
-            if not ticks:   # only parts of ticks (or junk): still waiting for some source
-                if time.monotonic() - last > self.silence_s and not said:
-                    said = True
-                    self.silences += 1
-                    self.system_alert("SAIM", "immediate", f"the clock is incomplete for {self.silence_s:.0f} s: "
-                                      f"the picture is not moving{self._waiting_for()}", event="source-silent")
-                if self.deadline_s is not None and time.monotonic() - last > self.deadline_s:
-                    raise SourceLost(f"no whole clock tick for {self.deadline_s:.0f} s: giving up")
-                continue
-            if said:
-                self.system_alert("SAIM", "routine", "the source's clock is back", event="source-back")
-            self.clock_t = max(self.clock_t, ticks[-1].t)
-            self.tick_seq = max(self.tick_seq, ticks[-1].seq)
-            return ticks
-
     def _on_tick(self, tick: W.Tick, buf: list) -> bool:
         """Feed the EA every message up to the tick's seq, in seq order, then advance it to
         the tick's time. True at the end tick."""

@@ -1,0 +1,177 @@
+"""A peer's intake: samples drained from its subscriber channels into the heap of
+messages waiting for their clock tick, batch by batch, each entry checked like a single
+message (seq rules, exact interest, size bound, gate, time, key against content).
+
+A mixin of `Peer` (saim_mesh/peer.py): it reads and writes the peer's state."""
+from __future__ import annotations
+
+import heapq
+
+from . import batch as B
+
+
+class Held(dict):
+    """seq -> payload waiting for its tick, and the bytes they hold (bounded by the peer)."""
+
+    def __init__(self):
+        super().__init__()
+        self.bytes = 0
+
+    def __setitem__(self, seq: int, payload: bytes) -> None:
+        old = super().get(seq)
+        self.bytes += len(payload) - (len(old) if old is not None else 0)
+        super().__setitem__(seq, payload)
+
+    def pop(self, seq: int, default=None):
+        v = super().pop(seq, None)
+        if v is None:
+            return default
+        self.bytes -= len(v)
+        return v
+
+
+
+class Intake:
+    """`Peer`'s receiving half: `_drain` at every loop, before the ticks it serves."""
+
+    def _drain(self, buf: list) -> None:
+        """Move received samples into the seq-ordered heap. A batch is unpacked and each
+        entry taken like a single message; whatever our coarse subscriptions let
+        through beyond the EA's exact interest is dropped (counted) before decoding."""
+        flow, groups, gate, trace = self.flow, self.groups, self.gate, self.trace
+        for sub in self.zsubs.values():
+            while (s := sub.try_recv()) is not None:
+                key = str(s.key_expr)
+                flow["samples"] += 1
+                if groups.is_batch(key):
+                    entries = B.unpack(gate, groups, s.payload.to_bytes(), key)
+                    flow["batches"] += 1
+                    flow["entries"] += len(entries)
+                    if trace is not None:
+                        trace.extend(e[0] for e in entries if 0 < e[0] < 2**32)
+                    self._take_entries(entries, buf)
+                    continue
+                att = s.attachment
+                seq = None
+                if att is not None:
+                    raw = att.to_bytes()
+                    seq = int.from_bytes(raw, "big") if len(raw) == 8 else -1
+                    if seq < 0:
+                        self._reject("?", "(seq)", f"attachment of {len(raw)} bytes is no sequence number", key)
+                        continue
+                    if trace is not None and 0 < seq < 2**32:
+                        trace.append(seq)
+                self._take(seq, key, s.payload.to_bytes(), buf)
+
+    def _take(self, seq: int | None, key: str, payload: bytes, buf: list) -> None:
+        """One message (seq None: outside the replay's sequence, a fused track). A seq
+        that came with two different payloads is contested and settled by the store; a
+        message that does not belong on its key, or is dated far ahead of the clock, is
+        rejected, never held."""
+        pending = self.pending
+        if seq is not None:
+            if seq <= self.last_seq:
+                return
+            prev = pending.get(seq)
+            if prev is not None:
+                if prev != payload:
+                    self.contested.add(seq)
+                return
+            if seq > self.tick_seq + self.max_seq_ahead:
+                self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
+                             f"clock's {self.tick_seq}", key)
+                return
+        if not self.want(key):
+            self.flow["dropped"] += 1
+            return
+        if seq is not None and pending.bytes + len(payload) > self.max_held:
+            self._evict(buf)
+        m = self.gate.data(payload, key)
+        if m is None:
+            return
+        if m.t > self.clock_t + self.max_ahead:
+            self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
+            return
+        if (why := self.ks.mismatch(key, m)) is not None:
+            self._reject(m.KIND, "(key)", why, key)
+            return
+        if seq is None:   # not from the replay (fused tracks): held until their time comes
+            self._hold(m)
+            return
+        pending[seq] = payload
+        heapq.heappush(buf, (seq, m))
+        if m.t > self.seen_t:
+            self.seen_t = m.t
+
+    def _take_entries(self, entries: list[tuple[int, str, bytes]], buf: list) -> None:
+        """A batch's entries: `_take` for each, its loop unrolled (the per-report hot path)."""
+        pending, want, data, mismatch = self.pending, self.want, self.gate.data, self.ks.mismatch
+        held = super(Held, pending).__setitem__
+        hi = self.tick_seq + self.max_seq_ahead
+        t_hi = self.clock_t + self.max_ahead
+        seen_t = self.seen_t
+        dropped = 0
+        for seq, key, payload in entries:
+            if seq <= self.last_seq:
+                continue
+            prev = pending.get(seq)
+            if prev is not None:
+                if prev != payload:
+                    self.contested.add(seq)
+                continue
+            if seq > hi:
+                self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
+                             f"clock's {self.tick_seq}", key)
+                continue
+            if not want(key):
+                dropped += 1
+                continue
+            if pending.bytes + len(payload) > self.max_held:
+                self._evict(buf)
+            m = data(payload, key)
+            if m is None:
+                continue
+            if m.t > t_hi:
+                self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
+                continue
+            if (why := mismatch(key, m)) is not None:
+                self._reject(m.KIND, "(key)", why, key)
+                continue
+            held(seq, payload)
+            pending.bytes += len(payload)
+            heapq.heappush(buf, (seq, m))
+            if m.t > seen_t:
+                seen_t = m.t
+        self.seen_t = seen_t
+        self.flow["dropped"] += dropped
+
+    def _evict(self, buf: list) -> None:
+        """Held messages passed `max_held_mb` (a flood of plausible junk): drop every one
+        not yet due; when their ticks come, the store gives back the real ones."""
+        due = self.tick_seq
+        for q in [q for q in self.pending if q > due]:
+            self.pending.pop(q)
+        buf[:] = [(q, m) for q, m in buf if q <= due]
+        heapq.heapify(buf)
+        if not self.evicted:
+            self._reject("?", "(held)", f"over {self.max_held >> 20} MB of messages waiting for their tick: "
+                         f"dropped, to be taken from the store", "")
+        self.evicted = True
+
+    def _settle(self, buf: list, upto: int) -> None:
+        """Contested seqs (junk that carried a real message's number) take the store's version."""
+        now = sorted(q for q in self.contested if q <= upto)
+        if not now:
+            return
+        self.log(f"contested seqs {now[:5]}{'...' if len(now) > 5 else ''}: taking the store's version", flush=True)
+        _, entries = self._query_store(now[0] - 1, sorted(self.subs))
+        truth = {seq: p for seq, p in entries if seq in self.contested}
+        keep = [(q, m) for q, m in buf if q not in self.contested or q > upto]
+        for q in now:
+            self.contested.discard(q)
+            self.pending.pop(q, None)
+            if q in truth and (m := self.gate.data(truth[q], "store")) is not None:
+                self.pending[q] = truth[q]
+                keep.append((q, m))
+        buf[:] = keep
+        heapq.heapify(buf)
