@@ -64,28 +64,15 @@ class Intake:
                 self._take(seq, key, s.payload.to_bytes(), buf)
 
     def _take(self, seq: int | None, key: str, payload: bytes, buf: list) -> None:
-        """One message (seq None: outside the replay's sequence, a fused track). A seq
-        that came with two different payloads is contested and settled by the store; a
-        message that does not belong on its key, or is dated far ahead of the clock, is
-        rejected, never held."""
-        pending = self.pending
+        """One message. A sequenced one is a batch of one (`_take_entries` has every
+        rule); one outside the replay's sequence (a fused track) passes the same checks
+        of interest, time and key, and is held until its time comes."""
         if seq is not None:
-            if seq <= self.last_seq:
-                return
-            prev = pending.get(seq)
-            if prev is not None:
-                if prev != payload:
-                    self.contested.add(seq)
-                return
-            if seq > self.tick_seq + self.max_seq_ahead:
-                self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
-                             f"clock's {self.tick_seq}", key)
-                return
+            self._take_entries([(seq, key, payload)], buf)
+            return
         if not self.want(key):
             self.flow["dropped"] += 1
             return
-        if seq is not None and pending.bytes + len(payload) > self.max_held:
-            self._evict(buf)
         m = self.gate.data(payload, key)
         if m is None:
             return
@@ -95,16 +82,12 @@ class Intake:
         if (why := self.ks.mismatch(key, m)) is not None:
             self._reject(m.KIND, "(key)", why, key)
             return
-        if seq is None:   # not from the replay (fused tracks): held until their time comes
-            self._hold(m)
-            return
-        pending[seq] = payload
-        heapq.heappush(buf, (seq, m))
-        if m.t > self.seen_t:
-            self.seen_t = m.t
+        self._hold(m)
 
     def _take_entries(self, entries: list[tuple[int, str, bytes]], buf: list) -> None:
-        """A batch's entries: `_take` for each, its loop unrolled (the per-report hot path)."""
+        """A batch's entries, each in turn (the per-report hot path). A seq that came with
+        two different payloads is contested and settled by the store; a message that does
+        not belong on its key, or is dated far ahead of the clock, is rejected, never held."""
         pending, want, data, mismatch = self.pending, self.want, self.gate.data, self.ks.mismatch
         held = super(Held, pending).__setitem__
         hi = self.tick_seq + self.max_seq_ahead
