@@ -230,6 +230,8 @@ def main(argv=None) -> int:
                                             "dropped", "messages")},
         "ea_samples_per_event": round(bn["samples"] / n_ev, 4),
         "ea_stage_s": bn.get("stage_s"),   # where the peer's time went: waiting, receiving, ticks (the EA), interest
+        "ea_stage_cpu_s": bn.get("stage_cpu_s"),   # the main thread's CPU time in those stages
+        "ea_ctx_switches": bn.get("ctx_switches"), "ea_cpu_s": bn.get("cpu_s"),
         "ea_active_s": bn["active_s"], "in_process_s": round(n_ev / inproc_rate, 3),
         "latency_p50_ms": lat["tick_latency_ms"].get("p50"), "latency_p99_ms": lat["tick_latency_ms"].get("p99"),
         "alert_latency_ms": lat["alert_latency_ms"], "latency_events_per_s": 1000,

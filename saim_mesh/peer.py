@@ -100,6 +100,9 @@ class Peer(Intake, TickWait):
         # wall seconds per stage of the loop (waiting for ticks, receiving, the ticks with
         # the EA in them, re-registering): where a peer's time goes, for bench_mesh
         self.stage_s: dict[str, float] = dict.fromkeys(("wait", "receive", "ticks", "interest"), 0.0)
+        # the main thread's own CPU time in the same stages: wall minus this is time the
+        # thread was runnable but off the CPU (the machine's other processes and threads)
+        self.stage_cpu_s: dict[str, float] = dict.fromkeys(("receive", "ticks"), 0.0)
         self.pending = Held()                 # seq -> payload, waiting for its tick
         self.max_held = int(mesh["max_held_mb"] * 2**20)
         self.max_seq_ahead = int(mesh["max_seq_ahead"])
@@ -407,17 +410,19 @@ class Peer(Intake, TickWait):
                 last_sig = self._plan_signature()
                 next_ack = 0.0
                 trim, next_trim = _malloc_trim(), TRIM_EVERY_S
-                stage = self.stage_s
+                stage, cpu = self.stage_s, self.stage_cpu_s
                 while not done:
                     # Take every tick already queued: one drain of the subscriber channels
                     # serves them all (every message up to the last tick's seq is already in it).
                     c0 = time.perf_counter()
                     ticks = self._next_ticks(clockq)
+                    k0 = time.thread_time()
                     t_first = t_first or time.monotonic()
                     self.barrier.wait(ticks[-1].t)
                     c1 = time.perf_counter()
                     self._drain(buf)
                     c2 = time.perf_counter()
+                    k2 = time.thread_time()
                     if ticks[-1].t >= next_ack and not ticks[-1].end:
                         # lets a max-speed replay pace itself (window 20 s): acked once taken in, not
                         # once worked through, so the next ticks come while we work on these
@@ -435,6 +440,8 @@ class Peer(Intake, TickWait):
                             stage["interest"] += time.perf_counter() - c3
                             next_interest, last_sig = tick.t + self.interest_s, sig
                     c4 = time.perf_counter()
+                    cpu["receive"] += k2 - k0
+                    cpu["ticks"] += time.thread_time() - k2
                     stage["wait"] += c1 - c0
                     stage["receive"] += c2 - c1
                     stage["ticks"] += c4 - c2
@@ -470,13 +477,15 @@ class Peer(Intake, TickWait):
                 "rejects": dict(self.gate.rejects.by_kind), "source_silences": self.silences,
                 "subscriptions": len(self.subs), "zenoh_subscriptions": len(self.zsubs), **self.flow,
                 "prefetched": self.prefetched,
-                "cpu_s": round(ru.ru_utime + ru.ru_stime, 2),
+                "cpu_s": round(ru.ru_utime + ru.ru_stime, 2), "sys_s": round(ru.ru_stime, 2),
+                "minor_faults": ru.ru_minflt, "ctx_switches": {"voluntary": ru.ru_nvcsw, "involuntary": ru.ru_nivcsw},
                 "peak_rss_mb": round(rss, 1), "max_lead_s": round(self.max_lead, 1),
                 "gaps": self.gaps, "lost_fusion": sorted(self.barrier.lost),
                 "wall_s": round(time.monotonic() - t_wall, 2),
                 "active_s": round(time.monotonic() - (t_first or t_wall), 3),
                 "tick_latency_ms": _pcts(self.tick_lat), "alert_latency_ms": _pcts(self.alert_lat),
                 "stage_s": {k: round(v, 3) for k, v in self.stage_s.items()},
+                "stage_cpu_s": {k: round(v, 3) for k, v in self.stage_cpu_s.items()},
                 "alert_latencies_ms": [round(1000 * x, 3) for x in self.alert_lat[:5000]],
                 "picture": self.picture()}
 
