@@ -216,6 +216,30 @@ def test_a_cut_radio_link_is_noticed_on_both_sides_and_no_alert_is_lost(tmp_path
     assert res["links"]["r-A->r-BN"]["cuts"] == 1
 
 
+@pytest.mark.timeout(500)
+def test_a_killed_router_is_restarted_its_leaves_reattach_and_no_alert_is_lost(tmp_path, inproc):
+    """kill -9 of r-A (A's and A1's router, one end of a radio link) mid-run: the
+    supervisor restarts it on the same endpoint; the leaves, the link and the replay
+    reattach by themselves, and every peer's alerts still equal the in-process run's."""
+    out = tmp_path / "mesh"
+    res: dict = {}
+    t = threading.Thread(target=lambda: res.update(up(
+        SC, UNITS, out, "40", topology=str(topo_file(tmp_path, SMALL_TOPO)), link={"delay_ms": 50.0, "loss": 0.01},
+        insecure=True, echo=lambda *a, **k: None, timeout=400)), daemon=True)
+    t.start()
+    _wait_line(out / "logs" / "replay.log", "t=1200", 120)
+    first = json.loads((out / "pids.json").read_text())["r-A"]
+    os.kill(first, signal.SIGKILL)
+    t.join(420)
+    assert not t.is_alive() and sorted(res["peers"]) == UNITS and not res["given_up"]
+    assert json.loads((out / "pids.json").read_text())["r-A"] != first   # a new r-A process served the rest
+    assert any(e["process"] == "r-A" and "exit_code" in e for e in res["events"])        # its death was seen
+    assert any(e["process"] == "r-A" and e.get("restarted") == 1 for e in res["events"])  # and it came back once
+    for u in UNITS:
+        got = [plan_key(a) for a in mesh_alerts(out, u) if a["category"] != "system-problem"]
+        assert got == inproc[u], u
+
+
 def test_a_leaf_whose_router_is_down_at_start_says_so_and_exits(tmp_path):
     port = free_port()   # nobody listens there
     p = subprocess.run([sys.executable, "-m", "saim_mesh", "peer", "--scenario", SC, "--unit", "A", "--mode", "client",
