@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,15 @@ from saim_mesh.runner import run
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "scenarios" / "small"
 BATTALION = ROOT / "scenarios" / "battalion"
+
+
+def wait_until(pred, timeout: float, what: str) -> None:
+    """Poll a condition until a deadline: the test fails naming what never happened."""
+    end = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > end:
+            raise AssertionError(f"within {timeout} s: {what}")
+        time.sleep(0.005)
 
 
 @pytest.fixture(scope="session")

@@ -16,16 +16,9 @@ from saim_mesh.linkemu import CHUNK, Link
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
+from .conftest import wait_until
+
 pytestmark = pytest.mark.timeout(120)
-
-
-def wait_until(pred, timeout: float, what: str) -> None:
-    """Poll a condition until a deadline: the test fails naming what never happened."""
-    end = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > end:
-            raise AssertionError(f"within {timeout} s: {what}")
-        time.sleep(0.005)
 
 
 class Sink:

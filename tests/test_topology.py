@@ -183,16 +183,23 @@ def _wait_line(path, text, timeout):
     raise TimeoutError(f"no {text!r} in {path} within {timeout} s")
 
 
-@pytest.mark.timeout(500)
-def test_a_cut_radio_link_is_noticed_on_both_sides_and_no_alert_is_lost(tmp_path, inproc):
-    """A 60 s cut of r-A's link: peers on both sides say their picture stopped; after the
-    heal they catch up from the stores and raise what fell due meanwhile, marked late."""
-    out = tmp_path / "mesh"
+def _up_in_background(tmp_path, out) -> tuple[threading.Thread, dict]:
+    """The small mesh through 3 routers and two 50 ms / 1 % links at 40x, in a thread
+    (the test acts on it meanwhile); the dict gets `up`'s result when it ends."""
     res: dict = {}
     t = threading.Thread(target=lambda: res.update(up(
         SC, UNITS, out, "40", topology=str(topo_file(tmp_path, SMALL_TOPO)), link={"delay_ms": 50.0, "loss": 0.01},
         insecure=True, echo=lambda *a, **k: None, timeout=400)), daemon=True)
     t.start()
+    return t, res
+
+
+@pytest.mark.timeout(500)
+def test_a_cut_radio_link_is_noticed_on_both_sides_and_no_alert_is_lost(tmp_path, inproc):
+    """A 60 s cut of r-A's link: peers on both sides say their picture stopped; after the
+    heal they catch up from the stores and raise what fell due meanwhile, marked late."""
+    out = tmp_path / "mesh"
+    t, res = _up_in_background(tmp_path, out)
     _wait_line(out / "logs" / "replay.log", "t=1200", 120)
     link_pid = json.loads((out / "pids.json").read_text())["link-r-A-r-BN"]
     os.kill(link_pid, signal.SIGUSR1)
@@ -222,11 +229,7 @@ def test_a_killed_router_is_restarted_its_leaves_reattach_and_no_alert_is_lost(t
     supervisor restarts it on the same endpoint; the leaves, the link and the replay
     reattach by themselves, and every peer's alerts still equal the in-process run's."""
     out = tmp_path / "mesh"
-    res: dict = {}
-    t = threading.Thread(target=lambda: res.update(up(
-        SC, UNITS, out, "40", topology=str(topo_file(tmp_path, SMALL_TOPO)), link={"delay_ms": 50.0, "loss": 0.01},
-        insecure=True, echo=lambda *a, **k: None, timeout=400)), daemon=True)
-    t.start()
+    t, res = _up_in_background(tmp_path, out)
     _wait_line(out / "logs" / "replay.log", "t=1200", 120)
     first = json.loads((out / "pids.json").read_text())["r-A"]
     os.kill(first, signal.SIGKILL)

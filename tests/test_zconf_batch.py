@@ -4,21 +4,13 @@ batch (a store reply, a big batch of reports) must still arrive whole and in ord
 through a router as in the brigade topology."""
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from saim_mesh.zconf import config, free_port
 
+from .conftest import wait_until
+
 pytestmark = pytest.mark.timeout(60)
-
-
-def _until(pred, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > end:
-            raise AssertionError(f"within {timeout} s: {what}")
-        time.sleep(0.005)
 
 
 def test_the_mesh_config_asks_for_small_batches():
@@ -36,7 +28,7 @@ def test_messages_of_any_size_cross_a_router_whole_and_in_order(size):
             zenoh.open(config(mode="client", connect=[ep])) as b:
         sub = b.declare_subscriber("test/big", zenoh.handlers.FifoChannel(100))
         pub = a.declare_publisher("test/big", congestion_control=zenoh.CongestionControl.BLOCK)
-        _until(lambda: pub.matching_status.matching, 20, "the publisher sees the subscriber through the router")
+        wait_until(lambda: pub.matching_status.matching, 20, "the publisher sees the subscriber through the router")
         sent = [bytes([i]) * size for i in range(5)]
         for p in sent:
             pub.put(p)
@@ -45,6 +37,6 @@ def test_messages_of_any_size_cross_a_router_whole_and_in_order(size):
             while (s := sub.handler.try_recv()) is not None:
                 got.append(s.payload.to_bytes())
             return len(got) >= len(sent)
-        _until(take, 30, f"5 messages of {size} bytes")
+        wait_until(take, 30, f"5 messages of {size} bytes")
         assert got == sent
         assert router is not None
