@@ -100,8 +100,9 @@ class Peer(Intake, TickWait):
         # wall seconds per stage of the loop (waiting for ticks, receiving, the ticks with
         # the EA in them, re-registering): where a peer's time goes, for bench_mesh
         self.stage_s: dict[str, float] = dict.fromkeys(("wait", "receive", "ticks", "interest"), 0.0)
-        # the main thread's own CPU time in the same stages: wall minus this is time the
-        # thread was runnable but off the CPU (the machine's other processes and threads)
+        # the main thread's own CPU time: "receive" from a tick's arrival through the drain
+        # (the barrier wait included), "ticks" the rest of the loop (interest included);
+        # set beside stage_s, it shows whether the EA got slower or only got less CPU
         self.stage_cpu_s: dict[str, float] = dict.fromkeys(("receive", "ticks"), 0.0)
         self.pending = Held()                 # seq -> payload, waiting for its tick
         self.max_held = int(mesh["max_held_mb"] * 2**20)
