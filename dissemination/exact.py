@@ -3,7 +3,7 @@
 Coarse subscriptions (`coarse.py`) let through more than the EA asked for; this is
 the cheap test that drops the rest. The fine set changes every re-registration (as
 units move), so building the test must cost little too: expressions are indexed by
-family and second chunk (a place's block), and a key is compared chunk by chunk with
+family, second and third chunk (a place's block and cell), and a key is compared chunk by chunk with
 the few that can match it; answers are cached until the next re-registration."""
 from __future__ import annotations
 
@@ -45,10 +45,12 @@ def _dollar(p: str, chunk: str) -> bool:
     return True
 
 
-def exact(exprs: set[str] | list[str], root: str) -> Callable[[str], bool]:
-    """A test of concrete keys under `root` against the fine expressions."""
+def exact(exprs: set[str] | list[str], root: str, cache: bool = True) -> Callable[[str], bool]:
+    """A test of concrete keys under `root` against the fine expressions (`cache`: remember
+    each key's answer; off for a caller that caches what it learns per key itself)."""
     n = len(root) + 1
     exact_keys: set[str] = set()
+    by_third: dict[tuple[str, str, str], list[tuple[str, ...]]] = defaultdict(list)   # (family, block, cell)
     by_second: dict[tuple[str, str], list[tuple[str, ...]]] = defaultdict(list)   # (family, chunk 1)
     by_family: dict[str, list[tuple[str, ...]]] = defaultdict(list)               # (family, wildcard chunk 1)
     other: list[tuple[str, ...]] = []                                             # no family under our root
@@ -62,14 +64,16 @@ def exact(exprs: set[str] | list[str], root: str) -> Callable[[str], bool]:
         c = tuple(e[n:].split("/"))
         if "*" in c[0]:
             other.append(tuple(e.split("/")))
+        elif len(c) > 2 and "*" not in c[1] and "*" not in c[2]:
+            by_third[(c[0], c[1], c[2])].append(c)
         elif len(c) > 1 and "*" not in c[1]:
             by_second[(c[0], c[1])].append(c)
         else:
             by_family[c[0]].append(c)
-    cache: dict[str, bool] = {}
+    answers: dict[str, bool] = {}
 
     def match(key: str) -> bool:
-        hit = cache.get(key)
+        hit = answers.get(key)
         if hit is not None:
             return hit
         ok = key in exact_keys
@@ -78,12 +82,15 @@ def exact(exprs: set[str] | list[str], root: str) -> Callable[[str], bool]:
             cands = by_family.get(c[0], ())
             if len(c) > 1:
                 cands = [*by_second.get((c[0], c[1]), ()), *cands]
+                if len(c) > 2:
+                    cands = [*by_third.get((c[0], c[1], c[2]), ()), *cands]
             ok = any(_chunks_match(p, c) for p in cands)
         if not ok and other:
             full = key.split("/")
             ok = any(_chunks_match(p, full) for p in other)
-        if len(cache) >= CACHE_MAX:
-            cache.clear()
-        cache[key] = ok
+        if cache:
+            if len(answers) >= CACHE_MAX:
+                answers.clear()
+            answers[key] = ok
         return ok
     return match

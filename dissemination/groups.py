@@ -57,10 +57,11 @@ class Groups:
         if g is False:
             if len(self._cache) >= CACHE_MAX:
                 self._cache.clear()
-            g = self._cache[key] = self._group(key)
+            g = self._cache[key] = self.find(key)
         return g
 
-    def _group(self, key: str) -> str | None:
+    def find(self, key: str) -> str | None:
+        """`group` without the cache (for a caller that caches what it learns per key itself)."""
         chunks = key[self.n:].split("/")
         lay = self.layout.get(chunks[0])
         if lay is None or len(chunks) < 3:

@@ -155,6 +155,14 @@ def template(cls: type) -> Template:
     return t
 
 
+def field_mismatch(checks: tuple[tuple[str, str], ...], msg) -> str | None:
+    """The first of `KeySpace.key_checks`' (field, chunk) pairs that `msg` breaks, said."""
+    for a, c in checks:
+        if c != getattr(msg, a):
+            return f"field '{a}' {str(getattr(msg, a))[:40]!r} differs from the key's {c[:40]!r}"
+    return None
+
+
 class KeySpace:
     def __init__(self, root: str, sensor_group: dict[str, str] | None = None, cell_m: float = CELL_M):
         if not root or any(c in root for c in "#?*$") or root.startswith("/") or "//" in root:
@@ -199,23 +207,26 @@ class KeySpace:
         """Why a message does not belong on the key it came on (None when it does).
         Access control says who may publish on a key; this says that what they
         published is what the key claims (an order on ord/A2 is issued by A2)."""
+        checks = self.key_checks(key, type(msg))
+        return checks if type(checks) is str else field_mismatch(checks, msg)
+
+    def key_checks(self, key: str, cls: type) -> tuple[tuple[str, str], ...] | str:
+        """What a message of `cls` on `key` must carry: (field, the key's chunk) pairs,
+        or why no such message belongs there. Depends on the key and class alone, so a
+        receiver works it out once per key (`saim_mesh/keyfacts.py`)."""
         n = len(self.root) + 1
         if key[:n] != self.root + "/":
             return f"key {key[:80]!r} outside the root"
         chunks = key[n:].split("/")
-        tpl = _TEMPLATES.get(type(msg)) or template(type(msg))
+        tpl = _TEMPLATES.get(cls) or template(cls)
         if chunks[0] != tpl.family:
-            return f"a {msg.KIND} message on {chunks[0]}/ keys"
+            return f"a {cls.KIND} message on {chunks[0]}/ keys"
         count, checks = tpl.field_checks()
         if count > 0 and len(chunks) != count:
             return f"key {key[:80]!r} has {len(chunks)} chunks, not {count}"
         if count < 0 and len(chunks) < -count:
             return f"key {key[:80]!r} has too few chunks"
-        for i, a in checks:
-            c = chunks[i]
-            if c != getattr(msg, a):
-                return f"field '{a}' {str(getattr(msg, a))[:40]!r} differs from the key's {c[:40]!r}"
-        return None
+        return tuple((a, chunks[i]) for i, a in checks)
 
     def clock(self) -> str:
         return f"{self.root}/clock"

@@ -239,6 +239,7 @@ def main(argv=None) -> int:
         "peak_rss_mb": max(s["peak_rss_mb"] for s in peers.values()),
         "peak_rss_mb_by_peer": {u: s["peak_rss_mb"] for u, s in peers.items()},
         "peak_pss_mb_per_ea_peer": max(m["pss_mb"] for m in ea_mem.values()),
+        "peak_pss_mb_per_ea_peer_any": max(m["pss_mb_any"] for m in ea_mem.values()),   # peers leaving included
         "memory_by_process": mem.peak_memory, "flow_by_peer": flow,
         "alerts_equal_in_process": same, "events": n_ev,
         "sensors_wall_s": round(rs["wall_s"], 2) if sens_same is not None else None,

@@ -249,6 +249,10 @@ def main(argv=None) -> int:
     ea = {u: procs.get(u, {}) for u in peers}
     pss = [p["pss_mb"] for p in ea.values() if p.get("pss_mb")]
     out["ea_peer_pss_mb"] = {"max": max(pss, default=None), "mean": round(sum(pss) / len(pss), 1) if pss else None}
+    # the same at any moment, the end of the run included, when peers leave and the last ones'
+    # PSS takes over the departed ones' share of the pages they all mapped (procstat.py)
+    out["ea_peer_pss_mb_any"] = {"max": max((p["pss_mb_any"] for p in ea.values() if p.get("pss_mb_any")),
+                                            default=None)}
     out["ea_peer_rss_mb"] = {"max": max((p["rss_mb"] for p in ea.values() if p.get("rss_mb")), default=None)}
     out["cpu_s_total"] = round(sum(p.get("cpu_s") or 0 for p in procs.values()), 1)
     print(json.dumps({k: out[k] for k in ("wall_s", "times_real_time", "ea_peers", "events", "cpu_s_total",

@@ -1,13 +1,19 @@
-"""A peer's intake: samples drained from its subscriber channels into the heap of
+"""A peer's intake: samples drained from its subscriber channels into the list of
 messages waiting for their clock tick, batch by batch, each entry checked like a single
 message (seq rules, exact interest, size bound, gate, time, key against content).
 
 A mixin of `Peer` (saim_mesh/peer.py): it reads and writes the peer's state."""
 from __future__ import annotations
 
-import heapq
+import bisect
+from operator import itemgetter
+
+from dissemination.keyspace import field_mismatch
 
 from . import batch as B
+from . import messages as M
+
+_SEQ = itemgetter(0)
 
 
 class Held(dict):
@@ -29,27 +35,52 @@ class Held(dict):
         self.bytes -= len(v)
         return v
 
+    def drop(self, seqs) -> None:
+        """Forget every one of `seqs` (those fed to the EA at a tick)."""
+        pop, n = super().pop, 0
+        for q in seqs:
+            v = pop(q, None)
+            if v is not None:
+                n += len(v)
+        self.bytes -= n
+
 
 
 class Intake:
     """`Peer`'s receiving half: `_drain` at every loop, before the ticks it serves."""
 
+    @property
+    def want(self):
+        """The exact test of a received key against the EA's fine interest."""
+        return self._want
+
+    @want.setter
+    def want(self, test) -> None:   # a new interest: what `facts` knew of keys' wanting is stale
+        self._want = test
+        if (facts := self.__dict__.get("facts")) is not None:
+            facts.reset(test)
+
     def _drain(self, buf: list) -> None:
-        """Move received samples into the seq-ordered heap. A batch is unpacked and each
-        entry taken like a single message; whatever our coarse subscriptions let
-        through beyond the EA's exact interest is dropped (counted) before decoding."""
-        flow, groups, gate, trace = self.flow, self.groups, self.gate, self.trace
+        """Move received samples into the list of messages waiting for their tick. A
+        batch is decoded and each entry taken like a single message; whatever our
+        coarse subscriptions let through beyond the EA's exact interest is dropped
+        (counted) before decoding."""
+        flow, is_batch, gate, trace = self.flow, self.groups.is_batch, self.gate, self.trace
         for sub in self.zsubs.values():
             while (s := sub.try_recv()) is not None:
                 key = str(s.key_expr)
                 flow["samples"] += 1
-                if groups.is_batch(key):
-                    entries = B.unpack(gate, groups, s.payload.to_bytes(), key)
+                if is_batch(key):
+                    try:
+                        entries = B.decode(s.payload.to_bytes(), gate.max_bytes).entries
+                    except M.MessageError as e:   # counted whole
+                        gate.rejects.add(e, key)
+                        continue
                     flow["batches"] += 1
                     flow["entries"] += len(entries)
                     if trace is not None:
                         trace.extend(e[0] for e in entries if 0 < e[0] < 2**32)
-                    self._take_entries(entries, buf)
+                    self._take_entries(entries, buf, key)
                     continue
                 att = s.attachment
                 seq = None
@@ -84,18 +115,31 @@ class Intake:
             return
         self._hold(m)
 
-    def _take_entries(self, entries: list[tuple[int, str, bytes]], buf: list) -> None:
-        """A batch's entries, each in turn (the per-report hot path). A seq that came with
-        two different payloads is contested and settled by the store; a message that does
-        not belong on its key, or is dated far ahead of the clock, is rejected, never held."""
-        pending, want, data, mismatch = self.pending, self.want, self.gate.data, self.ks.mismatch
+    def _take_entries(self, entries: list[tuple[int, str, bytes]], buf: list, batch: str | None = None) -> None:
+        """A batch's entries (received on group key `batch`), each in turn: the per-report
+        hot path, one `KeyFacts` lookup per entry. An entry on a key outside its batch's
+        group is counted and left out. A seq that came with two different payloads is
+        contested and settled by the store; a message that does not belong on its key,
+        or is dated far ahead of the clock, is rejected, never held. `buf` takes
+        (seq, message) in arrival order: `_due` sorts it at the tick."""
+        pending, data, facts = self.pending, self.gate.data, self.facts
+        known, learn, gen = facts.get, facts.learn, facts.gen
         held = super(Held, pending).__setitem__
+        last = self.last_seq
         hi = self.tick_seq + self.max_seq_ahead
         t_hi = self.clock_t + self.max_ahead
         seen_t = self.seen_t
+        add = buf.append
         dropped = 0
         for seq, key, payload in entries:
-            if seq <= self.last_seq:
+            f = known(key)
+            if f is None or f.gen != gen:
+                f = learn(key)
+            if batch is not None and f.group != batch:
+                self.gate.rejects.add(M.MessageError("batch", "(key)", f"entry key {key[:80]!r} is not of group "
+                                                     f"{batch[:80]!r}"), batch)
+                continue
+            if seq <= last:
                 continue
             prev = pending.get(seq)
             if prev is not None:
@@ -106,7 +150,7 @@ class Intake:
                 self._reject("?", "(seq)", f"seq {seq} is more than {self.max_seq_ahead} ahead of the "
                              f"clock's {self.tick_seq}", key)
                 continue
-            if not want(key):
+            if not f.wanted:
                 dropped += 1
                 continue
             if pending.bytes + len(payload) > self.max_held:
@@ -117,16 +161,30 @@ class Intake:
             if m.t > t_hi:
                 self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
                 continue
-            if (why := mismatch(key, m)) is not None:
+            checks = f.checks if f.cls is type(m) else facts.checks(f, key, type(m))
+            why = checks if type(checks) is str else field_mismatch(checks, m) if checks else None
+            if why is not None:
                 self._reject(m.KIND, "(key)", why, key)
                 continue
             held(seq, payload)
             pending.bytes += len(payload)
-            heapq.heappush(buf, (seq, m))
+            add((seq, m))
             if m.t > seen_t:
                 seen_t = m.t
         self.seen_t = seen_t
         self.flow["dropped"] += dropped
+
+    def _due(self, buf: list, upto: int) -> list:
+        """The held (seq, message) pairs up to seq `upto`, in seq order, taken out of `buf`
+        (one sort of mostly ordered runs per tick, not a heap operation per report)."""
+        if not buf:
+            return []
+        buf.sort(key=_SEQ)
+        i = bisect.bisect_right(buf, upto, key=_SEQ)
+        ready = buf[:i]
+        del buf[:i]
+        self.pending.drop(q for q, _ in ready)
+        return ready
 
     def _evict(self, buf: list) -> None:
         """Held messages passed `max_held_mb` (a flood of plausible junk): drop every one
@@ -135,7 +193,6 @@ class Intake:
         for q in [q for q in self.pending if q > due]:
             self.pending.pop(q)
         buf[:] = [(q, m) for q, m in buf if q <= due]
-        heapq.heapify(buf)
         if not self.evicted:
             self._reject("?", "(held)", f"over {self.max_held >> 20} MB of messages waiting for their tick: "
                          f"dropped, to be taken from the store", "")
@@ -157,4 +214,3 @@ class Intake:
                 self.pending[q] = truth[q]
                 keep.append((q, m))
         buf[:] = keep
-        heapq.heapify(buf)

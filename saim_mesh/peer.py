@@ -38,6 +38,7 @@ from .alertlog import AlertLog
 from .cmdlog import CommandLog
 from .fusion.barrier import TrackBarrier
 from .intake import Held, Intake
+from .keyfacts import KeyFacts
 from .presence import Presence
 from .runner import config_for, make_ea
 from .scenario import Scenario
@@ -94,6 +95,7 @@ class Peer(Intake, TickWait):
         self.zsubs: dict[str, object] = {}   # coarse, non-overlapping Zenoh subscriptions covering it
         self.want = lambda key: False         # exact test of a received key against the fine interest
         self.groups = B.groups_of(root, group_depth(sc.taskorg))
+        self.facts = KeyFacts(self.ks, self.groups, self.want)   # per received key: group, wanted, checks
         self.flow = {"samples": 0, "batches": 0, "entries": 0, "dropped": 0}   # what the coarse subscriptions cost
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
@@ -177,7 +179,7 @@ class Peer(Intake, TickWait):
             for k in sorted(self.zsubs.keys() - zwant):
                 self.zsubs.pop(k).undeclare()
             self.subs = dict.fromkeys(sorted(want))
-            self.want = exact(want, self.ks.root)
+            self.want = exact(want, self.ks.root, cache=False)   # `facts` remembers each key's answer
         if new and buf is not None:
             self._catch_up(new, buf)
 
@@ -198,7 +200,7 @@ class Peer(Intake, TickWait):
         for seq, p in entries:
             if seq > self.last_seq and seq not in self.pending and (m := self.gate.data(p, "store")) is not None:
                 self.pending[seq] = p
-                heapq.heappush(buf, (seq, m))
+                buf.append((seq, m))
 
     def _plan_signature(self) -> tuple:
         """Changes when a reorganization, a mission transition or a threshold set by the
@@ -228,12 +230,12 @@ class Peer(Intake, TickWait):
         heapq.heappush(self.direct, (m.t, self.n_direct, m))
 
     def _feed(self, items) -> None:
-        """Submit in seq order; a fused track goes in before the first message of its
-        time or later, where the in-process run puts it. A message the domain judges on
+        """Submit `items` ((seq, message), in seq order); a fused track goes in before
+        the first message of its time or later, where the in-process run puts it. A message the domain judges on
         places beyond our interest (`needs_before`) has them brought up to date first."""
         direct, submit = self.direct, self.ea.submit
         before = None if self.replaying else self.needs_before   # a late join feeds everything anyway
-        for seq, m in sorted(items, key=lambda x: x[0]):
+        for seq, m in items:
             if seq > self.last_seq:
                 self.last_seq = seq
                 while direct and direct[0][0] <= m.t:
@@ -273,12 +275,7 @@ class Peer(Intake, TickWait):
             self.evicted = False
             self._catch_up(sorted(self.subs), buf)
         self._settle(buf, tick.seq)
-        ready = []
-        while buf and buf[0][0] <= tick.seq:
-            ready.append(heapq.heappop(buf))
-        for q, _ in ready:
-            self.pending.pop(q, None)
-        self._feed(ready)
+        self._feed(self._due(buf, tick.seq))
         while self.direct and self.direct[0][0] <= tick.t:
             self.ea.submit(heapq.heappop(self.direct)[2])
         if DEBUG and int(tick.t) % 300 == 0:
@@ -398,7 +395,7 @@ class Peer(Intake, TickWait):
                 self._resubscribe()
                 self.presence = Presence(self, s)
                 self.barrier.open(s)
-                buf: list = []        # heap of (seq, message) waiting for their clock tick
+                buf: list = []        # (seq, message) waiting for their clock tick, in arrival order
                 self._late_join(join_timeout, buf)
                 token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
                 ack_key = self.ks.ack(self.unit, str(s.info.zid()))
@@ -505,7 +502,8 @@ class Peer(Intake, TickWait):
         self.joined_t = t
         self.replaying = True
         try:
-            self._feed([(seq, m) for seq, p in entries if (m := self.gate.data(p, "store")) is not None])
+            self._feed(sorted(((seq, m) for seq, p in entries if (m := self.gate.data(p, "store")) is not None),
+                              key=lambda x: x[0]))
             self.ea.advance(t)
         finally:
             self.replaying = False

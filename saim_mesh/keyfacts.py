@@ -1,0 +1,61 @@
+"""What a peer knows about a received key, worked out once per key: the batch group it
+belongs to, whether its EA wants it, and what the key says about a message on it.
+
+An entity's key repeats in every report until it changes cell, so the receive path
+pays one dict lookup per report instead of a group walk, an interest test and a
+template check each with its own cache and its own copy of the key. Whether the EA
+wants a key changes at every re-registration: `reset` starts over with the new test.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+from dissemination.groups import Groups
+from dissemination.keyspace import KeySpace
+
+MAX_KEYS = 8192   # about twice the keys a brigade EA hears at once (an entity's key changes with its cell)
+
+
+class Facts:
+    """One key's facts; `checks` are for messages of class `cls` (the one that came first)."""
+    __slots__ = ("group", "wanted", "gen", "cls", "checks")
+
+    def __init__(self, group: str | None, wanted: bool, gen: int):
+        self.group, self.wanted, self.gen = group, wanted, gen
+        self.cls: type | None = None
+        self.checks: tuple[tuple[str, str], ...] | str = ()
+
+
+class KeyFacts(dict):
+    """key -> `Facts`. On the hot path: `f = get(key)`, and `learn(key)` when that is None
+    or of an older interest (`f.gen != gen`)."""
+
+    def __init__(self, ks: KeySpace, groups: Groups, want: Callable[[str], bool], max_keys: int = MAX_KEYS):
+        super().__init__()
+        self.ks, self.groups, self.want, self.max_keys = ks, groups, want, max_keys
+        self.gen = 0   # the interest's generation: a fact of an older one has a stale `wanted`
+
+    def reset(self, want: Callable[[str], bool]) -> None:
+        """A new interest: each key's `wanted` is asked again when the key next comes
+        (its group and checks stay: they depend on the key alone)."""
+        self.want = want
+        self.gen += 1
+
+    def learn(self, key: str) -> Facts:
+        f = self.get(key)
+        if f is not None:   # known under an older interest
+            f.wanted, f.gen = self.want(key), self.gen
+            return f
+        if len(self) >= self.max_keys:   # keys of cells left long ago: start over
+            self.clear()
+        f = self[key] = Facts(self.groups.find(key), self.want(key), self.gen)
+        return f
+
+    def checks(self, f: Facts, key: str, cls: type) -> tuple[tuple[str, str], ...] | str:
+        """(field, chunk) pairs a message of `cls` on `key` must match, or why none belongs there."""
+        if f.cls is cls:
+            return f.checks
+        c = self.ks.key_checks(key, cls)
+        if f.cls is None:
+            f.cls, f.checks = cls, c
+        return c

@@ -1,0 +1,37 @@
+"""bench_intake drives the real Peer's receive and tick path without Zenoh: on the small
+scenario that peer raises exactly the in-process EA's alerts, and the bench says so."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from saim_mesh import bench_intake
+from saim_mesh import scenario as S
+
+SMALL = Path(__file__).resolve().parents[1] / "scenarios" / "small"
+
+
+def test_the_offline_peer_raises_the_in_process_alerts(tmp_path):
+    sc = S.load(SMALL)
+    top = sc.taskorg.root
+    out = tmp_path / "intake.json"
+    assert bench_intake.main(["--scenario", str(SMALL), "--unit", top, "--repeat", "1", "--out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    assert res["alerts_equal_in_process"] is True
+    assert res["alerts"] > 0 and res["messages"] > 0
+    assert res["flow"]["entries"] > 0 and res["flow"]["batches"] > 0   # the batch path was taken
+    assert set(res["peer_cpu_s"]) == {"receive", "ticks", "interest"}
+
+
+def test_what_the_stream_loses_the_peer_never_hears(tmp_path, monkeypatch):
+    """The peer hears only the stream it is given (no second path feeds it)."""
+    sc = S.load(SMALL)
+    top = sc.taskorg.root
+    chunks, by_key, payloads = bench_intake.stream(sc)
+    # drop every batched report of one group: the peer never hears those units move
+    victim = next(k for c in chunks for k, _, att in c[0] if att is None and "/pos/" in k)
+    cut = [([x for x in samples if x[0] != victim], tick) for samples, tick in chunks]
+    full = bench_intake.one_pass(sc, top, chunks, by_key, payloads)
+    lossy = bench_intake.one_pass(sc, top, cut, by_key, payloads)
+    assert lossy["flow"]["entries"] < full["flow"]["entries"]
+    assert lossy["messages"] < full["messages"]
