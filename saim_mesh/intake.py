@@ -203,7 +203,8 @@ class Intake:
         now = sorted(q for q in self.contested if q <= upto)
         if not now:
             return
-        self.log(f"contested seqs {now[:5]}{'...' if len(now) > 5 else ''}: taking the store's version", flush=True)
+        # every one said (up to 64 a tick: a flood of junk makes no unbounded line)
+        self.log(f"contested seqs {now[:64]}{'...' if len(now) > 64 else ''}: taking the store's version", flush=True)
         _, entries = self._query_store(now[0] - 1, sorted(self.subs))
         truth = {seq: p for seq, p in entries if seq in self.contested}
         keep = [(q, m) for q, m in buf if q not in self.contested or q > upto]
