@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 
 import zenoh
 
@@ -155,7 +156,7 @@ def template(cls: type) -> Template:
     return t
 
 
-def field_mismatch(checks: tuple[tuple[str, str], ...], msg) -> str | None:
+def field_mismatch(checks: Iterable[tuple[str, str]], msg) -> str | None:
     """The first of `KeySpace.key_checks`' (field, chunk) pairs that `msg` breaks, said."""
     for a, c in checks:
         if c != getattr(msg, a):

@@ -161,8 +161,8 @@ class Intake:
             if m.t > t_hi:
                 self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
                 continue
-            checks = f.checks if f.cls is type(m) else facts.checks(f, key, type(m))
-            why = checks if type(checks) is str else field_mismatch(checks, m) if checks else None
+            attrs, values = (f.attrs, f.values) if f.cls is type(m) else facts.checks(f, key, type(m))
+            why = values if attrs is None else field_mismatch(zip(attrs, values), m) if attrs else None
             if why is not None:
                 self._reject(m.KIND, "(key)", why, key)
                 continue

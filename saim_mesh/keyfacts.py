@@ -17,13 +17,17 @@ MAX_KEYS = 8192   # about twice the keys a brigade EA hears at once (an entity's
 
 
 class Facts:
-    """One key's facts; `checks` are for messages of class `cls` (the one that came first)."""
-    __slots__ = ("group", "wanted", "gen", "cls", "checks")
+    """One key's facts. For messages of class `cls` (the first that came on it): the
+    fields in `attrs` must equal the key's chunks in `values`; or `attrs` is None and
+    `values` says why no such message belongs on the key. (Two flat slots, not a tuple
+    of pairs: a brigade EA keeps ~8k of these.)"""
+    __slots__ = ("group", "wanted", "gen", "cls", "attrs", "values")
 
     def __init__(self, group: str | None, wanted: bool, gen: int):
         self.group, self.wanted, self.gen = group, wanted, gen
         self.cls: type | None = None
-        self.checks: tuple[tuple[str, str], ...] | str = ()
+        self.attrs: tuple[str, ...] | None = ()
+        self.values: tuple[str, ...] | str = ()
 
 
 class KeyFacts(dict):
@@ -34,6 +38,7 @@ class KeyFacts(dict):
         super().__init__()
         self.ks, self.groups, self.want, self.max_keys = ks, groups, want, max_keys
         self.gen = 0   # the interest's generation: a fact of an older one has a stale `wanted`
+        self._shared: dict = {}   # one copy of each group key and attrs tuple, for all the keys that have it
 
     def reset(self, want: Callable[[str], bool]) -> None:
         """A new interest: each key's `wanted` is asked again when the key next comes
@@ -48,14 +53,21 @@ class KeyFacts(dict):
             return f
         if len(self) >= self.max_keys:   # keys of cells left long ago: start over
             self.clear()
-        f = self[key] = Facts(self.groups.find(key), self.want(key), self.gen)
+        g = self.groups.find(key)
+        f = self[key] = Facts(g if g is None else self._shared.setdefault(g, g), self.want(key), self.gen)
         return f
 
-    def checks(self, f: Facts, key: str, cls: type) -> tuple[tuple[str, str], ...] | str:
-        """(field, chunk) pairs a message of `cls` on `key` must match, or why none belongs there."""
+    def checks(self, f: Facts, key: str, cls: type) -> tuple[tuple[str, ...] | None, tuple[str, ...] | str]:
+        """(fields, the key's chunks they must equal) for a message of `cls` on `key`,
+        or (None, why no such message belongs there)."""
         if f.cls is cls:
-            return f.checks
+            return f.attrs, f.values
         c = self.ks.key_checks(key, cls)
+        if type(c) is str:
+            attrs, values = None, c
+        else:
+            a = tuple(x for x, _ in c)
+            attrs, values = self._shared.setdefault(a, a), tuple(v for _, v in c)
         if f.cls is None:
-            f.cls, f.checks = cls, c
-        return c
+            f.cls, f.attrs, f.values = cls, attrs, values
+        return attrs, values
