@@ -42,10 +42,12 @@ class KeyFacts(dict):
 
     def reset(self, want: Callable[[str], bool]) -> None:
         """A new interest: each key's `wanted` is asked again when the key next comes
-        (its group and checks stay: they depend on the key alone). Keys not heard since
-        the last re-registration are forgotten: mostly cells their entities have left."""
-        for k in [k for k, f in self.items() if f.gen < self.gen]:
-            del self[k]
+        (its group and checks stay: they depend on the key alone). Past half the bound,
+        keys not heard since the last re-registration are forgotten: mostly cells their
+        entities have left (below it, keeping them costs less than learning them again)."""
+        if len(self) > self.max_keys // 2:
+            for k in [k for k, f in self.items() if f.gen < self.gen]:
+                del self[k]
         self.want = want
         self.gen += 1
 

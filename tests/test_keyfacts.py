@@ -31,8 +31,8 @@ def test_a_key_is_learned_once_per_interest_and_wanted_is_asked_again_after_a_ne
     assert g is f and not g.wanted and g.group == f"{ROOT}/pos/X1Y1/_b/BN/A"
 
 
-def test_keys_not_heard_for_a_whole_interest_are_forgotten():
-    kf, _ = _facts(lambda k: True)
+def test_past_half_the_bound_keys_not_heard_for_a_whole_interest_are_forgotten():
+    kf, _ = _facts(lambda k: True, max_keys=2)
     old, live = f"{ROOT}/pos/X1Y1/x1y1/BN/A/A1/A1S1/A1S1E01", f"{ROOT}/pos/X1Y1/x1y2/BN/A/A1/A1S1/A1S1E02"
     kf.learn(old)
     kf.learn(live)
@@ -58,3 +58,12 @@ def test_checks_say_which_fields_a_key_names_and_why_a_message_does_not_belong()
     assert f.cls is M.LocationReport and (f.attrs, f.values) == (attrs, values)
     attrs2, why = kf.checks(f, k, M.Alert)             # another class on the same key: not kept
     assert attrs2 is None and "pos/ keys" in why and f.cls is M.LocationReport
+
+
+def test_below_half_the_bound_keys_are_kept_across_interests():
+    kf, _ = _facts(lambda k: True, max_keys=64)
+    old = f"{ROOT}/pos/X1Y1/x1y1/BN/A/A1/A1S1/A1S1E01"
+    kf.learn(old)
+    kf.reset(lambda k: True)
+    kf.reset(lambda k: True)
+    assert old in kf
