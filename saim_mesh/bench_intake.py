@@ -63,35 +63,35 @@ class _Out:
         return type("Pub", (), {"put": lambda _s, b, **__: out.append((key, b, None))})()
 
 
-def stream(sc) -> tuple[list, dict[str, list[int]], dict[int, bytes]]:
+def stream(sc) -> list:
     """The replay's messages tick by tick, as it sends them at max speed (batched per
-    group and tick): [(samples, tick)], and the store (key -> seqs, seq -> payload)."""
+    group and tick): [(samples, (key, payload) entries in seq order, tick)]."""
     rp = Replay(sc, zenoh.Config(), KEY_ROOT, log=lambda *a, **k: None)
     script = rp._prepare(sc.duration_s)
     out = _Out()
     bat = Batcher(out, groups_of(KEY_ROOT, group_depth(sc.taskorg)), rp.gate.max_bytes)
     chunks: list = []
-    by_key: dict[str, list[int]] = collections.defaultdict(list)
-    payloads: dict[int, bytes] = {}
+    added: list[tuple[str, bytes]] = []
     n, n_tick, next_t = 0, 0, W.TICK_S
 
     def tick(t: float, end: bool = False) -> None:
-        nonlocal n_tick
+        nonlocal n_tick, added
         bat.flush()
         n_tick += 1
-        chunks.append((out.out[:], W.make(W.Tick, t=t, n=n_tick, seq=n, end=end, w=None, src="main", of=1)))
+        chunks.append((out.out[:], added,
+                       W.make(W.Tick, t=t, n=n_tick, seq=n, end=end, w=None, src="main", of=1)))
         out.out.clear()
+        added = []
     for ev, key, payload, _ in script:
         while ev.t >= next_t:
             tick(next_t)
             next_t += W.TICK_S
         n += 1
-        by_key[key].append(n)
-        payloads[n] = payload
+        added.append((key, payload))
         if not bat.add(key, n, payload):
             out.out.append((key, payload, seq_bytes(n)))
     tick(sc.duration_s, end=True)
-    return chunks, dict(by_key), payloads
+    return chunks
 
 
 class _Sub:
@@ -106,13 +106,10 @@ class _Sub:
 
 
 class _Session:
-    """Subscriptions and the situation store, in process."""
+    """Subscriptions, and a replay's situation store (its own `_entries`) answering catch-ups."""
 
-    def __init__(self, by_key: dict[str, list[int]], payloads: dict[int, bytes]):
-        self.by_key, self.payloads = by_key, payloads
-        self.ke = {k: zenoh.KeyExpr(k) for k in by_key}
-        self.matches: dict[str, list[str]] = {}
-        self.sent, self.t = 0, 0.0
+    def __init__(self, sc):
+        self.store = Replay(sc, zenoh.Config(), KEY_ROOT, log=lambda *a, **k: None)
 
     def declare_subscriber(self, key: str, handler=None) -> _Sub:
         return _Sub(key)
@@ -121,19 +118,9 @@ class _Session:
         pass
 
     def get(self, selector: str, payload: bytes, **_):
-        q = W.decode_control(W.StoreQuery, payload, 1 << 20)
-        hi = self.sent if not q.before else min(self.sent, q.before - 1)
-        keys: set[str] = set(self.by_key) if q.keys is None else set()
-        for e in q.keys or ():
-            if e not in self.matches:
-                ke = zenoh.KeyExpr(e)
-                self.matches[e] = [k for k, x in self.ke.items() if ke.intersects(x)]
-            keys.update(self.matches[e])
-        seqs: list[int] = []
-        for k in keys:
-            s = [n for n in self.by_key[k] if q.since < n <= hi]
-            seqs += s[-1:] if q.latest else s
-        rep = W.make(W.StoreReply, t=self.t, entries=[(n, self.payloads[n]) for n in sorted(seqs)])
+        st = self.store
+        req = st.gate.control(W.StoreQuery, payload, selector)
+        rep = W.make(W.StoreReply, t=st.t, entries=st._entries(req, "main") if req is not None else [])
         return [type("Reply", (), {"ok": _Sample(selector + "/main", W.encode(rep), None)})()]
 
 
@@ -142,10 +129,10 @@ def _same(a) -> tuple:
     return (a.t, a.owner, a.type, tuple(a.subjects), a.message, a.priority)
 
 
-def one_pass(sc, unit: str, chunks, by_key, payloads) -> dict:
+def one_pass(sc, unit: str, chunks) -> dict:
     """A fresh peer through the whole stream: CPU seconds per stage and what it took in."""
     p = Peer(sc, unit, zenoh.Config(), KEY_ROOT, log=lambda *a, **k: None)
-    s = p.session = _Session(by_key, payloads)
+    s = p.session = _Session(sc)
     p.presence = type("Presence", (), {"take": lambda _s: None})()
     p.ea.start(0.0)
     p._resubscribe()
@@ -154,7 +141,9 @@ def one_pass(sc, unit: str, chunks, by_key, payloads) -> dict:
     routes: dict[str, list[_Sub]] = {}
     subs = None
     next_interest, last_sig = 0.0, p._plan_signature()
-    for samples, tick in chunks:
+    for samples, added, tick in chunks:
+        for key, b in added:   # published: in the store before the tick that covers it
+            s.store._add("main", key, b)
         if subs is not p.zsubs or len(routes) > 50_000:
             routes, subs = {}, p.zsubs
         for key, b, att in samples:   # Zenoh's work: the sample into every subscription it matches
@@ -164,7 +153,7 @@ def one_pass(sc, unit: str, chunks, by_key, payloads) -> dict:
                 to = routes[key] = [x for x in p.zsubs.values() if x.ke.intersects(ke)]
             for x in to:
                 x.q.append(_Sample(key, b, att))
-        s.sent, s.t = tick.seq, tick.t
+        s.store.t = tick.t
         p.clock_t, p.tick_seq = tick.t, tick.seq
         k0 = time.thread_time()
         p._drain(buf)
@@ -194,10 +183,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "intake.json"))
     a = ap.parse_args(argv)
     sc = S.load(a.scenario)
-    chunks, by_key, payloads = stream(sc)
+    chunks = stream(sc)
     passes, inproc = [], []
     for _ in range(a.repeat):   # interleaved: both see the same moments of this machine
-        passes.append(one_pass(sc, a.unit, chunks, by_key, payloads))
+        passes.append(one_pass(sc, a.unit, chunks))
         ea = make_ea(sc, a.unit, config_for(sc, a.unit, None), sinks=[])
         k = time.thread_time()
         feed(ea, sc)

@@ -27,11 +27,11 @@ def test_what_the_stream_loses_the_peer_never_hears(tmp_path, monkeypatch):
     """The peer hears only the stream it is given (no second path feeds it)."""
     sc = S.load(SMALL)
     top = sc.taskorg.root
-    chunks, by_key, payloads = bench_intake.stream(sc)
+    chunks = bench_intake.stream(sc)
     # drop every batched report of one group: the peer never hears those units move
     victim = next(k for c in chunks for k, _, att in c[0] if att is None and "/pos/" in k)
-    cut = [([x for x in samples if x[0] != victim], tick) for samples, tick in chunks]
-    full = bench_intake.one_pass(sc, top, chunks, by_key, payloads)
-    lossy = bench_intake.one_pass(sc, top, cut, by_key, payloads)
+    cut = [([x for x in samples if x[0] != victim], added, tick) for samples, added, tick in chunks]
+    full = bench_intake.one_pass(sc, top, chunks)
+    lossy = bench_intake.one_pass(sc, top, cut)
     assert lossy["flow"]["entries"] < full["flow"]["entries"]
     assert lossy["messages"] < full["messages"]
