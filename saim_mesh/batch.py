@@ -74,11 +74,15 @@ def unpack(gate: W.Gate, groups: Groups, payload: bytes, key: str) -> list[tuple
     out = []
     for seq, k, p in b.entries:
         if groups.group(k) != key:
-            gate.rejects.add(M.MessageError("batch", "(key)", f"entry key {k[:80]!r} is not of group {key[:80]!r}"),
-                             key)
+            gate.rejects.add(foreign(k, key), key)
             continue
         out.append((seq, k, p))
     return out
+
+
+def foreign(entry_key: str, batch_key: str) -> M.MessageError:
+    """An entry on a key outside the group its batch came on (counted, left out)."""
+    return M.MessageError("batch", "(key)", f"entry key {entry_key[:80]!r} is not of group {batch_key[:80]!r}")
 
 
 class Batcher:

@@ -136,8 +136,7 @@ class Intake:
             if f is None or f.gen != gen:
                 f = learn(key)
             if batch is not None and f.group != batch:
-                self.gate.rejects.add(M.MessageError("batch", "(key)", f"entry key {key[:80]!r} is not of group "
-                                                     f"{batch[:80]!r}"), batch)
+                self.gate.rejects.add(B.foreign(key, batch), batch)
                 continue
             if seq <= last:
                 continue
