@@ -101,7 +101,7 @@ class Intake:
         if seq is not None:
             self._take_entries([(seq, key, payload)], buf)
             return
-        if not self.want(key):
+        if not self.facts.of(key).wanted:   # `want` keeps no answers: `facts` does
             self.flow["dropped"] += 1
             return
         m = self.gate.data(payload, key)

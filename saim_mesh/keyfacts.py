@@ -4,7 +4,7 @@ belongs to, whether its EA wants it, and what the key says about a message on it
 An entity's key repeats in every report until it changes cell, so the receive path
 pays one dict lookup per report instead of a group walk, an interest test and a
 template check each with its own cache and its own copy of the key. Whether the EA
-wants a key changes at every re-registration: `reset` starts over with the new test.
+wants a key changes at every re-registration: `reset` marks every key's answer stale.
 """
 from __future__ import annotations
 
@@ -50,6 +50,11 @@ class KeyFacts(dict):
                 del self[k]
         self.want = want
         self.gen += 1
+
+    def of(self, key: str) -> Facts:
+        """The facts of `key`, learned or brought up to date (the hot path inlines this)."""
+        f = self.get(key)
+        return f if f is not None and f.gen == self.gen else self.learn(key)
 
     def learn(self, key: str) -> Facts:
         f = self.get(key)

@@ -27,8 +27,8 @@ def test_a_key_is_learned_once_per_interest_and_wanted_is_asked_again_after_a_ne
     assert kf.get(k) is f and f.gen == kf.gen
     kf.reset(lambda key: False)
     assert kf.get(k).gen != kf.gen            # stale: the hot path learns it again
-    g = kf.learn(k)
-    assert g is f and not g.wanted and g.group == f"{ROOT}/pos/X1Y1/_b/BN/A"
+    g = kf.of(k)
+    assert g is f and not g.wanted and kf.of(k).gen == kf.gen and g.group == f"{ROOT}/pos/X1Y1/_b/BN/A"
 
 
 def test_past_half_the_bound_keys_not_heard_for_a_whole_interest_are_forgotten():
