@@ -123,7 +123,7 @@ class Intake:
         or is dated far ahead of the clock, is rejected, never held. `buf` takes
         (seq, message) in arrival order: `_due` sorts it at the tick."""
         pending, data, facts = self.pending, self.gate.data, self.facts
-        known, learn, gen = facts.get, facts.learn, facts.gen
+        known, learn, gen, epoch = facts.get, facts.learn, facts.gen, facts.epoch
         held = super(Held, pending).__setitem__
         last = self.last_seq
         hi = self.tick_seq + self.max_seq_ahead
@@ -135,6 +135,8 @@ class Intake:
             f = known(key)
             if f is None or f.gen != gen:
                 f = learn(key)
+            else:
+                f.seen = epoch
             if batch is not None and f.group != batch:
                 self.gate.rejects.add(B.foreign(key, batch), batch)
                 continue

@@ -60,6 +60,7 @@ def _malloc_trim():
         return None
 
 
+SWEEP_S = 60.0   # scenario seconds between forgetting the received keys not heard since the last sweep
 ACK_EVERY_S = 4.0   # scenario seconds between pacing acks (the replay's window is 20 s)
 
 
@@ -96,6 +97,7 @@ class Peer(Intake, TickWait):
         self.want = lambda key: False         # exact test of a received key against the fine interest
         self.groups = B.groups_of(root, group_depth(sc.taskorg))
         self.facts = KeyFacts(self.ks, self.groups, self.want)   # per received key: group, wanted, checks
+        self.next_sweep = SWEEP_S
         self.flow = {"samples": 0, "batches": 0, "entries": 0, "dropped": 0}   # what the coarse subscriptions cost
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
@@ -282,6 +284,9 @@ class Peer(Intake, TickWait):
             self.log(f"debug t={tick.t} facts={self.ea.stats['facts']} subs={len(self.subs)} buf={len(buf)} "
                      f"last_seq={self.last_seq} hw={tick.seq}", flush=True)
         self.t, self.tick_n = tick.t, tick.n
+        if tick.t >= self.next_sweep:   # keys of cells entities have left: forgotten
+            self.facts.sweep()
+            self.next_sweep = tick.t + SWEEP_S
         self.presence.take()
         n_alerts = len(self.ea.alerts)
         try:
