@@ -172,7 +172,9 @@ def one_pass(sc, unit: str, chunks) -> dict:
         cpu["ticks"] += k2 - k1
         cpu["interest"] += k3 - k2
     return {"cpu_s": cpu, "alerts": [_same(a) for a in p.ea.alerts],
-            "messages": p.ea.n_in, "flow": dict(p.flow)}
+            "messages": p.ea.n_in, "flow": dict(p.flow),
+            "keys": {"held": len(p.facts), "sweeps": p.facts.epoch,   # the per-key cache at the end
+                     "oldest_sweep_heard": min((f.seen for f in p.facts.values()), default=None)}}
 
 
 def main(argv=None) -> int:
@@ -197,6 +199,7 @@ def main(argv=None) -> int:
     res = {
         "scenario": Path(a.scenario).name, "unit": a.unit, "repeat": a.repeat,
         "events": len(sc.events), "messages": passes[0]["messages"], "flow": passes[0]["flow"],
+        "keys": passes[0]["keys"],
         "peer_cpu_s": {k: round(v, 3) for k, v in best.items()}, "peer_s": round(peer_s, 3),
         "in_process_s": round(in_s, 3), "share_of_in_process": round(in_s / peer_s, 3),
         "beside_the_ea_s": round(peer_s - in_s, 3),

@@ -35,3 +35,17 @@ def test_what_the_stream_loses_the_peer_never_hears(tmp_path, monkeypatch):
     lossy = bench_intake.one_pass(sc, top, cut)
     assert lossy["flow"]["entries"] < full["flow"]["entries"]
     assert lossy["messages"] < full["messages"]
+
+
+def test_the_peer_sweeps_its_key_cache_on_scenario_time_and_keeps_only_keys_heard_since():
+    """Once a minute of scenario time the peer forgets the keys not heard since the sweep
+    before: at the end its cache holds only keys heard in the last two minutes."""
+    sc = S.load(SMALL)
+    top = sc.taskorg.root
+    chunks = bench_intake.stream(sc)
+    res = bench_intake.one_pass(sc, top, chunks)["keys"]
+    assert res["sweeps"] == int(sc.duration_s // 60)   # at t = 60, 120, ... of the scenario
+    # every key held was heard since the sweep before the last one: nothing older survives
+    assert res["held"] > 0 and res["oldest_sweep_heard"] >= res["sweeps"] - 1
+    never = bench_intake.one_pass(sc, top, chunks)
+    assert never["keys"] == res   # the same stream, the same cache: scenario time, not wall time
