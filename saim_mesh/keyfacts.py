@@ -23,7 +23,7 @@ class Facts:
     """One key's facts. For messages of class `cls` (the first that came on it): the
     fields in `attrs` must equal the key's chunks in `values`; or `attrs` is None and
     `values` says why no such message belongs on the key. (Two flat slots, not a tuple
-    of pairs: a brigade EA keeps ~8k of these.)"""
+    of pairs: a brigade EA keeps ~4k of these.)"""
     __slots__ = ("group", "wanted", "gen", "seen", "cls", "attrs", "values")
 
     def __init__(self, group: str | None, wanted: bool, gen: int, seen: int):
