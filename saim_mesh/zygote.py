@@ -1,6 +1,8 @@
 """A fork server for mesh processes: it imports the heavy modules once (numpy,
 shapely, pyproj, zenoh, the EA and its domains: ~30 MB of private heap in every
-peer), freezes them out of the garbage collector's reach, and forks each peer from
+peer), runs a minute of a small scenario's peer so that what the code builds on
+first use exists too (`offline.warm`: 5-6 MB less private memory in every child),
+freezes it all out of the garbage collector's reach, and forks each peer from
 itself, so 15 peers share those pages copy-on-write instead of holding 15 copies.
 
 Zenoh is imported but never opened here (a fork after `zenoh.open` hangs); each
@@ -11,6 +13,7 @@ zygote that reaps it. `SAIM_ZYGOTE=0` turns it off (plain subprocesses)."""
 from __future__ import annotations
 
 import atexit
+import contextlib
 import gc
 import importlib
 import json
@@ -21,10 +24,12 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "msgspec", "msgpack",
            "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer",
            "ea_agent.domains.suo.domain", "ea_agent.domains.uv.domain")
+WARM_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "small"
 
 
 # -- the zygote process ------------------------------------------------------------------
@@ -76,11 +81,32 @@ def _die_with_parent() -> None:
         pass
 
 
+def warm_up(scenario: Path = WARM_SCENARIO) -> str | None:
+    """Run the first minute of a small scenario's peer here, before any fork (`offline.warm`).
+    A problem is returned, not raised: a zygote that could not warm up still forks.
+    `SAIM_ZYGOTE_WARM`: 0 for none, or another scenario's directory."""
+    choice = os.environ.get("SAIM_ZYGOTE_WARM", "1")
+    if choice == "0":
+        return None
+    if choice not in ("", "1"):
+        scenario = Path(choice)
+    try:
+        from .offline import warm
+        with contextlib.redirect_stdout(sys.stderr):   # stdout is the launcher's channel
+            warm(scenario)
+    except Exception as e:   # noqa: BLE001 -- whatever it was: named, and no warm-up
+        return f"zygote: no warm-up ({scenario}: {type(e).__name__}: {e})"
+    return None
+
+
 def serve() -> None:
     """The zygote's loop: fork on request, report every child's pid and exit status."""
     _die_with_parent()
     for m in PRELOAD:
         importlib.import_module(m)
+    problem = warm_up()
+    if problem:
+        print(problem, file=sys.stderr, flush=True)
     gc.collect()
     gc.freeze()   # imported objects stay out of the collector's passes: their pages stay shared
     out = sys.stdout
@@ -173,6 +199,7 @@ class Zygote:
     def __init__(self, env: dict | None = None):
         env = dict(env or os.environ)
         env.setdefault("OPENBLAS_NUM_THREADS", "1")   # no thread pool to fork under
+        env.setdefault("MALLOC_ARENA_MAX", "2")   # as `proc.clean_env`: glibc reads it at start, here for every child
         env.setdefault("PYTHONUNBUFFERED", "1")
         self.p = subprocess.Popen([sys.executable, "-m", "saim_mesh.zygote"], stdin=subprocess.PIPE,
                                   stdout=subprocess.PIPE, env=env)

@@ -56,3 +56,56 @@ def test_a_killed_launcher_leaves_no_orphan_peers(tmp_path):
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+WARM = r"""
+import importlib, json, os, sys
+from saim_mesh import offline, zygote
+for m in zygote.PRELOAD:
+    importlib.import_module(m)
+tasks = sorted(os.listdir("/proc/self/task"))
+fresh = "ea_agent.domains.suo.needs" in sys.modules
+n = offline.warm(zygote.WARM_SCENARIO)
+print(json.dumps({"n": n, "tasks_before": tasks, "tasks_after": sorted(os.listdir("/proc/self/task")),
+                  "needs_before": fresh, "needs_after": "ea_agent.domains.suo.needs" in sys.modules}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/self/task is Linux's")
+@pytest.mark.timeout(120)
+def test_the_warm_up_runs_a_peer_and_leaves_no_thread_to_fork_under():
+    """The zygote forks after its warm-up: a thread started there (Zenoh's runtime, a
+    pool) would be missing in every child, holding whatever lock it held."""
+    out = subprocess.run([sys.executable, "-c", WARM], capture_output=True, text=True, timeout=100)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["n"] > 100   # a minute of the small scenario went through the peer
+    assert res["tasks_after"] == res["tasks_before"]
+    assert not res["needs_before"] and res["needs_after"]   # code a peer imports on first use is in
+
+
+def test_a_warm_up_that_fails_is_named_and_the_zygote_goes_on(tmp_path):
+    from saim_mesh import zygote
+    bad = tmp_path / "nowhere"
+    problem = zygote.warm_up(bad)
+    assert problem is not None and str(bad) in problem and problem.startswith("zygote: no warm-up")
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "scenario.json").write_text("{not json")
+    assert "scenario.json" in zygote.warm_up(broken) or str(broken) in zygote.warm_up(broken)
+
+
+@pytest.mark.timeout(60)
+def test_a_zygote_that_cannot_warm_up_says_so_and_still_forks(tmp_path, capfd):
+    from saim_mesh import zygote
+    bad = tmp_path / "nowhere"
+    env = dict(os.environ, SAIM_ZYGOTE_WARM=str(bad))
+    z = zygote.Zygote(env)
+    try:
+        log = tmp_path / "child.log"
+        p = z.spawn([sys.executable, "-m", "saim_mesh", "link", "--help"], str(log), env)
+        assert p.wait(30) == 0
+        assert "usage" in log.read_text()
+    finally:
+        z.close()
+    assert f"zygote: no warm-up ({bad}" in capfd.readouterr().err
