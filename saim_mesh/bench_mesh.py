@@ -30,6 +30,7 @@ from . import zygote
 from .bench_ea import feed
 from .procstat import Sampler
 from .mesh import Proc, start_peer, up
+from .proc import leaf_env
 from .runner import config_for, make_ea, run
 from .zconf import config, free_port
 
@@ -142,7 +143,7 @@ def one_peer(scenario: str, unit: str, speed: str, until: float | None, tmp: Pat
     root = f"bench/{uuid.uuid4().hex[:8]}"
     args = [sys.executable, "-m", "saim_mesh", "replay", scenario, "--listen", ep, "--root", root, "--speed", speed,
             "--linger", "5", "--wait-peers", unit] + (["--until", str(until)] if until else [])
-    rp = Proc("replay", args)
+    rp = Proc("replay", args, env=leaf_env())   # as `mesh.start_replay` has it
     procs = [rp]
     try:
         rp.wait_for("ready", 60)

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from . import zygote
-from .proc import Proc, clean_env, py
+from .proc import Proc, clean_env, leaf_env, py
 from .zconf import free_port
 
 
@@ -33,7 +33,7 @@ def start_replay(scenario: str, endpoint: str, root: str, wait: list[str], speed
                        "--linger", str(linger), "--window", str(window), *_sec(pki),
                        *(["--state", str(state)] if state else []), *(["--until", str(until)] if until else []),
                        "--wait-peers", *wait],
-                env=clean_env(), log_dir=log_dir)
+                env=leaf_env(), log_dir=log_dir)
 
 
 def _listen(endpoint: str) -> str:
@@ -49,7 +49,7 @@ def start_peer(scenario: str, unit: str, endpoint: str, root: str, out: str | Pa
                extra: list[str] = (), pki=None, log_dir=None, net: list[str] | None = None) -> Proc:
     return Proc(name or unit, [*py(), "peer", "--scenario", scenario, "--unit", unit, *(net or _net(endpoint)),
                                "--root", root, "--out", str(out), *_sec(pki), *extra],
-                env=clean_env(), log_dir=log_dir,
+                env=leaf_env(), log_dir=log_dir,
                 spawner=zygote.spawner())   # EA peers fork from one zygote (saim_mesh/zygote.py)
 
 

@@ -103,3 +103,19 @@ def clean_env() -> dict:
     # (zenoh's threads would otherwise each grow their own and keep them)
     env.setdefault("MALLOC_ARENA_MAX", "2")
     return env
+
+
+# one worker thread for Zenoh's receive runtime where the default is two (the other
+# runtimes run one already): a leaf has a link or two, and on a shared machine a second
+# receive worker only wakes the first (BN peer in bench_mesh: share of in-process
+# 0.43 -> 0.47 in three A/B pairs, a fifth fewer context switches). Routers keep two.
+LEAF_RUNTIME = "(rx:(worker_threads:1))"
+
+
+def leaf_env() -> dict:
+    """`clean_env` for a leaf (an EA peer, the replay): one receive worker in Zenoh,
+    unless ZENOH_RUNTIME is set already."""
+    env = clean_env()
+    if not env.get("ZENOH_RUNTIME"):   # an empty value makes Zenoh panic: unset counts as unset
+        env["ZENOH_RUNTIME"] = LEAF_RUNTIME
+    return env
