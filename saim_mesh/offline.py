@@ -2,7 +2,7 @@
 batches and singles routed to its coarse subscriptions by key expression, a replay's
 situation store answering its catch-ups), tick by tick, on scenario time.
 
-`bench_intake` times it against the in-process EA; the zygote runs a minute of it
+`bench_intake` times it against the in-process EA; the zygote runs two minutes of it
 before it forks (`warm`), so what the peer's code builds on first use is built once."""
 from __future__ import annotations
 
@@ -159,7 +159,7 @@ def run(sc, unit: str, chunks) -> tuple[Peer, dict[str, float]]:
 
 
 def warm(scenario: str | Path, ticks: int = 60) -> int:
-    """The first `ticks` (a minute of scenario time) of the top unit's peer on a small
+    """The first `ticks` (two minutes of scenario time) of the top unit's peer on a small
     scenario: msgspec's per-type codecs, the interpreter's specialised bytecode, shapely's
     and the domain's first-use state come to exist here. In a fork server that is once
     for every child, shared, instead of once in each. Returns the messages it took in."""

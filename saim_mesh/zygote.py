@@ -1,7 +1,7 @@
 """A fork server for mesh processes: it imports the heavy modules once (numpy,
 shapely, pyproj, zenoh, the EA and its domains: ~30 MB of private heap in every
-peer), runs a minute of a small scenario's peer so that what the code builds on
-first use exists too (`offline.warm`: 5-6 MB less private memory in every child),
+peer), runs two minutes of a small scenario's peer so that what the code builds on
+first use exists too (`offline.warm`: about 4 MB less PSS in every child),
 freezes it all out of the garbage collector's reach, and forks each peer from
 itself, so 15 peers share those pages copy-on-write instead of holding 15 copies.
 
@@ -82,7 +82,7 @@ def _die_with_parent() -> None:
 
 
 def warm_up(scenario: Path = WARM_SCENARIO) -> str | None:
-    """Run the first minute of a small scenario's peer here, before any fork (`offline.warm`).
+    """Run the first two minutes of a small scenario's peer here, before any fork (`offline.warm`).
     A problem is returned, not raised: a zygote that could not warm up still forks.
     `SAIM_ZYGOTE_WARM`: 0 for none, or another scenario's directory."""
     choice = os.environ.get("SAIM_ZYGOTE_WARM", "1")

@@ -79,7 +79,7 @@ def test_the_warm_up_runs_a_peer_and_leaves_no_thread_to_fork_under():
     out = subprocess.run([sys.executable, "-c", WARM], capture_output=True, text=True, timeout=100)
     assert out.returncode == 0, out.stderr
     res = json.loads(out.stdout.strip().splitlines()[-1])
-    assert res["n"] > 100   # a minute of the small scenario went through the peer
+    assert res["n"] > 100   # two minutes of the small scenario went through the peer
     assert res["tasks_after"] == res["tasks_before"]
     assert not res["needs_before"] and res["needs_after"]   # code a peer imports on first use is in
 
@@ -92,7 +92,8 @@ def test_a_warm_up_that_fails_is_named_and_the_zygote_goes_on(tmp_path):
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "scenario.json").write_text("{not json")
-    assert "scenario.json" in zygote.warm_up(broken) or str(broken) in zygote.warm_up(broken)
+    problem = zygote.warm_up(broken)   # a scenario that does not load: returned, not raised
+    assert problem is not None and str(broken) in problem
 
 
 @pytest.mark.timeout(60)
