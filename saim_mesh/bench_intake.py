@@ -18,7 +18,7 @@ from pathlib import Path
 
 from . import scenario as S
 from .bench_ea import feed
-from .offline import KEY_ROOT, run, stream  # noqa: F401 -- KEY_ROOT: the harness's key root, for callers
+from .offline import run, stream
 from .runner import config_for, make_ea
 
 ROOT = Path(__file__).resolve().parents[1]
