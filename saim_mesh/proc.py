@@ -96,8 +96,9 @@ class Proc:
         return self.p.poll()
 
 
-def clean_env() -> dict:
-    env = dict(os.environ)
+def clean_env(base: dict | None = None) -> dict:
+    """`base` (the environment by default) with what every mesh process wants set."""
+    env = dict(os.environ if base is None else base)
     env.setdefault("PYTHONUNBUFFERED", "1")
     # dozens of small processes per machine: two malloc arenas each, not one per thread
     # (zenoh's threads would otherwise each grow their own and keep them)

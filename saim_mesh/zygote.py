@@ -26,6 +26,8 @@ import threading
 import time
 from pathlib import Path
 
+from .proc import clean_env
+
 PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "msgspec", "msgpack",
            "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer",
            "ea_agent.domains.suo.domain", "ea_agent.domains.uv.domain")
@@ -197,10 +199,8 @@ def _exists(pid: int) -> bool:
 
 class Zygote:
     def __init__(self, env: dict | None = None):
-        env = dict(env or os.environ)
+        env = clean_env(env or None)   # glibc reads MALLOC_ARENA_MAX at start: here, for every child
         env.setdefault("OPENBLAS_NUM_THREADS", "1")   # no thread pool to fork under
-        env.setdefault("MALLOC_ARENA_MAX", "2")   # as `proc.clean_env`: glibc reads it at start, here for every child
-        env.setdefault("PYTHONUNBUFFERED", "1")
         self.p = subprocess.Popen([sys.executable, "-m", "saim_mesh.zygote"], stdin=subprocess.PIPE,
                                   stdout=subprocess.PIPE, env=env)
         if self.p.stdout.readline().strip() != b"ready":
