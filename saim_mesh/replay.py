@@ -37,6 +37,7 @@ from ea_agent import domains
 from . import messages as M
 from . import wire as W
 from .batch import Batcher, groups_of
+from .inbox import Inbox, Waker
 from .radios import Radios
 from .store import KeyIndex, Log
 from .scenario import Scenario
@@ -84,6 +85,14 @@ class Replay:
         self.entity_unit = {e: u.id for u in sc.taskorg.units.values() for e in u.entities}
         self.signer = sign.signer_for(conf)   # secure mode: authority goes out signed as `replay`
         self.batchers: dict[str, Batcher] = {}   # per source: batched families go out per group and tick (batch.py)
+        self.waker = Waker()   # what we serve (queries, acks, tokens, live reports) wakes us: we block, not poll
+        self.inboxes: dict[str, Inbox] = {}
+
+    def inbox(self, name: str, cap: int, declare, key: str, **kw) -> Inbox:
+        """Declare (a subscriber, queryable or liveliness subscriber) into an `Inbox` that wakes us."""
+        box = self.inboxes[name] = Inbox(self.waker, cap)
+        box.decl = declare(key, box, **kw)   # kept: a dropped declaration may be undeclared
+        return box
 
     def _flush(self) -> None:
         """Every source's batches out, before the tick that covers them."""
@@ -248,9 +257,10 @@ class Replay:
         with contextlib.ExitStack() as stack:
             sess = {n: stack.enter_context(zenoh.open(c)) for n, c in sorted(self.confs.items())}
             s = sess[self.top]
-            qs = {n: x.declare_queryable(self.ks.store(n), zenoh.handlers.FifoChannel(64)) for n, x in sess.items()}
-            fticks = s.declare_subscriber(self.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
-            ingest = s.declare_subscriber(self.ks.ingest("*"), zenoh.handlers.FifoChannel(10_000))
+            box = self.inbox
+            qs = {n: box(f"store-{n}", 64, x.declare_queryable, self.ks.store(n)) for n, x in sess.items()}
+            fticks = box("fusion-ticks", 100_000, s.declare_subscriber, self.ks.fusion_tick("*"))
+            ingest = box("ingest", 10_000, s.declare_subscriber, self.ks.ingest("*"))
 
             def serve() -> None:
                 self._take_fusion_ticks(fticks)
@@ -267,7 +277,9 @@ class Replay:
                 serve()
                 if time.monotonic() > deadline:
                     raise TimeoutError(f"peers never came: {missing}")
-            pacer = (Pacer(s, self.ks, self.window_s, serve, self.log, self.gate) if self.window_s > 0 else None)
+                self.waker.wait(0.05)   # a query is answered at once; who is here is asked 20 times a second
+            pacer = (Pacer(s, self.ks, self.window_s, serve, self.log, self.gate, box) if self.window_s > 0
+                     else None)
             source_of = getattr(domains.of(sc), "source_of", None)   # robots send their own state
             radios = Radios(s, self.ks, source_of, self.log) if source_of else None
             self.log("start" + (f" resumed n={self.n_ticks} t={self.t:.0f}" if self.resumed_from else ""), flush=True)
@@ -287,7 +299,7 @@ class Replay:
                     while (wait := t0 + ev.t / self.speed - time.monotonic()) > 0:
                         serve()
                         self._ingest(s, ingest, self.t)   # a live report while the script is quiet
-                        time.sleep(min(wait, 0.005))
+                        self.waker.wait(min(wait, 0.005))
                 self._ingest(s, ingest, max(self.t, min(ev.t, next_tick)))
                 if radios is not None and radios.silent(ev):
                     continue
@@ -304,15 +316,16 @@ class Replay:
                 for src, x in sess.items():   # the end again: a peer cut off when it went out still gets it
                     x.put(self.ks.clock(), self.last_tick[src], congestion_control=BLOCK)
                 look = time.monotonic() + 0.5          # answer queries promptly, ask who is there less often
-                while time.monotonic() < look:
+                while (left := look - time.monotonic()) > 0:
                     serve()
-                    time.sleep(0.002)
+                    self.waker.wait(left)
             return {"events": len(self.entries), "wall_s": time.monotonic() - t0, "rejects": self.gate.errors,
                     "batches": sum(b.sent for b in batchers.values()),
                     "batched": sum(b.entries for b in batchers.values()),
                     "store_index_bytes": self.entries.nbytes + sum(k.nbytes for k in self.by_key.values())
                     + sum(a.itemsize * len(a) for a in self.src_seqs.values()),
                     "ingested": self.ingested,
+                    "inbox_dropped": {k: b.dropped for k, b in self.inboxes.items() if b.dropped},
                     "silenced": radios.silenced if radios else 0}
 
     def _resume(self, script) -> int:
@@ -348,12 +361,13 @@ class Pacer:
     (`ack/<zid>`), and stop counting when their token goes or when they make no
     progress for `stall_s` of wall time."""
 
-    def __init__(self, s, ks: KeySpace, window_s: float, serve, log, gate: W.Gate, stall_s: float = 30.0):
+    def __init__(self, s, ks: KeySpace, window_s: float, serve, log, gate: W.Gate, box, stall_s: float = 30.0):
+        """`box`: `Replay.inbox`, so that an ack or a token wakes the wait."""
         self.window_s, self.serve, self.log, self.stall_s, self.gate = window_s, serve, log, stall_s, gate
         self.ks = ks
-        self.acks = s.declare_subscriber(ks.ack("*", "*"), zenoh.handlers.FifoChannel(100_000))
-        self.alive = s.liveliness().declare_subscriber(ks.alive("*", "*"), zenoh.handlers.FifoChannel(1024),
-                                                       history=True)
+        self.acks = box("acks", 100_000, s.declare_subscriber, ks.ack("*", "*"))
+        self.alive = box("alive", 1024, s.liveliness().declare_subscriber, ks.alive("*", "*"), history=True)
+        self.waker: Waker = self.acks.waker
         self.live: set[str] = set()          # EA peers, as "<unit>/<zid>"
         for r in s.liveliness().get(ks.alive("*", "*"), timeout=2.0):   # those here now, for sure
             if r.ok is not None and (p := self._ea(str(r.ok.key_expr))):
@@ -405,7 +419,7 @@ class Pacer:
                              flush=True)
                     self.ignored.add(z)
             self.serve()
-            time.sleep(0.0005)   # a peer's next ack is at most one of its ticks away
+            self.waker.wait(0.05)   # an ack, a token or a query wakes us; the timeout notices a stall
 
 
 def main_replay(sc: Scenario, conf, root: str, speed, wait_peers, linger_s: float, until=None,

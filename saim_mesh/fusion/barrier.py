@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import time
 
-import zenoh
-
 from saim_mesh import wire as W
+from saim_mesh.inbox import Inbox, Waker
 
 
 class TrackBarrier:
@@ -17,11 +16,12 @@ class TrackBarrier:
         self.peer, self.grace_s = peer, grace_s
         self.ftick = {g: -1.0 for g in peer.fusion_groups}   # clock time each node's tracks are out to
         self.lost: set[str] = set()
-        self.sub = None
+        self.sub: Inbox | None = None
 
     def open(self, s) -> None:
-        if self.ftick:
-            self.sub = s.declare_subscriber(self.peer.ks.fusion_tick("*"), zenoh.handlers.FifoChannel(100_000))
+        if self.ftick:   # a node's marker wakes the wait (`Inbox`): no polling while a node is behind
+            self.sub = Inbox(Waker(), 100_000)
+            self.sub.decl = s.declare_subscriber(self.peer.ks.fusion_tick("*"), self.sub)
 
     def _take(self) -> None:
         while (m := self.sub.try_recv()) is not None:
@@ -55,4 +55,4 @@ class TrackBarrier:
                     p.system_alert(f"fusion-{g}", "immediate", f"fusion node {g} silent for {self.grace_s:.0f} s: "
                                    f"the clock goes on without its tracks", event="fusion-silent", fusion=g)
                 return
-            time.sleep(0.0002)   # the node's marker is at most one of its ticks away
+            self.sub.waker.wait(min(0.05, give_up - now))   # woken by the next marker; the timeout sees a silence
