@@ -41,6 +41,7 @@ from .inbox import Inbox, Waker
 from .radios import Radios
 from .store import KeyIndex, Log
 from .scenario import Scenario
+from .script import Script
 from .security import sign
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -227,9 +228,10 @@ class Replay:
                 s.put(k, self.entries[-1][1], attachment=seq_bytes(n), congestion_control=BLOCK)
             self.ingested += 1
 
-    def _prepare(self, end_t: float) -> list[tuple[object, str, bytes, str]]:
+    def _prepare(self, end_t: float) -> Script:
         """Keys and payloads for the whole script, before the clock starts: one bulk
-        projection, and the task organization as it will be at each event's time."""
+        projection, and the task organization as it will be at each event's time
+        (`(event, key, payload, source)` entries, kept compactly: `script.py`)."""
         sc = self.sc
         evs = [e for e in sc.events if e.t <= end_t]
         lon = np.array([getattr(e, "lon", 0.0) for e in evs])
@@ -238,7 +240,7 @@ class Replay:
         to = sc.taskorg.copy()
         planned = getattr(domains.of(sc), "org_changes", None)   # a domain with a changing hierarchy
         reorgs = planned(sc) if planned else []
-        out = []
+        out = Script()
         for i, (ev, x, y) in enumerate(zip(evs, xs.tolist(), ys.tolist())):
             while reorgs and reorgs[0][0] <= ev.t:
                 _, unit, parent = reorgs.pop(0)
@@ -246,8 +248,8 @@ class Replay:
             if type(ev) is M.Reorganization:
                 to.resubordinate(ev.unit, ev.new_parent)
             k = self.ks.key(ev, to, sc.projection, (x, y))   # signed with its place in the script: n = i + 1
-            out.append((ev, k, sign.seal(self.signer, k, ev, M.encode(ev), i + 1), self._source(ev, to)))
-        return out
+            out.append(ev, k, sign.seal(self.signer, k, ev, M.encode(ev), i + 1), self._source(ev, to))
+        return out.close()
 
     def run(self) -> dict:
         sc = self.sc
@@ -258,7 +260,7 @@ class Replay:
             sess = {n: stack.enter_context(zenoh.open(c)) for n, c in sorted(self.confs.items())}
             s = sess[self.top]
             box = self.inbox
-            qs = {n: box(f"store-{n}", 64, x.declare_queryable, self.ks.store(n)) for n, x in sess.items()}
+            qs = {n: box(f"store-{n}", 4096, x.declare_queryable, self.ks.store(n)) for n, x in sess.items()}
             fticks = box("fusion-ticks", 100_000, s.declare_subscriber, self.ks.fusion_tick("*"))
             ingest = box("ingest", 10_000, s.declare_subscriber, self.ks.ingest("*"))
 
@@ -270,7 +272,7 @@ class Replay:
             self.batchers = batchers = {n: Batcher(x, groups, self.gate.max_bytes) for n, x in sess.items()}
             # one declared publisher per key not batched (on its source's session): a put then skips parsing the key
             pubs = {(k, src): sess[src].declare_publisher(k, congestion_control=BLOCK)
-                    for k, src in sorted({(k, src) for _, k, _, src in script}) if groups.group(k) is None}
+                    for k, src in sorted(set(zip(script.keys, script.sources))) if groups.group(k) is None}
             self.log(f"ready {s.info.zid()}", flush=True)
             deadline = time.monotonic() + self.wait_timeout
             while self.wait_peers and (missing := self._missing(s)):
@@ -285,7 +287,7 @@ class Replay:
             self.log("start" + (f" resumed n={self.n_ticks} t={self.t:.0f}" if self.resumed_from else ""), flush=True)
             t0 = time.monotonic() - (self.t / self.speed if self.speed else 0.0)
             next_tick = self.t + self.tick_s
-            for ev, key, payload, src in script[start:]:
+            for ev, key, payload, src in script.since(start):
                 while ev.t >= next_tick:
                     self._flush()
                     if pacer:
@@ -342,7 +344,7 @@ class Replay:
             raise ValueError(f"{self.state_path}: unreadable replay state ({e}); remove it to start over") from None
         if not (0 <= seq <= len(script) and 0 <= t <= self.sc.duration_s and n >= 0):
             raise ValueError(f"{self.state_path}: replay state n={n} t={t} seq={seq} does not fit this scenario")
-        for ev, key, payload, src in script[:seq]:
+        for ev, key, payload, src in script.since(0, seq):
             self._add(src, key, payload)
         self.n_ticks, self.t, self.fusion_t = n, t, fusion
         self.resumed_from = st
