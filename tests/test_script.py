@@ -30,7 +30,7 @@ def test_a_script_reads_like_the_list_it_replaces():
     assert list(s) == want
     assert [s[i] for i in range(len(want))] == want
     assert s[-1] == want[-1]
-    assert s[2:7] == want[2:7] and s[:0] == [] and s[8:] == want[8:]
+    assert s[2:7] == want[2:7] and s[:0] == [] and s[8:] == want[8:] and s[::3] == want[::3] and s[::-1] == want[::-1]
     assert list(s.since(4)) == want[4:] and list(s.since(3, 6)) == want[3:6] and list(s.since(10)) == []
     assert s.payload(0) == b"" and s.payload(3) == bytes([3]) * 3
     with pytest.raises(IndexError):
