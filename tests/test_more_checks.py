@@ -53,6 +53,23 @@ def table(*rows) -> str:
     return "\n".join(f"{(a.t, a.type, a.subjects, a.details.get('how') or a.details.get('check'))}" for a in rows)
 
 
+def elsewhere(t0: float, t1: float) -> list:
+    """Another unit and a hostile moving 30 km away, reported every 2 s: an in-process EA
+    hears them (each closes an epoch), a peer of A1's company need not."""
+    return ([m for t in range(int(t0), int(t1), 2) for m in at(t, "A2", -30000.0 + 5 * t, 0.0)]
+            + track_path("H9", t0, t1, lambda t: (-30000.0 + 5 * t, 30000.0), every=2.0))
+
+
+def told(alerts) -> list[dict]:
+    """What alerts say, without their ids (numbered over every alert the EA gave)."""
+    out = []
+    for a in alerts:
+        d = a.to_json_dict()
+        d["details"] = {k: v for k, v in d["details"].items() if k != "id"}
+        out.append(d)
+    return out
+
+
 # ========================================================================= 1. checkpoints
 # A1 marches east along RTE-1 from (0, 0), its start confirmed at t=100; CP-1 a point
 # 1 km down the route, CP-2 a polygon checkpoint 2 km down it.
@@ -156,6 +173,19 @@ def test_a_checkpoint_passed_before_the_march_started_is_not_reached(tmp_path):
     msgs = path("A1", 10, 500, east(5.0, t0=50.0)) + [start(290, "A1-march", "A1")]   # x=1000 at t=250
     cp = of(play(sc, msgs, 500), "checkpoint")
     assert [(a.t, a.details["how"]) for a in cp] == [(330.0, "late")], table(*cp)
+
+
+def test_a_checkpoint_is_reached_at_the_same_moment_whatever_else_is_heard(tmp_path):
+    """A1 (6.07 m/s from t=100, reporting at 13, 23, ...) comes within 50 m of CP-1 at
+    t=256.5, dead-reckoned between its reports. An EA that also hears far units and tracks
+    closes every epoch; the arrival is still seen when A1 reports or at the periodic scan,
+    as by an EA that hears A1 alone (a peer): the same alert at the same time."""
+    sc = scenario(tmp_path, CP_FEATURES, [mission("A1-march", "A1", "move", route="RTE-1", destination="AA-E",
+                                                  checkpoints=[{"point": "CP-1", "t": 450}])])
+    base = path("A1", 13, 600, east(6.07)) + [start(100, "A1-march", "A1")]
+    alone, beside = of(play(sc, base, 600), "checkpoint"), of(play(sc, base + elsewhere(100, 600), 600), "checkpoint")
+    assert told(alone) == told(beside), table(*alone, *beside)
+    assert len(alone) == 1 and alone[0].details["how"] == "early" and 256.5 <= alone[0].t <= 262.0, table(*alone)
 
 
 # ============================================================================== 2. lines
@@ -375,6 +405,19 @@ def test_several_hostiles_near_are_one_alert_unit_first_then_the_tracks(tmp_path
     a = so[0]
     assert a.subjects == ("A1", "H1", "H2") and a.details["tracks"] == ["H1", "H2"]
     assert abs(a.details["distance_m"] - 700.0) < 2.0
+
+
+def test_a_standoff_is_told_at_the_same_moment_whatever_else_is_heard(tmp_path):
+    """A1 withdraws north at 5 m/s from t=100 (reporting at 13, 23, ...) towards H1 at
+    (0, 1707): within its 1 km standoff from t=241.4, dead-reckoned between reports. An EA
+    that also hears far units and tracks tells it when A1 reports (t=243), as one that
+    hears A1 alone does, not at the first epoch after the crossing."""
+    sc = scenario(tmp_path, SO_FEATURES, [mission("A1-so", "A1", "withdraw", destination="AA-FAR")])
+    base = path("A1", 13, 400, lambda t: (0.0, max(0.0, t - 100) * 5.0)) + [start(100, "A1-so", "A1"),
+                                                                           track(110, "H1", 0, 1707)]
+    alone, beside = of(play(sc, base, 400), "standoff"), of(play(sc, base + elsewhere(100, 400), 400), "standoff")
+    assert told(alone) == told(beside), table(*alone, *beside)
+    assert len(alone) == 1 and 241.4 <= alone[0].t <= 246.0, table(*alone)
 
 
 GONE_T = 300.0

@@ -26,6 +26,7 @@ class ThreatsAhead(Detector):
         self._box: tuple | None = None   # rebuilt when a corridor is added (see _near_any_line)
         self._box_lines = 0
         self._boxes_of: tuple | None = None   # (watched lines' bounds, their union box, each one's box, the width)
+        self._found: dict[str, frozenset[str]] = {}   # mission id -> the tracks ahead at its last look
 
     def org_changed(self) -> None:
         self._box = None   # the missions in our plan changed
@@ -119,38 +120,57 @@ class ThreatsAhead(Detector):
                 & (shapely.distance(line, pts) <= w))
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        """A watched mission is looked at when what it depends on changed: a report of its
+        unit, the periodic scan (its dead-reckoned place moved on), or a change of a track
+        that is ahead of it now or was at its last look. Never because a track elsewhere
+        changed, nor at an epoch closed only because other messages came: an in-process EA
+        hears every message and a peer only those near its units, and both must look at the
+        same moments (a look also keeps a standing alert from expiring, `Voa.touch`)."""
         dom = self.dom
-        if not (ch.tracks or ch.rescan) or not dom.pic.tracks or float(dom.voi_cfg["ahead_m"]) <= 0.0:
+        if not dom.pic.tracks or float(dom.voi_cfg["ahead_m"]) <= 0.0:
+            self._found.clear()   # nothing is ahead of anyone
+            return
+        watched, bounds = self._watched_with_bounds()
+        found = self._found
+        if not watched:
+            found.clear()
+            return
+        due = [ch.rescan or m.unit in ch.units for m, _ in watched]
+        if not ch.tracks and not any(due):
             return
         tracks = dom.pic.tracks
         # the live tracks (as Picture.live_tracks), on plain floats: bounding boxes first
         live = [(k, e.x, e.y) for k, e in sorted(tracks.items()) if e.strength > 0]
         if len(dom.location.lines) != self._box_lines:
             self._box = None
-        if not live or not self._near_any_line(live):
-            return
-        watched, bounds = self._watched_with_bounds()
-        if not watched:
-            return
         (x0, y0, x1, y1), boxes = self._boxes(watched, bounds)
-        near = [(i, x, y) for i, (_, x, y) in enumerate(live) if x0 <= x <= x1 and y0 <= y <= y1]
-        if not near:
-            return   # no track anywhere near any moving unit's line
+        near = ([(i, x, y) for i, (_, x, y) in enumerate(live) if x0 <= x <= x1 and y0 <= y <= y1]
+                if live and self._near_any_line(live) else [])
+        changed = ch.tracks
         xy = pts = None
-        for (m, line), (bx0, by0, bx1, by1) in zip(watched, boxes):
-            # only tracks in the union of the boxes can be in this one (most of the time none is)
-            if not any(bx0 <= x <= bx1 and by0 <= y <= by1 for _, x, y in near):
+        for (m, line), (bx0, by0, bx1, by1), again in zip(watched, boxes, due):
+            before = found.get(m.id, frozenset())
+            inbox = [i for i, x, y in near if bx0 <= x <= bx1 and by0 <= y <= by1]
+            if not (again or changed.intersection(before) or any(live[i][0] in changed for i in inbox)):
                 continue
-            box = [False] * len(live)
-            for i, x, y in near:
-                box[i] = bx0 <= x <= bx1 and by0 <= y <= by1
-            if xy is None:
-                xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
-                pts = shapely.points(xy)
-            hit = self.ahead(m, line, xy, pts, np.array(box))
-            if hit is not None and hit.any():
-                inside = [k for (k, _, _), ok in zip(live, hit.tolist()) if ok]
+            inside: list[str] = []
+            if inbox:
+                box = [False] * len(live)
+                for i in inbox:
+                    box[i] = True
+                if xy is None:
+                    xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
+                    pts = shapely.points(xy)
+                hit = self.ahead(m, line, xy, pts, np.array(box))
+                if hit is not None and hit.any():
+                    inside = [k for (k, _, _), ok in zip(live, hit.tolist()) if ok]
+            if not (again or changed.intersection(before) or changed.intersection(inside)):
+                continue   # only tracks that are not ahead changed: nothing to look at
+            found[m.id] = frozenset(inside)
+            if inside:
                 m.respond_to_threat_ahead(dom, t, inside, sum(tracks[k].strength for k in inside))
+        for mid in found.keys() - {m.id for m, _ in watched}:   # no longer watched
+            del found[mid]
 
     def _boxes(self, watched: list, bounds: list) -> tuple[tuple[float, ...], list[tuple[float, ...]]]:
         """Each watched line's bounds widened by its mission's ahead width, and the bounds of

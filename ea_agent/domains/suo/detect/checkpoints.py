@@ -46,6 +46,8 @@ class Checkpoints(Detector):
             if not left or dom.plan.state.get(mid) != "active":
                 continue
             m = left[0][0]
+            if not ch.rescan and m.unit not in ch.units:   # its unit's reports and the scan only, not an epoch
+                continue   # another unit's report closed (a peer may not hear that unit: see ThreatsAhead)
             pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
             if pos is None:
                 continue

@@ -18,14 +18,20 @@ class Standoffs(Detector):
 
     def reset(self) -> None:
         self.watch: dict[str, Mission] = {}
+        self.found: dict[str, frozenset[str]] = {}   # mission id -> the tracks too near at its last look
 
     def post(self, m: Mission) -> None:
         self.watch[m.id] = m
 
     def end_mission(self, mid: str) -> None:
         self.watch.pop(mid, None)
+        self.found.pop(mid, None)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
+        """A mission is looked at when what it depends on changed: a report of its unit,
+        the periodic scan (its dead-reckoned place moved on), or a change of a track that
+        is too near now or was at its last look; not when a unit or a track elsewhere
+        changed, which an in-process EA hears and a peer may not (see ThreatsAhead)."""
         dom = self.dom
         if not self.watch or dom.plan is None or not (ch.tracks or ch.units or ch.rescan):
             return
@@ -33,28 +39,36 @@ class Standoffs(Detector):
         # the live tracks (as Picture.live_tracks), on plain floats
         live = [(k, e.x, e.y) for k, e in sorted(tracks.items()) if e.strength > 0]
         if not live:
+            self.found.clear()
             return
+        changed = ch.tracks
         ids = xy = None
         for mid, m in self.watch.items():
             if dom.plan.state.get(mid) != "active" or not dom.in_plan(m):
+                continue
+            again = ch.rescan or m.unit in ch.units
+            before = self.found.get(mid, frozenset())
+            if not (again or changed):
                 continue
             pos = dom.unit_now.get(m.unit) or dom.unit_pos.get(m.unit)
             if pos is None:
                 continue
             keep = dom.voi(m, "standoff_m")
             px, py = pos
-            if not any(abs(x - px) < keep and abs(y - py) < keep for _, x, y in live):
-                continue   # a square around the unit holds none: hypot >= either side, none is near
-            if ids is None:
-                ids = [k for k, _, _ in live]
-                xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
-            d = np.hypot(xy[:, 0] - pos[0], xy[:, 1] - pos[1])
-            near = d < keep
-            if not near.any():
+            inside: list[str] = []
+            if any(abs(x - px) < keep and abs(y - py) < keep for _, x, y in live):
+                if ids is None:
+                    ids = [k for k, _, _ in live]
+                    xy = np.array([(x, y) for _, x, y in live]).reshape(-1, 2)
+                d = np.hypot(xy[:, 0] - pos[0], xy[:, 1] - pos[1])
+                inside = [k for k, ok in zip(ids, (d < keep).tolist()) if ok]
+            if not (again or changed.intersection(before) or changed.intersection(inside)):
+                continue   # only tracks that are not near changed: nothing to look at
+            self.found[mid] = frozenset(inside)
+            if not inside:
                 continue
             key = ("standoff", mid)
             dom.ea.voa.touch(key, t)   # still too near: the same story
-            inside = [k for k, ok in zip(ids, near.tolist()) if ok]
             nearest = float(d.min())
             cands.append(Candidate(
                 t, "standoff", m.compute_priority("standoff"), (m.unit, *inside),
