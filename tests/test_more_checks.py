@@ -188,6 +188,20 @@ def test_a_checkpoint_is_reached_at_the_same_moment_whatever_else_is_heard(tmp_p
     assert len(alone) == 1 and alone[0].details["how"] == "early" and 256.5 <= alone[0].t <= 262.0, table(*alone)
 
 
+def test_a_slow_march_is_projected_late_at_the_same_moment_whatever_else_is_heard(tmp_path):
+    """A1 marches at 3 m/s to an END-NLT at t=1500 it cannot make: projected late. Its
+    trend is sampled on a grid of scenario time, so an EA that also hears far units and
+    tracks from t=0 (and closes every epoch from the first) samples it when one that
+    hears A1 alone does (their projections were 4 s apart when a sample followed the
+    first epoch each happened to close)."""
+    sc = scenario(tmp_path, CP_FEATURES, [mission("A1-march", "A1", "move", route="RTE-1", destination="AA-E",
+                                                  end={"type": "END-NLT", "t": 1500})])
+    base = path("A1", 13, 1600, east(3.0)) + [start(100, "A1-march", "A1")]
+    alone, beside = (of(play(sc, msgs, 1600), "projected-late") for msgs in (base, base + elsewhere(0, 1600)))
+    assert told(alone) == told(beside), table(*alone, *beside)
+    assert len(alone) == 1 and alone[0].t % 10.0 == 0.0, table(*alone)   # a sample's time
+
+
 # ============================================================================== 2. lines
 # ---- a delay holds forward of PL-D (x = -1000) until its time
 PL_D = line("PL-D", "phase-line", (-1000, -2000), (-1000, 2000))

@@ -34,7 +34,7 @@ class Projections(Detector):
 
     def reset(self) -> None:
         self.hist: dict[str, deque] = {}   # mission -> (t, distance off its route, distance to go)
-        self.next_t = 0.0
+        self.next_t = -1.0   # the next sample's time; none yet: the first grid time from the next look
         self.due: list[Mission] = []
         self.routes: dict[str, tuple] = {}      # mission -> (its monitor list, its length, _route of it)
         self.beyond: dict[tuple, tuple] = {}    # (route, destination) -> (line, area, length, end to area)
@@ -47,9 +47,16 @@ class Projections(Detector):
         positions dead-reckoned to now (a stale report alone would make it seem behind)."""
         dom = self.dom
         self.due = []
-        if dom.plan is None or t < self.next_t or float(dom.voi_cfg["projection_horizon_s"]) <= 0.0:
+        if dom.plan is None or float(dom.voi_cfg["projection_horizon_s"]) <= 0.0:
             return
-        self.next_t = t + SAMPLE_S
+        # samples fall on a grid of scenario time, not SAMPLE_S after whichever epoch was
+        # closed: an EA that hears more messages closes more epochs, and every EA must
+        # sample at the same moments (a grid time is a periodic scan's, which every EA closes)
+        if self.next_t < 0.0:
+            self.next_t = math.ceil(t / SAMPLE_S) * SAMPLE_S
+        if t < self.next_t:
+            return
+        self.next_t = (math.floor(t / SAMPLE_S) + 1) * SAMPLE_S
         plans = self._plans()
         self.due = plans.due
         rows = []   # (index in due, its history, where it is now)
