@@ -55,3 +55,18 @@ def test_a_track_beside_one_already_there_is_no_new_group():
     got = _alerts(reps, 600.0)
     news = [k for a in got for k in a.details.get("new_tracks", ())]
     assert "N-1" in news and "N-3" in news and "N-2" not in news
+
+
+def test_a_group_that_stood_inside_until_it_left_is_no_news_back_whatever_else_is_heard():
+    """Reported inside once at t=100 and standing there, 1 km out at 900, back at 1000: it
+    was in the area until 900, so its return is no news (the expiry is 720 s). The time a
+    track was last inside is stamped when it changes and at the periodic scan, not at
+    every epoch another track's change closed: with a far track reported every 2 s (which
+    an in-process EA hears and a peer does not) the alerts are the same, and without it
+    the return was told as a new group."""
+    reps = [(100, "N-1", EDGE_X - 500, 17000.0, 4), (900, "N-1", EDGE_X + 1000, 17000.0, 4),
+            (1000, "N-1", EDGE_X - 500, 17000.0, 4)]
+    far = [(t, "F-9", -30000.0 + 5 * t, 40000.0, 4) for t in range(101, 1300, 2)]
+    alone, beside = _alerts(reps, 1300.0), _alerts(reps + far, 1300.0)
+    assert [a.to_json_dict() for a in alone] == [a.to_json_dict() for a in beside]
+    assert len(alone) == 1 and alone[0].t < 200, [(a.t, a.type, a.details.get("new_tracks")) for a in alone]

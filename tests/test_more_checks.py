@@ -53,10 +53,12 @@ def table(*rows) -> str:
     return "\n".join(f"{(a.t, a.type, a.subjects, a.details.get('how') or a.details.get('check'))}" for a in rows)
 
 
-def elsewhere(t0: float, t1: float) -> list:
-    """Another unit and a hostile moving 30 km away, reported every 2 s: an in-process EA
-    hears them (each closes an epoch), a peer of A1's company need not."""
-    return ([m for t in range(int(t0), int(t1), 2) for m in at(t, "A2", -30000.0 + 5 * t, 0.0)]
+def elsewhere(t0: float, t1: float, unit: str = "B1") -> list:
+    """A platoon and a hostile moving 30 km away, reported every 2 s. Another company's
+    platoon (B1) and the far hostile are heard by an in-process EA (the hostile closes
+    epochs) and not by company A's peer; a platoon of A's own (A2) is heard by both, but
+    its reports close epochs that A1's alerts must not depend on either."""
+    return ([m for t in range(int(t0), int(t1), 2) for m in at(t, unit, -30000.0 + 5 * t, 0.0)]
             + track_path("H9", t0, t1, lambda t: (-30000.0 + 5 * t, 30000.0), every=2.0))
 
 
@@ -177,13 +179,14 @@ def test_a_checkpoint_passed_before_the_march_started_is_not_reached(tmp_path):
 
 def test_a_checkpoint_is_reached_at_the_same_moment_whatever_else_is_heard(tmp_path):
     """A1 (6.07 m/s from t=100, reporting at 13, 23, ...) comes within 50 m of CP-1 at
-    t=256.5, dead-reckoned between its reports. An EA that also hears far units and tracks
-    closes every epoch; the arrival is still seen when A1 reports or at the periodic scan,
-    as by an EA that hears A1 alone (a peer): the same alert at the same time."""
+    t=256.5, dead-reckoned between its reports. With A2's reports every 2 s the EA closes
+    every epoch; the arrival is still seen when A1 reports or at the periodic scan, as
+    without them: the same alert at the same time (the epochs an EA closes depend on what
+    it hears, which differs between an in-process EA and a peer)."""
     sc = scenario(tmp_path, CP_FEATURES, [mission("A1-march", "A1", "move", route="RTE-1", destination="AA-E",
                                                   checkpoints=[{"point": "CP-1", "t": 450}])])
     base = path("A1", 13, 600, east(6.07)) + [start(100, "A1-march", "A1")]
-    alone, beside = of(play(sc, base, 600), "checkpoint"), of(play(sc, base + elsewhere(100, 600), 600), "checkpoint")
+    alone, beside = (of(play(sc, msgs, 600), "checkpoint") for msgs in (base, base + elsewhere(100, 600, "A2")))
     assert told(alone) == told(beside), table(*alone, *beside)
     assert len(alone) == 1 and alone[0].details["how"] == "early" and 256.5 <= alone[0].t <= 262.0, table(*alone)
 
@@ -432,6 +435,25 @@ def test_a_standoff_is_told_at_the_same_moment_whatever_else_is_heard(tmp_path):
     alone, beside = of(play(sc, base, 400), "standoff"), of(play(sc, base + elsewhere(100, 400), 400), "standoff")
     assert told(alone) == told(beside), table(*alone, *beside)
     assert len(alone) == 1 and 241.4 <= alone[0].t <= 246.0, table(*alone)
+
+
+@pytest.mark.parametrize("case", ["silent", "halted"])
+def test_a_standoff_is_judged_on_where_the_unit_is_now_whatever_else_is_heard(tmp_path, case):
+    """A1 reports moving north at 5 m/s (y=0 at t=13, 500 at 113). Silent after that, it is
+    dead-reckoned up to a minute on (y=800 from t=173): H1 at y=1795 comes within its 1 km
+    standoff then. Halted (an unchanged report at 171 stops the reckoning at y=500), H2
+    appearing at y=1700 at t=300 is 1.2 km away. An EA that hears far traffic and one that
+    hears A1 alone must judge on the same place (a stale reckoned place put a peer 915 m
+    from H2: a false standoff)."""
+    sc = scenario(tmp_path, SO_FEATURES, [mission("A1-so", "A1", "withdraw", destination="AA-FAR")])
+    base = at(13, "A1", 0, 0) + at(113, "A1", 0, 500) + [start(100, "A1-so", "A1")]
+    base += [track(110, "H1", 0, 1795)] if case == "silent" else at(171, "A1", 0, 500) + [track(300, "H2", 0, 1700)]
+    alone, beside = (of(play(sc, msgs, 400), "standoff") for msgs in (base, base + elsewhere(100, 400)))
+    assert told(alone) == told(beside), table(*alone, *beside)
+    if case == "silent":
+        assert len(alone) == 1 and 173.0 <= alone[0].t <= 180.0 and alone[0].details["tracks"] == ["H1"], table(*alone)
+    else:
+        assert not alone, table(*alone)
 
 
 GONE_T = 300.0

@@ -490,7 +490,11 @@ class SuoDomain:
             up = self._up
             dirty_units = dirty_units.union(*[up[leaf] for leaf in self.dirty_leaves])
             self._update_positions(t)
-        elif t <= self._reckoning_until():   # members still dead-reckoned: their estimate moves on
+        elif self.dirty_tracks or t >= self.next_scan or t <= self._reckoning_until():
+            # members still dead-reckoned (their estimate moves on), or detectors will look
+            # (a track changed, the periodic scan): they read where units are now, not where
+            # they were at the last epoch this EA happened to close (an in-process EA closes
+            # more epochs than a peer, which hears fewer messages)
             self._update_positions(t)
         ch = Changes(self.dirty_leaves, dirty_units, self.dirty_tracks, t >= self.next_scan)
         cands: list[Candidate] = []

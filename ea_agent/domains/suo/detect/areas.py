@@ -112,7 +112,7 @@ class Areas(Detector):
                                        "new_tracks": self._new.get(area, [])}))
 
     def observe(self, t: float, ch: Changes) -> None:
-        if not ch.tracks and not self._stale:
+        if not ch.tracks and not self._stale and not ch.rescan:
             return
         self._stale = False
         pic = self.dom.pic
@@ -144,12 +144,19 @@ class Areas(Detector):
             for k in ids:
                 self.last_xy[(a, k)] = (pic.tracks[k].x, pic.tracks[k].y)
                 self.seen_in[a].add(k)
+        # a track's time in an area is stamped when it changed, and at the periodic scan:
+        # not at whichever epochs other tracks' changes closed (an in-process EA hears more
+        # of those than a peer, and both must tell the same news)
         present = set()
+        stamp, changed = ch.rescan, ch.tracks
         for a, idx in self._inside(self.near_index, xy).items():   # still there, or at its edge
             for i in idx:
-                if (a, tids[i]) in self.inside_t or tids[i] in self.tracks.get(a, ()):
-                    self.inside_t[(a, tids[i])] = t
-                    present.add((a, tids[i]))
+                k = tids[i]
+                was = self.inside_t.get((a, k))
+                if (was is not None and t - was < forget) or k in self.tracks.get(a, ()):
+                    if stamp or k in changed or was is None:
+                        self.inside_t[(a, k)] = t
+                    present.add((a, k))
         self._present = present
         self._present_areas = {a for a, _ in present}
         if len(self.inside_t) > 4 * max(1, len(tids)) * max(1, len(members)):   # bounded: drop the forgotten
@@ -211,8 +218,8 @@ class Areas(Detector):
         begun, self._eligible = eligible - self._eligible, eligible
         # a group still in an area (or lingering at its edge) keeps what was told of it
         # alive, changed or not: it is no news when it next moves
-        voa = dom.ea.voa
-        for area in self._present_areas:
+        voa = dom.ea.voa   # at the scan, or where a track there changed (see observe)
+        for area in self._present_areas if ch.rescan else {a for a, k in self._present if k in ch.tracks}:
             kind = self.global_areas.get(area)
             if kind:
                 voa.touch((kind, area, None), t)

@@ -85,8 +85,9 @@ class Lines(Detector):
                 m, lid, what, when, start = it
                 if state not in (("ready", "active") if what == "depart" else ("active",)):
                     continue
-                if m.unit not in ch.units and start is not None:
-                    continue   # it did not move: it did not cross
+                if m.unit not in ch.units and (start is not None or not ch.rescan):
+                    continue   # it did not move: it did not cross (its side is first taken at its
+                    # report or a scan, not at another unit's, which a peer may not hear)
                 pos = dom.unit_pos.get(m.unit)   # as reported: dead reckoning overshoots a unit halting on its line
                 if pos is None:
                     continue

@@ -51,11 +51,11 @@ class Projections(Detector):
             return
         # samples fall on a grid of scenario time, not SAMPLE_S after whichever epoch was
         # closed: an EA that hears more messages closes more epochs, and every EA must
-        # sample at the same moments (a grid time is a periodic scan's, which every EA closes)
+        # sample at the same moments
         if self.next_t < 0.0:
             self.next_t = math.ceil(t / SAMPLE_S) * SAMPLE_S
-        if t < self.next_t:
-            return
+        if t < self.next_t or not ch.rescan:   # at a scan's epoch, which every EA closes, whatever
+            return                              # epoch_s and unknown_scan_s are
         self.next_t = (math.floor(t / SAMPLE_S) + 1) * SAMPLE_S
         plans = self._plans()
         self.due = plans.due
