@@ -115,6 +115,14 @@ class Force:
         """`unit` reporting every REPORT_S from t0 to t1 from the same place."""
         return self.path(unit, t0, t1, lambda t: (x, y))
 
+    def elsewhere(self, t0: float, t1: float, unit: str = "B1") -> list:
+        """A platoon and a hostile moving 30 km away, reported every 2 s. Another company's
+        platoon (B1) and the far hostile are heard by an in-process EA (the hostile closes
+        epochs) and not by company A's peer; a platoon of A's own (A2) is heard by both, but
+        its reports close epochs that A1's alerts must not depend on either."""
+        return ([m for t in range(int(t0), int(t1), 2) for m in self.at(t, unit, -30000.0 + 5 * t, 0.0)]
+                + track_path("H9", t0, t1, lambda t: (-30000.0 + 5 * t, 30000.0), every=2.0))
+
 
 # ------------------------------------------------------------------------ tracks, confirmations
 def track(t: float, k: str, x: float, y: float, strength: int = 4) -> SensorTrack:
@@ -162,6 +170,16 @@ def alerts_of(ea, typ: str, mission: str | None = None, repeats: bool = False) -
     """Alerts of `typ` (with the notifier's repeats only if `repeats`), of `mission` when given."""
     return [a for a in ea.alerts if a.type == typ and (repeats or "repeat_of" not in a.details)
             and (mission is None or a.details.get("mission") == mission)]
+
+
+def told(alerts) -> list[dict]:
+    """What alerts say, without their ids (numbered over every alert the EA gave)."""
+    out = []
+    for a in alerts:
+        d = a.to_json_dict()
+        d["details"] = {k: v for k, v in d["details"].items() if k != "id"}
+        out.append(d)
+    return out
 
 
 def near(t: float, want: float, tol: float = 2 * EPOCH) -> bool:

@@ -29,7 +29,7 @@ from saim_mesh.console.state import State
 
 from .conftest import BATTALION, SMALL
 from .synthetic import (EPOCH, EXPIRY_S, Force, alerts_of, box, end, feed, line, mission, near, play, start,
-                        track, track_path)
+                        told, track)
 
 AHEAD_M = 1500.0   # configs/ea.toml voi.ahead_m
 WIDTH_M = 300.0    # voi.ahead_width_m
@@ -127,14 +127,13 @@ def test_a_far_track_does_not_decide_when_a_threat_ahead_is_told(tmp_path):
     """An in-process EA hears every track; a peer hears only those near its units. Both
     must tell a hostile ahead at the same moment: when the unit's own move brings it
     within ahead_m (A1 reports at t=203 from x=515, 1485 m short of H1), not at the next
-    change of some track 30 km away, nor at the next periodic scan (battalion-sensors' M
+    change of some track or unit 30 km away, nor at the next periodic scan (battalion-sensors' M
     told it 4 s later through the mesh than in process)."""
     sc = scenario(tmp_path, [MOVE])
     base = (path("A1", 13, 400, east()) + stays("A2", 0, -3000, t1=400)
             + [start(100, "A1-move", "A1"), track(110, "H1", 2000, 0)])
-    far = track_path("H9", 101, 400, lambda t: (-20000 + 5 * t, 30000), every=2.0)
-    alone, beside = threat(play(sc, base, 400)), threat(play(sc, base + far, 400))
-    assert alone.to_json_dict() == beside.to_json_dict()
+    alone, beside = (threat(play(sc, msgs, 400)) for msgs in (base, base + FORCE.elsewhere(101, 400)))
+    assert told([alone]) == told([beside])
     assert near(alone.t, 203.0), alone.t
 
 

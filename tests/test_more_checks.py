@@ -20,11 +20,11 @@ from saim_mesh import scenario as S
 from saim_mesh.runner import config_for, make_ea
 
 from .synthetic import (EPOCH, EXPIRY_S, REPORT_S, Force, alerts_of, box, edited, end, line, mission, play,
-                        point, start, track, track_path)
+                        point, start, told, track, track_path)
 from .synthetic import near as _near
 
 FORCE = Force(name="more-checks")
-write, at, path = FORCE.write, FORCE.at, FORCE.path
+write, at, path, elsewhere = FORCE.write, FORCE.at, FORCE.path, FORCE.elsewhere
 
 
 def scenario(tmp_path, features, missions):
@@ -51,25 +51,6 @@ def east(v: float, t0: float = 100.0, x0: float = 0.0, y: float = 0.0):
 
 def table(*rows) -> str:
     return "\n".join(f"{(a.t, a.type, a.subjects, a.details.get('how') or a.details.get('check'))}" for a in rows)
-
-
-def elsewhere(t0: float, t1: float, unit: str = "B1") -> list:
-    """A platoon and a hostile moving 30 km away, reported every 2 s. Another company's
-    platoon (B1) and the far hostile are heard by an in-process EA (the hostile closes
-    epochs) and not by company A's peer; a platoon of A's own (A2) is heard by both, but
-    its reports close epochs that A1's alerts must not depend on either."""
-    return ([m for t in range(int(t0), int(t1), 2) for m in at(t, unit, -30000.0 + 5 * t, 0.0)]
-            + track_path("H9", t0, t1, lambda t: (-30000.0 + 5 * t, 30000.0), every=2.0))
-
-
-def told(alerts) -> list[dict]:
-    """What alerts say, without their ids (numbered over every alert the EA gave)."""
-    out = []
-    for a in alerts:
-        d = a.to_json_dict()
-        d["details"] = {k: v for k, v in d["details"].items() if k != "id"}
-        out.append(d)
-    return out
 
 
 # ========================================================================= 1. checkpoints
@@ -136,8 +117,8 @@ def test_a_checkpoint_reached_well_before_its_time_is_early_at_arrival(tmp_path,
     assert a.subjects == ("A1",) and a.priority == priority and "early" in a.message
 
 
-@pytest.mark.parametrize("cp_t, told", [(300, []), (450, ["early"])], ids=["on-time", "early"])
-def test_a_unit_passing_a_checkpoint_between_its_reports_is_dead_reckoned_there(tmp_path, cp_t, told):
+@pytest.mark.parametrize("cp_t, hows", [(300, []), (450, ["early"])], ids=["on-time", "early"])
+def test_a_unit_passing_a_checkpoint_between_its_reports_is_dead_reckoned_there(tmp_path, cp_t, hows):
     """Reports every 60 s at 5 m/s: x=900 at t=280, 1200 at t=340; none within 50 m of
     CP-1, but its position dead-reckoned on scenario time passes it at t=300."""
     sc = scenario(tmp_path, CP_FEATURES, [mission("A1-march", "A1", "move", route="RTE-1", destination="AA-E",
@@ -145,7 +126,7 @@ def test_a_unit_passing_a_checkpoint_between_its_reports_is_dead_reckoned_there(
     msgs = [m for t in range(40, 641, 60) for m in at(t, "A1", *east(5.0, t0=100.0)(t))]
     ea = play(sc, msgs + [start(100, "A1-march", "A1")], 640)
     cp = of(ea, "checkpoint")
-    assert [a.details["how"] for a in cp] == told, table(*cp)
+    assert [a.details["how"] for a in cp] == hows, table(*cp)
     assert all(290.0 <= a.t <= 310.0 for a in cp), table(*cp)   # within 50 m of x=1000 from t=290 to 310
 
 
@@ -432,7 +413,7 @@ def test_a_standoff_is_told_at_the_same_moment_whatever_else_is_heard(tmp_path):
     sc = scenario(tmp_path, SO_FEATURES, [mission("A1-so", "A1", "withdraw", destination="AA-FAR")])
     base = path("A1", 13, 400, lambda t: (0.0, max(0.0, t - 100) * 5.0)) + [start(100, "A1-so", "A1"),
                                                                            track(110, "H1", 0, 1707)]
-    alone, beside = of(play(sc, base, 400), "standoff"), of(play(sc, base + elsewhere(100, 400), 400), "standoff")
+    alone, beside = (of(play(sc, msgs, 400), "standoff") for msgs in (base, base + elsewhere(100, 400)))
     assert told(alone) == told(beside), table(*alone, *beside)
     assert len(alone) == 1 and 241.4 <= alone[0].t <= 246.0, table(*alone)
 
