@@ -282,6 +282,11 @@ class KeySpace:
         orders every event, takes them into its stream."""
         return f"{self.root}/ingest/{source}"
 
+    def notice(self, to: str = "*", owner: str = "*") -> str:
+        """Re-notifications (to = owner) and escalations (to = the owner's superior) of
+        `owner`'s EA: not alerts (docs/console.md, "Notifications")."""
+        return f"{self.root}/notice/{to}/{owner}"
+
     def cmdlog(self, unit: str = "*") -> str:
         """`unit`'s EA answers every command here."""
         return f"{self.root}/cmdlog/{unit}"

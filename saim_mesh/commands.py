@@ -43,7 +43,7 @@ def make(kind: str, **fields) -> msgspec.Struct:
 
 
 REF_FIELD = {W.AckCmd: "alert", W.SilenceCmd: "id", W.UnsilenceCmd: "id", W.SetCmd: "key", W.ConfirmCmd: "mission",
-             W.CffCmd: "cff", W.DecideCmd: "alert"}
+             W.CffCmd: "cff", W.DecideCmd: "alert", W.InhibitCmd: "id", W.UninhibitCmd: "id"}
 
 
 def result(cmd, ok: bool, t: float, error: str = "") -> W.CmdResult:
@@ -101,6 +101,10 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
             _cff(ea, book, cmd, t)
         elif k is W.DecideCmd:
             _decide(ea, cmd, t)
+        elif k is W.InhibitCmd:
+            ea.inhibit(rule_of(cmd))
+        elif k is W.UninhibitCmd:
+            ea.uninhibit(cmd.id)
         else:
             raise ValueError(f"not a command: {k.__name__}")
     except KeyError as e:
@@ -108,6 +112,17 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
     except (ValueError, TypeError) as e:
         return result(cmd, False, t, str(e))
     return result(cmd, True, t)
+
+
+def rule_of(cmd: W.InhibitCmd) -> dict:
+    """The rule an `inhibit` command carries, as a config table would give it."""
+    def m(spec: W.MatcherSpec) -> dict:
+        return {k: list(getattr(spec, k)) for k in ("types", "subjects", "priorities", "owners") if getattr(spec, k)}
+    d = {"id": cmd.id, "source": m(cmd.source), "target": m(cmd.target), "equal": list(cmd.equal),
+         "comment": cmd.comment}
+    if cmd.for_s > 0:
+        d["for_s"] = cmd.for_s
+    return d
 
 
 def _confirm(ea, cmd: W.ConfirmCmd, t: float) -> None:

@@ -29,6 +29,7 @@ from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 
 from . import cmdlog
+from . import noticelog
 from . import commands as C
 from . import messages as M
 from . import batch as B
@@ -42,7 +43,7 @@ from .keyfacts import KeyFacts
 from .presence import Presence
 from .runner import config_for, make_ea
 from .scenario import Scenario
-from .security.sign import verifier_for
+from .security.sign import signer_for, verifier_for
 from .tickwait import SourceLost, TickWait
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -82,6 +83,10 @@ class Peer(Intake, TickWait):
         self.reject_alert = int(mesh["reject_alert"])
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
         self.clog = CommandLog(cmdlog.path_for(out_path)) if out_path else None   # for a deterministic replay
+        self.nlog = noticelog.NoticeLog(noticelog.path_for(out_path)) if out_path else None
+        self.signer = signer_for(conf)   # secure mode: our escalations are signed (they cross routers)
+        self.ea.notice_sinks.append(self._notice_sink)
+        self.ea.inbox_sinks.append(self._notice_in)
         if armed:   # a commander's console watches this EA: urgent alerts repeat until acknowledged
             self.ea.arm()
         self.deadline_s, self.connect = deadline_s, connect or []
@@ -138,6 +143,7 @@ class Peer(Intake, TickWait):
         # SAIM_TRACE=DIR (bench_scale): every seq that reached us from the wire, written to
         # DIR/<unit>.recv at the end: what crossed each router link, per key family
         self.trace: array | None = array("I") if os.environ.get("SAIM_TRACE") else None
+        self._notice_prefix = self.ks.notice(self.unit, "")
         C.tap(self.ea)   # a `cff confirm` needs the call for fire the EA saw
         self.needs_before = getattr(self.ea.domain, "needs_before", None)   # places to bring up to date first
         self.prefetched = 0   # messages fed for them
@@ -159,6 +165,46 @@ class Peer(Intake, TickWait):
             self.alog.write(a)
         if self.session is not None:
             self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
+
+    def _notice_sink(self, n) -> None:
+        """Our re-notification or escalation: logged and published (not while feeding the
+        store's past at a (re)join: those were told, or fell, before we were here)."""
+        if self.replaying:
+            return
+        if self.nlog:
+            self.nlog(n)
+        if self.session is not None:
+            key = self.ks.notice(n.to, n.owner)
+            payload = W.encode(W.make(W.Notice, **{**n.to_json_dict(), "subjects": list(n.subjects)}))
+            if self.signer is not None:
+                payload = self.signer.sign(key, payload)
+            self.session.put(key, payload, congestion_control=BLOCK)
+
+    def _notice_in(self, n) -> None:
+        """An escalation from a subordinate's EA: logged with our notices."""
+        if self.nlog:
+            self.nlog(n)
+
+    def _on_notice(self, key: str, payload: bytes) -> None:
+        """notice/<us>/<owner>: an escalation from below, checked (signature in secure
+        mode, key against content, the owner under us in the task organization now)."""
+        n = self.gate.control(W.Notice, payload, key, signed=True)
+        if n is None:
+            return
+        owner = key.rsplit("/", 1)[-1]
+        if owner == self.unit:
+            return   # our own re-notification, heard back
+        taskorg = getattr(self.ea.domain, "taskorg", None)
+        why = (f"notice of {n.owner!r} on the key of {owner!r}" if n.owner != owner else
+               f"a {n.kind} notice on our escalation key" if n.kind != "escalate" or n.to != self.unit else
+               f"{owner} is not under {self.unit} in the task organization"
+               if taskorg is None or owner not in taskorg.units or self.unit not in taskorg.ancestors(owner) else None)
+        if why is not None:
+            self._reject("notice", "(key)", why, key)
+            return
+        from ea_agent.core.notify import Notice
+        self.ea.take_notice(Notice(n.kind, n.t, n.owner, n.alert, n.story, n.type, n.priority, tuple(n.subjects),
+                                   n.message, n.count, n.to, n.due_t))
 
     def system_alert(self, subject: str, prio: str, text: str, **details) -> None:
         self.log(f"presence {subject} {details.get('event', '')} t={self.t:.0f}", flush=True)
@@ -316,6 +362,9 @@ class Peer(Intake, TickWait):
                 key, payload = self.cmdq.get_nowait()
             except queue.Empty:
                 return
+            if key.startswith(self._notice_prefix):
+                self._on_notice(key, payload)
+                continue
             res = self._command(key, payload)
             if res is not None and self.session is not None:
                 if res.t > self.sc.duration_s:   # a `set` after the last epoch: the gate bounds t
@@ -396,6 +445,7 @@ class Peer(Intake, TickWait):
                 clock = s.declare_subscriber(self.ks.clock(), lambda smp: clockq.put(smp.payload.to_bytes()))
                 self._wake = lambda: clockq.put(None)
                 cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"), self._on_cmd)
+                notices = s.declare_subscriber(self.ks.notice(self.unit, "*"), self._on_cmd)   # escalations from below
                 self._check_connected(s)
                 self._resubscribe()
                 self.presence = Presence(self, s)
@@ -456,6 +506,7 @@ class Peer(Intake, TickWait):
                 s.put(self.ks.bye(self.unit), W.encode(W.make(W.Bye, unit=self.unit)))   # a clean leave is no lost peer
                 token.undeclare()
                 cmds.undeclare()
+                notices.undeclare()
                 clock.undeclare()
                 self.session = None
         finally:
@@ -466,6 +517,8 @@ class Peer(Intake, TickWait):
                 self.alog.close()
             if self.clog:
                 self.clog.close()
+            if self.nlog:
+                self.nlog.close()
         return self.summary(t_wall, t_first)
 
     def summary(self, t_wall: float, t_first: float | None) -> dict:

@@ -56,31 +56,51 @@ class Fusion:
         return out
 
 
+def wire_notices(eas: list[ExecutionAssistant], sinks: Iterable[Callable] = ()) -> None:
+    """Each EA's notices to `sinks`, and its escalations to its superior's EA when that
+    one runs here too (on the mesh they travel on notice/<superior>/<owner>)."""
+    by_owner = {ea.owner: ea for ea in eas}
+    sinks = list(sinks)
+
+    def route(n) -> None:
+        up = by_owner.get(n.to) if n.kind == "escalate" else None
+        if up is not None:
+            up.take_notice(n)
+    for ea in eas:
+        ea.notice_sinks.extend(sinks)
+        ea.notice_sinks.append(route)
+
+
 def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bool = True,
         config_path=None, speed: float | None = None,
         progress: Callable[[float], None] | None = None, overrides: dict | None = None,
         on_made: Callable[[list], None] | None = None, commands: list | None = None,
-        armed: bool = False) -> list[ExecutionAssistant]:
+        armed: bool = False, notice_sinks: Iterable[Callable] = (),
+        ack_after_s: float | None = None) -> list[ExecutionAssistant]:
     """Feed every event to every EA in scenario-time order. speed=None runs as fast as
     possible; otherwise scenario time is paced at `speed` x wall-clock time.
     `commands`: a commander's commands (`cmdlog.Logged`, in time order), each applied
     after the EA reached its time, as the peer applied it after that clock tick;
-    `armed`: urgent alerts repeat until acknowledged from the start (a console watching)."""
+    `armed`: urgent alerts are re-notified and escalated until acknowledged from the start
+    (a console watching); `ack_after_s`: a modelled commander acknowledges each urgent alert
+    that long after it (implies armed); `notice_sinks`: every EA's re-notifications and
+    escalations. An escalation to a superior run here reaches that EA (`take_notice`)."""
     sinks = list(sinks)
     eas = []
     for o in owners:
         if o not in sc.taskorg.units:
             raise KeyError(f"unknown unit {o!r}: not in the task organization of {sc.name}")
         eas.append(make_ea(sc, o, config_for(sc, o, config_path, overrides), sinks, voa=voa))
+    by_owner = {ea.owner: ea for ea in eas}
+    wire_notices(eas, notice_sinks)
     if on_made is not None:   # e.g. a console hooks the EAs before they start
         on_made(eas)
     for ea in eas:
-        if armed:
-            ea.arm()
+        if armed or ack_after_s is not None:
+            ea.arm(ack_after_s)
         if commands:
             tap(ea)   # a `cff confirm` needs the calls for fire seen before it (the peer taps at start too)
         ea.start(0.0)
-    by_owner = {ea.owner: ea for ea in eas}
     cmds = [c for c in commands or () if c.unit in by_owner]
 
     def command_until(t: float) -> None:   # commands due before events at time >= their t

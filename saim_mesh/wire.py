@@ -158,6 +158,48 @@ class DecideCmd(_Wire, kw_only=True):
     option: Name
 
 
+class MatcherSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """Which alerts an inhibition rule's source or target is: every non-empty list must match."""
+    types: Names = []
+    subjects: Names = []
+    priorities: Annotated[list[Literal["flash", "immediate", "priority", "routine"]], msgspec.Meta(max_length=4)] = []
+    owners: Names = []
+
+
+class InhibitCmd(_Wire, kw_only=True):
+    """Add (or replace) an inhibition rule: while a `source` alert is active (`for_s`, 0:
+    the EA's voa.expiry_s), `target` alerts sharing the `equal` labels are inhibited."""
+    req: Req
+    id: Name
+    source: MatcherSpec
+    target: MatcherSpec
+    equal: Annotated[list[Literal["subjects", "owner", "places", "category"]], msgspec.Meta(max_length=4)] = []
+    for_s: Annotated[float, msgspec.Meta(ge=0.0, le=T_LIMIT)] = 0.0
+    comment: Comment = ""
+
+
+class UninhibitCmd(_Wire, kw_only=True):
+    req: Req
+    id: Name
+
+
+class Notice(_Wire, kw_only=True):
+    """A re-notification of an unacknowledged urgent alert, or its escalation to the
+    superior (`ea_agent.core.notify.Notice`); published on notice/<to>/<owner>. Not an alert."""
+    kind: Literal["renotify", "escalate"]
+    t: Time
+    owner: Name
+    alert: Name
+    story: Name
+    type: Name
+    priority: Literal["flash", "immediate", "priority", "routine"]
+    subjects: Names
+    message: Annotated[str, msgspec.Meta(max_length=2000)]
+    count: Annotated[int, msgspec.Meta(ge=1, le=1000)]
+    to: Name
+    due_t: Time
+
+
 class CmdResult(_Wire, kw_only=True):
     """The EA's answer to command `req`: `t` is the scenario time it took effect; `ref`
     what it was about (the alert acknowledged, the silence, mission, call for fire or
@@ -171,9 +213,10 @@ class CmdResult(_Wire, kw_only=True):
 
 
 COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": UnsilenceCmd, "set": SetCmd,
-                             "confirm": ConfirmCmd, "cff": CffCmd, "decide": DecideCmd}
+                             "confirm": ConfirmCmd, "cff": CffCmd, "decide": DecideCmd,
+                             "inhibit": InhibitCmd, "uninhibit": UninhibitCmd}
 CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health,
-           *COMMANDS.values(), CmdResult)
+           *COMMANDS.values(), CmdResult, Notice)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
 KINDS = (frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}
          | {"signed"})   # what rejects are counted under ("signed": a forged or replayed envelope)

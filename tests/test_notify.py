@@ -11,6 +11,7 @@ import pytest
 from ea_agent.core.config import ConfigError
 from saim_mesh import commands as C
 from saim_mesh import messages as M
+from saim_mesh import wire as W
 from saim_mesh.runner import config_for, make_ea
 
 OWNER = "A2"
@@ -49,52 +50,109 @@ def of(ea, typ=None, **details):
             and all(a.details.get(k) == v for k, v in details.items())]
 
 
+def notices(ea, kind=None, alert=None):
+    return [n for n in ea.notices if (kind is None or n.kind == kind) and (alert is None or n.alert == alert)]
+
+
 def test_ids_are_unique_and_deterministic(small):
     a, b = run_a2(small, armed=False), run_a2(small, armed=False)
     ids = [x.details["id"] for x in a.alerts]
     assert ids == [f"{OWNER}/{n}" for n in range(1, len(ids) + 1)]
     assert ids == [x.details["id"] for x in b.alerts]
-    assert not of(a, repeats=1)   # not armed (no commander acted): the paper's baseline, no repeats
+    assert not a.notices   # not armed (no commander acted): the paper's baseline, nobody to re-notify
 
 
-def test_unacknowledged_urgent_alert_repeats_and_escalates(small):
-    ea = run_a2(small, until=1200.0)
-    first = next(a for a in ea.alerts if a.priority == "immediate")
+def test_stories_fold_a_storys_updates(small):
+    ea = run_a2(small, armed=False)
+    oop = of(ea, "out-of-position")
+    # the same unit out of position three times within the VOA expiry: one story
+    assert [a.details["story"] for a in oop] == [oop[0].details["id"]] * len(oop)
+    others = [a for a in ea.alerts if (a.type, a.subjects) != (oop[0].type, oop[0].subjects)]
+    assert all(a.details["story"] != oop[0].details["id"] for a in others)
+
+
+def test_unacknowledged_urgent_alert_is_renotified_never_reraised(small):
+    """Re-notifications are notices, at `[notify.immediate]` cadence and cap; the alerts
+    (times, types, priorities, messages) are exactly the unarmed run's."""
+    armed, plain = run_a2(small), run_a2(small, armed=False)
+    key = lambda a: (a.t, a.type, a.priority, a.subjects, a.message, a.details["id"])   # noqa: E731
+    assert [key(a) for a in armed.alerts] == [key(a) for a in plain.alerts]
+    first = next(a for a in armed.alerts if a.priority == "immediate")
     assert (first.t, first.type, first.details["id"]) == (942.0, "out-of-position", "A2/1")
-    reps = of(ea, repeat_of="A2/1")
-    step, n = ea.notify.repeat_s, ea.notify.escalate_after
-    assert [r.t for r in reps] == [first.t + step * k for k in range(1, len(reps) + 1)]
-    assert len(reps) == int((1200.0 - first.t) // step)
-    assert [r.details["repeats"] for r in reps] == list(range(1, len(reps) + 1))
-    assert [r.priority for r in reps] == ["immediate"] * n + ["flash"] * (len(reps) - n)
-    assert all((r.type, r.subjects, r.message) == (first.type, first.subjects, first.message) for r in reps)
-    assert len({a.details["id"] for a in ea.alerts}) == len(ea.alerts)
-    assert ea.stats["repeats"] == len(of(ea, None, repeat_of="A2/1")) + sum(
-        1 for a in ea.alerts if a.details.get("repeat_of") not in (None, "A2/1"))
-    # a flash alert stays flash
-    ff = [a for a in ea.alerts if a.priority == "flash" and "repeat_of" not in a.details]
-    assert ff and all(r.priority == "flash" for a in ff for r in of(ea, repeat_of=a.details["id"]))
+    every, times = armed.cfg["notify"]["immediate"]["every_s"], armed.cfg["notify"]["immediate"]["times"]
+    ren = notices(armed, "renotify", "A2/1")
+    assert [(n.t, n.count) for n in ren] == [(first.t + every * k, k) for k in range(1, times + 1)]
+    assert all((n.type, n.priority, n.subjects, n.message, n.to, n.due_t) ==
+               (first.type, first.priority, first.subjects, first.message, OWNER, first.t) for n in ren)
+    (esc,) = notices(armed, "escalate", "A2/1")
+    assert esc.t == first.t + armed.cfg["notify"]["escalate_s"] and esc.to == "A" and esc.priority == "immediate"
+    assert armed.stats["renotifications"] == len(notices(armed, "renotify"))
+    assert armed.stats["escalations"] == len(notices(armed, "escalate"))
+    # flash alerts are re-notified at their own cadence, and stay flash
+    for a in (x for x in armed.alerts if x.priority == "flash"):
+        fl = notices(armed, "renotify", a.details["id"])
+        assert [n.t - a.t for n in fl] == [armed.cfg["notify"]["flash"]["every_s"] * k
+                                          for k in range(1, len(fl) + 1)]
+        assert len(fl) <= armed.cfg["notify"]["flash"]["times"] and all(n.priority == "flash" for n in fl)
 
 
-def test_ack_stops_repeats(small):
+def test_cadence_cap_and_escalation_are_configuration(small):
+    cfg = config_for(small, OWNER)
+    cfg["voi"]["projection_horizon_s"] = 0.0
+    cfg["notify"]["immediate"] = {"every_s": 60.0, "times": 5}
+    cfg["notify"]["escalate_s"] = 0.0
+    ea = make_ea(small, OWNER, cfg)
+    ea.arm()
+    ea.start(0.0)
+    for ev in small.events:
+        ea.submit(ev)
+    ea.finish(small.duration_s)
+    assert [n.t for n in notices(ea, "renotify", "A2/1")] == [942.0 + 60.0 * k for k in range(1, 6)]
+    assert not notices(ea, "escalate")
+
+
+def test_ack_stops_renotification_and_escalation(small):
     acks = []
-    ea = run_a2(small, [(1070.0, lambda e: acks.append(e.ack("A2/1")))], until=1500.0)
-    reps = of(ea, repeat_of="A2/1")
-    assert [r.t for r in reps] == [1002.0, 1062.0]
-    assert acks[0]["stopped"] and acks[0]["repeats"] == 2
-    # acknowledging one of its repeats acknowledges the chain
-    ea2 = run_a2(small, [(1010.0, lambda e: e.ack(of(e, repeat_of="A2/1")[0].details["id"]))], until=1500.0)
-    assert [r.t for r in of(ea2, repeat_of="A2/1")] == [1002.0]
-    ea2.ack("A2/1")   # again: fine, nothing to stop
+    ea = run_a2(small, [(1300.0, lambda e: acks.append(e.ack("A2/1")))], until=2500.0)
+    # at 1242 (300 s after it): re-notified once and escalated; acknowledged at 1300, the second
+    # re-notification (1542) never comes
+    assert [n.t for n in notices(ea, "renotify", "A2/1")] == [1242.0]
+    assert [n.t for n in notices(ea, "escalate", "A2/1")] == [1242.0]
+    assert acks[0]["stopped"] and acks[0]["renotified"] == 1 and acks[0]["escalated"]
+    early = run_a2(small, [(1000.0, lambda e: e.ack("A2/1"))], until=2500.0)
+    assert not notices(early, alert="A2/1")
+    ea.ack("A2/1")   # again: fine, nothing to stop
+    with pytest.raises(KeyError, match="unknown alert"):
+        ea.ack("A2/999")
+
+
+def test_a_modelled_commander_acknowledges_after_a_delay(small):
+    """evaluate --commander: `arm(ack_after_s)` acknowledges each urgent alert that long after it."""
+    diligent = run_a2(small, [(0.0, lambda e: e.arm(30.0))], armed=False)
+    assert not diligent.notices and diligent.notify.acked and not diligent.notify.chains
+    slow = run_a2(small, [(0.0, lambda e: e.arm(300.0))], armed=False)
+    # immediate: nothing before 300 s; flash: re-notified at 120 and 240 s, then acknowledged
+    assert all(n.kind == "renotify" and n.priority == "flash" for n in slow.notices)
+
+
+def test_escalation_reaches_the_superiors_ea_in_process(small):
+    from saim_mesh.runner import run
+    got = []
+    eas = run(small, ["A", "A2"], armed=True, notice_sinks=[got.append])
+    a, a2 = eas
+    esc = notices(a2, "escalate")
+    assert esc and all(n.to == "A" for n in esc)
+    assert a.received == esc and a.stats["escalations_in"] == len(esc)
+    assert [n for n in got if n.kind == "escalate" and n.owner == "A2"] == esc
 
 
 def test_silence_marks_matching_alerts_and_expires(small):
     ea = run_a2(small, [(0.0, lambda e: e.silence("s1", types=["out-of-position"], until_t=1100.0,
                                                   comment="known"))])
     oop = of(ea, "out-of-position")
-    assert [(a.t, a.details.get("silenced")) for a in oop if "repeat_of" not in a.details] == \
-        [(942.0, "s1"), (1062.0, "s1"), (1216.0, None)]
-    assert not of(ea, repeat_of=oop[0].details["id"])   # silenced: never repeated
+    assert [(a.t, a.details.get("silenced")) for a in oop] == [(942.0, "s1"), (1062.0, "s1"), (1216.0, None)]
+    assert not notices(ea, alert=oop[0].details["id"])   # silenced: never re-notified or escalated
+    assert [n.alert for n in notices(ea, "renotify")][:2] == ["A2/3", "A2/3"]   # a flash fratricide: not silenced
     assert "s1" not in ea.notify.silences               # expired
     assert ea.stats["silenced"] == 2
     # subjects and areas must match too; unsilence lifts it at once
@@ -103,8 +161,90 @@ def test_silence_marks_matching_alerts_and_expires(small):
     assert not [a for a in ea2.alerts if "silenced" in a.details]
     ea3 = run_a2(small, [(0.0, lambda e: e.silence("s3", types=["out-of-position"], until_t=5000.0)),
                          (1000.0, lambda e: e.unsilence("s3"))])
-    assert [a.details.get("silenced") for a in of(ea3, "out-of-position") if "repeat_of" not in a.details] == \
-        ["s3", None, None]
+    assert [a.details.get("silenced") for a in of(ea3, "out-of-position")] == ["s3", None, None]
+
+
+def test_a_silence_set_after_an_alert_stops_its_renotifications(small):
+    """Silenced while it waits: nothing more of it, even after the silence ends (the
+    commander knows of it); it can still be acknowledged."""
+    ea = run_a2(small, [(1000.0, lambda e: e.silence("s", types=["out-of-position"], until_t=3000.0))])
+    assert not notices(ea, alert="A2/1")
+    assert ea.ack("A2/1")["stopped"]
+
+
+RULE = {"id": "oop-after-oop", "source": {"types": ["out-of-position"]}, "target": {"types": ["out-of-position"]},
+        "equal": ["subjects"], "for_s": 150.0}
+
+
+def test_an_inhibition_rule_from_the_config_marks_and_quiets(small):
+    cfg = config_for(small, OWNER)
+    cfg["voi"]["projection_horizon_s"] = 0.0
+    cfg["inhibit"] = [RULE]
+    ea = make_ea(small, OWNER, cfg)
+    ea.arm()
+    ea.start(0.0)
+    for ev in small.events:
+        ea.submit(ev)
+    ea.finish(small.duration_s)
+    oop = of(ea, "out-of-position")
+    # 942 is the first (nothing active); 1062 falls within 150 s of it: inhibited by it; 1216 is 154 s after 1062
+    assert [a.details.get("inhibited_by") for a in oop] == [None, {"rule": "oop-after-oop", "source": "A2/1"}, None]
+    assert ea.stats["inhibited"] == 1 and not notices(ea, alert=oop[1].details["id"])
+    assert notices(ea, alert=oop[0].details["id"])
+
+
+def test_an_inhibition_rule_at_run_time_and_lifted(small):
+    cmd = C.make("inhibit", id="r", source=W.MatcherSpec(types=["out-of-position"]),
+                 target=W.MatcherSpec(types=["out-of-position"]), equal=["subjects"], for_s=150.0)
+    ea = run_a2(small, [(0.0, lambda e: C.apply(e, cmd))])
+    assert [bool(a.details.get("inhibited_by")) for a in of(ea, "out-of-position")] == [False, True, False]
+    ea2 = run_a2(small, [(0.0, lambda e: C.apply(e, cmd)),
+                         (1000.0, lambda e: C.apply(e, C.make("uninhibit", id="r")))])
+    assert not [a for a in ea2.alerts if "inhibited_by" in a.details]
+    bad = C.apply(ea2, C.make("uninhibit", id="r"))
+    assert not bad.ok and "unknown rule" in bad.error
+
+
+@pytest.mark.parametrize("rule,text", [
+    ({"id": "x", "source": {"types": ["contact"]}}, "needs both 'source' and 'target'"),
+    ({"id": "x", "source": {}, "target": {"types": ["a"]}}, "an empty matcher matches every alert"),
+    ({"id": "x", "source": {"type": ["contact"]}, "target": {"types": ["a"]}}, "field 'type': unknown key"),
+    ({"id": "x", "source": {"types": ["c"]}, "target": {"types": ["a"]}, "equal": ["unit"]}, "unknown label 'unit'"),
+    ({"id": "x", "source": {"types": ["c"]}, "target": {"types": ["a"]}, "for_s": -1}, "field 'for_s'"),
+    ({"id": "x", "source": {"types": ["c"]}, "target": {"priorities": ["urgent"]}}, "'urgent' is not one of"),
+    ({"source": {"types": ["c"]}, "target": {"types": ["a"]}}, "field 'id'"),
+    ({"id": "x", "source": {"types": ["c"]}, "target": {"types": ["a"]}, "when": 3}, "field 'when': unknown key"),
+])
+def test_a_bad_inhibition_rule_is_one_clear_line(small, tmp_path, rule, text):
+    from ea_agent.core.config import load_config
+    import tomllib  # noqa: F401 -- the file below is TOML
+    ea = run_a2(small, armed=False, until=10.0)
+    with pytest.raises(ValueError, match=text.replace("(", r"\(").replace(")", r"\)")):
+        ea.inhibit(rule)
+    # the same rule in a config file: a ConfigError naming the file
+    p = tmp_path / "ea.toml"
+    p.write_text("[[inhibit]]\n" + "\n".join(f"{k} = {_toml(v)}" for k, v in rule.items()) + "\n")
+    with pytest.raises(ConfigError, match=r"ea\.toml: \[\[inhibit\]\]"):
+        load_config(p)
+
+
+def _toml(v):
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(x)}" for k, x in v.items()) + " }"
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    return f'"{v}"' if isinstance(v, str) else repr(v)
+
+
+def test_unknown_notify_keys_are_refused(tmp_path):
+    from ea_agent.core.config import load_config
+    p = tmp_path / "ea.toml"
+    p.write_text("[notify]\nrepeat_s = 60.0\n")
+    with pytest.raises(ConfigError, match="field 'repeat_s': unknown key"):
+        load_config(p)
+    p.write_text("[notify.flash]\nevery = 60.0\n")
+    with pytest.raises(ConfigError, match="field 'every': unknown key"):
+        load_config(p)
 
 
 def test_set_threshold_applies_from_the_next_epoch_and_is_logged(small, caplog):

@@ -27,7 +27,6 @@ POSITIVE = frozenset({
     "voi.out_of_position_m", "voi.schedule_repeat_s", "voi.unknown_position_s", "voi.weapons_range_m",
     "voi.threat_radius_m", "voi.coordination_radius_m", "voi.projection_trend_s",
     "voa.expiry_s",
-    "notify.repeat_s",
 })
 CHOICES = {"mesh.fsync": ("alert", "urgent", "never")}   # string keys with a closed set of values
 
@@ -164,4 +163,14 @@ def load_config(path: str | Path | None = None, owner: str | None = None,
         cfg = mine
     if overrides:
         cfg = _merge(cfg, overrides, "overrides")
+    _check_inhibit(cfg, str(p))
     return cfg
+
+
+def _check_inhibit(cfg: dict, where: str) -> None:
+    """[[inhibit]] rules are checked here, with the file's name, not at the first alert."""
+    from .inhibit import Inhibitor
+    try:
+        Inhibitor(cfg.get("inhibit", []), float(cfg.get("voa", {}).get("expiry_s", 720.0)), f"{where}: [[inhibit]]")
+    except ValueError as e:
+        raise ConfigError(str(e)) from None

@@ -15,15 +15,15 @@ import math
 from collections import Counter
 from typing import Callable, Iterable, Protocol
 
-from .alert import Alert
-
-from .alert import Candidate
-from .notify import Notifier, Silence
+from .alert import Alert, Candidate
+from .inhibit import Rule
+from .notify import Notice, Notifier, Silence
 from .timed import TimedMonitors
 from .voa import Voa
 
 log = logging.getLogger(__name__)
 Sink = Callable[[Alert], None]
+NoticeSink = Callable[[Notice], None]
 
 
 class Domain(Protocol):
@@ -60,7 +60,11 @@ class ExecutionAssistant:
         self._next_forget = 60.0
         self.n_in = 0
         self.now = 0.0                # the latest scenario time seen (commands take effect at it)
-        self.notify = Notifier(owner, cfg)
+        self.notice_sinks: list[NoticeSink] = []   # this EA's re-notifications and escalations (not alerts)
+        self.inbox_sinks: list[NoticeSink] = []    # escalations from subordinates' EAs (take_notice)
+        self.notices: list[Notice] = []             # given by this EA
+        self.received: list[Notice] = []            # escalations from subordinates' EAs
+        self.notify = Notifier(owner, cfg, self._superior)
         self.changes = self.notify.changes   # threshold changes made at run time, as applied
         self._watch = domain.watch    # bound once: this is the per-message hot path
         bulk = getattr(domain, "BULK_FACTS", None)   # None: every fact may wait in a batch
@@ -154,16 +158,18 @@ class ExecutionAssistant:
         self.stats["epochs"] += 1
         if end >= self._next_forget:   # keep memory bounded: expired history no longer counts anyway
             self.voa.forget_before(end - self.voa.expiry)   # a margin for late-posted timer candidates
+            self.notify.forget_before(end - self.notify.story_s)
             self._next_forget = end + 60.0
         if self.notify.pending:   # thresholds changed by a commander count from this epoch on
             self.stats["settings"] += len(self.notify.apply_pending(end, self.voa))
         notify = self.notify
         if notify.silences:
             notify.expire(end)
-        for r in notify.repeats_until(end) if notify.due else ():
-            self.stats["repeats"] += 1
-            self.stats["escalations"] += r.priority != r.details.get("escalated_from", r.priority)
-            self.notify.chained(r.details["repeat_of"], self.emit(r))
+        for n in notify.notices_until(end) if notify.due else ():
+            self.stats["renotifications" if n.kind == "renotify" else "escalations"] += 1
+            self.notices.append(n)
+            for s in self.notice_sinks:
+                s(n)
         self.timers.advance(end)
         found = self.domain.detect(end)   # may post more (mission responses)
         cands, self.posted = self.posted + found, []
@@ -179,6 +185,8 @@ class ExecutionAssistant:
         alert = self.notify.stamp(alert)
         if "silenced" in alert.details:
             self.stats["silenced"] += 1
+        elif "inhibited_by" in alert.details:
+            self.stats["inhibited"] += 1
         self.alerts.append(alert)
         self.stats["alerts"] += 1
         self.voa.remember(alert.t, alert.type, alert.subjects, alert.details.get("places", ()))
@@ -186,13 +194,30 @@ class ExecutionAssistant:
             s(alert)
         return alert
 
+    def _superior(self) -> str | None:
+        """The unit above this EA's in the task organization as the domain knows it now."""
+        to = getattr(self.domain, "taskorg", None)
+        return to.parent.get(self.owner) if to is not None else None
+
+    def take_notice(self, n: Notice) -> None:
+        """An escalation from a subordinate's EA reached this one: told to its sinks (the
+        notice log, the console), never as an alert of this EA."""
+        self.stats["escalations_in"] += 1
+        self.received.append(n)
+        for s in self.inbox_sinks:
+            s(n)
+
     # -- a commander's actions (docs/console.md 1); bad input raises, changing nothing --
-    def arm(self) -> None:
-        """A commander is in the loop: urgent alerts given from now on repeat until acknowledged."""
+    def arm(self, ack_after_s: float | None = None) -> None:
+        """A commander is in the loop: urgent alerts given from now on are re-notified and
+        escalated until acknowledged. `ack_after_s`: a modelled commander who acknowledges
+        each urgent alert that long after it is raised (evaluate --commander)."""
         self.notify.armed = True
+        if ack_after_s is not None:
+            self.notify.ack_after_s = float(ack_after_s)
 
     def ack(self, alert_id: str, t: float | None = None) -> dict:
-        """Acknowledge an alert (or one of its repeats): its repeats stop. KeyError if unknown."""
+        """Acknowledge an alert: its re-notifications and escalation stop. KeyError if unknown."""
         out = self.notify.ack(alert_id, self.now if t is None else t)
         self.stats["acks"] += 1
         return out
@@ -206,6 +231,15 @@ class ExecutionAssistant:
 
     def unsilence(self, sid: str) -> Silence:
         return self.notify.unsilence(sid)
+
+    def inhibit(self, rule: dict) -> Rule:
+        """Add (or replace) an inhibition rule from now on (ValueError if malformed)."""
+        r = self.notify.inhibit(rule)
+        self.stats["inhibits"] += 1
+        return r
+
+    def uninhibit(self, rid: str) -> Rule:
+        return self.notify.uninhibit(rid)
 
     def set_param(self, key: str, value, t: float | None = None):
         """Change a `voi.*`/`voa.*` threshold from the next epoch close on (ConfigError if bad)."""

@@ -1,17 +1,21 @@
-"""What a commander does with alerts (docs/console.md section 1): ids, acknowledgement
-with repeats and escalation, silences, and thresholds changed at run time.
+"""What a commander does with alerts (docs/console.md section 1): ids, stories,
+re-notification and escalation of unacknowledged urgent alerts, silences, inhibition
+rules, and thresholds changed at run time.
 
 Everything runs on scenario time and is driven by the manager's epoch closes, so a
-run gives the same alerts whatever the wall clock did:
+run gives the same alerts and notices whatever the wall clock did:
  - every alert gets `details["id"] = "<owner>/<n>"`, n counting from 1 in emission
    order (wall-clock-driven system alerts count apart, `<owner>/w<n>`, so that a
-   presence note never shifts the ids of the plan's alerts);
+   presence note never shifts the ids of the plan's alerts), and `details["story"]`,
+   the id of the first alert of its story (same type and subjects, not expired);
  - once armed (a commander acted on this EA: a batch run stays the paper's baseline),
-   a flash or immediate alert not acknowledged is repeated every `repeat_s` (a new
-   alert with `repeat_of` and `repeats`), raised one priority from the repeat after
-   `escalate_after` on;
- - an alert matching an active silence is still given, marked `silenced`, and never
-   repeated; a repeat falling inside a silence is skipped, not counted;
+   a flash or immediate alert not acknowledged is *re-notified* (a `Notice`, never a new
+   alert: Alertmanager's repeat_interval) every `[notify.<priority>] every_s`, at most
+   `times` times, and *escalated* once to the superior's EA and console after
+   `escalate_s` (PagerDuty's escalation to the next person, never a higher priority);
+ - an alert matching an active silence is given marked `silenced`; one an inhibition
+   rule mutes is given marked `inhibited_by`: both are logged, neither is shown as new,
+   re-notified or escalated;
  - a threshold change is checked as the config file is and applied at the next epoch.
 """
 from __future__ import annotations
@@ -20,21 +24,42 @@ import heapq
 import logging
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
-from .alert import PRIORITIES, Alert, rank
+from .alert import Alert
 from .config import check_setting
+from .inhibit import Inhibitor, Rule, rule as make_rule
 
 log = logging.getLogger(__name__)
 URGENT = frozenset({"flash", "immediate"})
 # Values a Voa object caches at init: dotted key -> its attribute.
 VOA_ATTRS = {"voa.expiry_s": "expiry", "voa.suppress_friendly_s": "suppress_friendly",
              "voa.suppress_hostile_s": "suppress_hostile"}
+RENOTIFY, ESCALATE, ACK = 0, 1, -1   # heap entry kinds (an ack due at the same time goes first)
 
 
-def raised(priority: str) -> str:
-    """One priority higher (flash stays flash)."""
-    return PRIORITIES[max(0, rank(priority) - 1)]
+@dataclass(slots=True, frozen=True)
+class Notice:
+    """A re-notification of an unacknowledged urgent alert (`renotify`, to its own EA's
+    commander) or its escalation to the superior (`escalate`, `to` = the superior's unit).
+    Not an alert: it never enters the alert log, the counts or VOA."""
+    kind: str
+    t: float
+    owner: str
+    alert: str          # the original alert's id
+    story: str
+    type: str
+    priority: str       # the original's, unchanged: escalation goes up the chain, not the priorities
+    subjects: tuple[str, ...]
+    message: str
+    count: int          # the n-th re-notification (escalate: 1)
+    to: str             # the unit whose commander is told
+    due_t: float        # when the original was raised
+
+    def to_json_dict(self) -> dict:
+        return {"kind": self.kind, "t": self.t, "owner": self.owner, "alert": self.alert, "story": self.story,
+                "type": self.type, "priority": self.priority, "subjects": list(self.subjects),
+                "message": self.message, "count": self.count, "to": self.to, "due_t": self.due_t}
 
 
 @dataclass(slots=True)
@@ -60,10 +85,10 @@ class Silence:
 
 @dataclass(slots=True)
 class Chain:
-    """An urgent alert waiting for its acknowledgement, and the ids of its repeats."""
+    """An urgent alert waiting for its acknowledgement."""
     alert: Alert
-    repeats: int = 0
-    ids: list[str] = field(default_factory=list)
+    count: int = 0          # re-notifications given
+    escalated: bool = False
 
 
 def _names(v: Any, what: str) -> frozenset[str]:
@@ -73,21 +98,25 @@ def _names(v: Any, what: str) -> frozenset[str]:
 
 
 class Notifier:
-    def __init__(self, owner: str, cfg: dict):
+    def __init__(self, owner: str, cfg: dict, superior: Callable[[], str | None] = lambda: None):
         n = cfg.get("notify", {})
         self.owner = owner
         self.cfg = cfg
-        self.repeat_s = float(n.get("repeat_s", 60.0))
-        self.escalate_after = int(n.get("escalate_after", 2))
-        if not (math.isfinite(self.repeat_s) and self.repeat_s > 0):   # a zero would repeat forever
-            raise ValueError(f"notify.repeat_s must be > 0 (got {self.repeat_s})")
+        self.superior = superior   # the unit above this EA's, as the task organization stands now
+        self.cadence: dict[str, tuple[float, int]] = {
+            p: (float(n.get(p, {}).get("every_s", 0.0)), int(n.get(p, {}).get("times", 0))) for p in URGENT}
+        self.escalate_s = float(n.get("escalate_s", 0.0))   # 0: never escalate
+        expiry = float(cfg.get("voa", {}).get("expiry_s", 720.0))
+        self.inhibitor = Inhibitor(cfg.get("inhibit", []), expiry)
+        self.story_s = expiry       # a story ends when nothing was told on it for this long
         self.armed = False
+        self.ack_after_s: float | None = None   # a commander model (evaluate --commander): acks after this
         self.n = 0                  # plan alerts issued (ids <owner>/1..n)
         self.nw = 0                 # wall-clock-driven alerts issued (ids <owner>/w1..wn)
         self.chains: dict[str, Chain] = {}
-        self.chain_of: dict[str, str] = {}          # repeat id -> the original's id
-        self.due: list[tuple[float, int, str]] = []  # (scenario time, tie, original id)
+        self.due: list[tuple[float, int, int, str]] = []  # (scenario time, kind, tie, original id)
         self._tie = 0
+        self.stories: dict[tuple, tuple[str, float]] = {}   # (type, subjects) -> (story id, last t)
         self.silences: dict[str, Silence] = {}
         self.pending: list[tuple[str, Any, float]] = []   # (key, checked value, requested at)
         self.changes: list[dict] = []
@@ -95,7 +124,8 @@ class Notifier:
 
     # -- alerts --------------------------------------------------------------------
     def stamp(self, alert: Alert) -> Alert:
-        """The alert with its id (and silence mark); registered for repeats when urgent."""
+        """The alert with its id, story, silence or inhibition mark; watched for its
+        acknowledgement when urgent and armed."""
         d = dict(alert.details)
         if d.get("wall_clock_driven"):
             self.nw += 1
@@ -103,15 +133,38 @@ class Notifier:
         else:
             self.n += 1
             d["id"] = f"{self.owner}/{self.n}"
+        d["story"] = self._story(alert, d["id"])
         d.pop("silenced", None)
+        d.pop("inhibited_by", None)
         s = self.silence_for(alert)
         if s is not None:
             d["silenced"] = s.id
         out = replace(alert, details=d)
-        if self.armed and s is None and "repeat_of" not in d and alert.priority in URGENT:
+        if self.inhibitor.rules:
+            why = self.inhibitor.judge(out)
+            if why is not None:
+                d["inhibited_by"] = why
+        if self.armed and "silenced" not in d and "inhibited_by" not in d and alert.priority in URGENT:
+            every, times = self.cadence[alert.priority]
             self.chains[d["id"]] = Chain(out)
-            self._schedule(alert.t + self.repeat_s, d["id"])
+            if every > 0 and times > 0:
+                self._schedule(alert.t + every, RENOTIFY, d["id"])
+            if self.escalate_s > 0:
+                self._schedule(alert.t + self.escalate_s, ESCALATE, d["id"])
+            if self.ack_after_s is not None:
+                self._schedule(alert.t + self.ack_after_s, ACK, d["id"])
         return out
+
+    def _story(self, a: Alert, aid: str) -> str:
+        key = (a.type, tuple(sorted(a.subjects)))
+        old = self.stories.get(key)
+        sid = old[0] if old is not None and a.t - old[1] <= self.story_s else aid
+        self.stories[key] = (sid, a.t)
+        return sid
+
+    def quiet(self, a: Alert) -> bool:
+        """Silenced or inhibited: logged, never shown as new."""
+        return "silenced" in a.details or "inhibited_by" in a.details
 
     def silence_for(self, a: Alert, t: float | None = None) -> Silence | None:
         for s in self.silences.values():
@@ -119,43 +172,48 @@ class Notifier:
                 return s
         return None
 
-    def _schedule(self, t: float, orig: str) -> None:
+    def _schedule(self, t: float, kind: int, orig: str) -> None:
         self._tie += 1
-        heapq.heappush(self.due, (t, self._tie, orig))
+        heapq.heappush(self.due, (t, kind, self._tie, orig))
 
     def next_due(self) -> float:
-        """When the manager must close an epoch for a repeat (inf: none)."""
-        while self.due and self.due[0][2] not in self.chains:
+        """When the manager must close an epoch for a notice (inf: none)."""
+        while self.due and self.due[0][3] not in self.chains:
             heapq.heappop(self.due)
         return self.due[0][0] if self.due else math.inf
 
-    def repeats_until(self, end: float) -> list[Alert]:
-        """The repeats due by `end`, in time order (the manager emits them)."""
+    def notices_until(self, end: float) -> list[Notice]:
+        """The re-notifications and escalations due by `end`, in time order."""
         out = []
         while self.due and self.due[0][0] <= end:
-            t, _, orig = heapq.heappop(self.due)
+            t, kind, _, orig = heapq.heappop(self.due)
             ch = self.chains.get(orig)
             if ch is None:
                 continue   # acknowledged meanwhile
-            self._schedule(t + self.repeat_s, orig)
+            if kind == ACK:   # the commander model acknowledges
+                self.ack(orig, t)
+                continue
             a = ch.alert
             if self.silence_for(a, t) is not None:
-                continue   # silenced now: skipped, not counted
-            ch.repeats += 1
-            prio = raised(a.priority) if ch.repeats > self.escalate_after else a.priority
-            d = {k: v for k, v in a.details.items() if k not in ("id", "silenced")}
-            d.update(repeat_of=orig, repeats=ch.repeats)
-            if prio != a.priority:
-                d["escalated_from"] = a.priority
-            out.append(replace(a, t=round(t, 3), priority=prio, details=d))
+                continue   # silenced since it was raised: the commander knows; nothing more of this kind
+            if kind == RENOTIFY:
+                every, times = self.cadence[a.priority]
+                ch.count += 1
+                if ch.count < times:
+                    self._schedule(t + every, RENOTIFY, orig)
+                out.append(self._notice("renotify", t, a, ch.count, self.owner))
+            else:
+                up = self.superior()
+                if up is None or ch.escalated:
+                    continue   # the top of the chain has nobody to escalate to
+                ch.escalated = True
+                out.append(self._notice("escalate", t, a, 1, up))
         return out
 
-    def chained(self, orig: str, repeat: Alert) -> None:
-        """A repeat was given its id: acknowledging it acknowledges the chain."""
-        ch = self.chains.get(orig)
-        if ch is not None:
-            ch.ids.append(repeat.details["id"])
-            self.chain_of[repeat.details["id"]] = orig
+    def _notice(self, kind: str, t: float, a: Alert, count: int, to: str) -> Notice:
+        d = a.details
+        return Notice(kind, round(t, 3), self.owner, d["id"], d.get("story", d["id"]), a.type, a.priority,
+                      tuple(a.subjects), a.message, count, to, a.t)
 
     # -- commands ------------------------------------------------------------------
     def known(self, alert_id: Any) -> bool:
@@ -171,14 +229,13 @@ class Notifier:
         if not self.known(alert_id):
             raise KeyError(f"ack: unknown alert {str(alert_id)[:80]!r}: not issued by the EA of {self.owner} "
                            f"(ids {self.owner}/1..{self.owner}/{self.n})")
-        orig = self.chain_of.get(alert_id, alert_id)
-        ch = self.chains.pop(orig, None)
+        ch = self.chains.pop(alert_id, None)
         if ch is not None:
-            for i in ch.ids:
-                self.chain_of.pop(i, None)
-            self.acked[orig] = t
-            log.info("EA %s: alert %s acknowledged at t=%.1f after %d repeats", self.owner, orig, t, ch.repeats)
-        return {"alert": alert_id, "of": orig, "stopped": ch is not None, "repeats": ch.repeats if ch else 0}
+            self.acked[alert_id] = t
+            log.info("EA %s: alert %s acknowledged at t=%.1f after %d re-notifications", self.owner, alert_id, t,
+                     ch.count)
+        return {"alert": alert_id, "stopped": ch is not None, "renotified": ch.count if ch else 0,
+                "escalated": ch.escalated if ch else False}
 
     def silence(self, sid: str, types=(), subjects=(), areas=(), until_t: float = 0.0, comment: str = "",
                 t: float = 0.0) -> Silence:
@@ -207,6 +264,22 @@ class Notifier:
                            f"{', '.join(sorted(self.silences)) or 'none'})")
         log.info("EA %s: silence %s lifted", self.owner, sid)
         return s
+
+    def inhibit(self, d: dict) -> Rule:
+        """A rule added at run time (the `inhibit` command), checked like a config one."""
+        r = self.inhibitor.add(make_rule(d, "inhibit", self.inhibitor.default_for_s))
+        log.info("EA %s: inhibition rule %s", self.owner, r.to_dict())
+        return r
+
+    def uninhibit(self, rid: str) -> Rule:
+        r = self.inhibitor.remove(rid)
+        log.info("EA %s: inhibition rule %s lifted", self.owner, rid)
+        return r
+
+    def forget_before(self, t: float) -> None:
+        """Stories nothing was told on since `t` are over (memory stays bounded)."""
+        for k in [k for k, (_, last) in self.stories.items() if last < t]:
+            del self.stories[k]
 
     def expire(self, end: float) -> None:
         for sid in [k for k, s in self.silences.items() if s.until_t <= end]:

@@ -14,12 +14,12 @@ rules and the keys cannot drift apart.
 | subject | ingress allowed, besides reading |
 |---|---|
 | `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log/*; query store/**; token alive/replay/* |
-| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>; token alive/<U>/*; query store/** |
+| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations); token alive/<U>/*; query store/** |
 | `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
 | `observer` | reading alert/** and alive/** only |
-| `console` | as observer, plus reading cmdlog/**, put cmd/** |
+| `console` | as observer, plus reading cmdlog/** and notice/**, put cmd/** |
 | `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put ingest/tak (PLI for the replay to sequence); query store/** |
-| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now); reading what an observer reads plus cmdlog/**, clock and the data families but raw hits; query store/** |
+| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now); reading what an observer reads plus cmdlog/**, notice/**, clock and the data families but raw hits; query store/** |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
 (observer and console: on alert/** and alive/** only).
@@ -120,7 +120,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
         subject(f"ea.{u}", [out, read_all, query_store,
                             rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
                                                           f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
-                                                          ks.cmdlog(u)]),
+                                                          ks.cmdlog(u), ks.notice("*", u)]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
     for g in groups:
         subject(f"fusion.{g}", [out, read_all, query_store,
@@ -129,7 +129,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                                 rule(f"fusion.{g}.store", ["declare_queryable", "reply"], [ks.fusion_store(g)]),
                                 rule(f"fusion.{g}.token", ["liveliness_token"], [ks.alive(f"fusion-{g}", "*")])])
     subject("observer", [out, read_public])
-    read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**")])
+    read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**"), ks.notice("**")])
     subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
     seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit")]
     read_seen = rule("read_console", READ, seen)

@@ -51,6 +51,7 @@ _DOMAIN = "saim-mesh signed v1"  # what a signature is for: never valid for anyt
 AUTHORITY: tuple[type, ...] = (M.Order, M.Reorganization, M.MissionConfirm, M.UvAgent)
 AUTHORITY_FAMILIES = tuple(template(c).family for c in AUTHORITY)   # ord, org, msn, agm
 COMMAND_FAMILY = "cmd"
+NOTICE_FAMILY = "notice"
 
 Name = Annotated[str, msgspec.Meta(min_length=1, max_length=128, pattern=NAME_RE.pattern)]
 
@@ -149,6 +150,8 @@ def rules_for(identities: Iterable[str]) -> dict[str, list[str]]:
             out[name] = [f"{COMMAND_FAMILY}/**"]
         elif name.startswith("console.") and len(name) > 8:
             out[name] = [f"{COMMAND_FAMILY}/*/*/{name[8:]}"]
+        elif name.startswith("ea.") and len(name) > 3:   # its escalations cross routers to its superior
+            out[name] = [f"{NOTICE_FAMILY}/*/{name[3:]}"]
     return out
 
 
