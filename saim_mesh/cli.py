@@ -115,13 +115,19 @@ def cmd_run(a) -> int:
 
 def cmd_evaluate(a) -> int:
     from .evaluate import evaluate
-    res = evaluate(S.load(a.scenario), config_path=a.config)
+    res = evaluate(S.load(a.scenario), config_path=a.config, commander=a.commander)
     if a.json:
         print(json.dumps(res, sort_keys=True))
     else:
         for k in ("events", "incidents", "recall", "alerts", "naive_alerts", "reduction", "unwanted",
                   "unwanted_share", "unwanted_flash", "by_type"):
             print(f"{k:15} {res[k]}")
+        if "commander" in res:
+            c = res["commander"]
+            print(f"commander {c['model']}: shown {c['shown']} ({c['alerts_shown']} alerts, {c['renotifications']} "
+                  f"re-notifications, {c['escalations']} escalations), worst {c['shown_per_commander_hour_worst']}"
+                  f"/commander/hour, unwanted {c['unwanted_share']:.1%}, unwanted flash {c['unwanted_flash']}, "
+                  f"priorities as unarmed: {c['priorities_equal']}")
         for m in res["missed"]:
             print("MISSED ", m)
         for u in res["unwanted_alerts"]:
@@ -451,6 +457,9 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     e.add_argument("--json", action="store_true")
     e.add_argument("--config", metavar="TOML")
+    e.add_argument("--commander", choices=["none", "slow", "diligent"],
+                   help="also run the EAs armed with a modelled commander (none: never acknowledges; slow: "
+                        "acknowledges each urgent alert after 5 min; diligent: after 30 s) and score what they saw")
     e.set_defaults(fn=cmd_evaluate)
     mi = sub.add_parser("missions", help="list a domain's mission model")
     mi.add_argument("--domain", default="suo", choices=["suo", "uv"])

@@ -146,7 +146,53 @@ def score(alerts: list[Alert], truth: dict) -> dict:
     }
 
 
-def evaluate(sc, config_path=None) -> dict:
+# A commander model (issue 30): how long after an urgent alert the commander acknowledges
+# it (None: never). "slow" is busy fighting; "diligent" reads each flash and immediate alert.
+COMMANDERS: dict[str, float | None] = {"none": None, "slow": 300.0, "diligent": 30.0}
+
+
+def commander_view(sc, owners: list[str], model: str, plain: list, truth: dict, config_path=None) -> dict:
+    """The EAs armed, with a modelled commander acknowledging (or not), scored on what each
+    commander *saw*: alerts shown (not silenced or inhibited), re-notifications of their
+    own EA's alerts and escalations from below. A notice is unwanted when its alert is.
+    `plain`: the unarmed run's EAs, against which no alert's priority may differ."""
+    if model not in COMMANDERS:
+        raise ValueError(f"unknown commander model {model!r} (known: {', '.join(COMMANDERS)})")
+    notices: list = []
+    eas = run(sc, owners, config_path=config_path, armed=True, ack_after_s=COMMANDERS[model],
+              notice_sinks=[notices.append])
+    alerts = [a for ea in eas for a in ea.alerts]
+    shown = [a for a in alerts if "silenced" not in a.details and "inhibited_by" not in a.details]
+    sc_ = score(shown, truth)
+    bad_ids = {a["details"].get("id") for a in sc_["unwanted_alerts"]}
+    prio = {a.details.get("id"): a.priority for a in alerts}
+    bad_notices = [n for n in notices if n.alert in bad_ids]
+    hours = max(sc.duration_s, 1.0) / 3600.0
+    per = {o: 0 for o in owners}
+    for a in shown:
+        per[a.owner] = per.get(a.owner, 0) + 1
+    for n in notices:   # a re-notification to its owner's commander, an escalation to the superior's
+        if n.to in per:
+            per[n.to] += 1
+    per_hour = {o: round(k / hours, 1) for o, k in per.items()}
+    total = len(shown) + len(notices)
+    unwanted = sc_["unwanted"] + len(bad_notices)
+    same = [(a.details.get("id"), a.priority) for ea in plain for a in ea.alerts]
+    return {
+        "model": model, "ack_after_s": COMMANDERS[model],
+        "alerts": len(alerts), "alerts_shown": len(shown),
+        "renotifications": sum(n.kind == "renotify" for n in notices),
+        "escalations": sum(n.kind == "escalate" for n in notices),
+        "shown": total, "shown_per_commander_hour": per_hour,
+        "shown_per_commander_hour_worst": max(per_hour.values(), default=0.0),
+        "unwanted": unwanted, "unwanted_share": round(unwanted / total, 4) if total else 0.0,
+        "unwanted_flash": sc_["unwanted_flash"] + sum(1 for n in bad_notices if prio.get(n.alert) == "flash"),
+        "recall": sc_["recall"],
+        "priorities_equal": same == [(a.details.get("id"), a.priority) for a in alerts],
+    }
+
+
+def evaluate(sc, config_path=None, commander: str | None = None) -> dict:
     truth = sc.truth()
     owners = truth["owners"]
     eas = run(sc, owners, config_path=config_path)
@@ -161,4 +207,6 @@ def evaluate(sc, config_path=None) -> dict:
     res["owners"] = owners
     res["events"] = len(sc.events)
     res["watchman"] = {ea.owner: dict(getattr(getattr(ea.domain, "watchman", None), "stats", {})) for ea in eas}
+    if commander is not None:
+        res["commander"] = commander_view(sc, owners, commander, eas, truth, config_path)
     return res

@@ -3,7 +3,9 @@ random (`generate --incidents random --sensors`: hostiles seen by simulated sens
 noise, misses and false alarms, fused into tracks), its truth from the independent oracle, the EAs
 and the naive detector (VOA off) scored against it. Writes the per-seed rows and the
 summary (mean and worst recall, unwanted share, unwanted flash, detection delay p95,
-reduction against the naive detector) as JSON."""
+reduction against the naive detector) as JSON, and with a commander in the loop (each
+model of `evaluate.COMMANDERS`: what they saw, re-notifications and escalations included)
+under `summary.armed`."""
 from __future__ import annotations
 
 import argparse
@@ -18,8 +20,12 @@ from pathlib import Path
 TARGETS = {"recall": 1.0, "unwanted_share_max": 0.05, "unwanted_flash": 0, "reduction_min": 50.0}
 
 
-def one(args: tuple[int, bool, bool]) -> dict:
-    seed, small, sensors = args
+ARMED_TARGETS = {"unwanted_share_worst": 0.05, "unwanted_flash_total": 0}
+
+
+def one(args: tuple) -> dict:
+    seed, small, sensors, *rest = args
+    commanders = rest[0] if rest else ()
     from ea_agent.domains.suo.generator import write
 
     from . import scenario as S
@@ -27,14 +33,25 @@ def one(args: tuple[int, bool, bool]) -> dict:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix=f"seed{seed}-") as d:
         gen = write(Path(d) / "sc", small=small, seed=seed, incidents="random", sensors=sensors)
-        res = evaluate(S.load(Path(d) / "sc"))
+        sc = S.load(Path(d) / "sc")
+        res = evaluate(sc)
+        armed = {}
+        if commanders:   # the same battle with a commander in the loop, per model
+            from .evaluate import commander_view
+            from .runner import run
+            plain = run(sc, res["owners"])
+            for m in commanders:
+                v = commander_view(sc, res["owners"], m, plain, sc.truth())
+                armed[m] = {k: v[k] for k in ("alerts_shown", "renotifications", "escalations", "shown",
+                                              "shown_per_commander_hour_worst", "unwanted_share", "unwanted_flash",
+                                              "recall", "priorities_equal")}
     keep = ("recall", "incidents", "alerts", "unwanted", "unwanted_share", "unwanted_flash", "unwanted_repeats",
             "wrong_priority", "delay_s_median", "delay_s_p95", "naive_alerts", "reduction")
     row = {"seed": seed, **{k: res[k] for k in keep}, "naive_unwanted_share": res["naive"]["unwanted_share"],
            "events": gen["events"], "wall_s": round(time.perf_counter() - t0, 1),
            "missed": [f"{m['owner']} {m['type']} {m['subjects']} t={m['at']}: {m['label']}" for m in res["missed"]],
            "unwanted_alerts": [f"{a['owner']} t={a['t']} {a['priority']} {a['type']} {a['subjects']}"
-                               for a in res["unwanted_alerts"]]}
+                               for a in res["unwanted_alerts"]], **({"armed": armed} if armed else {})}
     print(json.dumps({k: row[k] for k in ("seed", "recall", "incidents", "alerts", "unwanted_share", "unwanted_flash",
                                           "delay_s_p95", "reduction", "wall_s")}), flush=True)
     return row
@@ -56,11 +73,32 @@ def summarize(rows: list[dict]) -> dict:
          "reduction_total": round(sum(col("naive_alerts")) / max(1, sum(col("alerts"))), 1),
          "naive_unwanted_share_mean": round(sum(col("naive_unwanted_share")) / len(rows), 4),
          "incidents_total": sum(col("incidents")), "alerts_total": sum(col("alerts"))}
+    models = sorted({m for r in rows for m in r.get("armed", {})})
+    if models:   # what each modelled commander saw, over every seed
+        s["armed"] = {}
+        for m in models:
+            vs = [r["armed"][m] for r in rows if m in r.get("armed", {})]
+            s["armed"][m] = {
+                "unwanted_share_worst": max(v["unwanted_share"] for v in vs),
+                "unwanted_share_mean": round(sum(v["unwanted_share"] for v in vs) / len(vs), 4),
+                "unwanted_flash_total": sum(v["unwanted_flash"] for v in vs),
+                "shown_per_commander_hour_worst": max(v["shown_per_commander_hour_worst"] for v in vs),
+                "shown_per_commander_hour_mean": round(sum(v["shown_per_commander_hour_worst"] for v in vs)
+                                                       / len(vs), 1),
+                "renotifications_total": sum(v["renotifications"] for v in vs),
+                "escalations_total": sum(v["escalations"] for v in vs),
+                "priorities_equal": all(v["priorities_equal"] for v in vs),
+                "recall_worst": min(v["recall"] for v in vs)}
+        s["armed_targets"] = ARMED_TARGETS
     s["targets"] = TARGETS
     s["met"] = {"recall": s["recall_worst"] >= TARGETS["recall"],
                 "unwanted_share": s["unwanted_share_worst"] <= TARGETS["unwanted_share_max"],
                 "unwanted_flash": s["unwanted_flash_total"] == TARGETS["unwanted_flash"],
                 "reduction": s["reduction_total"] >= TARGETS["reduction_min"]}
+    for m, v in s.get("armed", {}).items():
+        s["met"][f"armed_{m}"] = (v["unwanted_share_worst"] <= ARMED_TARGETS["unwanted_share_worst"]
+                                  and v["unwanted_flash_total"] == ARMED_TARGETS["unwanted_flash_total"]
+                                  and v["priorities_equal"])
     return s
 
 
@@ -72,11 +110,18 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--true-tracks", action="store_true",
                     help="hostile tracks at their true positions (default: simulated sensors through fusion)")
+    ap.add_argument("--commanders", default="none,slow,diligent",
+                    help="commander models to run armed per seed, comma-separated ('' for none)")
     ap.add_argument("--out", default="bench/results/alert_value.json")
     a = ap.parse_args(argv)
     if a.seeds < 1 or a.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
-    work = [(s, not a.full, not a.true_tracks) for s in range(a.first, a.first + a.seeds)]
+    commanders = tuple(m for m in a.commanders.split(",") if m)
+    from .evaluate import COMMANDERS
+    for m in commanders:
+        if m not in COMMANDERS:
+            ap.error(f"--commanders: unknown model {m!r} (known: {', '.join(COMMANDERS)})")
+    work = [(s, not a.full, not a.true_tracks, commanders) for s in range(a.first, a.first + a.seeds)]
     t0 = time.perf_counter()
     with mp.get_context("spawn").Pool(a.jobs) as pool:
         rows = pool.map(one, work, chunksize=1)

@@ -89,3 +89,36 @@ def test_a_repeat_is_wanted_only_with_a_material_change():
     other = Alert(20, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A3",), "off", {})
     assert score([oop(10, 200), other], {"incidents": [inc, {**inc, "subjects": ["A3"]}],
                                          "situations": []})["unwanted_repeats"] == 0   # another story
+
+
+def test_a_commander_in_the_loop_sees_what_the_commander_model_implies():
+    """evaluate --commander: the EAs armed; what each commander saw, scored. Nobody
+    acknowledging is told more (re-notifications, escalations) than a diligent commander,
+    who acknowledges before the first re-notification falls due; no alert changes priority."""
+    from saim_mesh.evaluate import commander_view
+    from saim_mesh.runner import run
+    sc = S.load(SMALL)
+    truth = sc.truth()
+    owners = truth["owners"]
+    plain = run(sc, owners)
+    none = commander_view(sc, owners, "none", plain, truth)
+    slow = commander_view(sc, owners, "slow", plain, truth)
+    diligent = commander_view(sc, owners, "diligent", plain, truth)
+    n_plain = sum(len(ea.alerts) for ea in plain)
+    for v in (none, slow, diligent):
+        assert v["priorities_equal"] and v["alerts"] == n_plain   # notices, never new alerts
+        assert v["unwanted_share"] <= 0.05 and v["unwanted_flash"] == 0 and v["recall"] == 1.0
+    assert none["renotifications"] > slow["renotifications"] > diligent["renotifications"] == 0
+    assert none["escalations"] > 0 and slow["escalations"] <= none["escalations"] and diligent["escalations"] == 0
+    assert none["shown"] == none["alerts_shown"] + none["renotifications"] + none["escalations"]
+    assert none["shown_per_commander_hour_worst"] > diligent["shown_per_commander_hour_worst"]
+
+
+def test_evaluate_commander_on_the_command_line():
+    out = subprocess.run([sys.executable, "-m", "saim_mesh", "evaluate", str(SMALL), "--commander", "slow"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "commander slow: shown" in out.stdout and "priorities as unarmed: True" in out.stdout
+    bad = subprocess.run([sys.executable, "-m", "saim_mesh", "evaluate", str(SMALL), "--commander", "lazy"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert bad.returncode == 2 and "invalid choice: 'lazy'" in bad.stderr

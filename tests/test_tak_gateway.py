@@ -89,22 +89,36 @@ def test_feed_checks_every_payload_and_sends_alerts_at_once(small):
 
 
 def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
-    """A flash alert is an emergency on TAK; once its EA takes an acknowledgement (heard on
-    cmdlog/<owner>), the gateway cancels it and its repeats (b-a-o-can, same uid) and
-    nothing else; a refused ack, an ack of a marker alert or of another EA's alert cancels nothing."""
+    """A flash alert is an emergency on TAK; a re-notification (notice/A/A) sends the same
+    uid again, never a new marker; once its EA takes an acknowledgement (heard on
+    cmdlog/<owner>), the gateway cancels it once (b-a-o-can, same uid) and nothing else; a
+    refused ack, an ack of a marker alert or of another EA's alert cancels nothing; a
+    silenced or inhibited alert never reaches TAK users."""
     sent: list[bytes] = []
     pic = Picture(small, Options(epoch=EPOCH))
     feed = TakFeed(small, None, "saim", pic, sent.append, overlay_every=None, log=lambda *a, **k: None)
     flash = M.Alert(100.0, "A", "fratricide", "friendly-activity", "flash", ("A1", "B1"), "A1 and B1 close",
                     {"id": "A/1"})
-    rep = M.Alert(130.0, "A", "fratricide", "friendly-activity", "flash", ("A1", "B1"), "A1 and B1 close",
-                  {"id": "A/2", "repeat_of": "A/1", "repeats": 1})
     other = M.Alert(110.0, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A2",), "A2 off",
                     {"id": "A/3"})
-    for a in (flash, rep, other):
+    quiet = [M.Alert(120.0, "A", "contact", "adversarial-activity", "flash", ("A2",), "contact", {"id": "A/4",
+                     "silenced": "s1"}),
+             M.Alert(121.0, "A", "distance", "adversarial-activity", "immediate", ("A2",), "near",
+                     {"id": "A/5", "inhibited_by": {"rule": "r", "source": "A/4"}})]
+    for a in (flash, other, *quiet):
         feed.take(f"saim/alert/A/{a.type}", M.encode(a))
+    assert feed.alerts == 4 and feed.quiet == 2
+
+    def notice(alert, owner="A", kind="renotify", to="A"):
+        return W.encode(W.make(W.Notice, kind=kind, t=220.0, owner=owner, alert=alert, story=alert, type="fratricide",
+                               priority="flash", subjects=["A1", "B1"], message="A1 and B1 close", count=1, to=to,
+                               due_t=100.0))
+    feed.take("saim/notice/A/A", notice("A/1"))
+    feed.take("saim/notice/A/A", notice("A/99"))            # never seen: nothing to re-send
+    feed.take("saim/notice/B/A", notice("A/1", kind="escalate", to="B"))   # for the superior's console
+    feed.take("saim/notice/A/B", notice("A/1", owner="A"))  # not B's alert
     uids = [C.parse(b).uid for b in sent]
-    assert [C.parse(b).type for b in sent] == [T.EMERGENCY, T.EMERGENCY, T.MARKER]
+    assert [C.parse(b).type for b in sent] == [T.EMERGENCY, T.MARKER, T.EMERGENCY] and uids[2] == uids[0]
     ack = lambda ref, ok=True, unit="A": W.encode(W.make(W.CmdResult, req="r", kind="ack", ok=ok, t=140.0,  # noqa: E731
                                                           ref=ref))
     for payload, key in [(ack("A/1", ok=False), "saim/cmdlog/A"), (ack("A/3"), "saim/cmdlog/A"),
@@ -113,13 +127,14 @@ def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
     assert len(sent) == 3 and feed.gate.rejects.total == 2   # another EA's alert; junk
     feed.take("saim/cmdlog/A", ack("A/1"))
     cancels = [C.parse(b) for b in sent[3:]]
-    assert [c.type for c in cancels] == [T.CANCEL, T.CANCEL] and [c.uid for c in cancels] == uids[:2]
+    assert [c.type for c in cancels] == [T.CANCEL] and [c.uid for c in cancels] == uids[:1]
     for c, b in zip(cancels, sent[3:]):
         assert c.detail["emergency"]["cancel"] == "true" and c.detail["__saim"]["id"] == "A/1"
         assert c.time == EPOCH + timedelta(seconds=140.0) and c.stale > c.start >= c.time
         assert takproto.parse_proto(takproto.xml2proto(b)) is not None
     feed.take("saim/cmdlog/A", ack("A/1"))   # once only
-    assert len(sent) == 5 and pic.counts["cancel"] == 2
+    feed.take("saim/notice/A/A", notice("A/1"))   # acknowledged: nothing to re-send
+    assert len(sent) == 4 and pic.counts["cancel"] == 1
 
 
 def test_positions_go_out_per_period_and_only_when_changed(small):

@@ -119,12 +119,13 @@ class TakFeed(MeshReader):
         self.overlay_every = overlay_every
         self._overlay_next = 0.0
         self.alerts = 0
+        self.quiet = 0   # silenced or inhibited alerts, not sent
         self.lock = threading.Lock()
         self.publisher = None
 
     def keys(self) -> list[str]:
         data = sorted({self.ks.data(c) for c in self.classes})
-        return [self.ks.clock(), f"{self.ks.root}/alert/**", self.ks.cmdlog("*"), *data]
+        return [self.ks.clock(), f"{self.ks.root}/alert/**", self.ks.cmdlog("*"), self.ks.notice("*", "*"), *data]
 
     def opened(self, session) -> None:
         import zenoh
@@ -171,6 +172,12 @@ class TakFeed(MeshReader):
                 with self.lock:
                     self._emit(pic.acknowledged(res.ref, owner, res.t))
             return
+        if fam == "notice":   # a re-notification: the same CoT uid again (escalations are for consoles)
+            n = gate.control(W.Notice, payload, key, signed=True)
+            if n is not None and n.kind == "renotify" and n.owner == ks.last(key)[0] and n.alert.startswith(f"{n.owner}/"):
+                with self.lock:
+                    self._emit(pic.renotified(n.alert))
+            return
         m = gate.data(payload, key)
         if m is None:
             return
@@ -182,6 +189,10 @@ class TakFeed(MeshReader):
         with self.lock:
             if fam == "alert":
                 self.alerts += 1
+                if "silenced" in m.details or "inhibited_by" in m.details:
+                    self.quiet += 1   # logged by its EA, not pushed to TAK users as new
+                    return
+                pic.remember(m)
                 self._emit([pic.alert_event(m)])
             else:
                 pic.message(m)

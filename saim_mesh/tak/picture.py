@@ -69,6 +69,7 @@ class Picture:
         self._n_alert = 0
         self._units: dict | None = None        # unit centroids, until the next position or reorganization
         self.emergencies: OrderedDict[str, list[tuple]] = OrderedDict()   # alert id -> its emergencies on TAK
+        self.urgent: OrderedDict[str, object] = OrderedDict()   # alert id -> the urgent alert (re-notifications)
         self.overlay = {f["id"]: f for f in overlay_geojson(sc)["features"]}
         self.places = {}
         for fid, f in self.overlay.items():
@@ -236,10 +237,12 @@ class Picture:
                                      "category": a.category, "priority": a.priority,
                                      "subjects": json.dumps(list(a.subjects)), "t": f"{a.t:.3f}"})]
         if typ in T.EMERGENCY_NAMES:
-            root = a.details.get("repeat_of") or aid   # an ack of the first cancels its repeats too
-            if isinstance(root, str) and root:
-                self.emergencies.setdefault(root, []).append((self.uid("alert", ident), lon, lat, callsign))
-                self.emergencies.move_to_end(root)
+            if isinstance(aid, str) and aid:   # one entry per uid: a re-notification re-sends the same uid
+                entry = (self.uid("alert", ident), lon, lat, callsign)
+                ems = self.emergencies.setdefault(aid, [])
+                if all(e[0] != entry[0] for e in ems):
+                    ems.append(entry)
+                self.emergencies.move_to_end(aid)
                 if len(self.emergencies) > MAX_EMERGENCIES:
                     self.emergencies.popitem(last=False)
             em = ET.Element("emergency", {"type": T.EMERGENCY_NAMES[typ]})
@@ -257,11 +260,30 @@ class Picture:
                        how=T.HOW_FUSED, callsign=callsign, detail=det,
                        remarks=f"[{a.priority.upper()}] {a.owner} {hms(a.t)} {a.type}: {a.message}")
 
+    def remember(self, a) -> None:
+        """An urgent alert a re-notification may name later (the newest MAX_EMERGENCIES)."""
+        aid = a.details.get("id")
+        if isinstance(aid, str) and aid and a.priority in ("flash", "immediate"):
+            self.urgent[aid] = a
+            self.urgent.move_to_end(aid)
+            if len(self.urgent) > MAX_EMERGENCIES:
+                self.urgent.popitem(last=False)
+
+    def renotified(self, alert_id: str) -> list[bytes]:
+        """A re-notification of an unacknowledged alert: the same CoT uid sent again (TAK
+        clients update the marker and raise its banner again), never a new marker."""
+        a = self.urgent.get(alert_id)
+        if a is None:
+            return []
+        self._count("renotify")
+        return [self.alert_event(a)]
+
     def acknowledged(self, alert_id: str, owner: str, t: float) -> list[bytes]:
         """An alert its EA took an acknowledgement for: cancel the TAK emergencies it (and
         its repeats) raised, as ATAK cancels one (`b-a-o-can`, same uid, `cancel="true"`),
         so the banner goes from every TAK user's screen. Other alerts: nothing."""
         out = []
+        self.urgent.pop(alert_id, None)
         for uid, lon, lat, callsign in self.emergencies.pop(alert_id, ()):
             tm = self.when(max(t, self.t))
             em = ET.Element("emergency", {"cancel": "true"})
