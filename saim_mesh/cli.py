@@ -347,6 +347,21 @@ def _command_fields(a) -> tuple[str, dict]:
         return "confirm", {"mission": a.mission, "phase": a.phase}
     if a.cmd == "decide":
         return "decide", {"alert": a.alert, "option": a.option}
+    if a.cmd == "inhibit":
+        if a.lift:
+            return "uninhibit", {"id": a.id}
+        from . import wire as W
+        src = {k: v for k, v in (("types", a.source_types), ("subjects", a.source_subjects),
+                                 ("priorities", a.source_priorities)) if v}
+        tgt = {k: v for k, v in (("types", a.target_types), ("subjects", a.target_subjects),
+                                 ("priorities", a.target_priorities)) if v}
+        if not src or not tgt:
+            raise ValueError("inhibit: give at least one --source-* and one --target-* matcher, or --lift")
+        try:
+            return "inhibit", {"id": a.id, "source": W.MatcherSpec(**src), "target": W.MatcherSpec(**tgt),
+                               "equal": a.equal, "for_s": a.for_s or 0.0, "comment": a.comment}
+        except TypeError as e:
+            raise ValueError(f"inhibit: {e}") from None
     return "cff", {"cff": a.cff, "action": a.action}
 
 
@@ -559,7 +574,7 @@ def main(argv: list[str] | None = None) -> int:
     ce.add_argument("--units", nargs="+", metavar="UNIT", help="EA identities (default: battalion, companies, platoons)")
     ce.set_defaults(fn=cmd_certs)
     for name, help_, fields in (
-            ("ack", "acknowledge an alert: its repeats stop", [
+            ("ack", "acknowledge an alert: its re-notifications and escalation stop", [
                 ("--alert", dict(required=True, help="alert id, <owner>/<n>")), ("--by", dict(default=""))]),
             ("silence", "silence matching alerts until a scenario time (or --lift one)", [
                 ("--id", dict(required=True)), ("--types", dict(nargs="*", default=[])),
@@ -573,6 +588,20 @@ def main(argv: list[str] | None = None) -> int:
                 ("--mission", dict(required=True)), ("--phase", dict(required=True, choices=["start", "end"]))]),
             ("cff", "confirm or cancel a call for fire the EA has seen", [
                 ("--cff", dict(required=True)), ("--action", dict(required=True, choices=["confirm", "cancel"]))]),
+            ("inhibit", "add an inhibition rule: while a source alert is active, matching target alerts sharing "
+                        "the --equal labels are logged marked inhibited_by, not shown (or --lift one)", [
+                ("--id", dict(required=True)),
+                ("--source-types", dict(nargs="*", default=[])), ("--source-subjects", dict(nargs="*", default=[])),
+                ("--source-priorities", dict(nargs="*", default=[],
+                                             choices=["flash", "immediate", "priority", "routine"])),
+                ("--target-types", dict(nargs="*", default=[])), ("--target-subjects", dict(nargs="*", default=[])),
+                ("--target-priorities", dict(nargs="*", default=[],
+                                             choices=["flash", "immediate", "priority", "routine"])),
+                ("--equal", dict(nargs="*", default=["subjects"], choices=["subjects", "owner", "places", "category"],
+                                 help="labels source and target must share (default: subjects)")),
+                ("--for", dict(dest="for_s", type=_seconds, default=None,
+                               help="scenario seconds a source alert stays active (default: voa.expiry_s)")),
+                ("--comment", dict(default="")), ("--lift", dict(action="store_true", help="lift rule --id"))]),
             ("decide", "answer an alert that asks for a decision (threat-ahead: continue, abort, execute:BRANCH)", [
                 ("--alert", dict(required=True, help="alert id, <owner>/<n>")),
                 ("--option", dict(required=True, help="one of the alert's details.decision.options"))])):

@@ -191,8 +191,38 @@ CASES = [
     ("nan-in-overlay", overlay(nan_overlay), ["overlay.geojson: feature 0", "field 'geometry'", "lon nan"]),
     ("lat-out-of-range-in-overlay", overlay(lat_overlay),
      ["overlay.geojson: feature 0", "field 'geometry'", "lat 95.0"]),
-    ("overlay-width-string", overlay(lambda fc: fc["features"][0]["properties"].update(width_m="wide")),
-     ["overlay.geojson: feature 0", "field 'width_m'"]),
+    ("overlay-width-string", overlay(lambda fc: fc["features"][2]["properties"].update(width_m="wide")),
+     ["overlay.geojson: feature 2 (PL-BLUE-A)", "field 'width_m'", "expected a number"]),
+    # nothing a user writes is silently ignored: parameters a mission class does not declare,
+    # trigger keys its kind does not read, overlay properties the loader reads elsewhere or misspelt
+    ("block-unknown-param", plan(lambda p: mission(p, "B1-defend")["params"].update(line="PL-BLUE-B")),
+     ["plan.json: plans.main[11] (B1-defend)", "field 'params.line'", "unknown parameter of block",
+      "block knows engagement_area, expect_hostile_by, position, voi"]),
+    ("move-param-typo", plan(lambda p: mission(p, "A1-move")["params"].update(routee=mission(p, "A1-move")
+                                                                               ["params"].pop("route"))),
+     ["(A1-move)", "field 'params.routee'", "unknown parameter of move", "did you mean 'route'?",
+      "checkpoints, destination, route, voi"]),
+    ("required-param-typo", plan(lambda p: mission(p, "A1-attack")["params"].update(
+        objectiv=mission(p, "A1-attack")["params"].pop("objective"))),
+     ["(A1-attack)", "field 'params.objectiv'", "unknown parameter of attack", "did you mean 'objective'?"]),
+    ("task-params-unknown", plan(lambda p: mission(p, "BN-branch-ABF")["params"]["task_params"].update(
+        engagement="EA-A")),
+     ["(BN-branch-ABF)", "field 'params.task_params.engagement'", "unknown parameter of attack-by-fire",
+      "did you mean 'engagement_area'?"]),
+    ("trigger-key-of-other-kind", plan(lambda p: mission(p, "A-sequel-occupy")["params"]["trigger"].update(
+        min_strength=2)),
+     ["(A-sequel-occupy) params.trigger", "field 'min_strength'", "not read by a unit-at trigger",
+      "kind, unit, area, within_m, rule"]),
+    ("overlay-radius-on-polygon", overlay(lambda fc: fc["features"][3]["properties"].update(radius_m=300)),
+     ["overlay.geojson: feature 3 (OBJ-A)", "field 'radius_m'", "not read for an objective Polygon",
+      "id, kind, owner"]),
+    ("overlay-radius-no-unit", overlay(lambda fc: fc["features"][45]["properties"].update(
+        radius=fc["features"][45]["properties"].pop("radius_m"))),
+     ["overlay.geojson: feature 45 (NAI-1)", "field 'radius'", "spelled like 'radius_m'",
+      "id, kind, owner, radius_m"]),
+    ("overlay-width-typo", overlay(lambda fc: fc["features"][49]["properties"].update(
+        widht_m=fc["features"][49]["properties"].pop("width_m"))),
+     ["overlay.geojson: feature 49 (AA-DIAMOND)", "field 'widht_m'", "spelled like 'width_m'"]),
     ("config-epoch-zero", config("[manager]\nepoch_s = 0\n"), ["ea.toml", "[manager]", "field 'epoch_s'", "> 0"]),
     ("config-fact-batch-string", config("[manager]\nfact_batch = \"x\"\n"), ["ea.toml", "field 'fact_batch'", "integer"]),
     ("config-fact-batch-negative", config("[manager]\nfact_batch = -3\n"), ["field 'fact_batch'", "> 0"]),
@@ -265,6 +295,28 @@ def test_copy_validates(scn):
     assert cli.main(["validate", str(scn)]) == 0
     events()(scn)
     assert cli.main(["validate", str(scn)]) == 0
+
+
+def test_descriptive_properties_still_validate(scn):
+    """Overlay properties the loader does not read are the user's own description (the
+    console shows them): a name, a note, a GIS tool's fid or styling are no error."""
+    def describe(fc):
+        for f in fc["features"]:
+            f["properties"].update(name=f"the {f['properties']['id']}", description="from the OPORD", fid=7,
+                                   stroke="#ff0000")
+    overlay(describe)(scn)
+    assert cli.main(["validate", str(scn)]) == 0
+
+
+def test_every_declared_param_is_known():
+    """A class knows what it and its ancestors declare (PARAMS, merged): the loader's list of
+    a class's parameters is the one `saim-mesh missions` prints."""
+    from ea_agent.domains.suo.missions import REGISTRY
+    for typ, cls in REGISTRY.items():
+        assert set(cls.required()) <= set(cls.all_params()), typ
+        assert {*cls.GEOMETRY_PARAMS, *cls.UNIT_PARAMS} <= set(cls.all_params()), typ
+        assert cls.unknown_params({p: None for p in cls.all_params()}) == [], typ
+    assert REGISTRY["block"].unknown_params({"position": "BP", "line": "PL"}) == ["line"]
 
 
 def test_key_chunk_helper():

@@ -127,6 +127,19 @@ def test_ack_and_set_through_the_cli(plain):
     assert code == 0 and res["ok"] and res["kind"] == "silence"
     code, res = cli("silence", ep, root, "--id", "s1", "--lift")
     assert code == 0 and res["kind"] == "unsilence"
+    code, res = cli("inhibit", ep, root, "--id", "r1", "--source-types", "contact", "--target-types", "distance",
+                    "strength", "--equal", "subjects")
+    assert code == 0 and res["ok"] and res["kind"] == "inhibit" and res["ref"] == "r1"
+    code, res = cli("inhibit", ep, root, "--id", "r1", "--lift")
+    assert code == 0 and res["ok"] and res["kind"] == "uninhibit"
+    code, res = cli("inhibit", ep, root, "--id", "r1", "--lift")
+    assert code == 2 and "unknown rule 'r1'" in res["error"]
+    logged = [json.loads(x) for x in open(out.with_name("A2.cmdlog"))]
+    assert [(x["kind"], x["ok"]) for x in logged][-3:] == [("inhibit", True), ("uninhibit", True),
+                                                          ("uninhibit", False)]
+    from saim_mesh import cmdlog
+    rule = [c.cmd for c in cmdlog.read([out.with_name("A2.cmdlog")]) if type(c.cmd) is W.InhibitCmd]
+    assert rule and rule[0].source.types == ["contact"]   # replayable by run --commands
     code, res = cli("confirm", ep, root, "--mission", "no-such-mission", "--phase", "start")
     assert code == 2 and "unknown mission" in res["error"]
     code, res = cli("cff", ep, root, "--cff", "no-such-cff", "--action", "confirm")

@@ -13,7 +13,7 @@ from .plan import MissionSpec
 class Mission:
     """Every mission has start and end time constraints and a place to be."""
     TYPE: ClassVar[str] = "mission"
-    PARAMS: ClassVar[dict[str, str]] = {
+    PARAMS: ClassVar[dict[str, str]] = {   # name -> one line; merged along the hierarchy (all_params)
         "voi": "optional per-mission VOI overrides, e.g. {schedule_s: 10}",
     }
     REQUIRED: ClassVar[tuple[str, ...]] = ()
@@ -42,6 +42,14 @@ class Mission:
         for k in reversed(cls.__mro__):
             out.update(getattr(k, "PARAMS", {}) if "PARAMS" in vars(k) else {})
         return out
+
+    @classmethod
+    def unknown_params(cls, params: dict) -> list[str]:
+        """The keys of `params` that no class along the hierarchy declares in PARAMS: a
+        loader rejects them, so that nothing a plan says is silently ignored (a class
+        declares every parameter it, its monitors or its detectors read)."""
+        known = cls.all_params()
+        return [k for k in params if k not in known]
 
     @classmethod
     def required(cls) -> tuple[str, ...]:

@@ -129,7 +129,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                                 rule(f"fusion.{g}.store", ["declare_queryable", "reply"], [ks.fusion_store(g)]),
                                 rule(f"fusion.{g}.token", ["liveliness_token"], [ks.alive(f"fusion-{g}", "*")])])
     subject("observer", [out, read_public])
-    read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**"), ks.notice("**")])
+    read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**"), f"{r}/notice/**"])
     subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
     seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit")]
     read_seen = rule("read_console", READ, seen)

@@ -5,7 +5,9 @@ scenario is fixed in one look.
 """
 from __future__ import annotations
 
+import difflib
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,6 +32,62 @@ AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "enga
 LINE_KINDS = {"route", "phase-line", "avenue-of-approach", "obstacle"}
 POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon
 KINDS = AREA_KINDS | LINE_KINDS | POINT_KINDS
+
+# The feature properties the loader reads. Any other property is the user's own description
+# (a name, a note: the console shows them all), except one spelled like these (`radius`,
+# `Width_M`, `widht_m`) or one of these where it is not read (`radius_m` on a polygon):
+# both would be silently ignored, so both are errors.
+OVERLAY_PROPS = {
+    "id": "unique id of the control measure",
+    "kind": "one of KINDS",
+    "owner": "optional unit whose plan holds it",
+    "width_m": "lines: width when used as an area (default 100; avenue-of-approach 500)",
+    "radius_m": "decision-point, nai, checkpoint given as a Point: radius (default 250)",
+}
+
+
+def _read_props(kind: str, geom_type: str) -> tuple[str, ...]:
+    """The OVERLAY_PROPS the loader reads for a feature of this kind and geometry."""
+    size = ("width_m",) if kind in LINE_KINDS else ("radius_m",) if kind in POINT_KINDS and geom_type == "Point" else ()
+    return ("id", "kind", "owner", *size)
+
+
+def _norm(key: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", key.lower())
+
+
+_PROP_SPELLINGS = {**{_norm(k): k for k in OVERLAY_PROPS},   # `Width_M`, `radius-m`; `radius` (no unit)
+                   **{_norm(k[:-2]): k for k in OVERLAY_PROPS if k.endswith("_m")}}
+
+
+def _like_prop(key: str) -> str | None:
+    """The loader property `key` is a misspelling of (other case or punctuation, no unit
+    suffix, a typo), or None for a descriptive property of the user's own."""
+    hit = _PROP_SPELLINGS.get(_norm(key))
+    if hit is None and len(key) > 3:
+        close = difflib.get_close_matches(key.lower(), OVERLAY_PROPS, n=1, cutoff=0.85)
+        hit = close[0] if close else None
+    return hit
+
+
+def _a(word: str) -> str:
+    return f"{'an' if word[0] in 'aeio' else 'a'} {word}"
+
+
+def _check_props(props: dict, kind: str, geom_type: str, where: str) -> None:
+    """Nothing the loader would ignore: a property it reads only for other features, or a
+    misspelling of one (see OVERLAY_PROPS)."""
+    read = _read_props(kind, geom_type)
+    for k in props:
+        if k in read:
+            continue
+        if k in OVERLAY_PROPS:
+            raise ScenarioError(f"{where}: field '{k}': not read for {_a(kind)} {geom_type} "
+                                f"(it reads {', '.join(read)})")
+        like = _like_prop(k)
+        if like is not None:
+            raise ScenarioError(f"{where}: field '{k}': unknown property, spelled like {like!r} ({_a(kind)} "
+                                f"{geom_type} reads {', '.join(read)}; other properties are descriptive)")
 
 
 @dataclass(slots=True)
@@ -72,6 +130,7 @@ def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
         if not shapely.is_valid(geom):
             raise ScenarioError(f"{where}: field 'geometry': invalid {geom.geom_type} "
                                 f"({shapely.is_valid_reason(geom)})")
+        _check_props(props, kind, geom.geom_type, where)
         xy = shapely.transform(geom, lambda c: proj.to_xy_array(c))
         if not np.isfinite(shapely.get_coordinates(xy)).all():
             raise ScenarioError(f"{where}: field 'geometry': cannot be projected to EPSG:{proj.epsg} "
@@ -137,6 +196,13 @@ def _check_params(cls, params: Any, where: str, prefix: str, overlay: dict, ids:
     """A mission's params against its class: required ones, control measures, units, numbers."""
     if not isinstance(params, dict):
         raise ScenarioError(f"{where}: field '{prefix.rstrip('.') or 'params'}': expected an object")
+    unknown = cls.unknown_params(params)
+    if unknown:   # before `required`: a misspelt required parameter is named as what it is
+        known = sorted(cls.all_params())
+        close = difflib.get_close_matches(unknown[0], known, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise ScenarioError(f"{where}: field '{prefix}{unknown[0]}': unknown parameter of {cls.TYPE} "
+                            f"({hint}{cls.TYPE} knows {', '.join(known)}; see `saim-mesh missions`)")
     if required:
         for r in cls.required():
             if r not in params:
@@ -277,8 +343,13 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
 def _check_trigger(tr: Any, where: str, overlay: dict, ids: set[str]) -> None:
     where += " params.trigger"
     kind = _need(tr, "kind", where, str)
-    if kind not in ("hostile-in-area", "unit-at"):
-        raise ScenarioError(f"{where}: field 'kind': {kind!r} not hostile-in-area or unit-at")
+    kinds = ContingentMission.TRIGGERS
+    if kind not in kinds:
+        raise ScenarioError(f"{where}: field 'kind': {kind!r} not {' or '.join(kinds)}")
+    for k in tr:
+        if k not in kinds[kind]:
+            raise ScenarioError(f"{where}: field '{k}': not read by {_a(kind)} trigger "
+                                f"(it reads {', '.join(kinds[kind])})")
     _area_ref(_need(tr, "area", where), where, "area", overlay)
     if kind == "unit-at":
         _unit_ref(_need(tr, "unit", where), where, "unit", ids)

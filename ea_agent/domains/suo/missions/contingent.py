@@ -1,6 +1,8 @@
 """Missions that change the plan: contingencies (branches, sequels) and reorganizations."""
 from __future__ import annotations
 
+from typing import ClassVar
+
 from .base import Mission, mission
 
 
@@ -8,11 +10,21 @@ class ContingentMission(Mission):
     """A branch or sequel: executed only when its trigger holds.
 
     trigger: {"kind": "hostile-in-area", "area": ID, "min_strength": N}
-          or {"kind": "unit-at", "unit": ID, "area": ID}
+          or {"kind": "unit-at", "unit": ID, "area": ID, "within_m": M, "rule": R} (TRIGGERS)
     `owner` is the unit whose plan holds the contingency (only its EA monitors it).
     """
-    PARAMS = {"trigger": "condition that activates the contingency", "task": "mission type to execute",
+    PARAMS = {"trigger": "condition that activates the contingency (one of TRIGGERS)",
+              "task": "mission type to execute",
+              "task_params": "the task's own parameters (what its class requires; checked against it)",
               "owner": "unit whose plan holds this contingency"}
+    # trigger kind -> the keys its evaluation reads (detect/contingency.py, the oracle)
+    TRIGGERS: ClassVar[dict[str, dict[str, str]]] = {
+        "hostile-in-area": {"kind": "hostile-in-area", "area": "overlay feature watched",
+                            "min_strength": "optional hostile strength in it that triggers (default 1)"},
+        "unit-at": {"kind": "unit-at", "unit": "unit whose arrival triggers", "area": "overlay feature it reaches",
+                    "within_m": "optional distance from the feature that counts (default 0)",
+                    "rule": "optional centroid (default), any or all members"},
+    }
     REQUIRED = ("trigger", "task", "owner")
     UNIT_PARAMS = ("owner",)
     CHECKS = ("its trigger (contingency); once triggered, its task as a monitored mission from then",)
