@@ -166,18 +166,18 @@ def play(sc, msgs: list, until: float, owner: str = "A", cfg: dict | None = None
     return ea
 
 
-def alerts_of(ea, typ: str, mission: str | None = None, repeats: bool = False) -> list:
-    """Alerts of `typ` (with the notifier's repeats only if `repeats`), of `mission` when given."""
-    return [a for a in ea.alerts if a.type == typ and (repeats or "repeat_of" not in a.details)
+def alerts_of(ea, typ: str, mission: str | None = None) -> list:
+    """Alerts of `typ`, of `mission` when given."""
+    return [a for a in ea.alerts if a.type == typ
             and (mission is None or a.details.get("mission") == mission)]
 
 
 def told(alerts) -> list[dict]:
-    """What alerts say, without their ids (numbered over every alert the EA gave)."""
+    """What alerts say, without their ids and story ids (numbered over every alert the EA gave)."""
     out = []
     for a in alerts:
         d = a.to_json_dict()
-        d["details"] = {k: v for k, v in d["details"].items() if k != "id"}
+        d["details"] = {k: v for k, v in d["details"].items() if k not in ("id", "story")}
         out.append(d)
     return out
 

@@ -32,7 +32,7 @@ def stays(unit: str, x: float, y: float, t0: float = 10.0, t1: float = 600.0) ->
 
 def of(ea, typ: str) -> list:
     """Every alert of `typ`, the notifier's repeats included."""
-    return alerts_of(ea, typ, repeats=True)
+    return alerts_of(ea, typ)
 
 
 # ===================================================== 1. Check-Initial-Location, stationary units
