@@ -83,8 +83,12 @@ def cmd_run(a) -> int:
     cmds = read_commands(a.commands, set(sc.taskorg.units)) if a.commands else None
     sinks = [] if a.quiet else [TerminalSink()]
     out = open(a.out, "w", buffering=1) if a.out else None   # line-buffered; JsonlSink flushes each alert
+    notice_sinks: list = []
     if out:
         sinks.append(JsonlSink(out))
+        from .noticelog import NoticeLog, path_for
+        nlog = NoticeLog(path_for(a.out))   # re-notifications and escalations, beside the alerts
+        notice_sinks.append(nlog)
     try:
         consoles: list = []
         if a.console is not None:
@@ -93,10 +97,11 @@ def cmd_run(a) -> int:
         stops: list = []
         eas = run(sc, owners, sinks, voa=not a.no_voa, config_path=a.config, speed=a.speed, progress=_progress,
                   on_made=(lambda eas: stops.append(consoles[0](eas))) if consoles else None,
-                  commands=cmds, armed=a.armed or a.console is not None)
+                  commands=cmds, armed=a.armed or a.console is not None, notice_sinks=notice_sinks)
     finally:
         if out:
             out.close()
+            nlog.close()
     print()
     print(table(eas, tuple(domains.of(sc).ALERT_TYPES)))
     if stops:
@@ -465,8 +470,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="apply a commander's commands as logged by mesh peers (<unit>.cmdlog): replays a run "
                         "with a console in the loop to the same alerts")
     r.add_argument("--armed", action="store_true",
-                   help="flash and immediate alerts repeat until acknowledged from the start (as under "
-                        "`mesh up --console`); --console implies it")
+                   help="a commander watches from the start (as under `mesh up --console`): unacknowledged flash "
+                        "and immediate alerts are re-notified and escalated ([notify]; --out FILE: notices in "
+                        "FILE's .notify.jsonl); --console implies it")
     r.set_defaults(fn=cmd_run)
     e = sub.add_parser("evaluate", help="score alerts against the scenario's ground truth")
     e.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
@@ -511,7 +517,8 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
     pe.add_argument("--config", metavar="TOML")
     pe.add_argument("--armed", action="store_true",
-                    help="a console watches: flash and immediate alerts repeat until acknowledged")
+                    help="a console watches: unacknowledged flash and immediate alerts are re-notified and "
+                         "escalated to the superior ([notify])")
     pe.add_argument("--radius", type=_seconds, default=None,
                     help="geographic interest radius around our units (m); default: [dissemination] in the config")
     pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",

@@ -23,6 +23,8 @@ class TerminalSink:
         self.colour = self.stream.isatty() if colour is None else colour
 
     def __call__(self, a: Alert) -> None:
+        if "silenced" in a.details or "inhibited_by" in a.details:
+            return   # logged (JSON lines), not shown as new
         tag = f"{a.priority.upper():9}"
         if self.colour:
             tag = f"{COLOURS[a.priority]}{tag}{RESET}"

@@ -1,13 +1,17 @@
 """The console on a live mesh, in a real browser (issue #9, "Tested in a real browser").
 
-`mesh up --console` on the small scenario (BN's and A2's EA peers, mTLS, access control)
-at 60x real time; headless Chromium opens the printed address and acts as the commander:
+`mesh up --console` on the small scenario (BN's, A's and A2's EA peers, mTLS, access
+control) at 60x real time; headless Chromium opens the printed address and acts as the
+commander:
  - the first flash alert raised after the page opened is on screen within 1 s of falling
    due on the mesh's own clock (the replay's tick stamps its wall time; the page logs when
    it drew each row: `window.__latencies()`);
- - clicking it shows its details; unacknowledged, it repeats; acknowledged, the repeats
-   stop (checked once the mesh clock is well past the next repeats, not after a sleep);
-   unacknowledged immediate alerts meanwhile escalate to flash;
+ - clicking it shows its details; unacknowledged, its row is re-notified (never a new
+   alert); acknowledged, the re-notifications stop (checked on BN's notice log once the
+   mesh clock is well past the next ones, not after a sleep);
+ - an urgent alert A2's commander leaves unacknowledged is escalated to A (a signed notice
+   through the mesh): it is on the page as "unacknowledged at A2", in A's notice log, and
+   no alert anywhere changed priority (every peer's alerts have the unarmed run's priorities);
  - a threshold set from the page (A2's threat radius) shapes A2's next alerts: its first
    contact comes earlier and farther than in the run without the change;
  - the call for fire A2 must confirm is confirmed from the page;
@@ -49,14 +53,21 @@ def plan_alerts(path):
             continue
         d = a["details"]
         out.append((a["t"], a["type"], tuple(a["subjects"]), a["message"], a["priority"], d.get("id"),
-                    d.get("repeat_of"), d.get("silenced")))
+                    d.get("story"), d.get("silenced")))
     return out
+
+
+def notices(path):
+    try:
+        return [json.loads(x) for x in open(path) if x.strip()]
+    except FileNotFoundError:
+        return []
 
 
 @pytest.fixture(scope="module")
 def mesh(tmp_path_factory):
     out = tmp_path_factory.mktemp("console-mesh")
-    p = Proc("mesh-up", [*py(), "mesh", "up", str(SMALL), "--units", "BN", "A2", "--speed", str(SPEED),
+    p = Proc("mesh-up", [*py(), "mesh", "up", str(SMALL), "--units", "BN", "A", "A2", "--speed", str(SPEED),
                          "--out-dir", str(out), "--console", "0", "--console-linger", "300"],
              env=clean_env(), log_dir=out)
     try:
@@ -103,28 +114,35 @@ def test_a_commander_acts_on_a_live_mesh(mesh):
         assert first["t_alert"] > 0 and first["owner"] == "BN"
         aid = first["id"]
 
-        # 2. its details on a click; it repeats until acknowledged; the ack stops the repeats
-        row = d.find_element(By.CSS_SELECTOR, f'#pane-flash li.alert[data-id="{aid}"]')
-        row.click()
+        # 2. its details on a click; re-notified until acknowledged (the row, never a new alert)
+        row = lambda: d.find_element(By.CSS_SELECTOR, f'#pane-flash li.story[data-story="{first["story"]}"]')  # noqa: E731
+        row().click()
         wait(d, lambda d: aid in d.find_element(By.ID, "details").get_attribute("textContent"), what="details")
         assert first["message"] in d.find_element(By.ID, "details").get_attribute("textContent")
-        chain = first["repeat_of"] or aid   # the first flash may itself be an escalated repeat
-        repeats = lambda: [e for e in js("return window.__renderLog")   # noqa: E731
-                           if e["repeat_of"] == chain and e["t_alert"] > first["t_alert"]]
-        wait(d, lambda d: repeats(), 60, f"repeat of {aid}")
-        d.find_element(By.CSS_SELECTOR, f'#pane-flash li.alert[data-id="{aid}"]').click()
+        renotified = lambda: [n for n in notices(out / "BN.notify.jsonl")   # noqa: E731
+                              if n["kind"] == "renotify" and n["alert"] == aid]
+        wait(d, lambda d: renotified(), 60, f"re-notification of {aid}")
+        wait(d, lambda d: "renotified" in (row().get_attribute("class") or ""), 30, "the row re-notified")
+        assert not any(a["details"].get("id") != aid and a["details"].get("story") == first["story"]
+                       and a["message"] == first["message"] for a in map(json.loads, open(out / "BN.jsonl")))
+        row().click()
         d.find_element(By.ID, "ack-btn").click()
         wait(d, lambda d: status().startswith("ack BN: ok at H+"), 30, "ack result")
-        acked_t = max(e["t_alert"] for e in repeats())   # the ack took effect after the last repeat shown
         log_ack = _wait_logged(out / "BN.cmdlog", "ack", proc)
         assert log_ack["ok"] and log_ack["cmd"]["alert"] == aid
-        acked_t = max(acked_t, log_ack["t"])
-        wait(d, lambda d: mesh_t() >= acked_t + 4 * 60.0, 60, "mesh clock 4 repeat periods past the ack")
-        after = [e for e in repeats() if e["t_alert"] > log_ack["t"]]
-        assert after == [], f"{aid} repeated after its ack at t={log_ack['t']}: {after}"
-        escalated = [e for e in js("return window.__renderLog") if e["escalated_from"]]
-        assert escalated and all(e["priority"] == "flash" and e["escalated_from"] == "immediate"
-                                 for e in escalated), escalated[:3]
+        every = 120.0   # [notify.flash] every_s
+        wait(d, lambda d: mesh_t() >= log_ack["t"] + 2 * every, 60, "mesh clock two re-notification periods on")
+        after = [n for n in renotified() if n["t"] > log_ack["t"]]
+        assert after == [], f"{aid} re-notified after its ack at t={log_ack['t']}: {after}"
+
+        # an escalation from below reaches the superiors (A2 -> A, A -> BN), on the page and in A's log
+        esc = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#escalations li.escalation"), 120, "escalation")
+        assert "unacknowledged at" in esc[0].get_attribute("textContent")
+        got = wait(d, lambda d: [n for n in notices(out / "A.notify.jsonl")
+                                 if n["kind"] == "escalate" and n["owner"] == "A2" and n["to"] == "A"], 60,
+                   "A2's escalation in A's notice log")
+        sent = [n for n in notices(out / "A2.notify.jsonl") if n["kind"] == "escalate"]
+        assert got[0] in sent and got[0]["priority"] in ("flash", "immediate")
 
         # 3. A2's threat radius from 2 km to 4 km, from the page: A2's next contact follows it
         Select(d.find_element(By.ID, "unit-select")).select_by_value("A2")
@@ -153,24 +171,34 @@ def test_a_commander_acts_on_a_live_mesh(mesh):
         assert bad == [], bad
 
     # 5. the peers end; a replay of their command logs gives exactly their alerts
-    for u in ("BN", "A2"):
+    units = ("BN", "A", "A2")
+    for u in units:
         _wait_line(out / "logs" / f"{u}.log", "summary ", proc)
-    cmds = [out / "BN.cmdlog", out / "A2.cmdlog"]
+    cmds = [out / f"{u}.cmdlog" for u in units if (out / f"{u}.cmdlog").exists()]
     kinds = [json.loads(x)["kind"] for f in cmds for x in open(f)]
     assert sorted(kinds) == ["ack", "cff", "set"], kinds
-    replay = out / "replay.jsonl"
-    subprocess.run([sys.executable, "-m", "saim_mesh", "run", str(SMALL), "--ea", "BN", "A2", "--armed", "--quiet",
+    replay, unarmed = out / "replay.jsonl", out / "unarmed.jsonl"
+    subprocess.run([sys.executable, "-m", "saim_mesh", "run", str(SMALL), "--ea", *units, "--armed", "--quiet",
                     "--commands", *map(str, cmds), "--out", str(replay)], check=True, env=clean_env(),
                    stdout=subprocess.DEVNULL, timeout=300)
-    by_owner: dict[str, list] = {"BN": [], "A2": []}
-    for line in open(replay):
-        a = json.loads(line)
-        if a["category"] != "system-problem":
-            d = a["details"]
-            by_owner[a["owner"]].append((a["t"], a["type"], tuple(a["subjects"]), a["message"], a["priority"],
-                                         d.get("id"), d.get("repeat_of"), d.get("silenced")))
-    for u in ("BN", "A2"):
-        assert plan_alerts(out / f"{u}.jsonl") == by_owner[u], u
+    subprocess.run([sys.executable, "-m", "saim_mesh", "run", str(SMALL), "--ea", *units, "--quiet",
+                    "--commands", *map(str, cmds), "--out", str(unarmed)], check=True, env=clean_env(),
+                   stdout=subprocess.DEVNULL, timeout=300)
+
+    def by_owner(path) -> dict[str, list]:
+        got: dict[str, list] = {u: [] for u in units}
+        for line in open(path):
+            a = json.loads(line)
+            if a["category"] != "system-problem":
+                d = a["details"]
+                got[a["owner"]].append((a["t"], a["type"], tuple(a["subjects"]), a["message"], a["priority"],
+                                        d.get("id"), d.get("story"), d.get("silenced")))
+        return got
+    armed_run, unarmed_run = by_owner(replay), by_owner(unarmed)
+    for u in units:
+        assert plan_alerts(out / f"{u}.jsonl") == armed_run[u], u
+        # a commander watching changes what is re-notified and escalated, never an alert or its priority
+        assert armed_run[u] == unarmed_run[u], u
 
 
 def _wait_line(path, prefix: str, proc: Proc, timeout: float = 180.0) -> str:
