@@ -362,3 +362,20 @@ def test_an_insider_cannot_forge_or_replay_authority(tmp_path, sc, pki, inproc):
     assert keys_of(load(tmp_path / "A2.jsonl")) == [key(a) for a in inproc["A2"]]
     events = sorted([*sc.events, M.MissionConfirm(400.0, "A2-attack", "A2", "start")], key=lambda e: e.t)
     assert in_process_a2(events) != [key(a) for a in inproc["A2"]]   # the forgery would have mattered
+
+
+def test_an_escalation_is_signed_by_its_owners_ea_only(keys):
+    """An EA signs the notices of its own alerts (notice/<superior>/<owner>): the superior
+    takes A2's escalation signed by ea.A2, and refuses it signed by anyone else, on another
+    owner's key, or unsigned in secure mode."""
+    n = W.make(W.Notice, kind="escalate", t=1242.0, owner="A2", alert="A2/1", story="A2/1", type="out-of-position",
+               priority="immediate", subjects=["A2"], message="off route", count=1, to="A", due_t=942.0)
+    key = KS.notice("A", "A2")
+    g = gate(keys)
+    assert g.control(W.Notice, G.Signer("ea.A2", keys["ea.A2"]).sign(key, W.encode(n)), key, signed=True) == n
+    for who, k in (("console.A", key), ("replay", key), ("ea.A2", KS.notice("A", "B1"))):
+        before = g.errors
+        assert g.control(W.Notice, G.Signer(who, keys[who]).sign(k, W.encode(n)), k, signed=True) is None
+        assert g.errors == before + 1 and "may not sign" in g.rejects.recent[-1], (who, k)
+    before = g.errors
+    assert g.control(W.Notice, W.encode(n), key, signed=True) is None and g.errors == before + 1
