@@ -296,18 +296,26 @@ def matcher(exprs: list[str]):
     """A fast test of concrete keys against key expressions: the `prefix/**` and
     `prefix/*` forms our subscriptions use are string checks; others go to Zenoh, those
     ending in a literal chunk (`pos/*/*/**/<entity>`, one entity wherever it is) only
-    for keys ending in it (a store scans every key it holds)."""
+    for keys ending in it (a store scans every key it holds). An expression Zenoh will not
+    parse (`$*`, `a//b`: attacker input in a query) is a ValueError naming it, never a
+    `zenoh.ZError` out of the caller's loop."""
     deep, one, other = [], [], []
     by_last: dict[str, list] = {}
+
+    def kexpr(e: str):
+        try:
+            return zenoh.KeyExpr(e)
+        except Exception as err:   # zenoh.ZError is no ValueError
+            raise ValueError(f"key expression {e[:80]!r}: {str(err).split(' at /', 1)[0][:160]}") from None
     for e in exprs:
         head = e[:-3] if e.endswith("/**") else e[:-2] if e.endswith("/*") else None
         last = e.rsplit("/", 1)[-1]
         if head is not None and "*" not in head:
             (deep if e.endswith("/**") else one).append(head + "/")
         elif "*" not in last and "$" not in last:
-            by_last.setdefault(last, []).append(zenoh.KeyExpr(e))
+            by_last.setdefault(last, []).append(kexpr(e))
         else:
-            other.append(zenoh.KeyExpr(e))
+            other.append(kexpr(e))
     deep_t, one_t = tuple(deep), tuple(one)
 
     def match(k: str) -> bool:

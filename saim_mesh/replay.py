@@ -148,9 +148,10 @@ class Replay:
             if req is not None:
                 try:
                     entries = self._entries(req, src)
-                except ValueError as e:   # a key expression Zenoh will not parse
+                except ValueError as e:   # a key expression Zenoh will not parse: an error answer, and we live
                     self.gate.rejects.add(M.MessageError("storequery", "keys", str(e)[:160]), self.ks.store(src))
                     entries = None
+                    query.reply_err(str(e)[:200].encode())
                 if entries is not None:
                     query.reply(self.ks.store(src), W.encode(W.make(W.StoreReply, t=self.t, entries=entries,
                                                                        fusion=dict(self.fusion_t))),

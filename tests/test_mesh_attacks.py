@@ -495,3 +495,29 @@ def test_secure_forged_presence_and_bye_are_dropped(tmp_path, sc, pki, inproc):
     notes = [x for x in load(tmp_path / "A.jsonl") if x["category"] == "system-problem"]
     assert [(x["subjects"], x["details"]["left"]) for x in notes] == [(["A2"], True)]
     assert keys_of(load(tmp_path / "A.jsonl")) == [key(x) for x in inproc["A"]]
+
+
+def test_a_store_query_zenoh_cannot_parse_is_an_error_answer_and_the_replay_lives(tmp_path, sc, inproc):
+    """Issue 31, 7: a key expression the gate lets through but Zenoh will not parse (`$*`,
+    `a//b`) raised a zenoh.ZError out of the replay's store and killed it; under `mesh up`
+    repeated queries exhausted its restarts. Now: an error answer, counted, and the replay
+    serves the next query and runs to the end (the peer's alerts as in process)."""
+    ep, root, procs = launch(tmp_path, [("A2", "A2")])
+    ks = KeySpace(root)
+    try:
+        procs[0].wait_for("t=300", RUN)
+        with attacker(ep, root, sc) as s:
+            for bad in (["$*"], ["a//b"], ["x/**/*"]):
+                req = W.encode(W.make(W.StoreQuery, since=0, keys=bad))
+                answers = list(s.get(ks.store(), payload=req, timeout=WAIT))
+                assert answers and all(r.ok is None and r.err is not None for r in answers), bad
+                assert "Invalid Key Expr" in answers[0].err.payload.to_string()
+            req = W.encode(W.make(W.StoreQuery, since=0, keys=[f"{root}/clock"]))
+            good = [r for r in s.get(ks.store(), payload=req, timeout=WAIT) if r.ok is not None]
+            assert good and W.decode_control(W.StoreReply, good[0].ok.payload.to_bytes(), 1 << 28).t > 0
+        summary_of(procs[1])
+        procs[0].p.wait(60)
+        assert procs[0].p.returncode == 0, procs[0].tail()
+    finally:
+        reap(procs)
+    assert keys_of(load(tmp_path / "A2.jsonl")) == [key(a) for a in inproc["A2"]]

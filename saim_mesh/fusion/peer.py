@@ -60,7 +60,9 @@ class FusionPeer:
         try:
             match = matcher(req.keys) if req.keys is not None else (lambda k: True)
             entries = [p for k, p in list(self.log_out) if match(k)]
-        except ValueError:
+        except ValueError as e:   # a key expression Zenoh will not parse: counted, an error answer
+            self.gate.rejects.add(M.MessageError("fusionquery", "keys", str(e)[:160]), self.ks.fusion_store(self.group))
+            query.reply_err(str(e)[:200].encode())
             return
         query.reply(self.ks.fusion_store(self.group), W.encode(W.make(W.FusionReply, entries=entries)))
 
