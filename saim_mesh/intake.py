@@ -108,7 +108,7 @@ class Intake:
         if m is None:
             return
         if m.t > self.clock_t + self.max_ahead:
-            self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
+            self._defer(m.t)   # not held; fetched from its fusion node when due
             return
         if (why := self.ks.mismatch(key, m)) is not None:
             self._reject(m.KIND, "(key)", why, key)
@@ -120,7 +120,8 @@ class Intake:
         hot path, one `KeyFacts` lookup per entry. An entry on a key outside its batch's
         group is counted and left out. A seq that came with two different payloads is
         contested and settled by the store; a message that does not belong on its key,
-        or is dated far ahead of the clock, is rejected, never held. `buf` takes
+        is rejected; one dated more than `max_ahead_s` ahead of the clock is deferred: not
+        held, fetched from the store once the clock comes within reach. `buf` takes
         (seq, message) in arrival order: `_due` sorts it at the tick."""
         pending, data, facts = self.pending, self.gate.data, self.facts
         known, learn, gen, epoch = facts.get, facts.learn, facts.gen, facts.epoch
@@ -160,7 +161,7 @@ class Intake:
             if m is None:
                 continue
             if m.t > t_hi:
-                self._reject(m.KIND, "t", f"{m.t} is more than {self.max_ahead:.0f} s ahead of the clock", key)
+                self._defer(m.t)   # not held; fetched from the store when due
                 continue
             attrs, values = (f.attrs, f.values) if f.cls is type(m) else facts.checks(f, key, type(m))
             why = values if attrs is None else field_mismatch(zip(attrs, values), m) if attrs else None
@@ -186,6 +187,18 @@ class Intake:
         del buf[:i]
         self.pending.drop(q for q, _ in ready)
         return ready
+
+    def _defer(self, t: float) -> None:
+        """A message dated more than `max_ahead_s` ahead of our clock: a peer that fell
+        behind (stalled in a fusion grace at a high replay speed) must never lose real data,
+        nor hold an unbounded amount of it. Not held; when the clock comes within
+        `max_ahead_s` of the earliest such time, everything on our keys after the last
+        message taken is fetched again (`_on_tick`). Forged data is not in the store."""
+        self.flow["deferred"] = self.flow.get("deferred", 0) + 1
+        if t < self.defer_t:
+            self.defer_t = t
+        if self.clock_t < self.defer_from:
+            self.defer_from = self.clock_t
 
     def _evict(self, buf: list) -> None:
         """Held messages passed `max_held_mb` (a flood of plausible junk): drop every one

@@ -8,6 +8,7 @@ stop it: a bad message is counted, a lost source or fusion node is an alert.
 from __future__ import annotations
 
 import heapq
+import math
 from array import array
 import json
 import os
@@ -103,7 +104,7 @@ class Peer(Intake, TickWait):
         self.groups = B.groups_of(root, group_depth(sc.taskorg))
         self.facts = KeyFacts(self.ks, self.groups, self.want)   # per received key: group, wanted, checks
         self.next_sweep = SWEEP_S
-        self.flow = {"samples": 0, "batches": 0, "entries": 0, "dropped": 0}   # what the coarse subscriptions cost
+        self.flow = {"samples": 0, "batches": 0, "entries": 0, "dropped": 0, "deferred": 0}   # what the coarse subscriptions cost
         self.joined_t = 0.0
         self.tick_lat: list[float] = []
         # wall seconds per stage of the loop (waiting for ticks, receiving, the ticks with
@@ -118,6 +119,8 @@ class Peer(Intake, TickWait):
         self.max_seq_ahead = int(mesh["max_seq_ahead"])
         self.tick_seq = 0                     # the latest valid tick's seq
         self.evicted = False                  # held messages were dropped: the store has them
+        self.defer_t = math.inf               # earliest time of a message deferred as too far ahead (intake._defer)
+        self.defer_from = math.inf            # the clock when the first of them was deferred
         self.contested: set[int] = set()      # seqs that came with two different payloads
         self.direct: list = []    # heap of (t, n, message) not covered by the replay's sequence
         self.n_direct = 0
@@ -243,10 +246,17 @@ class Peer(Intake, TickWait):
                 rep = self.gate.control(W.FusionReply, r.ok.payload.to_bytes(), str(r.ok.key_expr))
                 for p in rep.entries if rep else ():
                     if (m := self.gate.data(p, "store/fusion")) is not None and m.t > tracks_after:
-                        self._hold(m)
+                        if m.t > self.clock_t + self.max_ahead:
+                            self._defer(m.t)
+                        else:
+                            self._hold(m)
         _, entries = self._query_store(self.last_seq, keys)
+        t_hi = self.clock_t + self.max_ahead
         for seq, p in entries:
             if seq > self.last_seq and seq not in self.pending and (m := self.gate.data(p, "store")) is not None:
+                if m.t > t_hi:   # still too far ahead: fetched again when due (never held unbounded)
+                    self._defer(m.t)
+                    continue
                 self.pending[seq] = p
                 buf.append((seq, m))
 
@@ -322,6 +332,10 @@ class Peer(Intake, TickWait):
         if self.evicted:   # what we dropped to stay bounded comes back from the store
             self.evicted = False
             self._catch_up(sorted(self.subs), buf)
+        if self.defer_t <= self.clock_t + self.max_ahead:   # what came too far ahead is within reach now
+            since = self.defer_from
+            self.defer_t = self.defer_from = math.inf
+            self._catch_up(sorted(self.subs), buf, tracks_after=since)
         self._settle(buf, tick.seq)
         self._feed(self._due(buf, tick.seq))
         while self.direct and self.direct[0][0] <= tick.t:
