@@ -259,6 +259,12 @@ CONTROL_SAMPLES = [
        W.make(W.ConfirmCmd, req="r5", mission="m1", phase="start"),
        W.make(W.CffCmd, req="r6", cff="cff1", action="confirm"),
        W.make(W.DecideCmd, req="r7", alert="BN/27", option="execute:BN-branch-ABF"),
+       W.make(W.InhibitCmd, req="r8", id="contact-mutes-distance", source=W.MatcherSpec(types=["contact"]),
+              target=W.MatcherSpec(types=["distance", "strength"], priorities=["immediate"]), equal=["subjects"],
+              for_s=600.0, comment="known contact"),
+       W.make(W.UninhibitCmd, req="r9", id="contact-mutes-distance"),
+       W.make(W.Notice, kind="escalate", t=1242.0, owner="A2", alert="A2/1", story="A2/1", type="out-of-position",
+              priority="immediate", subjects=["A2"], message="off route", count=1, to="A", due_t=942.0),
        W.make(W.CmdResult, req="r1", kind="ack", ok=True, error="", t=12.0)] if hasattr(W, "CmdResult") else []),
 ]
 
