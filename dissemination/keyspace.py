@@ -287,6 +287,12 @@ class KeySpace:
         `owner`'s EA: not alerts (docs/console.md, "Notifications")."""
         return f"{self.root}/notice/{to}/{owner}"
 
+    def src(self, source: str = "*") -> str:
+        """A live source's stream of frames (issue 31): its reports and watermarks, in order
+        (`saim_mesh/live`). One key per source: `zenoh.ext`'s advanced publisher keeps
+        per-source order, a cache for recovery and late joiners, and miss detection."""
+        return f"{self.root}/src/{source}"
+
     def cmdlog(self, unit: str = "*") -> str:
         """`unit`'s EA answers every command here."""
         return f"{self.root}/cmdlog/{unit}"

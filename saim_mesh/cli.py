@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 import math
 import os
 import sys
@@ -225,6 +226,53 @@ def cmd_replay(a) -> int:
                        sources, topo)
 
 
+def _start_of(a) -> float | None:
+    """--live: the wall time of event time 0 (--start ISO8601, default now)."""
+    if not getattr(a, "live", False):
+        return None
+    if not a.start:
+        return time.time()
+    from datetime import datetime, timezone
+    try:
+        d = datetime.fromisoformat(a.start.replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"--start {a.start!r}: expected an ISO 8601 time, e.g. 2026-11-27T09:00:00Z") from None
+    return (d if d.tzinfo else d.replace(tzinfo=timezone.utc)).timestamp()
+
+
+def cmd_source(a) -> int:
+    """Publish one source's stream: a command post's share of a recorded scenario, or reports
+    from a file or standard input (docs/architecture.md, the live mesh)."""
+    import zenoh
+
+    from dissemination.keyspace import KeySpace
+
+    from .live import play
+    from .live.source import LiveSource
+    from .zconf import config
+    sc = S.load(a.scenario, events=a.file is None)
+    for u in [*(a.units or ()), *(a.but or ())]:
+        if u not in sc.taskorg.units:
+            raise KeyError(f"--units/--but {u}: unknown unit {u!r}: not in the task organization of {sc.name}")
+    root = a.root or f"saim/{sc.name}"
+    start = _start_of(a)
+    if a.file is None:
+        msgs = play.share(sc, a.units, a.tracks, a.but or ())
+    else:
+        f = sys.stdin if a.file == "-" else open(a.file, encoding="utf-8")
+        msgs = play.read_lines(f, a.format, a.entity, start)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"source.{a.name}", sc, root, **_zmode(a))
+    with zenoh.open(conf) as s:
+        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state)
+        print(f"ready source {a.name} epoch={src.epoch}", flush=True)
+        n = play.publish(src, msgs, a.speed, start)
+        src.close(end=not a.keep_open)
+        print(f"end source {a.name} messages={n} frames={src.seq}", flush=True)
+        if a.linger:
+            time.sleep(a.linger)   # the publisher's cache serves late joiners and recoveries meanwhile
+    return 0
+
+
 def cmd_peer(a) -> int:
     from .peer import main_peer
     from .zconf import config
@@ -233,6 +281,9 @@ def cmd_peer(a) -> int:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc, root, **_zmode(a))
+    if a.sources:   # the live mesh: event time from the sources' own watermarks, no replay
+        from .live.peer import main_live_peer
+        return main_live_peer(sc, a.unit, conf, root, a.sources, a.out, a.config, a.deadline, _start_of(a), a.armed)
     misplaced = None
     if a.topology:   # attached to another command post's router: it works, but its reports cross a radio link
         from .topology import read_resolved
@@ -523,8 +574,30 @@ def main(argv: list[str] | None = None) -> int:
                     help="geographic interest radius around our units (m); default: [dissemination] in the config")
     pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",
                     help="exit (code 3) after S seconds of wall time without a clock tick from the source")
+    pe.add_argument("--sources", nargs="+", metavar="NAME",
+                    help="the live mesh: no replay; advance on the event time these sources' watermarks promise")
+    pe.add_argument("--live", action="store_true", help="with --sources: event time is the wall clock from --start")
+    pe.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
+    so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the live mesh")
+    so.add_argument("scenario")
+    so.add_argument("--name", required=True, help="the source's name (e.g. the command post: cp.A)")
+    so.add_argument("--units", nargs="+", metavar="UNIT",
+                    help="publish the scenario's events of these units' subtrees (default: every unit)")
+    so.add_argument("--but", nargs="+", metavar="UNIT", help="leave out these units' subtrees (another source's)")
+    so.add_argument("--tracks", action="store_true", help="also the scenario's hostile tracks")
+    so.add_argument("--file", metavar="PATH|-", help="publish reports from this file (- : standard input)")
+    so.add_argument("--format", choices=["jsonl", "nmea", "gpx"], default="jsonl")
+    so.add_argument("--entity", help="nmea, gpx: whose reports these are")
+    so.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    so.add_argument("--live", action="store_true", help="event time is the wall clock from --start")
+    so.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
+    so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start)")
+    so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
+    so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")
+    _zenoh_args(so)
+    so.set_defaults(fn=cmd_source)
     fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")
     fu.add_argument("--scenario", required=True)
     fu.add_argument("--group", required=True)

@@ -1,0 +1,50 @@
+"""A live source's frames: a batch of its data messages and its watermark, numbered
+`(source, epoch, seq)`. Typed and bounded before use (`decode`), like every payload.
+
+Why our own numbering when `zenoh.ext` numbers samples too: Zenoh's sequence numbers and
+entity ids restart with the process; `epoch` (persisted, bumped at each start) and
+`seq` let an EA tell a restarted source from a duplicate, and make its input journal
+replayable (../shared/notes/live-mesh.md)."""
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import msgspec
+
+from .. import messages as M
+from .. import wire as W
+
+MAX_MSGS = 1024   # data messages in one frame
+
+Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.\-]+$")]
+
+
+class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """`msgs`: encoded data messages (messages.encode), each with its event time inside.
+    `wm`: the source's watermark after this frame: nothing at or before it will follow.
+    `end`: the source finished (its watermark is +inf from now on)."""
+    v: Literal[1]
+    source: Name
+    epoch: Annotated[int, msgspec.Meta(ge=0, le=2**62)]
+    seq: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
+    wm: Annotated[float, msgspec.Meta(ge=-1.0, le=W.T_LIMIT)]
+    msgs: Annotated[list[bytes], msgspec.Meta(max_length=MAX_MSGS)] = []
+    end: bool = False
+
+
+_ENC = msgspec.msgpack.Encoder()
+_DEC = msgspec.msgpack.Decoder(Frame)
+
+
+def encode(f: Frame) -> bytes:
+    return _ENC.encode(f)
+
+
+def decode(payload: bytes, max_bytes: int) -> Frame:
+    """A frame, or MessageError naming what was wrong (size first, before decoding)."""
+    if len(payload) > max_bytes:
+        raise M.MessageError("frame", "(bytes)", f"{len(payload)} bytes, over the {max_bytes} limit")
+    try:
+        return _DEC.decode(payload)
+    except (msgspec.ValidationError, msgspec.DecodeError) as e:
+        raise M.MessageError("frame", "(decode)", str(e)[:160]) from None

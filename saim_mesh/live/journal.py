@@ -1,0 +1,63 @@
+"""An EA's input journal on the live mesh: every frame it took, as received, and every
+loss decision, in the order it made them. Replaying it (`replay`) gives the live run's
+alerts exactly: whatever the wall clock did (a silence that became a loss), the journal
+says what the EA decided and when in its input (../shared/notes/live-mesh.md: idleness
+detected by wall clock is not reproducible, a decision written down is).
+
+Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
+as written: ["frame", payload] or ["lost", source, released, why]. A half-written last
+record (a kill) is ignored on reading."""
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import msgspec
+
+_ENC = msgspec.msgpack.Encoder()
+_LEN = struct.Struct(">I")
+
+
+class InputJournal:
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.f = open(self.path, "ab")
+
+    def _write(self, rec: list) -> None:
+        b = _ENC.encode(rec)
+        self.f.write(_LEN.pack(len(b)) + b)
+        self.f.flush()
+
+    def frame(self, payload: bytes) -> None:
+        self._write(["frame", payload])
+
+    def lost(self, source: str, released: float, why: str) -> None:
+        self._write(["lost", source, released, why])
+
+    def close(self) -> None:
+        self.f.close()
+
+
+def records(path: str | Path) -> list[list]:
+    data = Path(path).read_bytes()
+    out, i = [], 0
+    while i + 4 <= len(data):
+        (n,) = _LEN.unpack_from(data, i)
+        if i + 4 + n > len(data):
+            break   # cut by a kill
+        out.append(msgspec.msgpack.decode(data[i + 4:i + 4 + n]))
+        i += 4 + n
+    return out
+
+
+def replay(peer, path: str | Path) -> list:
+    """Feed a fresh `LivePeer` (not running: no session) the journal's records; its alerts.
+    The peer's own journal and logs should be off (out_path None)."""
+    peer.ea.start(0.0)
+    for rec in records(path):
+        if rec[0] == "frame":
+            peer.take(rec[1], "", journal=False)
+        elif rec[0] == "lost":
+            peer.lose(rec[1], rec[3], journal=False)
+    peer.ea.finish(peer.sc.duration_s if peer.live_start is None else max(peer.ea.now, peer.order.released))
+    return peer.ea.alerts

@@ -1,0 +1,255 @@
+"""One unit's EA on a live mesh with no centre (issue 31): no replay, no global clock,
+no global sequence. It subscribes to the streams of the sources it depends on and
+advances on event time as far as every one of them has promised (`order.EventTimeOrder`:
+the minimum watermark over the sources not declared lost), applying facts in
+`(event time, source, epoch, seq)` order, so the same inputs give the same alerts
+whatever the arrival order, speed or machine.
+
+Composed of small parts: the frames' subscriber (zenoh.ext advanced subscriber: per
+source order, recovery from the publisher's cache, late-joiner history, miss detection),
+the order, the EA, the input journal (every frame taken and every loss decision, so
+replaying it reproduces the run: `journal.replay`), the alert and notice logs.
+
+Loss is a decision, logged: a depended source silent for `[mesh] source_silence_s` of wall
+time is declared lost (journal, one system-problem alert naming it and what it degrades);
+monitoring goes on with the others. When it comes back its facts are taken on a late path
+and what they raise is marked late."""
+from __future__ import annotations
+
+import json
+import math
+import queue
+import signal
+import sys
+import time
+from dataclasses import replace
+
+import zenoh
+import zenoh.ext as zx
+
+from dissemination.keyspace import KeySpace
+from ea_agent.core.alert import hms
+
+from .. import messages as M
+from .. import noticelog
+from .. import wire as W
+from ..alertlog import AlertLog
+from ..runner import config_for, make_ea
+from ..scenario import Scenario
+from . import frames as F
+from .journal import InputJournal
+from .order import EventTimeOrder
+
+BLOCK = zenoh.CongestionControl.BLOCK
+DATA = (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
+        M.Reorganization)
+
+
+class LivePeer:
+    def __init__(self, sc: Scenario, unit: str, conf: zenoh.Config, root: str, sources: list[str],
+                 out_path: str | None = None, config_path=None, log=print, silence_s: float | None = None,
+                 live_start: float | None = None, armed: bool = False, max_bytes: int | None = None):
+        if unit not in sc.taskorg.units:
+            raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
+        if not sources:
+            raise ValueError("a live peer needs the names of the sources it depends on (--sources)")
+        self.sc, self.unit, self.conf, self.log = sc, unit, conf, log
+        self.ks = KeySpace.of(sc, root)
+        self.cfg = config_for(sc, unit, config_path)
+        mesh = self.cfg["mesh"]
+        self.silence_s = float(mesh["source_silence_s"] if silence_s is None else silence_s)
+        self.max_bytes = int(max_bytes or mesh["max_payload_bytes"])
+        self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
+        self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
+        self.sources = sorted(dict.fromkeys(sources))
+        self.order = EventTimeOrder(self.sources)
+        self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
+        if armed:
+            self.ea.arm()
+        self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
+        self.nlog = noticelog.NoticeLog(noticelog.path_for(out_path)) if out_path else None
+        self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
+        self.ea.notice_sinks.append(self._notice)
+        self.session = None
+        self.q: queue.SimpleQueue = queue.SimpleQueue()
+        self.heard: dict[str, float] = {}     # source -> wall time of its last frame
+        self.ended: set[str] = set()
+        self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
+        self.late_from: float | None = None   # set while facts of a returning source are taken
+        self.misses = 0
+        self.frames = 0
+        self.late = 0
+        self.t0 = time.monotonic()
+
+    # -- sinks ---------------------------------------------------------------------------
+    def _sink(self, a: M.Alert) -> None:
+        if self.late_from is not None:
+            a = replace(a, details={**a.details, "late": True, "due_from": round(self.late_from, 3)})
+            self.late += 1
+        if self.alog:
+            self.alog.write(a)
+        if self.session is not None:
+            self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
+
+    def _notice(self, n) -> None:
+        if self.nlog:
+            self.nlog(n)
+        if self.session is not None:
+            self.session.put(self.ks.notice(n.to, n.owner), W.encode(W.make(
+                W.Notice, **{**n.to_json_dict(), "subjects": list(n.subjects)})), congestion_control=BLOCK)
+
+    def _system(self, subject: str, text: str, **details) -> None:
+        self.log(f"system {subject}: {text}", flush=True)
+        self.ea.emit(M.Alert(round(max(self.ea.now, 0.0), 3), self.unit, "unknown-position", "system-problem",
+                             "immediate", (subject,), text, {"source": subject, "wall_clock_driven": True, **details}))
+
+    # -- input ---------------------------------------------------------------------------
+    def take(self, payload: bytes, key: str, journal: bool = True) -> None:
+        """One frame: checked, journalled, ordered; then everything the watermarks allow is applied."""
+        try:
+            f = F.decode(payload, self.max_bytes)
+        except M.MessageError as e:
+            self.gate.rejects.add(e, key)
+            return
+        if key and key != self.ks.src(f.source):
+            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
+            return
+        if f.source not in self.order.watermarks():
+            return   # a source this EA does not depend on
+        items = []
+        for b in f.msgs:
+            m = self.gate.data(b, key or f"src/{f.source}")
+            if m is None:
+                continue
+            if type(m) not in DATA:
+                self.gate.rejects.add(M.MessageError(m.KIND, "(kind)", f"a {m.KIND} message in a source's frame"),
+                                      key)
+                continue
+            items.append(m)
+            if type(m) is M.LocationReport:
+                u = self.sc.taskorg.entity_unit.get(m.entity)
+                if u is not None:
+                    self.reports.setdefault(f.source, set()).add(u)
+        if journal and self.journal is not None:
+            self.journal.frame(payload)
+        was_lost = f.source in self.order.lost
+        why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
+        if why is not None:
+            return
+        self.frames += 1
+        self.heard[f.source] = time.monotonic()
+        if f.end:
+            self.ended.add(f.source)
+        if was_lost:
+            self._system(f.source, f"source {f.source} is back (its facts since "
+                                   f"{hms(self.order.released)} are taken late)", event="source-back")
+        self._apply()
+
+    def lose(self, source: str, why: str, journal: bool = True) -> None:
+        """Declare a depended source lost: monitoring goes on without it (a logged decision)."""
+        if source in self.order.lost:
+            return
+        if journal and self.journal is not None:
+            self.journal.lost(source, self.order.released, why)
+        self.order.lose(source, why)
+        units = self._units_of(source)
+        named = ", ".join(units[:8]) + (f" and {len(units) - 8} more" if len(units) > 8 else "")
+        self._system(source, f"reports of source {source} not received since {hms(self.order.watermarks()[source])}"
+                             f" ({why}); monitoring of {named or 'what it reports'} degraded",
+                     event="source-lost", why=why, units=units)
+        self._apply()
+
+    def _units_of(self, source: str) -> list[str]:
+        """The units whose positions the source carried (the platoons: the units an EA monitors)."""
+        to = self.sc.taskorg
+        us = {to.parent.get(u, u) if to.units[u].kind == "squad" else u for u in self.reports.get(source, ())
+              if u in to.units}
+        return sorted(us)
+
+    def _apply(self) -> None:
+        """Everything the watermarks allow, in event-time order; then the late path."""
+        upto = None
+        if self.live_start is not None:   # live: never ahead of the wall clock either
+            upto = time.time() - self.live_start
+        for m in self.order.release(upto):
+            self.ea.submit(m)
+        r = self.order.released
+        if math.isfinite(r) and r > self.ea.now:
+            self.ea.advance(r)
+        if self.order.late:
+            late, self.order.late[:] = list(self.order.late), []
+            self.late_from = min(m.t for _, m in late)
+            try:
+                for _, m in sorted(late, key=lambda x: x[1].t):
+                    self.ea.submit(m)
+                self.ea.advance(max(self.ea.now, r if math.isfinite(r) else self.ea.now) + self.ea.epoch_s)
+            finally:
+                self.late_from = None
+
+    def done(self) -> bool:
+        """Every source ended, or ended and lost ones (at least one ended: a mesh where
+        every source is silent keeps waiting for them)."""
+        return bool(self.ended) and set(self.sources) <= self.ended | set(self.order.lost)
+
+    # -- loop ------------------------------------------------------------------------------
+    def run(self, deadline_s: float | None = None) -> dict:
+        def stop(*_):
+            raise SystemExit(0)
+        signal.signal(signal.SIGTERM, stop)
+        self.ea.start(0.0)
+        end_wall = time.monotonic() + deadline_s if deadline_s else math.inf
+        try:
+            with zenoh.open(self.conf) as s:
+                self.session = s
+                put = self.q.put
+                sub = zx.declare_advanced_subscriber(
+                    s, self.ks.src("*"), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
+                    history=zx.HistoryConfig(detect_late_publishers=True),
+                    recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True)
+                misses = sub.sample_miss_listener(lambda miss: put(("miss", miss.nb)))
+                self.log(f"ready {self.unit} sources={','.join(self.sources)}", flush=True)
+                started = time.monotonic()
+                while not self.done() and time.monotonic() < end_wall:
+                    try:
+                        key, payload = self.q.get(timeout=0.5)
+                    except queue.Empty:
+                        key = None
+                    if key == "miss":
+                        self.misses += payload
+                        self.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
+                    elif key is not None:
+                        self.take(payload, key)
+                    now = time.monotonic()
+                    for src in self.sources:   # silence: a decision, journalled
+                        last = self.heard.get(src, started)
+                        if src not in self.ended and src not in self.order.lost and now - last > self.silence_s:
+                            self.lose(src, f"silent for {now - last:.0f} s")
+                    if self.live_start is not None:
+                        self._apply()
+                end_t = self.sc.duration_s if self.live_start is None else max(self.ea.now, self.order.released)
+                self.ea.finish(end_t if math.isfinite(end_t) else self.ea.now)
+                misses.undeclare()
+                sub.undeclare()
+                self.session = None
+        finally:
+            for x in (self.alog, self.nlog, self.journal):
+                if x is not None:
+                    x.close()
+        summary = self.summary()
+        self.log("summary " + json.dumps(summary, sort_keys=True), flush=True)
+        return summary
+
+    def summary(self) -> dict:
+        return {"unit": self.unit, "alerts": len(self.ea.alerts), "frames": self.frames, "misses": self.misses,
+                "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
+                "rejects": dict(self.gate.rejects.by_kind), "messages": self.ea.n_in,
+                "wall_s": round(time.monotonic() - self.t0, 2)}
+
+
+def main_live_peer(sc: Scenario, unit: str, conf, root: str, sources: list[str], out: str | None, config_path=None,
+                   deadline_s: float | None = None, live_start: float | None = None, armed: bool = False) -> int:
+    p = LivePeer(sc, unit, conf, root, sources, out, config_path,
+                 log=lambda *a, **k: print(*a, **k), live_start=live_start, armed=armed)
+    p.run(deadline_s)
+    sys.stdout.flush()
+    return 0

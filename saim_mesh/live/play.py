@@ -1,0 +1,128 @@
+"""What a source publishes: a command post's share of a recorded scenario (the units of
+its subtree, optionally the hostile tracks it sees), or reports read from a file or
+standard input (JSON lines of messages, NMEA or GPX), in event time with a watermark
+every epoch; paced at a speed, as fast as possible, or live (event time = wall clock
+from a start instant)."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import xml.etree.ElementTree as ET
+from datetime import datetime, timezone
+from typing import IO, Iterable, Iterator
+
+from .. import messages as M
+from .source import LiveSource
+
+EPOCH_S = 2.0
+
+
+def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Iterator[M.Message]:
+    """The scenario's events that originate in `units`' subtrees (every unit when None)
+    except `but`'s subtrees (another command post publishes those): their members'
+    positions, their confirmations, calls for fire and orders they issue; hostile tracks
+    only with `tracks` (a command post that runs its sensors' fusion)."""
+    to = sc.taskorg
+    mine = set().union(*(to.subtree(u) for u in units)) if units else set(to.units)
+    for u in but:
+        mine -= set(to.subtree(u))
+    for ev in sc.events:
+        k = type(ev)
+        if k is M.LocationReport:
+            if to.entity_unit.get(ev.entity) in mine:
+                yield ev
+        elif k is M.SensorTrack:
+            if tracks:
+                yield ev
+        elif k is M.MissionConfirm:
+            if ev.unit in mine:
+                yield ev
+        elif k in (M.CallForFire, M.CallForFireConfirm):
+            if ev.requester in mine:
+                yield ev
+        elif k is M.Order:
+            if ev.issuer in mine:
+                yield ev
+        elif k is M.Reorganization:
+            if units is None or ev.new_parent in mine:
+                yield ev
+
+
+def read_lines(f: IO[str], fmt: str, entity: str | None, start: float | None) -> Iterator[M.Message]:
+    """Reports from a file: `jsonl` (messages as the scenario's events are written), `nmea`
+    (GGA/RMC sentences of one `entity`) or `gpx` (track points of one `entity`); NMEA and GPX
+    times are UTC, turned into event time from `start` (epoch seconds)."""
+    if fmt == "jsonl":
+        for i, line in enumerate(f, 1):
+            if line.strip():
+                try:
+                    yield M.from_dict(json.loads(line))
+                except (ValueError, M.MessageError) as e:
+                    print(f"line {i}: skipped: {e}", file=sys.stderr, flush=True)
+        return
+    if entity is None:
+        raise ValueError(f"--format {fmt}: --entity names whose reports these are")
+    base = start if start is not None else time.time()
+    if fmt == "gpx":
+        root = ET.parse(f).getroot()
+        for pt in root.iter():
+            if pt.tag.endswith("trkpt") or pt.tag.endswith("wpt"):
+                when = next((c.text for c in pt if c.tag.endswith("time")), None)
+                if when is None:
+                    continue
+                t = datetime.fromisoformat(when.replace("Z", "+00:00")).timestamp() - base
+                yield M.LocationReport(round(t, 3), entity, float(pt.get("lon")), float(pt.get("lat")))
+        return
+    day = datetime.fromtimestamp(base, timezone.utc).replace(hour=0, minute=0, second=0, microsecond=0)
+    for line in f:
+        p = line.strip().split("*", 1)[0].split(",")
+        if not p or len(p[0]) < 6 or p[0][3:6] not in ("GGA", "RMC"):
+            continue
+        try:
+            hhmmss = p[1]
+            lat, ns, lon, ew = (p[2], p[3], p[4], p[5]) if p[0][3:6] == "GGA" else (p[3], p[4], p[5], p[6])
+            t = (day.timestamp() + int(hhmmss[:2]) * 3600 + int(hhmmss[2:4]) * 60 + float(hhmmss[4:])) - base
+            la = (int(lat[:2]) + float(lat[2:]) / 60) * (1 if ns == "N" else -1)
+            lo = (int(lon[:3]) + float(lon[3:]) / 60) * (1 if ew == "E" else -1)
+        except (ValueError, IndexError):
+            print(f"skipped an NMEA sentence: {line.strip()[:60]}", file=sys.stderr, flush=True)
+            continue
+        yield M.LocationReport(round(t, 3), entity, lo, la)
+
+
+def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = None, live_start: float | None = None,
+            epoch_s: float = EPOCH_S, log=print) -> int:
+    """Publish `msgs` (in event-time order) with a watermark at every epoch boundary they
+    pass; at `speed` x real time, as fast as possible (None), or live (wait until each
+    message's event time on the wall clock, and keep watermarks going while idle)."""
+    t0 = time.monotonic()
+    n = 0
+    last_wm = src.wm
+    next_say = 600.0
+    for m in msgs:
+        if m.t >= next_say:   # progress, for whoever watches the source's log
+            log(f"source {src.name} t={next_say:.0f} messages={n}", flush=True)
+            next_say = (math.floor(m.t / 600.0) + 1) * 600.0
+        if not math.isfinite(m.t) or m.t <= src.wm:
+            log(f"source {src.name}: skipped a {m.KIND} at t={m.t} (not after its watermark {src.wm})", flush=True)
+            continue
+        if live_start is not None:
+            while (now := time.time() - live_start) < m.t:   # idle: promise the wall clock's past
+                w = math.floor(now / epoch_s) * epoch_s
+                if w > last_wm and w < m.t:
+                    src.watermark(w)
+                    last_wm = w
+                time.sleep(min(m.t - now, epoch_s / 4))
+        elif speed:
+            wait = t0 + m.t / speed - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+        w = math.ceil(m.t / epoch_s) * epoch_s - epoch_s   # the last boundary strictly before m.t
+        if w > last_wm:
+            src.watermark(w)
+            last_wm = w
+        src.put(m)
+        n += 1
+    return n

@@ -1,0 +1,92 @@
+"""A live source: one producer of facts (a unit's own reporter, a command post's share
+of a recorded scenario, a TAK gateway's PLI) publishing its own stream of frames and
+watermarks on `<root>/src/<name>`, with no clock and no sequencer but its own.
+
+`zenoh.ext`'s advanced publisher keeps the per-source order, a cache that late joiners
+and subscribers that missed samples (a cut link) recover from, and heartbeats that let
+a subscriber detect what it missed (../shared/notes/live-mesh.md: a 15 s partition healed
+with nothing lost). The epoch is persisted and bumped at each start when a state folder
+is given (else the start time in ns, also increasing), so a restarted source is never
+taken for a duplicate of its former self."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import zenoh
+import zenoh.ext as zx
+
+from dissemination.keyspace import KeySpace
+
+from .. import messages as M
+from . import frames as F
+
+BLOCK = zenoh.CongestionControl.BLOCK
+CACHE = 100_000        # frames kept for recovery and late joiners (a frame is one flush)
+FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
+
+
+def next_epoch(state_dir: str | Path | None, name: str) -> int:
+    """The epoch of this start: one more than the last one persisted for `name`."""
+    if state_dir is None:
+        return time.time_ns()
+    p = Path(state_dir) / f"{name}.epoch"
+    p.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        last = int(p.read_text().strip() or "0")
+    except (OSError, ValueError):
+        last = 0
+    epoch = last + 1
+    tmp = p.with_suffix(".tmp")
+    tmp.write_text(f"{epoch}\n")
+    tmp.replace(p)   # atomic: a kill leaves the old epoch or the new one, never half
+    return epoch
+
+
+class LiveSource:
+    """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
+
+    def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
+                 cache: int = CACHE, frame_bytes: int = FRAME_BYTES):
+        F.Frame(v=1, source=name, epoch=0, seq=1, wm=0.0)   # the name is checked as a frame checks it
+        self.name, self.ks = name, ks
+        self.epoch = next_epoch(state_dir, name)
+        self.seq = 0
+        self.wm = -1.0
+        self.frame_bytes = frame_bytes
+        self.pending: list[bytes] = []
+        self.size = 0
+        self.sent = 0
+        self.pub = zx.declare_advanced_publisher(
+            session, ks.src(name), congestion_control=BLOCK, cache=zx.CacheConfig(max_samples=cache),
+            sample_miss_detection=zx.MissDetectionConfig(heartbeat=0.5), publisher_detection=True)
+
+    def put(self, msg: M.Message) -> None:
+        """One data message; its event time must be after the watermark already given."""
+        if msg.t <= self.wm:
+            raise ValueError(f"source {self.name}: {msg.KIND} at t={msg.t} is not after its watermark {self.wm} "
+                             f"(it promised nothing at or before it would follow)")
+        b = M.encode(msg)
+        if self.pending and (self.size + len(b) > self.frame_bytes or len(self.pending) >= F.MAX_MSGS):
+            self._send(self.wm)
+        self.pending.append(b)
+        self.size += len(b)
+
+    def watermark(self, t: float) -> None:
+        """Nothing at or before `t` will follow: flushes what is pending with that promise."""
+        if t < self.wm:
+            return
+        self._send(t)
+
+    def close(self, end: bool = True) -> None:
+        """The last frame (`end`: the source is done: its watermark is +inf), then undeclare."""
+        self._send(self.wm, end=end)
+        self.pub.undeclare()
+
+    def _send(self, wm: float, end: bool = False) -> None:
+        self.seq += 1
+        self.wm = max(self.wm, wm)
+        f = F.Frame(v=1, source=self.name, epoch=self.epoch, seq=self.seq, wm=self.wm, msgs=self.pending, end=end)
+        self.pub.put(F.encode(f))
+        self.sent += len(self.pending)
+        self.pending, self.size = [], 0

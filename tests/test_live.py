@@ -1,0 +1,163 @@
+"""The live mesh with no centre (issue 31): EA peers with no replay, advancing on the event
+time their sources promise. Real processes on loopback, free ports, every child reaped;
+waits on printed lines and files, bounded by pytest-timeout.
+
+- one `saim-mesh source` publishing the small scenario's events, one peer (`peer --sources`):
+  the peer raises exactly the alerts of an in-process EA fed the same messages;
+- two sources (a command post's subtree and the rest): the peer applies facts in
+  (event time, source, seq) order: the alerts of an in-process EA fed that merge;
+- a source that dies is declared lost within `source_silence_s` (one system-problem alert
+  naming it) and monitoring goes on with the other; replaying the EA's input journal gives
+  exactly the live run's alerts.
+"""
+from __future__ import annotations
+
+import json
+import uuid
+
+import pytest
+
+from saim_mesh import scenario as S
+from saim_mesh.live import play
+from saim_mesh.live.journal import replay
+from saim_mesh.live.peer import LivePeer
+from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.runner import config_for, make_ea
+from saim_mesh.zconf import config, free_port
+
+from .conftest import SMALL
+
+pytestmark = pytest.mark.timeout(300)
+SC = str(SMALL)
+
+
+@pytest.fixture(scope="module")
+def sc():
+    return S.load(SMALL)
+
+
+def plan_alerts(alerts) -> list[tuple]:
+    """What alerts say (the plan's, not system problems), comparable across runs."""
+    out = []
+    for a in alerts:
+        d = a if isinstance(a, dict) else a.to_json_dict()
+        if d["category"] != "system-problem":
+            out.append((d["t"], d["type"], tuple(d["subjects"]), d["message"], d["priority"], d["details"].get("id")))
+    return out
+
+
+def load(path) -> list[dict]:
+    return [json.loads(x) for x in open(path) if x.strip()]
+
+
+def in_process(sc, unit: str, streams: dict[str, list]) -> list:
+    """An EA fed the sources' messages merged in (event time, source) order, each source in
+    its own order: what a live peer must raise."""
+    merged = sorted(((m.t, name, i, m) for name, ms in streams.items() for i, m in enumerate(ms)),
+                    key=lambda x: x[:3])
+    ea = make_ea(sc, unit, config_for(sc, unit))
+    ea.start(0.0)
+    for *_, m in merged:
+        ea.submit(m)
+    ea.finish(sc.duration_s)
+    return ea.alerts
+
+
+def start_source(tmp, name: str, ep: str, root: str, *args: str) -> Proc:
+    return Proc(f"source-{name}", [*py(), "source", SC, "--name", name, "--connect", ep, "--root", root,
+                                   "--linger", "600", *args], env=clean_env(), log_dir=tmp)
+
+
+def start_live_peer(tmp, unit: str, ep: str, root: str, sources: list[str]) -> Proc:
+    return Proc(f"peer-{unit}", [*py(), "peer", "--scenario", SC, "--unit", unit, "--listen", ep, "--root", root,
+                                 "--sources", *sources, "--out", str(tmp / f"{unit}.jsonl")],
+                env=clean_env(), log_dir=tmp)
+
+
+def reap(procs) -> None:
+    for p in procs:
+        p.stop()
+    assert all(p.p.poll() is not None for p in procs)
+
+
+def test_a_peer_with_no_replay_and_one_source_raises_what_its_plan_implies(tmp_path, sc):
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    procs = []
+    try:
+        procs.append(start_live_peer(tmp_path, "A2", ep, root, ["cp.all"]))
+        procs[0].wait_for("ready A2", 60)
+        procs.append(start_source(tmp_path, "cp.all", ep, root, "--tracks", "--speed", "max"))
+        procs[1].wait_for("end source cp.all", 120)
+        line = procs[0].wait_for("summary ", 120)
+    finally:
+        reap(procs)
+    summary = json.loads(line.split(" ", 1)[1])
+    assert summary["lost"] == {} and summary["misses"] == 0 and summary["rejects"] == {}, summary
+    want = plan_alerts(in_process(sc, "A2", {"cp.all": list(play.share(sc, None, True))}))
+    got = plan_alerts(load(tmp_path / "A2.jsonl"))
+    assert len(want) >= 5 and got == want
+
+
+def test_two_sources_merge_in_event_time_order(tmp_path, sc):
+    """cp.A publishes A's subtree, cp.rest the rest and the tracks: A2's EA applies them in
+    (event time, source) order whatever their interleaving on the wire, and its input
+    journal replays to the same alerts."""
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    procs = []
+    try:
+        procs.append(start_live_peer(tmp_path, "A2", ep, root, ["cp.A", "cp.rest"]))
+        procs[0].wait_for("ready A2", 60)
+        procs.append(start_source(tmp_path, "cp.A", ep, root, "--units", "A", "--speed", "max"))
+        procs.append(start_source(tmp_path, "cp.rest", ep, root, "--but", "A", "--tracks", "--speed", "max"))
+        procs[1].wait_for("end source cp.A", 120)
+        procs[2].wait_for("end source cp.rest", 120)
+        line = procs[0].wait_for("summary ", 120)
+    finally:
+        reap(procs)
+    summary = json.loads(line.split(" ", 1)[1])
+    assert summary["lost"] == {}, summary
+    streams = {"cp.A": list(play.share(sc, ["A"], False)), "cp.rest": list(play.share(sc, None, True, ["A"]))}
+    assert streams["cp.A"] and streams["cp.rest"]
+    got = plan_alerts(load(tmp_path / "A2.jsonl"))
+    assert got == plan_alerts(in_process(sc, "A2", streams))
+    # the EA's input journal replays to the same alerts
+    peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), root, ["cp.A", "cp.rest"])
+    assert plan_alerts(replay(peer, tmp_path / "A2.input")) == got
+
+
+def test_a_source_that_dies_is_declared_lost_and_monitoring_goes_on(tmp_path, sc):
+    """cp.rest is killed (SIGKILL: no end-of-stream) after 1,200 s of its battle: A2's EA
+    declares it lost within `source_silence_s` (one system-problem alert naming it and what
+    is degraded), goes on with cp.A to the end, and its input journal, which holds that
+    decision, replays to exactly the live run's alerts."""
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    cfg = tmp_path / "ea.toml"
+    cfg.write_text("[mesh]\nsource_silence_s = 5.0\n")
+    procs = []
+    try:
+        procs.append(Proc("peer-A2", [*py(), "peer", "--scenario", SC, "--unit", "A2", "--listen", ep, "--root",
+                                      root, "--sources", "cp.A", "cp.rest", "--out", str(tmp_path / "A2.jsonl"),
+                                      "--config", str(cfg)], env=clean_env(), log_dir=tmp_path))
+        procs[0].wait_for("ready A2", 60)
+        procs.append(start_source(tmp_path, "cp.rest", ep, root, "--but", "A", "--tracks", "--speed", "60"))
+        procs.append(start_source(tmp_path, "cp.A", ep, root, "--units", "A", "--speed", "200"))
+        procs[1].wait_for("source cp.rest t=1200", 120)
+        procs[1].p.kill()
+        lost = procs[0].wait_for("system cp.rest", 60)
+        line = procs[0].wait_for("summary ", 120)
+    finally:
+        reap(procs)
+    import re
+    since = re.search(r"not received since H\+00:(\d\d):(\d\d)", lost)
+    assert since and 1150 <= int(since[1]) * 60 + int(since[2]) <= 1320 and "silent for" in lost, lost
+    assert re.search(r"monitoring of B\d?.* degraded", lost), lost
+    summary = json.loads(line.split(" ", 1)[1])
+    assert list(summary["lost"]) == ["cp.rest"], summary
+    alerts = load(tmp_path / "A2.jsonl")
+    system = [a for a in alerts if a["category"] == "system-problem"]
+    assert len(system) == 1 and system[0]["subjects"] == ["cp.rest"] and system[0]["priority"] == "immediate"
+    assert max(a["t"] for a in alerts) > 1200.0   # monitoring went on past the loss
+    peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), root, ["cp.A", "cp.rest"])
+    again = [a.to_json_dict() for a in replay(peer, tmp_path / "A2.input")]
+    key = lambda d: (d["t"], d["type"], tuple(d["subjects"]), d["message"], d["priority"])   # noqa: E731
+    assert [key(a) for a in again] == [key(a) for a in alerts]
