@@ -283,7 +283,8 @@ def cmd_peer(a) -> int:
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc, root, **_zmode(a))
     if a.sources:   # the live mesh: event time from the sources' own watermarks, no replay
         from .live.peer import main_live_peer
-        return main_live_peer(sc, a.unit, conf, root, a.sources, a.out, a.config, a.deadline, _start_of(a), a.armed)
+        return main_live_peer(sc, a.unit, conf, root, a.sources, a.out, a.config, a.deadline, _start_of(a), a.armed,
+                              a.linger)
     misplaced = None
     if a.topology:   # attached to another command post's router: it works, but its reports cross a radio link
         from .topology import read_resolved
@@ -578,6 +579,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the live mesh: no replay; advance on the event time these sources' watermarks promise")
     pe.add_argument("--live", action="store_true", help="with --sources: event time is the wall clock from --start")
     pe.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
+    pe.add_argument("--linger", type=_seconds, default=0.0,
+                    help="with --sources: seconds to keep answering commands after every source ended")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
     so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the live mesh")

@@ -30,6 +30,8 @@ import zenoh.ext as zx
 from dissemination.keyspace import KeySpace
 from ea_agent.core.alert import hms
 
+from .. import cmdlog
+from .. import commands as C
 from .. import messages as M
 from .. import noticelog
 from .. import wire as W
@@ -69,6 +71,7 @@ class LivePeer:
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
         self.nlog = noticelog.NoticeLog(noticelog.path_for(out_path)) if out_path else None
         self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
+        self.clog = cmdlog.CommandLog(cmdlog.path_for(out_path)) if out_path else None
         self.ea.notice_sinks.append(self._notice)
         self.session = None
         self.q: queue.SimpleQueue = queue.SimpleQueue()
@@ -186,13 +189,34 @@ class LivePeer:
             finally:
                 self.late_from = None
 
+    def command(self, key: str, payload: bytes) -> None:
+        """A commander's command (docs/console.md 1): checked as the replay-driven peer checks
+        it (key, gate, authority in the task organization now), applied at the EA's time,
+        logged and answered on cmdlog/<unit>."""
+        prefix = f"{self.ks.root}/cmd/"
+        unit, kind, by = (key[len(prefix):].split("/") + ["", "", ""])[:3] if key.startswith(prefix) else ("", "", "")
+        cls = W.COMMANDS.get(kind)
+        if unit != self.unit or cls is None or not by:
+            self.gate.rejects.add(M.MessageError("cmd", "(key)", f"not a command to {self.unit}: {key[:80]}"), key)
+            return
+        cmd = self.gate.control(cls, payload, key, signed=True)
+        if cmd is None:
+            return
+        refused = C.authority(getattr(self.ea.domain, "taskorg", None), by, self.unit)
+        res = C.result(cmd, False, self.ea.now, refused) if refused else C.apply(self.ea, cmd, self.ea.now)
+        if self.clog is not None:
+            self.clog.write(self.unit, self.ea.now, cmd, res)
+        if self.session is not None:
+            self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
+        self.log(f"cmd {res.kind} req={res.req} ok={res.ok}" + (f" error={res.error}" if res.error else ""), flush=True)
+
     def done(self) -> bool:
         """Every source ended, or ended and lost ones (at least one ended: a mesh where
         every source is silent keeps waiting for them)."""
         return bool(self.ended) and set(self.sources) <= self.ended | set(self.order.lost)
 
     # -- loop ------------------------------------------------------------------------------
-    def run(self, deadline_s: float | None = None) -> dict:
+    def run(self, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
         def stop(*_):
             raise SystemExit(0)
         signal.signal(signal.SIGTERM, stop)
@@ -207,6 +231,8 @@ class LivePeer:
                     history=zx.HistoryConfig(detect_late_publishers=True),
                     recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True)
                 misses = sub.sample_miss_listener(lambda miss: put(("miss", miss.nb)))
+                cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"),
+                                            lambda smp: put(("cmd", (str(smp.key_expr), smp.payload.to_bytes()))))
                 self.log(f"ready {self.unit} sources={','.join(self.sources)}", flush=True)
                 started = time.monotonic()
                 while not self.done() and time.monotonic() < end_wall:
@@ -217,6 +243,8 @@ class LivePeer:
                     if key == "miss":
                         self.misses += payload
                         self.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
+                    elif key == "cmd":
+                        self.command(*payload)
                     elif key is not None:
                         self.take(payload, key)
                     now = time.monotonic()
@@ -228,11 +256,21 @@ class LivePeer:
                         self._apply()
                 end_t = self.sc.duration_s if self.live_start is None else max(self.ea.now, self.order.released)
                 self.ea.finish(end_t if math.isfinite(end_t) else self.ea.now)
+                self.log("end " + json.dumps(self.summary(), sort_keys=True), flush=True)
+                linger_end = time.monotonic() + linger_s   # still answering commands (a late ack)
+                while (left := linger_end - time.monotonic()) > 0:
+                    try:
+                        key, payload = self.q.get(timeout=left)
+                    except queue.Empty:
+                        break
+                    if key == "cmd":
+                        self.command(*payload)
+                cmds.undeclare()
                 misses.undeclare()
                 sub.undeclare()
                 self.session = None
         finally:
-            for x in (self.alog, self.nlog, self.journal):
+            for x in (self.alog, self.nlog, self.journal, self.clog):
                 if x is not None:
                     x.close()
         summary = self.summary()
@@ -247,9 +285,10 @@ class LivePeer:
 
 
 def main_live_peer(sc: Scenario, unit: str, conf, root: str, sources: list[str], out: str | None, config_path=None,
-                   deadline_s: float | None = None, live_start: float | None = None, armed: bool = False) -> int:
+                   deadline_s: float | None = None, live_start: float | None = None, armed: bool = False,
+                   linger_s: float = 0.0) -> int:
     p = LivePeer(sc, unit, conf, root, sources, out, config_path,
                  log=lambda *a, **k: print(*a, **k), live_start=live_start, armed=armed)
-    p.run(deadline_s)
+    p.run(deadline_s, linger_s)
     sys.stdout.flush()
     return 0

@@ -74,9 +74,9 @@ class LiveSource:
 
     def watermark(self, t: float) -> None:
         """Nothing at or before `t` will follow: flushes what is pending with that promise."""
-        if t < self.wm:
-            return
-        self._send(t)
+        if t <= self.wm and not self.pending:
+            return   # nothing new to say
+        self._send(max(t, self.wm))
 
     def close(self, end: bool = True) -> None:
         """The last frame (`end`: the source is done: its watermark is +inf), then undeclare."""

@@ -1,0 +1,192 @@
+"""saim-mesh's public Python API: publish facts into the mesh, follow alerts, command an EA.
+
+Each object is a context manager holding one Zenoh session (in the style of the
+zenoh-python examples); secure when given a PKI folder (`saim-mesh certs`):
+
+    from saim_mesh.api import Source, Alerts, Commander
+
+    with Source("scenarios/small", "cp.A", connect=["tcp/127.0.0.1:7447"]) as src:
+        src.report("A2S1E01", -116.6, 35.2, t=12.0)   # an entity's position at event time 12 s
+        src.watermark(14.0)                           # nothing at or before 14 s will follow
+
+    with Alerts("scenarios/small", connect=[...], units=["A2"], priorities=["flash"]) as alerts:
+        for a in alerts:                              # typed `Alert`s, checked like every payload
+            print(a.t, a.type, a.message)
+
+    with Commander("scenarios/small", "A2", connect=[...]) as cdr:
+        print(cdr.ack("A2/1"))                       # the EA's answer: {"ok": True, "t": ..., ...}
+
+docs/api.md says more; examples/ has one runnable script per idea."""
+from __future__ import annotations
+
+import queue
+from pathlib import Path
+from typing import Iterator
+
+import zenoh
+
+from dissemination.keyspace import KeySpace
+
+from . import commands as C
+from . import messages as M
+from . import scenario as S
+from . import wire as W
+from .live.source import LiveSource
+from .zconf import config
+
+__all__ = ["Source", "Alerts", "Commander", "Alert", "LocationReport"]
+Alert = M.Alert
+LocationReport = M.LocationReport
+
+
+def _scenario(sc) -> S.Scenario:
+    return sc if not isinstance(sc, (str, Path)) else S.load(sc, events=False)
+
+
+class _Session:
+    """One Zenoh session as `identity` (secure with `pki`), opened on __enter__."""
+
+    def __init__(self, scenario, identity: str, connect=None, listen=None, root=None, pki=None):
+        self.sc = _scenario(scenario)
+        self.root = root or f"saim/{self.sc.name}"
+        self.ks = KeySpace.of(self.sc, self.root)
+        self.conf = config(listen if listen is not None else ([] if connect else None), connect, None, False, pki,
+                           identity, self.sc, self.root)
+        self.session = None
+
+    def __enter__(self):
+        self.session = zenoh.open(self.conf)
+        self._opened()
+        return self
+
+    def _opened(self) -> None:
+        pass
+
+    def _closing(self) -> None:
+        pass
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self._closing()
+        finally:
+            self.session.close()
+            self.session = None
+
+
+class Source(_Session):
+    """A source of facts (a unit's reporter, a command post): its own stream of reports and
+    watermarks (`saim_mesh.live`). Event times must increase past each watermark given."""
+
+    def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None):
+        if pki is not None:
+            raise ValueError("Source: secure live sources (mTLS identities and access-control rules for "
+                             "source.<name>) are not built yet; use an open mesh")
+        super().__init__(scenario, f"source.{name}", connect, listen, root, pki)
+        self.name, self.state_dir, self.src = name, state_dir, None
+
+    def _opened(self) -> None:
+        self.src = LiveSource(self.session, self.ks, self.name, self.state_dir)
+
+    def put(self, msg: M.Message) -> None:
+        """Any data message (a LocationReport, a MissionConfirm, ...)."""
+        self.src.put(msg)
+
+    def report(self, entity: str, lon: float, lat: float, t: float) -> None:
+        """An entity's position at event time `t` (seconds)."""
+        if entity not in self.sc.taskorg.entity_unit:
+            raise KeyError(f"unknown entity {entity!r}: not in the task organization of {self.sc.name}")
+        self.src.put(M.LocationReport(float(t), entity, float(lon), float(lat)))
+
+    def watermark(self, t: float) -> None:
+        """Promise that nothing at or before `t` will follow from this source."""
+        self.src.watermark(float(t))
+
+    def _closing(self) -> None:
+        self.src.close(end=True)   # the end of the stream: the EAs need not wait for it
+
+
+class Alerts(_Session):
+    """Alerts as the EAs publish them, filtered by owner unit, type and priority; iterate
+    (blocks), or `get(timeout)`. A payload that is not a valid alert is counted, never raised."""
+
+    def __init__(self, scenario, connect=None, units=None, types=None, priorities=None, root=None, pki=None,
+                 identity: str = "observer"):
+        super().__init__(scenario, identity, connect, None, root, pki)
+        self.units, self.types = set(units or ()), set(types or ())
+        self.priorities = set(priorities or ())
+        self.gate = W.Gate(W.T_LIMIT)
+        self.q: queue.SimpleQueue = queue.SimpleQueue()
+
+    def _opened(self) -> None:
+        keys = [f"{self.root}/alert/{u}/**" for u in sorted(self.units)] or [f"{self.root}/alert/**"]
+        self.subs = [self.session.declare_subscriber(k, lambda s: self.q.put((str(s.key_expr),
+                                                                              s.payload.to_bytes())))
+                     for k in keys]
+
+    def _closing(self) -> None:
+        for s in self.subs:
+            s.undeclare()
+
+    def get(self, timeout: float | None = None) -> M.Alert | None:
+        """The next matching alert, or None after `timeout` seconds."""
+        while True:
+            try:
+                key, payload = self.q.get(timeout=timeout)
+            except queue.Empty:
+                return None
+            a = self.gate.data(payload, key)
+            if type(a) is not M.Alert or self.ks.mismatch(key, a) is not None:
+                continue
+            if self.types and a.type not in self.types or self.priorities and a.priority not in self.priorities:
+                continue
+            return a
+
+    def __iter__(self) -> Iterator[M.Alert]:
+        while True:
+            a = self.get()
+            if a is not None:
+                yield a
+
+
+class Commander(_Session):
+    """The commander of `unit` (identity `console.<unit>`): commands to the EAs of the units
+    it commands. Each call returns the EA's answer as a dict (`ok`, `error`, `t`, `ref`)."""
+
+    def __init__(self, scenario, unit: str, connect=None, root=None, pki=None, timeout: float = 10.0):
+        sc = _scenario(scenario)
+        if unit not in sc.taskorg.units:
+            raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
+        super().__init__(sc, f"console.{unit}", connect, None, root, pki)
+        self.unit, self.timeout = unit, timeout
+
+    def _opened(self) -> None:
+        from .security.sign import signer_for
+        self.signer = signer_for(self.conf)
+
+    def send(self, kind: str, to: str | None = None, **fields) -> dict:
+        """Any command (`commands.make` checks it; ValueError naming the field) to unit `to`'s EA."""
+        cmd = C.make(kind, **fields)
+        res = C.send(self.session, self.ks, to or self.unit, cmd, self.unit, self.timeout, self.signer)
+        return C.to_dict(res)
+
+    def ack(self, alert: str) -> dict:
+        return self.send("ack", alert.rsplit("/", 1)[0], alert=alert)
+
+    def silence(self, id: str, until_t: float, types=(), subjects=(), areas=(), comment: str = "",
+                to: str | None = None) -> dict:
+        return self.send("silence", to, id=id, until_t=until_t, types=list(types), subjects=list(subjects),
+                         areas=list(areas), comment=comment)
+
+    def set(self, key: str, value, to: str | None = None) -> dict:
+        return self.send("set", to, key=key, value=value)
+
+    def confirm(self, mission: str, phase: str, to: str | None = None) -> dict:
+        return self.send("confirm", to, mission=mission, phase=phase)
+
+    def decide(self, alert: str, option: str) -> dict:
+        return self.send("decide", alert.rsplit("/", 1)[0], alert=alert, option=option)
+
+    def inhibit(self, id: str, source: dict, target: dict, equal=("subjects",), for_s: float = 0.0,
+                to: str | None = None) -> dict:
+        return self.send("inhibit", to, id=id, source=W.MatcherSpec(**source), target=W.MatcherSpec(**target),
+                         equal=list(equal), for_s=for_s)

@@ -1,0 +1,53 @@
+"""The examples under examples/ run, against a live EA peer with no replay (issue 31):
+one publishes a platoon's reports as a source, one follows that platoon's alerts, one
+acknowledges the first. Processes on loopback, free ports, reaped; waits on printed lines."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import uuid
+
+import pytest
+
+from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.zconf import free_port
+
+from .conftest import ROOT, SMALL
+
+pytestmark = pytest.mark.timeout(240)
+EX = ROOT / "examples"
+
+
+def test_the_examples_publish_follow_and_acknowledge(tmp_path):
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    common = ["--scenario", str(SMALL), "--connect", ep, "--root", root]
+    peer = Proc("peer-A2", [*py(), "peer", "--scenario", str(SMALL), "--unit", "A2", "--listen", ep, "--root", root,
+                            "--sources", "reporter", "--out", str(tmp_path / "A2.jsonl"), "--linger", "120"],
+                env=clean_env(), log_dir=tmp_path)
+    follow = None
+    try:
+        peer.wait_for("ready A2", 60)
+        follow = Proc("follow", [sys.executable, str(EX / "follow_alerts.py"), *common, "--count", "2"],
+                      env=clean_env(), log_dir=tmp_path)
+        follow.wait_for("following", 60)
+        pub = subprocess.run([sys.executable, str(EX / "publish_reports.py"), *common, "--name", "reporter"],
+                             capture_output=True, text=True, timeout=120, env=clean_env(), cwd=ROOT)
+        assert pub.returncode == 0 and "published" in pub.stdout, pub.stderr
+        first = follow.wait_for("A2/1 ", 60)
+        assert follow.p.wait(60) == 0
+        peer.wait_for("end ", 60)
+        logged = [json.loads(x) for x in open(tmp_path / "A2.jsonl")]
+        assert logged[0]["details"]["id"] == "A2/1" and logged[0]["message"] in first
+        ack = subprocess.run([sys.executable, str(EX / "acknowledge.py"), *common, "--alert", "A2/1"],
+                             capture_output=True, text=True, timeout=60, env=clean_env(), cwd=ROOT)
+        assert ack.returncode == 0, (ack.stdout, ack.stderr)
+        answer = json.loads(ack.stdout.strip().splitlines()[-1])
+        assert answer["ok"] and answer["kind"] == "ack" and answer["ref"] == "A2/1"
+        bad = subprocess.run([sys.executable, str(EX / "acknowledge.py"), *common, "--alert", "A2/999"],
+                             capture_output=True, text=True, timeout=60, env=clean_env(), cwd=ROOT)
+        assert bad.returncode == 2 and "unknown alert" in bad.stdout
+    finally:
+        for p in (follow, peer):
+            if p is not None:
+                p.stop()
