@@ -1,0 +1,1 @@
+"""Live mesh without a centre: ordering facts from many sources by event time."""
