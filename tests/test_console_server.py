@@ -5,6 +5,7 @@ import io
 import json
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 import warnings
@@ -38,8 +39,15 @@ def uv():
     return S.load(ROOT / "scenarios" / "uv-team")
 
 
-def alert(owner="A", n=1, t=100.0, typ="out-of-position", prio="immediate"):
-    return M.Alert(t, owner, typ, "plan-constraint-violated", prio, ("A1",), f"alert {n}", {"id": f"{owner}/{n}"})
+def alert(owner="A", n=1, t=100.0, typ="out-of-position", prio="immediate", **details):
+    return M.Alert(t, owner, typ, "plan-constraint-violated", prio, ("A1",), f"alert {n}",
+                   {"id": f"{owner}/{n}", "story": f"{owner}/{n}", **details})
+
+
+def notice(kind="renotify", owner="A", n=1, to=None, t=220.0, count=1) -> dict:
+    return {"kind": kind, "t": t, "owner": owner, "alert": f"{owner}/{n}", "story": f"{owner}/{n}",
+            "type": "out-of-position", "priority": "immediate", "subjects": ["A1"], "message": f"alert {n}",
+            "count": count, "to": to or owner, "due_t": 100.0}
 
 
 class FakeActions:
@@ -69,6 +77,13 @@ class FakeActions:
     def cff(self, unit, cff, action):
         return self._do("cff", unit, cff=cff, action=action)
 
+    def inhibit(self, unit, id, source, target, equal, for_s, comment):
+        return self._do("inhibit", unit, id=id, source=source, target=target, equal=equal, for_s=for_s,
+                        comment=comment)
+
+    def uninhibit(self, unit, id):
+        return self._do("uninhibit", unit, id=id)
+
 
 def fed(sc, n=3000) -> State:
     st = State(sc)
@@ -83,7 +98,7 @@ def test_state_shape_small(small):
     st.alert(alert())
     body = TestClient(make_app(st, FakeActions())).get("/api/state").json()
     assert set(body) == {"scenario", "unit", "units", "overlay", "positions", "tracks", "alerts", "counts", "t",
-                         "actors", "silences"}
+                         "actors", "silences", "quiet", "notices", "inhibits", "acked"}
     assert body["scenario"] == small.name and body["unit"] == "BN" and "A2" in body["actors"]
     assert set(body["units"]) == set(small.taskorg.units)
     assert set(body["units"]["A1"]) == {"name", "kind", "parent", "mission", "mission_type", "state"}
@@ -180,6 +195,34 @@ def test_actions_call_the_actions_object(client):
     ("/api/confirm", {"unit": "A1", "mission": "nope", "phase": "start"}, "unknown mission 'nope'"),
     ("/api/confirm", {"unit": "A1", "mission": "A1-move", "phase": "middle"}, "field 'phase'"),
     ("/api/cff", {"unit": "A2", "cff": "CFF-1", "action": "fire"}, "field 'action'"),
+    ("/api/inhibit", {"unit": "A", "source": ["contact"], "target": {"types": ["distance"]}}, "field 'source': expected an object"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["contact"]}}, "field 'target': expected an object"),
+    ("/api/inhibit", {"unit": "A", "source": {}, "target": {"types": ["distance"]}}, "field 'source': give at least one"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": []}, "target": {"types": ["distance"]}}, "give at least one"),
+    ("/api/inhibit", {"unit": "A", "source": {"kinds": ["contact"]}, "target": {"types": ["distance"]}},
+     "field 'source.kinds': unexpected"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["no-such-type"]}, "target": {"types": ["distance"]}},
+     "field 'source.types': unknown alert type 'no-such-type'"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": "contact"}, "target": {"types": ["distance"]}},
+     "field 'source.types': expected a list"),
+    ("/api/inhibit", {"unit": "A", "source": {"priorities": ["urgent"]}, "target": {"types": ["distance"]}},
+     "field 'source.priorities': 'urgent' is not one of"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["contact"]}, "target": {"types": ["distance"]},
+                      "equal": ["track"]}, "field 'equal': unknown label 'track'"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["contact"]}, "target": {"types": ["distance"]},
+                      "equal": "subjects"}, "field 'equal': expected a list"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["contact"]}, "target": {"types": ["distance"]}, "for_s": -1},
+     "field 'for_s'"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["contact"]}, "target": {"types": ["distance"]}, "for_s": "9"},
+     "field 'for_s'"),
+    ("/api/inhibit", {"unit": "A", "id": "a/b", "source": {"types": ["contact"]}, "target": {"types": ["distance"]}},
+     "field 'id'"),
+    ("/api/inhibit", {"unit": "A", "source": {"types": ["contact"]}, "target": {"types": ["distance"]}, "why": "x"},
+     "unexpected field 'why'"),
+    ("/api/inhibit", {"unit": "ZZ", "source": {"types": ["contact"]}, "target": {"types": ["distance"]}},
+     "unknown unit 'ZZ'"),
+    ("/api/uninhibit", {"unit": "A", "id": "r9"}, "unknown inhibition rule 'r9' on the EA of A"),
+    ("/api/uninhibit", {"unit": "A"}, "field 'id'"),
 ])
 def test_bad_input_is_a_400_and_nothing_is_called(client, path, body, text):
     c, fake, _ = client
@@ -229,6 +272,7 @@ def test_sse_delivers_alerts_and_batched_positions(small):
             st.message(ev)
             st.clock(ev.t)
         st.alert(alert("A", 1))
+        st.notice(notice("escalate", "A", 1, to="BN"))
         st.result({"req": "r1", "kind": "ack", "ok": True, "error": "", "t": 1.0, "unit": "A"})
     try:
         events: list[tuple[str, dict]] = []
@@ -251,6 +295,8 @@ def test_sse_delivers_alerts_and_batched_positions(small):
     assert got["alert"]["details"]["id"] == "A/1" and got["alert"]["owner"] == "A"
     assert got["counts"] == {"A": {"out-of-position": 1}}
     assert got["result"]["req"] == "r1"
+    assert got["notice"] == notice("escalate", "A", 1, to="BN") and kinds.count("notice") == 1
+    assert kinds.index("alert") < kinds.index("notice") < kinds.index("result")   # one each, in order
     assert 1 <= kinds.count("positions") <= 10 and "BN" in got["positions"]
     assert not server.thread.is_alive()
 
@@ -295,6 +341,7 @@ def test_inprocess_hook_feeds_the_state(small):
         assert r.status_code == 200, r.text
         assert r.json()["result"]["kind"] == "ack" and r.json()["result"]["unit"] == "A"
         assert ("result", r.json()["result"]) in st.drain()
+        assert st.snapshot()["acked"] == [aid]   # a page opened later knows it was answered
     r = c.post("/api/set", json={"unit": "A", "key": "voi.no_such_key", "value": 1})
     assert r.status_code == 400 and r.json()["error"]
 
@@ -362,3 +409,157 @@ def test_silences_are_listed_with_areas_lifted_and_expire(small):
     st.drain()
     st.clock(st.t + 10.0)
     assert dict(st.drain())["silences"] == [] and st.snapshot()["silences"] == []
+
+
+# -- issue 30: stories, quiet alerts, notices, inhibition rules ------------------------------
+def test_quiet_alerts_are_kept_apart_and_still_counted(small):
+    """A silenced or inhibited alert is an `alert` event like any (the page puts it in its
+    quiet view), kept in the snapshot's `quiet`, not its `alerts`; the Fig. 7 counts count
+    every alert the EA logged, quiet or not."""
+    st = State(small)
+    st.drain()
+    shown = alert("A", 1)
+    hushed = alert("A", 2, t=110.0, silenced="console-1-s1")
+    muted = alert("A", 3, t=120.0, typ="distance", inhibited_by={"rule": "r1", "source": "A/1"})
+    for a in (shown, hushed, muted):
+        st.alert(a)
+    snap = st.snapshot()
+    assert [a["details"]["id"] for a in snap["alerts"]] == ["A/1"]
+    assert [a["details"]["id"] for a in snap["quiet"]] == ["A/2", "A/3"]
+    assert snap["counts"] == {"A": {"out-of-position": 2, "distance": 1}}
+    events = st.drain()
+    assert [d["details"]["id"] for e, d in events if e == "alert"] == ["A/1", "A/2", "A/3"]
+    assert dict(events)["counts"] == snap["counts"]
+    assert st.known_alert("A/3") == "A"   # a quiet alert can still be acknowledged
+    c = TestClient(make_app(st, FakeActions()))
+    assert c.get("/api/alert", params={"id": "A/3"}).json() == muted.to_json_dict()
+    r = c.get("/api/alert", params={"id": "A/9"})
+    assert r.status_code == 404 and "unknown alert 'A/9'" in r.json()["error"]
+    assert c.get("/api/alert").status_code == 404
+
+
+def test_notices_are_events_one_each_and_kept_bounded(small):
+    from saim_mesh.console import state as state_mod
+    st = State(small)
+    st.drain()
+    st.alert(alert("A", 1))
+    for i in range(state_mod.MAX_NOTICES + 5):
+        st.notice(notice("renotify", "A", 1, count=i + 1))
+    events = st.drain()
+    ns = [d for e, d in events if e == "notice"]
+    assert len(ns) == state_mod.MAX_NOTICES + 5 and ns[0]["count"] == 1
+    kept = st.snapshot()["notices"]
+    assert len(kept) == state_mod.MAX_NOTICES and kept[-1]["count"] == state_mod.MAX_NOTICES + 5   # the newest
+    assert st.snapshot()["counts"] == {"A": {"out-of-position": 1}}   # a notice is not an alert
+
+
+def test_the_feed_takes_notices_that_fit_their_key(small):
+    st = State(small)
+    feed = MeshFeed(small, None, "saim", st, log=lambda *a, **k: None)
+    assert "saim/notice/**" in feed.keys()
+
+    def payload(**kw):
+        d = {**notice(), **kw}
+        return W.encode(W.make(W.Notice, **d))
+    feed.take("saim/notice/A/A", payload())                                   # A's re-notification
+    feed.take("saim/notice/BN/A", payload(kind="escalate", to="BN"))          # escalated to BN
+    feed.take("saim/notice/BN/B", payload(kind="escalate", to="BN"))          # owner A on B's key
+    feed.take("saim/notice/BN/A", payload(kind="escalate", to="B"))           # to B on BN's key
+    feed.take("saim/notice/BN/A", payload(kind="renotify", to="BN"))          # a re-notification goes to its owner
+    feed.take("saim/notice/A/A", b"\x00junk")
+    got = [(d["kind"], d["to"]) for e, d in st.drain() if e == "notice"]
+    assert got == [("renotify", "A"), ("escalate", "BN")]
+    assert feed.gate.rejects.total == 4
+    assert st.snapshot()["notices"][1] == notice("escalate", to="BN")
+
+
+def test_inhibit_and_uninhibit_are_validated_sent_and_listed(small):
+    """POST /api/inhibit builds the `inhibit` command (MatcherSpecs from the JSON objects);
+    the rules in force that this console made are listed (`inhibits` in the snapshot and as
+    an event) until lifted; a refused one is not listed; uninhibit names a listed rule."""
+    st = fed(small, 500)
+    st.alert(alert("A2", 1, typ="contact"))
+    sent: list = []
+
+    def run(unit, cmd):   # an EA that takes every command
+        sent.append((unit, cmd))
+        return W.make(W.CmdResult, req=cmd.req, kind="inhibit" if type(cmd) is W.InhibitCmd else "uninhibit",
+                      ok=True, error="", t=st.t, ref=cmd.id)
+    c = TestClient(make_app(st, CommandActions(run, st)))
+    st.drain()
+    body = {"unit": "A2", "id": "contact-mutes-distance", "source": {"types": ["contact"]},
+            "target": {"types": ["distance", "strength"], "priorities": ["priority", "routine"]},
+            "equal": ["subjects"], "for_s": 600, "comment": "one story"}
+    r = c.post("/api/inhibit", json=body)
+    assert r.status_code == 200, r.text
+    assert r.json()["result"]["ref"] == "contact-mutes-distance"
+    unit, cmd = sent[-1]
+    assert unit == "A2" and type(cmd) is W.InhibitCmd and cmd.id == "contact-mutes-distance"
+    assert cmd.source == W.MatcherSpec(types=["contact"])
+    assert cmd.target == W.MatcherSpec(types=["distance", "strength"], priorities=["priority", "routine"])
+    assert (cmd.equal, cmd.for_s, cmd.comment) == (["subjects"], 600.0, "one story")
+    [rule] = c.get("/api/state").json()["inhibits"]
+    assert rule == {"id": "contact-mutes-distance", "unit": "A2", "source": {"types": ["contact"]},
+                    "target": {"types": ["distance", "strength"], "priorities": ["priority", "routine"]},
+                    "equal": ["subjects"], "for_s": 600.0, "comment": "one story", "t": st.t,
+                    "active_s": 600.0}
+    assert dict(st.drain())["inhibits"] == [rule]
+    # no id: the console names it; no for_s: the EA's voa.expiry_s (what the page assumes too)
+    r = c.post("/api/inhibit", json={"unit": "A2", "source": {"subjects": ["H2"]}, "target": {"owners": ["A2"]}})
+    assert r.status_code == 200, r.text
+    auto = sent[-1][1]
+    assert auto.id.startswith("console-") and auto.for_s == 0.0 and auto.equal == []
+    assert {i["id"]: i["active_s"] for i in st.snapshot()["inhibits"]}[auto.id] == 720.0
+    r = c.post("/api/uninhibit", json={"unit": "A", "id": "contact-mutes-distance"})
+    assert r.status_code == 400 and "on the EA of A" in r.json()["error"]
+    n = len(sent)
+    r = c.post("/api/uninhibit", json={"unit": "A2", "id": "contact-mutes-distance"})
+    assert r.status_code == 200 and len(sent) == n + 1 and type(sent[-1][1]) is W.UninhibitCmd
+    assert [i["id"] for i in st.snapshot()["inhibits"]] == [auto.id]
+    assert [i["id"] for i in dict(st.drain())["inhibits"]] == [auto.id]
+    refuse = CommandActions(lambda u, cmd: {"req": cmd.req, "kind": "inhibit", "ok": False, "error": "64 rules",
+                                            "t": st.t}, st)
+    r = TestClient(make_app(st, refuse)).post("/api/inhibit", json={**body, "id": "r2"})
+    assert r.status_code == 400 and r.json()["error"] == "64 rules"
+    assert [i["id"] for i in st.snapshot()["inhibits"]] == [auto.id]
+
+
+def test_inprocess_notices_quiet_alerts_and_an_inhibition_rule(small):
+    """Armed in-process EAs (A, A2; nobody acknowledging): every re-notification and
+    escalation each EA gives reaches the state once, as `notice` events; an inhibition rule
+    sent through the endpoint is in force on the EA, and the alerts it mutes are logged
+    marked inhibited_by and kept quiet, while the counts count them."""
+    from saim_mesh.runner import config_for, make_ea, wire_notices
+    eas = [make_ea(small, o, config_for(small, o, overrides={"notify": {"escalate_s": 120.0}})) for o in ("A", "A2")]
+    wire_notices(eas)   # as the runner does: A2's escalations reach A's EA
+    st = State(small, "A", actors=["A", "A2"])
+    actions = hook_inprocess(eas, small, st)
+    c = TestClient(make_app(st, actions))
+    for ea in eas:
+        ea.arm()
+        ea.start(0.0)
+    r = c.post("/api/inhibit", json={"unit": "A", "id": "contact-mutes", "source": {"types": ["contact"]},
+                                     "target": {"types": ["distance", "strength"]}, "equal": ["subjects"]})
+    assert r.status_code == 200, r.text
+    assert "contact-mutes" in eas[0].notify.inhibitor.rules
+    for ev in small.events:
+        for ea in eas:
+            ea.submit(ev)
+    for ea in eas:
+        ea.finish(small.duration_s)
+    snap = st.snapshot()
+    given = [n.to_json_dict() for ea in eas for n in ea.notices]
+    assert sorted(map(str, snap["notices"])) == sorted(map(str, given))
+    kinds = {(n["kind"], n["owner"], n["to"]) for n in snap["notices"]}
+    assert {("renotify", "A", "A"), ("escalate", "A", "BN"), ("escalate", "A2", "A")} <= kinds
+    assert [n.alert for n in eas[0].received] == [n["alert"] for n in snap["notices"]
+                                                  if n["kind"] == "escalate" and n["owner"] == "A2"]
+    muted = [a for a in eas[0].alerts if "inhibited_by" in a.details]
+    assert {a.details["id"] for a in muted} == {a["details"]["id"] for a in snap["quiet"]} and muted
+    assert all(a.details["inhibited_by"]["rule"] == "contact-mutes" for a in muted)
+    assert not {a.details["id"] for a in muted} & {a["details"]["id"] for a in snap["alerts"]}
+    logged = Counter((a.owner, a.type) for ea in eas for a in ea.alerts)
+    assert {(o, t): n for o, c_ in snap["counts"].items() for t, n in c_.items()} == logged
+    # lifted through the endpoint: gone from the EA and from the list
+    r = c.post("/api/uninhibit", json={"unit": "A", "id": "contact-mutes"})
+    assert r.status_code == 200 and eas[0].notify.inhibitor.rules == {} and st.snapshot()["inhibits"] == []

@@ -1,7 +1,7 @@
 """The commander's actions: checking what the page asks (so bad input is a clear 400
 and nothing is sent) and turning it into commands (docs/console.md section 1).
 
-`Actions` is anything with `ack/silence/unsilence/set/confirm/cff` returning a CmdResult-like
+`Actions` is anything with `ack/silence/unsilence/set/confirm/cff/decide/inhibit/uninhibit` returning a CmdResult-like
 dict `{req, kind, ok, error, t, unit}`; `CommandActions` is the real one, over any
 way of running a command (`commands.send` on the mesh, `commands.apply` in process)."""
 from __future__ import annotations
@@ -15,6 +15,10 @@ from ea_agent import domains
 
 PHASES = ("start", "end")
 CFF_ACTIONS = ("confirm", "cancel")
+PRIORITIES = ("flash", "immediate", "priority", "routine")
+MATCHER_KEYS = ("types", "subjects", "priorities", "owners")
+LABELS = ("subjects", "owner", "places", "category")   # what an inhibition rule's `equal` may name
+MAX_FOR_S = 7 * 86400
 
 
 class BadRequest(ValueError):
@@ -30,11 +34,16 @@ class Actions(Protocol):
     def confirm(self, unit: str, mission: str, phase: str) -> dict: ...
     def cff(self, unit: str, cff: str, action: str) -> dict: ...
     def decide(self, unit: str, alert: str, option: str) -> dict: ...
+    def inhibit(self, unit: str, id: str, source: dict, target: dict, equal: list[str], for_s: float,
+                comment: str) -> dict: ...
+    def uninhibit(self, unit: str, id: str) -> dict: ...
 
 
 FIELDS = {"ack": ("unit", "alert"), "silence": ("unit", "types", "subjects", "areas", "for_s", "comment"),
           "unsilence": ("unit", "id"), "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action"),
-          "decide": ("unit", "alert", "option")}
+          "decide": ("unit", "alert", "option"),
+          "inhibit": ("unit", "id", "source", "target", "equal", "for_s", "comment"),
+          "uninhibit": ("unit", "id")}
 
 
 def _text(body: dict, f: str, choices=None, default: str | None = None) -> str:
@@ -48,13 +57,39 @@ def _text(body: dict, f: str, choices=None, default: str | None = None) -> str:
     return v
 
 
-def _texts(body: dict, f: str) -> list[str]:
+def _texts(body: dict, f: str, name: str | None = None) -> list[str]:
     v = body.get(f, [])
+    name = name or f
     if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):
-        raise BadRequest(f"field {f!r}: expected a list of non-empty strings")
+        raise BadRequest(f"field {name!r}: expected a list of non-empty strings")
     if len(v) > 64:
-        raise BadRequest(f"field {f!r}: over 64 entries")
+        raise BadRequest(f"field {name!r}: over 64 entries")
+    if any(len(x) > 128 for x in v):
+        raise BadRequest(f"field {name!r}: an entry over 128 characters")
     return v
+
+
+def _matcher(body: dict, f: str, known_types: set[str]) -> dict:
+    """An inhibition rule's source or target: {types, subjects, priorities, owners}, at
+    least one non-empty (an empty matcher matches every alert)."""
+    v = body.get(f)
+    if not isinstance(v, dict):
+        raise BadRequest(f"field {f!r}: expected an object with any of {', '.join(MATCHER_KEYS)}, got {json_type(v)}")
+    extra = sorted(set(v) - set(MATCHER_KEYS))
+    if extra:
+        raise BadRequest(f"field '{f}.{extra[0][:40]}': unexpected (a matcher takes {', '.join(MATCHER_KEYS)})")
+    m = {k: _texts(v, k, f"{f}.{k}") for k in MATCHER_KEYS if k in v}
+    m = {k: x for k, x in m.items() if x}
+    if not m:
+        raise BadRequest(f"field {f!r}: give at least one of {', '.join(MATCHER_KEYS)} (an empty matcher matches "
+                         f"every alert)")
+    bad = [t for t in m.get("types", ()) if t not in known_types]
+    if bad:
+        raise BadRequest(f"field '{f}.types': unknown alert type {bad[0][:60]!r}")
+    bad = [p for p in m.get("priorities", ()) if p not in PRIORITIES]
+    if bad:
+        raise BadRequest(f"field '{f}.priorities': {bad[0][:60]!r} is not one of {', '.join(PRIORITIES)}")
+    return m
 
 
 def _number(v: Any) -> bool:
@@ -88,11 +123,11 @@ def validate(kind: str, body: Any, state) -> tuple[str, dict]:
         if kind == "decide":   # the EA checks the option against the alert's own list
             return unit, {"alert": aid, "option": _text(body, "option")}
         return unit, {"alert": aid}
+    known = set(domains.of(state.sc).ALERT_TYPES) | {t for c in state.counts.values() for t in c}
     if kind == "silence":
         f = {k: _texts(body, k) for k in ("types", "subjects", "areas")}
         if not any(f.values()):
             raise BadRequest("a silence needs at least one of types, subjects, areas (it would silence everything)")
-        known = set(domains.of(state.sc).ALERT_TYPES) | {t for c in state.counts.values() for t in c}
         bad = [t for t in f["types"] if t not in known]
         if bad:
             raise BadRequest(f"unknown alert type {bad[0][:60]!r}")
@@ -111,6 +146,33 @@ def validate(kind: str, body: Any, state) -> tuple[str, dict]:
         if state.silences[sid]["unit"] != unit:
             raise BadRequest(f"silence {sid} is on the EA of {state.silences[sid]['unit']}, not {unit}")
         return unit, {"id": sid}
+    if kind == "inhibit":
+        rid = body.get("id")
+        if rid is None or rid == "":
+            rid = ""   # the console names it
+        elif not isinstance(rid, str) or not rid.strip() or len(rid) > 64 or any(c in rid for c in "/*$#?"):
+            raise BadRequest(f"field 'id': expected a rule name (up to 64 characters, no / * $ # ?), got "
+                             f"{rid!r:.60}")
+        source, target = _matcher(body, "source", known), _matcher(body, "target", known)
+        equal = body.get("equal", [])
+        if not isinstance(equal, list) or not all(isinstance(x, str) for x in equal):
+            raise BadRequest(f"field 'equal': expected a list of labels ({', '.join(LABELS)})")
+        bad = [x for x in equal if x not in LABELS]
+        if bad:
+            raise BadRequest(f"field 'equal': unknown label {bad[0][:40]!r} (known: {', '.join(LABELS)})")
+        for_s = body.get("for_s", 0)
+        if not _number(for_s) or not 0 <= for_s <= MAX_FOR_S:
+            raise BadRequest(f"field 'for_s': expected seconds of scenario time in [0, {MAX_FOR_S}] (0: the EA's "
+                             f"voa.expiry_s), got {for_s!r:.60}")
+        return unit, {"id": rid, "source": source, "target": target, "equal": list(dict.fromkeys(equal)),
+                      "for_s": float(for_s), "comment": _text(body, "comment", default="")}
+    if kind == "uninhibit":
+        rid = _text(body, "id")
+        if not state.known_inhibit(unit, rid):
+            mine = state.inhibit_ids(unit)
+            raise BadRequest(f"unknown inhibition rule {rid[:60]!r} on the EA of {unit}: not one in force that this "
+                             f"console made (in force: {', '.join(mine) or 'none'})")
+        return unit, {"id": rid}
     if kind == "set":
         key = _text(body, "key")
         if not key.startswith(("voi.", "voa.")):
@@ -133,7 +195,7 @@ def result_dict(res: Any, unit: str | None = None) -> dict:
     if isinstance(res, dict):
         d = dict(res)
     else:
-        d = {f: getattr(res, f, None) for f in ("req", "kind", "ok", "error", "t")}
+        d = {f: getattr(res, f, None) for f in ("req", "kind", "ok", "error", "t", "ref")}
     d.pop("v", None)
     if unit is not None:
         d.setdefault("unit", unit)
@@ -156,6 +218,8 @@ class CommandActions:
         if self.state is not None:
             if kind in ("silence", "unsilence"):
                 self.state.silenced(unit, cmd, bool(d.get("ok")))
+            if kind in ("inhibit", "uninhibit"):
+                self.state.inhibited(unit, cmd, bool(d.get("ok")))
             if self.push:
                 self.state.result(d)
         return d
@@ -182,3 +246,12 @@ class CommandActions:
 
     def decide(self, unit, alert, option):
         return self._do(unit, "decide", alert=alert, option=option)
+
+    def inhibit(self, unit, id, source, target, equal, for_s, comment):
+        """`source`/`target`: {types, subjects, priorities, owners} (msgspec makes the
+        MatcherSpec structs); no `id`: this console names the rule."""
+        return self._do(unit, "inhibit", id=id or f"{self._tag}-i{next(self._n)}", source=source, target=target,
+                        equal=equal, for_s=for_s, comment=comment)
+
+    def uninhibit(self, unit, id):
+        return self._do(unit, "uninhibit", id=id)

@@ -1,6 +1,8 @@
 """What feeds the console's state: the mesh (a Zenoh session as `console.<U>`), or the
-EAs of an in-process run. Every mesh payload goes through `wire.Gate` and must fit the
-key it came on; nothing received can stop the console (a bad payload is counted).
+EAs of an in-process run: alerts, re-notifications and escalations (notices), command
+results, the clock and the data messages it draws. Every mesh payload goes through
+`wire.Gate` and must fit the key it came on; nothing received can stop the console (a
+bad payload is counted).
 
 No liveliness token: the replay's pacer waits for every `alive/<name>` it does not know
 as fusion node or replay, and a console sends no acks, so a token would stall the
@@ -36,7 +38,7 @@ class MeshFeed(MeshReader):
     def keys(self) -> list[str]:
         r = self.ks.root
         data = sorted({self.ks.data(c) for c in self.classes})
-        return [self.ks.clock(), f"{r}/alert/**", f"{r}/cmdlog/**", *data]
+        return [self.ks.clock(), f"{r}/alert/**", f"{r}/cmdlog/**", f"{r}/notice/**", *data]
 
     def take(self, key: str, payload: bytes) -> None:
         """One payload from the mesh, checked, into the state."""
@@ -54,6 +56,9 @@ class MeshFeed(MeshReader):
             if res is not None:
                 st.result(result_dict(res, ks.last(key)[0]))
             return
+        if fam == "notice":
+            self.take_notice(key, payload)
+            return
         m = gate.data(payload, key)
         if m is None:
             return
@@ -66,6 +71,22 @@ class MeshFeed(MeshReader):
         else:
             st.message(m)
 
+    def take_notice(self, key: str, payload: bytes) -> None:
+        """notice/<to>/<owner>: a re-notification (to = owner) or an escalation (to = the
+        owner's superior), signed in secure mode; the key must name what it carries."""
+        n = self.gate.control(W.Notice, payload, key, signed=True)
+        if n is None:
+            return
+        to, owner = self.ks.last(key, 2)
+        why = (f"a notice of {n.owner!r} on the key of {owner!r}" if n.owner != owner else
+               f"a notice to {n.to!r} on the key of {to!r}" if n.to != to else
+               f"a renotify notice to {to!r}, not its owner" if n.kind == "renotify" and to != owner else None)
+        if why is not None:
+            self.gate.rejects.add(M.MessageError("notice", "(key)", why), key)
+            return
+        d = {f: getattr(n, f) for f in n.__struct_fields__ if f != "v"}
+        d["subjects"] = list(n.subjects)
+        self.state.notice(d)
 
     def stored(self, messages: list, t: float) -> None:
         """At the first tick: every unit and confirmation so far (positions: the latest wins)."""
@@ -105,8 +126,13 @@ def hook_inprocess(eas: list, sc, state: State) -> CommandActions:
                 return inner(x, *a)
         setattr(ea, name, call)
 
+    def notice(n) -> None:
+        state.notice(n.to_json_dict())
+
     for i, ea in enumerate(eas):
         ea.sinks.append(state.alert)
+        ea.notice_sinks.append(notice)   # its own re-notifications and escalations (the runner routes
+        #                                  escalations to a superior's EA run here; the page needs them once)
         first = i == 0
         guard(ea, "submit", (lambda m: (state.message(m), state.clock(m.t))) if first else None)
         guard(ea, "advance", state.clock if first else None)

@@ -94,6 +94,15 @@ def make_app(state, actions, static_dir: Path | str = STATIC) -> Starlette:
     async def api_state(request: Request):
         return JSONResponse(await run_in_threadpool(state.snapshot))
 
+    async def api_alert(request: Request):
+        """GET /api/alert?id=<owner>/<n>: one alert (an escalated one the page no longer holds)."""
+        aid = request.query_params.get("id", "")
+        a = state.find_alert(aid) if aid else None
+        if a is None:
+            why = "give ?id=<alert id>" if not aid else f"unknown alert {aid[:60]!r}: not among those this console kept"
+            return JSONResponse({"ok": False, "error": why}, 404)
+        return JSONResponse(a)
+
     async def events(request: Request):
         q: asyncio.Queue = asyncio.Queue()
         hub.clients.add(q)
@@ -123,7 +132,8 @@ def make_app(state, actions, static_dir: Path | str = STATIC) -> Starlette:
             return JSONResponse({"ok": True, "result": res})
         return endpoint
 
-    routes = [Route("/", index), Route("/api/state", api_state), Route("/events", events),
+    routes = [Route("/", index), Route("/api/state", api_state), Route("/api/alert", api_alert),
+              Route("/events", events),
               *(Route(f"/api/{k}", action(k), methods=["POST"]) for k in FIELDS),
               Mount("/static", StaticFiles(directory=str(static_dir)), name="static")]
 
