@@ -341,6 +341,15 @@ def cmd_mesh(a) -> int:
 
     from .mesh import up
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
+    if a.live or a.sources_per_cp:   # the mesh with no centre: sources per command post, no replay
+        from .live.up import up as live_up
+        for bad, flag in ((a.console is not None, "--console"), (a.topology, "--topology"), (a.tak, "--tak"),
+                          (a.pki, "--pki")):
+            if bad:
+                raise ValueError(f"mesh up --live: {flag} is not built for the live mesh yet (issue 31)")
+        res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
+                      live=a.live)
+        return 0 if len(res["peers"]) == len(a.units or res["peers"]) else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
              console=a.console, console_linger=a.console_linger, tak=_tak_args(a),
@@ -610,6 +619,11 @@ def main(argv: list[str] | None = None) -> int:
     me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit EA plus the replay")
     me.add_argument("action", choices=["up"])
     me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    me.add_argument("--live", action="store_true",
+                    help="the mesh with no centre: a source per command post, EA peers on event time, no replay; "
+                         "event time is the wall clock (use --sources-per-cp for a recorded battle at --speed)")
+    me.add_argument("--sources-per-cp", action="store_true",
+                    help="as --live, but the sources play the recorded battle at --speed (max: as fast as they can)")
     me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
     me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     me.add_argument("--out-dir", default="out/mesh")

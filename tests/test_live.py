@@ -161,3 +161,24 @@ def test_a_source_that_dies_is_declared_lost_and_monitoring_goes_on(tmp_path, sc
     again = [a.to_json_dict() for a in replay(peer, tmp_path / "A2.input")]
     key = lambda d: (d["t"], d["type"], tuple(d["subjects"]), d["message"], d["priority"])   # noqa: E731
     assert [key(a) for a in again] == [key(a) for a in alerts]
+
+
+def test_mesh_up_with_a_source_per_command_post_gives_the_in_process_alerts(tmp_path, sc):
+    """`mesh up --sources-per-cp`: a Zenoh router, a source per command post (each company's
+    subtree, the battalion's own share with the tracks), EA peers as its clients, no replay:
+    every peer's alerts equal the in-process run's (the same EA on the same facts)."""
+    from saim_mesh.runner import run
+    units = ["BN", "A", "A2"]
+    out = tmp_path / "mesh"
+    r = Proc("mesh-up", [*py(), "mesh", "up", SC, "--sources-per-cp", "--units", *units, "--out-dir", str(out)],
+             env=clean_env(), log_dir=tmp_path)
+    try:
+        r.wait_for("3 of 3 EA peers done", 240)
+        assert r.p.wait(60) == 0
+    finally:
+        r.stop()
+    table = [x for x in r.lines if x.startswith("total ")]
+    assert table, r.tail()
+    eas = run(sc, units)
+    for ea in eas:
+        assert plan_alerts(load(out / f"{ea.owner}.jsonl")) == plan_alerts(ea.alerts), ea.owner

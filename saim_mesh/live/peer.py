@@ -41,8 +41,11 @@ from ..scenario import Scenario
 from . import frames as F
 from .journal import InputJournal
 from .order import EventTimeOrder
+from .source import CACHE
 
 BLOCK = zenoh.CongestionControl.BLOCK
+GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
+HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 DATA = (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
         M.Reorganization)
 
@@ -60,6 +63,7 @@ class LivePeer:
         self.cfg = config_for(sc, unit, config_path)
         mesh = self.cfg["mesh"]
         self.silence_s = float(mesh["source_silence_s"] if silence_s is None else silence_s)
+        self.join_s = max(self.silence_s, float(mesh["source_join_s"]))
         self.max_bytes = int(max_bytes or mesh["max_payload_bytes"])
         self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
@@ -80,6 +84,10 @@ class LivePeer:
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
         self.misses = 0
+        self.gaps = 0                         # frames that never came (beyond recovery)
+        self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
+        self.held: dict[str, dict[int, tuple]] = {}   # source -> seq -> a frame that came early
+        self.gap_since: dict[str, float] = {}
         self.frames = 0
         self.late = 0
         self.t0 = time.monotonic()
@@ -107,18 +115,67 @@ class LivePeer:
                              "immediate", (subject,), text, {"source": subject, "wall_clock_driven": True, **details}))
 
     # -- input ---------------------------------------------------------------------------
-    def take(self, payload: bytes, key: str, journal: bool = True) -> None:
-        """One frame: checked, journalled, ordered; then everything the watermarks allow is applied."""
+    def receive(self, payload: bytes, key: str) -> None:
+        """A frame off the wire: taken in its source's own sequence. One that comes ahead of
+        a missing one (a subscriber that joined after the source's first frames gets those
+        from the publisher's cache, after newer ones) waits for it, at most `GAP_WAIT_S`."""
+        f = self._frame(payload, key)
+        if f is None:
+            return
+        st = self.seq_of.get(f.source)
+        if st is None or f.epoch > st[0]:   # first heard, or the source restarted: its seq starts at 1
+            st = self.seq_of[f.source] = [f.epoch, 1]
+            self.held[f.source] = {}
+        if f.epoch < st[0] or f.seq < st[1]:
+            return   # an old epoch's frame, or one taken already
+        held = self.held[f.source]
+        if f.seq > st[1]:
+            if not held:
+                self.log(f"source {f.source}: frame {f.seq} came before {st[1]}: waiting for it", flush=True)
+            if len(held) < HELD_FRAMES:
+                held[f.seq] = (payload, key, f)
+                self.gap_since.setdefault(f.source, time.monotonic())
+            return
+        self.take(payload, key, f=f)
+        st[1] = f.seq + 1
+        self._drain_held(f.source)
+
+    def _drain_held(self, source: str, force: bool = False) -> None:
+        """Held frames now in sequence (or, `force`d after the wait, from the lowest held on:
+        the missing ones are gone, counted as a gap)."""
+        st, held = self.seq_of[source], self.held[source]
+        if force and held and st[1] not in held:
+            low = min(held)
+            self.gaps += low - st[1]
+            self.log(f"source {source}: frames {st[1]}..{low - 1} never came: going on without them", flush=True)
+            st[1] = low
+        while st[1] in held:
+            payload, key, f = held.pop(st[1])
+            self.take(payload, key, f=f)
+            st[1] += 1
+        if not held:
+            self.gap_since.pop(source, None)
+
+    def _frame(self, payload: bytes, key: str):
         try:
             f = F.decode(payload, self.max_bytes)
         except M.MessageError as e:
             self.gate.rejects.add(e, key)
-            return
+            return None
         if key and key != self.ks.src(f.source):
             self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
-            return
+            return None
         if f.source not in self.order.watermarks():
-            return   # a source this EA does not depend on
+            return None   # a source this EA does not depend on
+        return f
+
+    def take(self, payload: bytes, key: str, journal: bool = True, f=None) -> None:
+        """One frame, in its source's sequence: checked, journalled, ordered; then everything
+        the watermarks allow is applied."""
+        if f is None:
+            f = self._frame(payload, key)
+            if f is None:
+                return
         items = []
         for b in f.msgs:
             m = self.gate.data(b, key or f"src/{f.source}")
@@ -157,7 +214,9 @@ class LivePeer:
         self.order.lose(source, why)
         units = self._units_of(source)
         named = ", ".join(units[:8]) + (f" and {len(units) - 8} more" if len(units) > 8 else "")
-        self._system(source, f"reports of source {source} not received since {hms(self.order.watermarks()[source])}"
+        wm = self.order.watermarks()[source]
+        since = f"since {hms(wm)}" if math.isfinite(wm) and wm >= 0 else "at all"
+        self._system(source, f"reports of source {source} not received {since}"
                              f" ({why}); monitoring of {named or 'what it reports'} degraded",
                      event="source-lost", why=why, units=units)
         self._apply()
@@ -228,7 +287,7 @@ class LivePeer:
                 put = self.q.put
                 sub = zx.declare_advanced_subscriber(
                     s, self.ks.src("*"), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
-                    history=zx.HistoryConfig(detect_late_publishers=True),
+                    history=zx.HistoryConfig(detect_late_publishers=True, max_samples=CACHE),
                     recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True)
                 misses = sub.sample_miss_listener(lambda miss: put(("miss", miss.nb)))
                 cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"),
@@ -246,12 +305,17 @@ class LivePeer:
                     elif key == "cmd":
                         self.command(*payload)
                     elif key is not None:
-                        self.take(payload, key)
+                        self.receive(payload, key)
                     now = time.monotonic()
+                    for src, since in list(self.gap_since.items()):
+                        if now - since > GAP_WAIT_S:
+                            self._drain_held(src, force=True)
                     for src in self.sources:   # silence: a decision, journalled
-                        last = self.heard.get(src, started)
-                        if src not in self.ended and src not in self.order.lost and now - last > self.silence_s:
-                            self.lose(src, f"silent for {now - last:.0f} s")
+                        last = self.heard.get(src)
+                        quiet, limit = (now - started, self.join_s) if last is None else (now - last, self.silence_s)
+                        if src not in self.ended and src not in self.order.lost and quiet > limit:
+                            self.lose(src, f"silent for {quiet:.0f} s" if last is not None else
+                                      f"never heard in {quiet:.0f} s")
                     if self.live_start is not None:
                         self._apply()
                 end_t = self.sc.duration_s if self.live_start is None else max(self.ea.now, self.order.released)
@@ -279,6 +343,7 @@ class LivePeer:
 
     def summary(self) -> dict:
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "frames": self.frames, "misses": self.misses,
+                "gaps": self.gaps,
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "messages": self.ea.n_in,
                 "wall_s": round(time.monotonic() - self.t0, 2)}

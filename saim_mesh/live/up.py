@@ -1,0 +1,133 @@
+"""`saim-mesh mesh up --live`: the mesh with no centre on one host. One source per
+command post (each company's subtree; the battalion's own units and the hostile tracks
+its sensors see), one EA peer per unit advancing on those sources' watermarks, no
+replay. Alerts are printed as the peers raise them (read from their durable logs), the
+Fig. 7 table at the end. Supervised like `mesh up`: a child that dies is reported and
+restarted (a restarted source takes a new epoch; a restarted peer starts a new log)."""
+from __future__ import annotations
+
+import json
+import time
+from collections import Counter
+from pathlib import Path
+
+from ..mesh import Supervisor, mesh_units
+from ..proc import Proc, clean_env, leaf_env, py
+from ..zconf import free_port
+
+
+def cp_sources(sc) -> dict[str, list[str]]:
+    """name -> `saim-mesh source` arguments: one per child of the top unit (its subtree),
+    and the top's own share (everything else, with the tracks)."""
+    to = sc.taskorg
+    top = to.root
+    kids = sorted(u for u, p in to.parent.items() if p == top)
+    out = {f"cp.{k}": ["--units", k] for k in kids}
+    out[f"cp.{top}"] = ["--but", *kids, "--tracks"] if kids else ["--tracks"]
+    return out
+
+
+def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,
+       echo=print, live: bool = False, show: bool = True) -> dict:
+    from .. import scenario as S
+    from ..sinks import COLOURS, RESET
+    from ea_agent.core.alert import hms
+    import sys
+    sc = S.load(scenario, events=False)
+    units = units or mesh_units(sc)
+    colours = COLOURS if sys.stdout.isatty() else None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    logs = out_dir / "logs"
+    logs.mkdir(exist_ok=True)
+    root = f"saim/{sc.name}/live"
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    sources = cp_sources(sc)
+    echo("WARNING: the live mesh runs open (no mTLS or access control yet for sources)")
+    sup = Supervisor(echo, pids_path=out_dir / "pids.json")
+    live_args = ["--live"] if live else []
+    summaries: dict[str, dict] = {}
+    seen: dict[str, int] = {}
+    shown = Counter()
+    t0 = time.monotonic()
+    try:
+        # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
+        # peers do not relay for each other: ../shared/notes/live-mesh.md)
+        router = sup.add(Proc("router", [*py(), "router", "--scenario", scenario, "--name", "hub", "--listen", hub,
+                                         "--root", root], env=clean_env(), log_dir=logs))
+        router.wait_for("router ready", 60)
+        net = ["--connect", hub, "--mode", "client"]
+        for u in units:
+            for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
+                (out_dir / f).unlink(missing_ok=True)
+            sup.add(Proc(u, [*py(), "peer", "--scenario", scenario, "--unit", u, *net, "--root", root,
+                             "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args],
+                         env=leaf_env(), log_dir=logs))
+        for u in units:
+            sup.procs[u].wait_for(f"ready {u}", 120)
+        for name, args in sources.items():
+            sup.add(Proc(name, [*py(), "source", scenario, "--name", name, *args, "--connect", hub, "--root", root,
+                                "--speed", speed, "--state", str(out_dir / "sources"), "--linger", "30", *live_args,
+                                "--mode", "client"],
+                         env=clean_env(), log_dir=logs))
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and len(summaries) < len(units):
+            sup.check()
+            for u in units:
+                p = sup.procs[u]
+                if show:
+                    seen[u] = _show(out_dir / f"{u}.jsonl", seen.get(u, 0), echo, colours, RESET, hms, shown)
+                if u not in summaries and (line := p.find("summary ")) is not None:
+                    summaries[u] = json.loads(line[len("summary "):])
+            time.sleep(0.1)
+    finally:
+        sup.stop()
+    wall = time.monotonic() - t0
+    result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events}
+    (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
+    echo(table(out_dir, units, sc))
+    echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}; "
+         f"alerts in {out_dir}/, logs in {logs}/")
+    return result
+
+
+def _show(path: Path, done: int, echo, colours, reset, hms, shown: Counter) -> int:
+    """Print the alerts a peer logged since the last look (quiet ones left out)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.readlines()
+    except FileNotFoundError:
+        return done
+    for line in lines[done:]:
+        if not line.endswith("\n"):
+            return done
+        done += 1
+        a = json.loads(line)
+        if "silenced" in a["details"] or "inhibited_by" in a["details"]:
+            continue
+        shown[a["priority"]] += 1
+        tag = f"{a['priority'].upper():9}"
+        if colours:
+            tag = f"{colours[a['priority']]}{tag}{reset}"
+        echo(f"{hms(a['t'])} {a['owner']:>5} {tag} {a['type']:16} {a['message']}", flush=True)
+    return done
+
+
+def table(out_dir: Path, units: list[str], sc) -> str:
+    """The Fig. 7 table from the peers' alert logs: alerts by type per EA (system problems apart)."""
+    from ea_agent import domains
+    counts = {u: Counter() for u in units}
+    for u in units:
+        try:
+            for line in open(out_dir / f"{u}.jsonl", encoding="utf-8"):
+                if line.endswith("\n"):
+                    a = json.loads(line)
+                    counts[u]["system-problem" if a["category"] == "system-problem" else a["type"]] += 1
+        except FileNotFoundError:
+            pass
+    types = [t for t in domains.of(sc).ALERT_TYPES if any(c[t] for c in counts.values())]
+    types += ["system-problem"] if any(c["system-problem"] for c in counts.values()) else []
+    w = max([len(t) for t in types] + [16])
+    lines = [f"{'alert type':{w}} " + " ".join(f"{u:>6}" for u in units)]
+    lines += [f"{t:{w}} " + " ".join(f"{counts[u][t]:>6}" for u in units) for t in types]
+    lines.append(f"{'total':{w}} " + " ".join(f"{sum(counts[u].values()):>6}" for u in units))
+    return "\n".join(lines)
