@@ -265,7 +265,7 @@ def cmd_source(a) -> int:
     with zenoh.open(conf) as s:
         src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state)
         print(f"ready source {a.name} epoch={src.epoch}", flush=True)
-        n = play.publish(src, msgs, a.speed, start)
+        n = play.publish(src, msgs, a.speed, start, until=a.until)
         src.close(end=not a.keep_open)
         print(f"end source {a.name} messages={n} frames={src.seq}", flush=True)
         if a.linger:
@@ -607,6 +607,7 @@ def main(argv: list[str] | None = None) -> int:
     so.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
     so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
+    so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
     so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")
     _zenoh_args(so)
     so.set_defaults(fn=cmd_source)

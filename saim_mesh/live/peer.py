@@ -84,6 +84,7 @@ class LivePeer:
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
         self.misses = 0
+        self.alert_lat: list[float] = []      # live: wall seconds from an alert's event time to its raising
         self.gaps = 0                         # frames that never came (beyond recovery)
         self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
         self.held: dict[str, dict[int, tuple]] = {}   # source -> seq -> a frame that came early
@@ -94,6 +95,8 @@ class LivePeer:
 
     # -- sinks ---------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
+        if self.live_start is not None and not a.details.get("wall_clock_driven"):
+            self.alert_lat.append(time.time() - self.live_start - a.t)   # report (event time) to alert, live
         if self.late_from is not None:
             a = replace(a, details={**a.details, "late": True, "due_from": round(self.late_from, 3)})
             self.late += 1
@@ -218,7 +221,7 @@ class LivePeer:
         since = f"since {hms(wm)}" if math.isfinite(wm) and wm >= 0 else "at all"
         self._system(source, f"reports of source {source} not received {since}"
                              f" ({why}); monitoring of {named or 'what it reports'} degraded",
-                     event="source-lost", why=why, units=units)
+                     event="source-lost", why=why, units=units, declared_wall=round(time.time(), 3))
         self._apply()
 
     def _units_of(self, source: str) -> list[str]:
@@ -343,7 +346,7 @@ class LivePeer:
 
     def summary(self) -> dict:
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "frames": self.frames, "misses": self.misses,
-                "gaps": self.gaps,
+                "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "messages": self.ea.n_in,
                 "wall_s": round(time.monotonic() - self.t0, 2)}

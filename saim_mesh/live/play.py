@@ -93,7 +93,7 @@ def read_lines(f: IO[str], fmt: str, entity: str | None, start: float | None) ->
 
 
 def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = None, live_start: float | None = None,
-            epoch_s: float = EPOCH_S, log=print) -> int:
+            epoch_s: float = EPOCH_S, log=print, until: float | None = None) -> int:
     """Publish `msgs` (in event-time order) with a watermark at every epoch boundary they
     pass; at `speed` x real time, as fast as possible (None), or live (wait until each
     message's event time on the wall clock, and keep watermarks going while idle)."""
@@ -102,6 +102,8 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
     last_wm = src.wm
     next_say = 600.0
     for m in msgs:
+        if until is not None and m.t > until:
+            break
         if m.t >= next_say:   # progress, for whoever watches the source's log
             log(f"source {src.name} t={next_say:.0f} messages={n}", flush=True)
             next_say = (math.floor(m.t / 600.0) + 1) * 600.0
@@ -109,12 +111,7 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
             log(f"source {src.name}: skipped a {m.KIND} at t={m.t} (not after its watermark {src.wm})", flush=True)
             continue
         if live_start is not None:
-            while (now := time.time() - live_start) < m.t:   # idle: promise the wall clock's past
-                w = math.floor(now / epoch_s) * epoch_s
-                if w > last_wm and w < m.t:
-                    src.watermark(w)
-                    last_wm = w
-                time.sleep(min(m.t - now, epoch_s / 4))
+            last_wm = _idle(src, live_start, m.t, epoch_s, last_wm)
         elif speed:
             wait = t0 + m.t / speed - time.monotonic()
             if wait > 0:
@@ -125,4 +122,23 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
             last_wm = w
         src.put(m)
         n += 1
+    if until is not None:   # the stream ends at `until`: live, keep promising epochs as the wall clock passes them
+        if live_start is not None:
+            _idle(src, live_start, until, epoch_s, last_wm, inclusive=True)
+        src.watermark(until)
     return n
+
+
+def _idle(src: LiveSource, live_start: float, t: float, epoch_s: float, last_wm: float,
+          inclusive: bool = False) -> float:
+    """Live, nothing to send before event time `t`: promise each epoch boundary as the wall
+    clock passes it (a silent source would be declared lost), waking exactly at each one.
+    Returns the last watermark given."""
+    while (now := time.time() - live_start) < t:
+        w = math.floor(now / epoch_s) * epoch_s
+        if w > last_wm and (w < t or inclusive and w <= t):
+            src.watermark(w)
+            last_wm = w
+        nxt = (math.floor(now / epoch_s) + 1) * epoch_s
+        time.sleep(max(0.0, min(t, nxt) - now))
+    return last_wm

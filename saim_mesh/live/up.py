@@ -28,7 +28,10 @@ def cp_sources(sc) -> dict[str, list[str]]:
 
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,
-       echo=print, live: bool = False, show: bool = True) -> dict:
+       echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
+       start: float | None = None) -> dict:
+    """`on_started(sup)`: called once every source runs (a benchmark kills one). `start`
+    (live): the wall time of event time 0 (default 20 s from now: everyone is up by then)."""
     from .. import scenario as S
     from ..sinks import COLOURS, RESET
     from ea_agent.core.alert import hms
@@ -44,7 +47,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     sources = cp_sources(sc)
     echo("WARNING: the live mesh runs open (no mTLS or access control yet for sources)")
     sup = Supervisor(echo, pids_path=out_dir / "pids.json")
-    live_args = ["--live"] if live else []
+    start = start if start is not None else time.time() + 20.0
+    live_args = ["--live", "--start", _iso(start)] if live else []
+    until_args = ["--until", str(until)] if until is not None else []
     summaries: dict[str, dict] = {}
     seen: dict[str, int] = {}
     shown = Counter()
@@ -67,8 +72,10 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         for name, args in sources.items():
             sup.add(Proc(name, [*py(), "source", scenario, "--name", name, *args, "--connect", hub, "--root", root,
                                 "--speed", speed, "--state", str(out_dir / "sources"), "--linger", "30", *live_args,
-                                "--mode", "client"],
+                                *until_args, "--mode", "client"],
                          env=clean_env(), log_dir=logs))
+        if on_started is not None:
+            on_started(sup)
         end = time.monotonic() + timeout
         while time.monotonic() < end and len(summaries) < len(units):
             sup.check()
@@ -82,7 +89,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     finally:
         sup.stop()
     wall = time.monotonic() - t0
-    result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events}
+    result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events,
+              "start": start if live else None, "root": root, "units": units}
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
     echo(table(out_dir, units, sc))
     echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}; "
@@ -131,3 +139,8 @@ def table(out_dir: Path, units: list[str], sc) -> str:
     lines += [f"{t:{w}} " + " ".join(f"{counts[u][t]:>6}" for u in units) for t in types]
     lines.append(f"{'total':{w}} " + " ".join(f"{sum(counts[u].values()):>6}" for u in units))
     return "\n".join(lines)
+
+
+def _iso(t: float) -> str:
+    from datetime import datetime, timezone
+    return datetime.fromtimestamp(t, timezone.utc).isoformat()
