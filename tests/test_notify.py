@@ -17,13 +17,15 @@ from saim_mesh.runner import config_for, make_ea
 OWNER = "A2"
 
 
-def run_a2(small, actions=(), armed=True, until=None):
+def run_a2(small, actions=(), armed=True, until=None, config=None):
     """A2's EA over the small scenario; `actions` are (t, fn(ea)) done when scenario time
     reaches t (before the first event at or after t). Projections are off: these tests
     follow A2's out-of-position alerts as the paper's EA raises them (the projection of
     the same story is tested in test_alert_types)."""
     cfg = config_for(small, OWNER)
     cfg["voi"]["projection_horizon_s"] = 0.0
+    if config is not None:
+        config(cfg)
     ea = make_ea(small, OWNER, cfg)
     C.tap(ea)
     if armed:
@@ -97,16 +99,10 @@ def test_unacknowledged_urgent_alert_is_renotified_never_reraised(small):
 
 
 def test_cadence_cap_and_escalation_are_configuration(small):
-    cfg = config_for(small, OWNER)
-    cfg["voi"]["projection_horizon_s"] = 0.0
-    cfg["notify"]["immediate"] = {"every_s": 60.0, "times": 5}
-    cfg["notify"]["escalate_s"] = 0.0
-    ea = make_ea(small, OWNER, cfg)
-    ea.arm()
-    ea.start(0.0)
-    for ev in small.events:
-        ea.submit(ev)
-    ea.finish(small.duration_s)
+    def cadence(cfg):
+        cfg["notify"]["immediate"] = {"every_s": 60.0, "times": 5}
+        cfg["notify"]["escalate_s"] = 0.0
+    ea = run_a2(small, config=cadence)
     assert [n.t for n in notices(ea, "renotify", "A2/1")] == [942.0 + 60.0 * k for k in range(1, 6)]
     assert not notices(ea, "escalate")
 
@@ -177,15 +173,7 @@ RULE = {"id": "oop-after-oop", "source": {"types": ["out-of-position"]}, "target
 
 
 def test_an_inhibition_rule_from_the_config_marks_and_quiets(small):
-    cfg = config_for(small, OWNER)
-    cfg["voi"]["projection_horizon_s"] = 0.0
-    cfg["inhibit"] = [RULE]
-    ea = make_ea(small, OWNER, cfg)
-    ea.arm()
-    ea.start(0.0)
-    for ev in small.events:
-        ea.submit(ev)
-    ea.finish(small.duration_s)
+    ea = run_a2(small, config=lambda cfg: cfg.update(inhibit=[RULE]))
     oop = of(ea, "out-of-position")
     # 942 is the first (nothing active); 1062 falls within 150 s of it: inhibited by it; 1216 is 154 s after 1062
     assert [a.details.get("inhibited_by") for a in oop] == [None, {"rule": "oop-after-oop", "source": "A2/1"}, None]
