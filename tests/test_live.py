@@ -182,3 +182,46 @@ def test_mesh_up_with_a_source_per_command_post_gives_the_in_process_alerts(tmp_
     eas = run(sc, units)
     for ea in eas:
         assert plan_alerts(load(out / f"{ea.owner}.jsonl")) == plan_alerts(ea.alerts), ea.owner
+
+
+def test_bad_input_to_a_source_or_a_live_peer_is_one_line_counted_never_fatal(sc, tmp_path):
+    """A NaN coordinate or a time before the watermark is refused by the source with one
+    line naming it (the rest is published); a peer counts a junk frame, a frame on another
+    source's key and a frame carrying a message of the wrong kind, and goes on."""
+    import zenoh
+
+    from dissemination.keyspace import KeySpace
+    from saim_mesh import messages as M
+    from saim_mesh.live import frames as F
+    from saim_mesh.live.source import LiveSource
+    root = f"test/{uuid.uuid4().hex[:8]}"
+    ks = KeySpace.of(sc, root)
+    said: list[str] = []
+    with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
+        src = LiveSource(s, ks, "cp.test", tmp_path)
+        assert src.epoch == 1 and LiveSource(s, ks, "cp.test", tmp_path).epoch == 2   # bumped at each start
+        good = [e for e in sc.events if type(e) is M.LocationReport][:5]
+        bad = [M.LocationReport(good[2].t, good[2].entity, float("nan"), good[2].lat)]
+        n = play.publish(src, [*good[:3], *bad, *good[3:]], log=lambda *a, **k: said.append(a[0]))
+        assert n == 5 and len(said) == 1 and "field 'lon': not a finite number" in said[0]
+        src.watermark(100.0)
+        with pytest.raises(ValueError, match="not after its watermark 100.0"):
+            src.put(replace_t(good[0], 50.0))
+        src.close()
+    peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), root, ["cp.x"])
+    peer.ea.start(0.0)
+    frame = lambda **kw: F.encode(F.Frame(**{"v": 1, "source": "cp.x", "epoch": 1, "seq": 1, "wm": 10.0,  # noqa: E731
+                                             "msgs": [M.encode(good[0])], **kw}))
+    peer.take(b"\xc1junk", ks.src("cp.x"))
+    peer.take(frame(), ks.src("cp.y"))                                    # another source's key
+    peer.take(frame(msgs=[M.encode(M.Alert(1.0, "A", "contact", "adversarial-activity", "flash", ("A1",), "x"))]),
+              ks.src("cp.x"))                                             # not a fact a source may publish
+    peer.take(frame(source="cp.other"), ks.src("cp.other"))               # a source we do not depend on: ignored
+    assert sum(peer.gate.rejects.by_kind.values()) == 3, peer.gate.rejects.by_kind
+    peer.take(frame(seq=2), ks.src("cp.x"))
+    assert peer.ea.n_in == 1 and peer.order.released == 10.0
+
+
+def replace_t(m, t):
+    from dataclasses import replace
+    return replace(m, t=t)

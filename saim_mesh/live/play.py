@@ -120,7 +120,11 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
         if w > last_wm:
             src.watermark(w)
             last_wm = w
-        src.put(m)
+        try:
+            src.put(m)
+        except (ValueError, M.MessageError) as e:   # one line, counted, and the source goes on
+            log(f"source {src.name}: skipped a {getattr(m, 'KIND', '?')} at t={m.t}: {e}", flush=True)
+            continue
         n += 1
     if until is not None:   # the stream ends at `until`: live, keep promising epochs as the wall clock passes them
         if live_start is not None:

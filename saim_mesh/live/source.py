@@ -62,11 +62,13 @@ class LiveSource:
             sample_miss_detection=zx.MissDetectionConfig(heartbeat=0.5), publisher_detection=True)
 
     def put(self, msg: M.Message) -> None:
-        """One data message; its event time must be after the watermark already given."""
+        """One data message; its event time must be after the watermark already given.
+        ValueError or MessageError (naming the field) when it is not a valid message."""
         if msg.t <= self.wm:
             raise ValueError(f"source {self.name}: {msg.KIND} at t={msg.t} is not after its watermark {self.wm} "
                              f"(it promised nothing at or before it would follow)")
         b = M.encode(msg)
+        M.decode(b)   # checked as every receiver will check it (a NaN, a bad id): MessageError here, not there
         if self.pending and (self.size + len(b) > self.frame_bytes or len(self.pending) >= F.MAX_MSGS):
             self._send(self.wm)
         self.pending.append(b)
