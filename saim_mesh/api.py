@@ -75,12 +75,11 @@ class _Session:
 
 class Source(_Session):
     """A source of facts (a unit's reporter, a command post): its own stream of reports and
-    watermarks (`saim_mesh.live`). Event times must increase past each watermark given."""
+    watermarks (`saim_mesh.live`). Event times must increase past each watermark given.
+    Secure (`pki`): identity `source.<name>`, which the access-control rules know for the
+    command posts' sources `cp.<UNIT>` (`security.acl.source_names`)."""
 
     def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None):
-        if pki is not None:
-            raise ValueError("Source: secure live sources (mTLS identities and access-control rules for "
-                             "source.<name>) are not built yet; use an open mesh")
         super().__init__(scenario, f"source.{name}", connect, listen, root, pki)
         self.name, self.state_dir, self.src = name, state_dir, None
 

@@ -344,11 +344,11 @@ def cmd_mesh(a) -> int:
     if a.live or a.sources_per_cp:   # the mesh with no centre: sources per command post, no replay
         from .live.up import up as live_up
         for bad, flag in ((a.console is not None, "--console"), (a.topology, "--topology"), (a.tak, "--tak"),
-                          (a.pki, "--pki")):
+                          (a.pki, "--pki (it makes its own test PKI)")):
             if bad:
                 raise ValueError(f"mesh up --live: {flag} is not built for the live mesh yet (issue 31)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
-                      live=a.live)
+                      live=a.live, insecure=a.insecure)
         return 0 if len(res["peers"]) == len(a.units or res["peers"]) else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,

@@ -225,3 +225,39 @@ def test_bad_input_to_a_source_or_a_live_peer_is_one_line_counted_never_fatal(sc
 def replace_t(m, t):
     from dataclasses import replace
     return replace(m, t=t)
+
+
+def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
+    """mTLS and access control: cp.BN (identity source.cp.BN) publishes the battle to A2's EA;
+    an insider with a valid certificate (observer) puts a forged frame on cp.BN's key that
+    would end its stream at once: access control drops it, and A2 raises the in-process alerts."""
+    import zenoh
+
+    from dissemination.keyspace import KeySpace
+    from saim_mesh.live import frames as F
+    from saim_mesh.security import endpoint_tls, make_pki, names_for
+    pki = tmp_path / "pki"
+    make_pki(pki, names_for(sc))
+    ep, root = endpoint_tls(free_port()), f"test/{uuid.uuid4().hex[:8]}"
+    sec = ["--pki", str(pki)]
+    procs = []
+    try:
+        procs.append(Proc("peer-A2", [*py(), "peer", "--scenario", SC, "--unit", "A2", "--listen", ep, "--root", root,
+                                      "--sources", "cp.BN", "--out", str(tmp_path / "A2.jsonl"), *sec],
+                          env=clean_env(), log_dir=tmp_path))
+        procs[0].wait_for("ready A2", 60)
+        conf = config(["tls/127.0.0.1:0"], [ep], pki=pki, name="observer", sc=sc, root=root)
+        with zenoh.open(conf) as s:
+            forged = F.encode(F.Frame(v=1, source="cp.BN", epoch=2**40, seq=1, wm=1e6, msgs=[], end=True))
+            pub = s.declare_publisher(KeySpace.of(sc, root).src("cp.BN"))
+            pub.put(forged)
+            pub.undeclare()
+        procs.append(start_source(tmp_path, "cp.BN", ep, root, "--tracks", "--speed", "max", *sec,
+                                  "--listen", "tls/127.0.0.1:0"))
+        line = procs[0].wait_for("summary ", 120)
+    finally:
+        reap(procs)
+    summary = json.loads(line.split(" ", 1)[1])
+    assert summary["lost"] == {} and summary["messages"] == len(list(play.share(sc, None, True))), summary
+    want = plan_alerts(in_process(sc, "A2", {"cp.BN": list(play.share(sc, None, True))}))
+    assert plan_alerts(load(tmp_path / "A2.jsonl")) == want

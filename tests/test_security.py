@@ -56,11 +56,19 @@ def spki(pub):
 
 def test_names_for_scenario(small_sc):
     names = names_for(small_sc)
-    assert names[0] == "replay" and names[-3:] == ["observer", "console", "tak"]
+    plain = [n for n in names if not n.startswith("source.")]
+    assert names[0] == "replay" and plain[-3:] == ["observer", "console", "tak"]
     assert [n[3:] for n in names if n.startswith("ea.")] == mesh_units(small_sc)
-    assert names_for(small_sc, ["A2", "C"]) == ["replay", "ea.A2", "ea.C", "observer", "console", "tak"]
+    # a live source per command post: every mesh unit and every unit with subordinates
+    to = small_sc.taskorg
+    cps = set(mesh_units(small_sc)) | {p for p in to.parent.values() if p} | {u for u, p in to.parent.items()
+                                                                              if p == to.root}
+    assert sorted(n[len("source.cp."):] for n in names if n.startswith("source.")) == sorted(cps)
+    two = names_for(small_sc, ["A2", "C"])
+    assert [n for n in two if not n.startswith("source.")] == ["replay", "ea.A2", "ea.C", "observer", "console", "tak"]
     fused = names_for(S.load(SENSORS, events=False), ["BN"])
-    assert fused == ["replay", "ea.BN", "fusion.F", "fusion.N", "observer", "console", "tak"]
+    assert [n for n in fused if not n.startswith("source.")] == \
+        ["replay", "ea.BN", "fusion.F", "fusion.N", "observer", "console", "tak"]
     with pytest.raises(SecurityError, match="ZZ"):
         names_for(small_sc, ["ZZ"])
 
@@ -242,10 +250,14 @@ def test_access_control_for_any_task_organization(units, groups):
     ids = [r["id"] for r in acl["rules"]]
     assert len(ids) == len(set(ids))
     cns = [cn for s in acl["subjects"] for cn in s["cert_common_names"]]
-    assert len(cns) == len(set(cns)) == len(units) + len(groups) + 4   # replay, observer, console, tak
-    for u in units:   # each EA puts its own alerts, and no one else's
+    # replay, observer, console, tak; an EA and a live source (cp.<unit>) per unit
+    assert len(cns) == len(set(cns)) == 2 * len(units) + len(groups) + 4
+    for u in units:   # each EA puts its own alerts, and no one else's; each source its own stream
         assert allowed(acl, f"ea.{u}", "ingress", "put", f"saim/h/alert/{u}/t")
         assert all(not allowed(acl, f"ea.{v}", "ingress", "put", f"saim/h/alert/{u}/t") for v in units - {u})
+        assert allowed(acl, f"source.cp.{u}", "ingress", "put", f"saim/h/src/cp.{u}")
+        assert all(not allowed(acl, f"source.cp.{v}", "ingress", "put", f"saim/h/src/cp.{u}") for v in units - {u})
+        assert not allowed(acl, f"ea.{u}", "ingress", "put", f"saim/h/src/cp.{u}")
     zenoh.Config.from_json5(json.dumps({"access_control": acl}))
 
 

@@ -29,7 +29,7 @@ def cp_sources(sc) -> dict[str, list[str]]:
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,
        echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
-       start: float | None = None) -> dict:
+       start: float | None = None, insecure: bool = False) -> dict:
     """`on_started(sup)`: called once every source runs (a benchmark kills one). `start`
     (live): the wall time of event time 0 (default 20 s from now: everyone is up by then)."""
     from .. import scenario as S
@@ -43,9 +43,21 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     logs = out_dir / "logs"
     logs.mkdir(exist_ok=True)
     root = f"saim/{sc.name}/live"
-    hub = f"tcp/127.0.0.1:{free_port()}"
     sources = cp_sources(sc)
-    echo("WARNING: the live mesh runs open (no mTLS or access control yet for sources)")
+    sec: list[str] = []
+    if insecure:
+        echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
+             "feed this mesh positions and end its sources' streams")
+        hub = f"tcp/127.0.0.1:{free_port()}"
+    else:   # mTLS and access control; the one router is a relay every client's rules accept
+        from ..security.pki import make_pki, names_for
+        pki = out_dir / "pki"
+        make_pki(pki, names_for(sc, consoles=True) + ["router.hub"])
+        hub = f"tls/127.0.0.1:{free_port()}"
+        topo = out_dir / "topology.json"
+        topo.write_text(json.dumps({"topology": {"routers": {"hub": {"cp": sc.taskorg.root, "links": []}},
+                                                 "attach": {}, "top": "hub"}, "endpoints": {"hub": hub}}))
+        sec = ["--pki", str(pki), "--topology", str(topo)]
     sup = Supervisor(echo, pids_path=out_dir / "pids.json")
     start = start if start is not None else time.time() + 20.0
     live_args = ["--live", "--start", _iso(start)] if live else []
@@ -58,9 +70,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
         # peers do not relay for each other: ../shared/notes/live-mesh.md)
         router = sup.add(Proc("router", [*py(), "router", "--scenario", scenario, "--name", "hub", "--listen", hub,
-                                         "--root", root], env=clean_env(), log_dir=logs))
+                                         "--root", root, *sec], env=clean_env(), log_dir=logs))
         router.wait_for("router ready", 60)
-        net = ["--connect", hub, "--mode", "client"]
+        net = ["--connect", hub, "--mode", "client", *sec]
         for u in units:
             for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
                 (out_dir / f).unlink(missing_ok=True)
@@ -72,7 +84,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         for name, args in sources.items():
             sup.add(Proc(name, [*py(), "source", scenario, "--name", name, *args, "--connect", hub, "--root", root,
                                 "--speed", speed, "--state", str(out_dir / "sources"), "--linger", "30", *live_args,
-                                *until_args, "--mode", "client"],
+                                *until_args, "--mode", "client", *sec],
                          env=clean_env(), log_dir=logs))
         if on_started is not None:
             on_started(sup)
@@ -90,10 +102,12 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         sup.stop()
     wall = time.monotonic() - t0
     result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events,
+              "secure": not insecure,
               "start": start if live else None, "root": root, "units": units}
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
     echo(table(out_dir, units, sc))
-    echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}; "
+    echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}, "
+         f"{'insecure' if insecure else 'mTLS + access control'}; "
          f"alerts in {out_dir}/, logs in {logs}/")
     return result
 

@@ -77,7 +77,18 @@ def identities(units, groups, taskorg=None, routers=()) -> list[str]:
     `router.<R>` per router of the topology."""
     consoles = [f"console.{u}" for u in units] if taskorg is not None else []
     return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, "tak",
-            *consoles, *(f"router.{r}" for r in routers)]
+            *consoles, *(f"router.{r}" for r in routers), *(f"source.{n}" for n in source_names(units, taskorg))]
+
+
+def source_names(units, taskorg=None) -> list[str]:
+    """The live sources the rules know (issue 31): `cp.<U>` for each command post, i.e.
+    each unit of the mesh, each unit with subordinates and each unit directly under the top
+    (the live mesh's sources per command post: saim_mesh/live/up.py)."""
+    cps = set(units)
+    if taskorg is not None:   # every unit with subordinates, and every unit directly under the top
+        cps |= {p for p in taskorg.parent.values() if p}
+        cps |= {u for u, p in taskorg.parent.items() if p == taskorg.root}
+    return [f"cp.{u}" for u in sorted(cps)]
 
 
 def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
@@ -107,6 +118,12 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     read_all = rule("read", READ, [f"{r}/**"])
     read_public = rule("read_public", READ, [f"{r}/alert/**", f"{r}/alive/**"])
     query_store = rule("query_store", ["query"], [f"{r}/store/**"])
+    # live sources (zenoh.ext): the advanced publisher puts on src/<name> and keeps its cache
+    # and liveliness token under src/<name>/@adv/...; `@` chunks are verbatim (`**` does not
+    # reach them), so they are named. An EA's advanced subscriber queries those caches and
+    # declares its own token under src/*/@adv/...
+    adv = f"{r}/src/*/@adv/**"
+    ea_src = [rule("ea_src_read", READ, [adv]), rule("ea_src", ["query", "liveliness_token"], [adv, f"{r}/src/**"])]
 
     def subject(cn: str, rule_ids: list[str]) -> None:
         subjects.append({"id": cn, "cert_common_names": [cn]})
@@ -117,11 +134,17 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                        rule("replay_store", ["declare_queryable", "reply"], [ks.store()]),
                        rule("replay_token", ["liveliness_token"], [ks.alive("replay", "*")])])
     for u in units:
-        subject(f"ea.{u}", [out, read_all, query_store,
+        subject(f"ea.{u}", [out, read_all, query_store, *ea_src,
                             rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
                                                           f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
                                                           ks.cmdlog(u), ks.notice("*", u)]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
+    for n in source_names(units, taskorg):
+        mine = [ks.src(n), f"{r}/src/{n}/@adv/**"]
+        subject(f"source.{n}", [out, rule(f"source.{n}.read", READ, [f"{r}/src/**", adv]),
+                                rule(f"source.{n}.put", ["put", "declare_queryable", "reply", "liveliness_token"],
+                                     mine),
+                                rule(f"source.{n}.query", ["query"], [adv])])
     for g in groups:
         subject(f"fusion.{g}", [out, read_all, query_store,
                                 rule(f"fusion.{g}.put", ["put"], [f"{r}/trk/**", ks.fusion_tick(g),
