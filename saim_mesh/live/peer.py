@@ -84,7 +84,8 @@ class LivePeer:
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
         self.misses = 0
-        self.alert_lat: list[float] = []      # live: wall seconds from an alert's event time to its raising
+        self.alert_lat: list[float] = []      # live: wall seconds from its epoch's close to an alert's raising
+        self.due_lat: list[float] = []        # ... and from the alert's own event time
         self.gaps = 0                         # frames that never came (beyond recovery)
         self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
         self.held: dict[str, dict[int, tuple]] = {}   # source -> seq -> a frame that came early
@@ -96,7 +97,13 @@ class LivePeer:
     # -- sinks ---------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
         if self.live_start is not None and not a.details.get("wall_clock_driven"):
-            self.alert_lat.append(time.time() - self.live_start - a.t)   # report (event time) to alert, live
+            # live: from the close of the epoch the alert falls in (on event time, the earliest
+            # it can be raised: an epoch closes once every source promised it) to its raising;
+            # `due_lat` from the alert's own time (a timer due mid-epoch waits for the close)
+            now = time.time() - self.live_start
+            ep = self.ea.epoch_s
+            self.alert_lat.append(now - math.ceil(a.t / ep - 1e-9) * ep)
+            self.due_lat.append(now - a.t)
         if self.late_from is not None:
             a = replace(a, details={**a.details, "late": True, "due_from": round(self.late_from, 3)})
             self.late += 1
@@ -347,6 +354,7 @@ class LivePeer:
     def summary(self) -> dict:
         return {"unit": self.unit, "alerts": len(self.ea.alerts), "frames": self.frames, "misses": self.misses,
                 "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
+                "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "messages": self.ea.n_in,
                 "wall_s": round(time.monotonic() - self.t0, 2)}
