@@ -261,3 +261,26 @@ def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
     assert summary["lost"] == {} and summary["messages"] == len(list(play.share(sc, None, True))), summary
     want = plan_alerts(in_process(sc, "A2", {"cp.BN": list(play.share(sc, None, True))}))
     assert plan_alerts(load(tmp_path / "A2.jsonl")) == want
+
+
+def test_a_frame_the_full_order_refuses_is_offered_again_never_dropped(sc):
+    """The order holds at most `max_buffered` facts: a frame it refuses as full waits (and its
+    source's later frames behind it) until a release makes room; nothing is lost and the
+    journal holds frames in the order they were taken."""
+    from saim_mesh import messages as M
+    from saim_mesh.live import frames as F
+    peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), "t/full", ["cp.a", "cp.b"])
+    peer.order.max_buffered = 3
+    peer.ea.start(0.0)
+    reps = [e for e in sc.events if type(e) is M.LocationReport][:8]
+
+    def frame(src, seq, wm, ms):
+        return F.encode(F.Frame(v=1, source=src, epoch=1, seq=seq, wm=wm, msgs=[M.encode(m) for m in ms]))
+    peer.receive(frame("cp.a", 1, reps[1].t, reps[0:2]), "")
+    peer.receive(frame("cp.a", 2, reps[3].t, reps[2:4]), "")   # 4 facts would wait: refused as full
+    peer.receive(frame("cp.a", 3, reps[5].t, reps[4:6]), "")   # queues behind it
+    assert [f.seq for _, _, f in peer.retry["cp.a"]] == [2, 3] and peer.ea.n_in == 0
+    peer.receive(frame("cp.b", 1, 1e5, []), "")                # cp.b's promise releases cp.a's first facts
+    peer._retry()
+    peer._retry()
+    assert not peer.retry["cp.a"] and peer.ea.n_in == 6 and peer.frames == 4

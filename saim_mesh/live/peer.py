@@ -90,6 +90,7 @@ class LivePeer:
         self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
         self.held: dict[str, dict[int, tuple]] = {}   # source -> seq -> a frame that came early
         self.gap_since: dict[str, float] = {}
+        self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
         self.frames = 0
         self.late = 0
         self.t0 = time.monotonic()
@@ -179,13 +180,17 @@ class LivePeer:
             return None   # a source this EA does not depend on
         return f
 
-    def take(self, payload: bytes, key: str, journal: bool = True, f=None) -> None:
-        """One frame, in its source's sequence: checked, journalled, ordered; then everything
-        the watermarks allow is applied."""
+    def take(self, payload: bytes, key: str, journal: bool = True, f=None) -> bool:
+        """One frame, in its source's sequence: checked, ordered, journalled; then everything
+        the watermarks allow is applied. False when the order could not take it yet (kept
+        for `_retry`, and the source's later frames queue behind it)."""
         if f is None:
             f = self._frame(payload, key)
             if f is None:
-                return
+                return True
+        if self.retry.get(f.source) and journal:
+            self.retry[f.source].append((payload, key, f))
+            return False
         items = []
         for b in f.msgs:
             m = self.gate.data(b, key or f"src/{f.source}")
@@ -200,12 +205,15 @@ class LivePeer:
                 u = self.sc.taskorg.entity_unit.get(m.entity)
                 if u is not None:
                     self.reports.setdefault(f.source, set()).add(u)
-        if journal and self.journal is not None:
-            self.journal.frame(payload)
         was_lost = f.source in self.order.lost
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
+        if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
+            self.retry.setdefault(f.source, []).append((payload, key, f))
+            return False
         if why is not None:
-            return
+            return True
+        if journal and self.journal is not None:   # what was taken, in the order taken: replays to the same
+            self.journal.frame(payload)
         self.frames += 1
         self.heard[f.source] = time.monotonic()
         if f.end:
@@ -214,6 +222,21 @@ class LivePeer:
             self._system(f.source, f"source {f.source} is back (its facts since "
                                    f"{hms(self.order.released)} are taken late)", event="source-back")
         self._apply()
+        return True
+
+    def _retry(self) -> None:
+        """Offer the frames the order refused as full again, each source's in its order."""
+        for src in [s for s, q in self.retry.items() if q]:
+            q = self.retry[src]
+            while q:
+                payload, key, f = q[0]
+                self.retry[src] = []          # take() must not queue it behind itself
+                ok = self.take(payload, key, f=f)
+                if not ok:                    # still full: put it back at the head, keep the rest
+                    self.retry[src] = [q[0], *q[1:]]
+                    break
+                q.pop(0)
+                self.retry[src] = q
 
     def lose(self, source: str, why: str, journal: bool = True) -> None:
         """Declare a depended source lost: monitoring goes on without it (a logged decision)."""
@@ -316,6 +339,8 @@ class LivePeer:
                         self.command(*payload)
                     elif key is not None:
                         self.receive(payload, key)
+                    if self.retry:
+                        self._retry()
                     now = time.monotonic()
                     for src, since in list(self.gap_since.items()):
                         if now - since > GAP_WAIT_S:
