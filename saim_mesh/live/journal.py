@@ -59,5 +59,5 @@ def replay(peer, path: str | Path) -> list:
             peer.take(rec[1], "", journal=False)
         elif rec[0] == "lost":
             peer.lose(rec[1], rec[3], journal=False)
-    peer.ea.finish(peer.sc.duration_s if peer.live_start is None else max(peer.ea.now, peer.order.released))
+    peer.ea.finish(peer.end_t())
     return peer.ea.alerts

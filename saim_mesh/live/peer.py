@@ -90,6 +90,7 @@ class LivePeer:
         self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
         self.held: dict[str, dict[int, tuple]] = {}   # source -> seq -> a frame that came early
         self.gap_since: dict[str, float] = {}
+        self.promised: dict[str, float] = {}          # source -> the furthest watermark its frames gave
         self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
         self.frames = 0
         self.late = 0
@@ -215,6 +216,7 @@ class LivePeer:
         if journal and self.journal is not None:   # what was taken, in the order taken: replays to the same
             self.journal.frame(payload)
         self.frames += 1
+        self.promised[f.source] = max(self.promised.get(f.source, -1.0), f.wm)   # finite, also in its last frame
         self.heard[f.source] = time.monotonic()
         if f.end:
             self.ended.add(f.source)
@@ -263,9 +265,10 @@ class LivePeer:
 
     def _apply(self) -> None:
         """Everything the watermarks allow, in event-time order; then the late path."""
-        upto = None
+        upto = self._promised()
         if self.live_start is not None:   # live: never ahead of the wall clock either
-            upto = time.time() - self.live_start
+            upto = min(upto, time.time() - self.live_start)
+        upto = None if math.isinf(upto) else upto
         for m in self.order.release(upto):
             self.ea.submit(m)
         r = self.order.released
@@ -301,6 +304,24 @@ class LivePeer:
         if self.session is not None:
             self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
         self.log(f"cmd {res.kind} req={res.req} ok={res.ok}" + (f" error={res.error}" if res.error else ""), flush=True)
+
+    def _promised(self) -> float:
+        """How far the sources promised: their minimum watermark, or, once every one ended
+        or is lost (the order's bound is then +inf), the furthest any of them promised:
+        an EA never runs ahead of what its sources said, live or replayed."""
+        b = self.order.bound()
+        if not math.isinf(b):
+            return b
+        fin = [w for w in self.promised.values() if math.isfinite(w)]
+        return max(fin) if fin and b > 0 else b
+
+    def end_t(self) -> float:
+        """Where the EA finishes: the scenario's end for a recorded battle, else what the
+        sources promised (the same live and when the journal is replayed)."""
+        if self.live_start is None:
+            return self.sc.duration_s
+        t = self._promised()
+        return max(self.ea.now, t if math.isfinite(t) else self.ea.now)
 
     def done(self) -> bool:
         """Every source ended, or ended and lost ones (at least one ended: a mesh where
@@ -353,8 +374,7 @@ class LivePeer:
                                       f"never heard in {quiet:.0f} s")
                     if self.live_start is not None:
                         self._apply()
-                end_t = self.sc.duration_s if self.live_start is None else max(self.ea.now, self.order.released)
-                self.ea.finish(end_t if math.isfinite(end_t) else self.ea.now)
+                self.ea.finish(self.end_t())
                 self.log("end " + json.dumps(self.summary(), sort_keys=True), flush=True)
                 linger_end = time.monotonic() + linger_s   # still answering commands (a late ack)
                 while (left := linger_end - time.monotonic()) > 0:
