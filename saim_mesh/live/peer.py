@@ -265,10 +265,9 @@ class LivePeer:
 
     def _apply(self) -> None:
         """Everything the watermarks allow, in event-time order; then the late path."""
-        upto = self._promised()
-        if self.live_start is not None:   # live: never ahead of the wall clock either
-            upto = min(upto, time.time() - self.live_start)
-        upto = None if math.isinf(upto) else upto
+        upto = None   # every source ended or is lost: all they sent is released, nothing beyond
+        if self.live_start is not None and math.isfinite(self.order.bound()):
+            upto = time.time() - self.live_start   # live: never ahead of the wall clock either
         for m in self.order.release(upto):
             self.ea.submit(m)
         r = self.order.released
@@ -305,23 +304,14 @@ class LivePeer:
             self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
         self.log(f"cmd {res.kind} req={res.req} ok={res.ok}" + (f" error={res.error}" if res.error else ""), flush=True)
 
-    def _promised(self) -> float:
-        """How far the sources promised: their minimum watermark, or, once every one ended
-        or is lost (the order's bound is then +inf), the furthest any of them promised:
-        an EA never runs ahead of what its sources said, live or replayed."""
-        b = self.order.bound()
-        if not math.isinf(b):
-            return b
-        fin = [w for w in self.promised.values() if math.isfinite(w)]
-        return max(fin) if fin and b > 0 else b
-
     def end_t(self) -> float:
-        """Where the EA finishes: the scenario's end for a recorded battle, else what the
-        sources promised (the same live and when the journal is replayed)."""
+        """Where the EA finishes: the scenario's end for a recorded battle, else the furthest
+        any source promised or sent (never the wall clock: the same live and when the
+        journal is replayed)."""
         if self.live_start is None:
             return self.sc.duration_s
-        t = self._promised()
-        return max(self.ea.now, t if math.isfinite(t) else self.ea.now)
+        fin = [w for w in self.promised.values() if math.isfinite(w)]
+        return max([self.ea.now, *fin])
 
     def done(self) -> bool:
         """Every source ended, or ended and lost ones (at least one ended: a mesh where
