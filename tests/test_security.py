@@ -169,14 +169,15 @@ def test_access_control_is_well_formed(small_sc, pki):
     groups = sc.meta["fusion"]["groups"]
     units = mesh_units(sc)
     root = "saim/test"
-    acl = access_control(root, units, groups)
+    acl = access_control(root, units, groups, sc.taskorg)   # as secure_config makes them
     assert acl["enabled"] and acl["default_permission"] == "deny"
     ids = [r["id"] for r in acl["rules"]]
     assert len(ids) == len(set(ids))
     subjects = [s["id"] for s in acl["subjects"]]
     assert len(subjects) == len(set(subjects))
     cns = [cn for s in acl["subjects"] for cn in s["cert_common_names"]]
-    assert sorted(cns) == sorted(names_for(sc)) == sorted(subjects)   # each CN exactly one subject
+    # each CN exactly one subject; the certificates made for the mesh are the identities the rules know
+    assert sorted(cns) == sorted(names_for(sc, consoles=True)) == sorted(subjects)
     pids = [p["id"] for p in acl["policies"]]
     assert len(pids) == len(set(pids))
     for p in acl["policies"]:
