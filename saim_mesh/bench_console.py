@@ -38,6 +38,7 @@ from pathlib import Path
 
 from .proc import Proc, clean_env, py
 from . import results
+from .stats import percentiles
 
 ROOT = Path(__file__).resolve().parents[1]
 LONGTASKS = """window.__longTasks = [];
@@ -47,11 +48,7 @@ TARGETS = {"alerts_ratio": 1.25, "flash_ratio": 1.25, "render_p99_ms": 100.0, "f
 
 
 def _pcts(xs: list[float]) -> dict:
-    if not xs:
-        return {"n": 0}
-    ys = sorted(xs)
-    pick = lambda q: round(ys[min(len(ys) - 1, int(q * len(ys)))], 1)   # noqa: E731
-    return {"n": len(ys), "p50": pick(0.50), "p95": pick(0.95), "p99": pick(0.99), "max": round(ys[-1], 1)}
+    return percentiles(xs, 1)
 
 
 def _jsonl(path: Path) -> list[dict]:

@@ -20,13 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-
-def _pct(xs: list[float]) -> dict:
-    if not xs:
-        return {"n": 0}
-    ys = sorted(xs)
-    pick = lambda q: round(ys[min(len(ys) - 1, int(q * len(ys)))], 2)   # noqa: E731
-    return {"n": len(ys), "p50": pick(0.5), "p95": pick(0.95), "p99": pick(0.99), "max": round(ys[-1], 2)}
+from .stats import percentiles
 
 
 def main(argv=None) -> int:
@@ -81,7 +75,7 @@ def main(argv=None) -> int:
     worst = max(alert_s.values(), default=None)
     out = {"scenario": Path(a.scenario).name, "minutes": a.minutes, "sources": res["sources"],
            "peers": len(res["peers"]), "alerts": alerts, "killed": a.kill, "killed_at_event_t": until / 2,
-           "report_to_alert_ms": _pct(lat), "due_to_alert_ms": _pct(due), "source_silence_s": silence,
+           "report_to_alert_ms": percentiles(lat, 2), "due_to_alert_ms": percentiles(due, 2), "source_silence_s": silence,
            "secure": res.get("secure"),
            "killed_source_alert_s": alert_s, "killed_source_alert_s_max": worst,
            "journal_replay_equal": bool(equal) and all(equal.values()), "journal_replay_equal_by_peer": equal,
