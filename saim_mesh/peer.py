@@ -178,7 +178,7 @@ class Peer(Intake, TickWait):
             self.nlog(n)
         if self.session is not None:
             key = self.ks.notice(n.to, n.owner)
-            payload = W.encode(W.make(W.Notice, **{**n.to_json_dict(), "subjects": list(n.subjects)}))
+            payload = W.encode(W.notice_of(n))
             if self.signer is not None:
                 payload = self.signer.sign(key, payload)
             self.session.put(key, payload, congestion_control=BLOCK)

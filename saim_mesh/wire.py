@@ -200,6 +200,11 @@ class Notice(_Wire, kw_only=True):
     due_t: Time
 
 
+def notice_of(n) -> Notice:
+    """The wire form of an EA's notice (`ea_agent.core.notify.Notice`)."""
+    return make(Notice, **n.to_json_dict())
+
+
 class CmdResult(_Wire, kw_only=True):
     """The EA's answer to command `req`: `t` is the scenario time it took effect; `ref`
     what it was about (the alert acknowledged, the silence, mission, call for fire or

@@ -38,6 +38,7 @@ from .. import wire as W
 from ..alertlog import AlertLog
 from ..runner import config_for, make_ea
 from ..scenario import Scenario
+from ..security.sign import signer_for
 from . import frames as F
 from .journal import InputJournal
 from .order import EventTimeOrder
@@ -77,6 +78,7 @@ class LivePeer:
         self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
         self.clog = cmdlog.CommandLog(cmdlog.path_for(out_path)) if out_path else None
         self.ea.notice_sinks.append(self._notice)
+        self.signer = signer_for(conf)   # secure mode: our notices are signed
         self.session = None
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.heard: dict[str, float] = {}     # source -> wall time of its last frame
@@ -117,9 +119,11 @@ class LivePeer:
     def _notice(self, n) -> None:
         if self.nlog:
             self.nlog(n)
-        if self.session is not None:
-            self.session.put(self.ks.notice(n.to, n.owner), W.encode(W.make(
-                W.Notice, **{**n.to_json_dict(), "subjects": list(n.subjects)})), congestion_control=BLOCK)
+        if self.session is not None:   # signed in secure mode: an escalation crosses the router
+            key = self.ks.notice(n.to, n.owner)
+            payload = W.encode(W.notice_of(n))
+            self.session.put(key, payload if self.signer is None else self.signer.sign(key, payload),
+                             congestion_control=BLOCK)
 
     def _system(self, subject: str, text: str, **details) -> None:
         self.log(f"system {subject}: {text}", flush=True)
