@@ -82,8 +82,11 @@ class ExecutionAssistant:
         t = msg.t
         if t > self.now:
             self.now = t
-        if t >= self.epoch_end:
-            self.advance(t)   # finish earlier epochs before the watchman sees later data
+        if t > self.epoch_end:   # finish earlier epochs before the watchman sees later data
+            if t > self.now:
+                self.now = t
+            self.process()
+            self._close_until(t, strict=True)
         try:
             fact = self._watch(msg)
         except (KeyError, ValueError, TypeError) as e:
@@ -115,11 +118,11 @@ class ExecutionAssistant:
         self.stats["facts"] += len(facts)
         start = 0
         for i, f in enumerate(facts):
-            if f.t >= self.epoch_end:
+            if f.t > self.epoch_end:
                 if i > start:
                     self._apply(facts[start:i])
                     start = i
-                self._close_until(f.t)
+                self._close_until(f.t, strict=True)
         if start < len(facts):
             self._apply(facts[start:])
 
@@ -137,18 +140,22 @@ class ExecutionAssistant:
         self.process()
         self._close_until(t)
 
-    def _close_until(self, t: float) -> None:
+    def _close_until(self, t: float, strict: bool = False) -> None:
+        """Close the epochs that end at or before t (`strict`: before t, when a fact at t
+        is still to come: an epoch (end - epoch_s, end] holds the facts at its very end,
+        so one whose sources promised `end` closes at once, not an epoch later)."""
         ep = self.epoch_s
-        while self.epoch_end <= t:
+        while self.epoch_end < t or not strict and self.epoch_end == t:
             if not self.posted and not self.notify.pending and not self.domain.busy():
-                # the first epoch end after a timer's deadline (it fires once its time has
-                # passed), at or after the domain's and the notifier's next due time
-                dl = self.timers.next_deadline()
-                nxt = min((math.floor(dl / ep) + 1) * ep if math.isfinite(dl) else math.inf,
-                          math.ceil(min(self.domain.next_wakeup(), self.notify.next_due()) / ep) * ep)
-                target = max(self.epoch_end, nxt) if math.isfinite(nxt) else math.inf
-                if target > t:  # idle until after t: skip the empty epochs
-                    self.epoch_end = (math.floor(t / ep) + 1) * ep
+                # the first epoch end at or after a timer's deadline, the domain's and the
+                # notifier's next due time
+                dl = min(self.timers.next_deadline(), self.domain.next_wakeup(), self.notify.next_due())
+                nxt = math.ceil(dl / ep) * ep if math.isfinite(dl) else math.inf
+                target = max(self.epoch_end, nxt)
+                if target > t or strict and target == t:  # idle until t or after: skip the empty epochs
+                    self.epoch_end = max(self.epoch_end, math.ceil(t / ep) * ep)
+                    if not strict and self.epoch_end == t:
+                        self.epoch_end += ep
                     break
                 self.epoch_end = target
             self._close_epoch(self.epoch_end)

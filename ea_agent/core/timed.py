@@ -93,11 +93,11 @@ class TimedMonitors:
         return self._heap[0][0] if self._heap else math.inf
 
     def advance(self, now: float) -> int:
-        """Fire every timer due before `now`, in deadline order; returns how many failed. A
-        deadline at exactly `now` waits: an event at that very time (applied after the epoch
-        that ends at `now` closes) still meets it, as "within fuzz seconds" says."""
+        """Fire every timer due at or before `now`, in deadline order; returns how many
+        failed. The epoch that ends at `now` holds the facts at `now`: an event at the very
+        deadline was applied before this and still meets it, as "within fuzz seconds" says."""
         fired = 0
-        while self._heap and self._heap[0][0] < now:
+        while self._heap and self._heap[0][0] <= now:
             deadline, _, m = heapq.heappop(self._heap)
             if not m.active or deadline != m.deadline:
                 continue

@@ -53,7 +53,6 @@ def records(path: str | Path) -> list[list]:
 def replay(peer, path: str | Path) -> list:
     """Feed a fresh `LivePeer` (not running: no session) the journal's records; its alerts.
     The peer's own journal and logs should be off (out_path None)."""
-    peer.ea.start(0.0)
     for rec in records(path):
         if rec[0] == "frame":
             peer.take(rec[1], "", journal=False)

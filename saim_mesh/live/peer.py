@@ -40,6 +40,7 @@ from ..runner import config_for, make_ea
 from ..scenario import Scenario
 from ..security.sign import signer_for
 from . import frames as F
+from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
 from .source import CACHE
@@ -68,11 +69,14 @@ class LivePeer:
         self.max_bytes = int(max_bytes or mesh["max_payload_bytes"])
         self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
-        self.sources = sorted(dict.fromkeys(sources))
-        self.order = EventTimeOrder(self.sources)
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         if armed:
             self.ea.arm()
+        self.ea.start(0.0)
+        # the sources its interest needs among those named: only these gate its epochs
+        self.named = sorted(dict.fromkeys(sources))
+        self.sources = depends(sc, self.ea, self.named)
+        self.order = EventTimeOrder(self.sources)
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
         self.nlog = noticelog.NoticeLog(noticelog.path_for(out_path)) if out_path else None
         self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
@@ -97,6 +101,7 @@ class LivePeer:
         self.frames = 0
         self.late = 0
         self.t0 = time.monotonic()
+        self.cpu0 = (time.thread_time(), time.process_time())
 
     # -- sinks ---------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
@@ -327,20 +332,22 @@ class LivePeer:
         def stop(*_):
             raise SystemExit(0)
         signal.signal(signal.SIGTERM, stop)
-        self.ea.start(0.0)
         end_wall = time.monotonic() + deadline_s if deadline_s else math.inf
         try:
             with zenoh.open(self.conf) as s:
                 self.session = s
                 put = self.q.put
-                sub = zx.declare_advanced_subscriber(
-                    s, self.ks.src("*"), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
+                # one advanced subscriber per source depended on: nothing else crosses a link to us
+                subs = [zx.declare_advanced_subscriber(
+                    s, self.ks.src(name), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
                     history=zx.HistoryConfig(detect_late_publishers=True, max_samples=CACHE),
-                    recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True)
-                misses = sub.sample_miss_listener(lambda miss: put(("miss", miss.nb)))
+                    recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True) for name in self.sources]
+                misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
                 cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"),
                                             lambda smp: put(("cmd", (str(smp.key_expr), smp.payload.to_bytes()))))
-                self.log(f"ready {self.unit} sources={','.join(self.sources)}", flush=True)
+                self.log(f"ready {self.unit} sources={','.join(self.sources)}"
+                         + (f" (not depending on {','.join(sorted(set(self.named) - set(self.sources)))})"
+                            if len(self.sources) < len(self.named) else ""), flush=True)
                 started = time.monotonic()
                 while not self.done() and time.monotonic() < end_wall:
                     try:
@@ -379,8 +386,8 @@ class LivePeer:
                     if key == "cmd":
                         self.command(*payload)
                 cmds.undeclare()
-                misses.undeclare()
-                sub.undeclare()
+                for x in (*misses, *subs):
+                    x.undeclare()
                 self.session = None
         finally:
             for x in (self.alog, self.nlog, self.journal, self.clog):
@@ -396,7 +403,11 @@ class LivePeer:
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "messages": self.ea.n_in,
-                "wall_s": round(time.monotonic() - self.t0, 2)}
+                "wall_s": round(time.monotonic() - self.t0, 2),
+                # CPU of the loop that decodes, orders and runs the EA, and of the whole process
+                # (Zenoh's threads too): for benchmarks, robust to this machine's varying share
+                "thread_cpu_s": round(time.thread_time() - self.cpu0[0], 3),
+                "process_cpu_s": round(time.process_time() - self.cpu0[1], 3)}
 
 
 def main_live_peer(sc: Scenario, unit: str, conf, root: str, sources: list[str], out: str | None, config_path=None,

@@ -23,13 +23,21 @@ def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Ite
     """The scenario's events that originate in `units`' subtrees (every unit when None)
     except `but`'s subtrees (another command post publishes those): their members'
     positions, their confirmations, calls for fire and orders they issue; hostile tracks
-    only with `tracks` (a command post that runs its sensors' fusion)."""
+    only with `tracks` (a command post that runs its sensors' fusion: where the scenario
+    has fusion groups, the sensors' hits go through the same fusion nodes as in process,
+    flushed on every event's time as there, and the tracks they give are published)."""
+    from ..runner import Fusion
     to = sc.taskorg
     mine = set().union(*(to.subtree(u) for u in units)) if units else set(to.units)
     for u in but:
         mine -= set(to.subtree(u))
+    fusion = Fusion.of(sc) if tracks else None
     for ev in sc.events:
         k = type(ev)
+        if fusion is not None:
+            yield from fusion.feed(ev)
+        if k is M.SensorHit:
+            continue
         if k is M.LocationReport:
             if to.entity_unit.get(ev.entity) in mine:
                 yield ev
@@ -48,6 +56,8 @@ def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Ite
         elif k is M.Reorganization:
             if units is None or ev.new_parent in mine:
                 yield ev
+    if fusion is not None:   # windows that close after the last event
+        yield from fusion.flush(sc.duration_s)
 
 
 def read_lines(f: IO[str], fmt: str, entity: str | None, start: float | None) -> Iterator[M.Message]:

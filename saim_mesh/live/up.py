@@ -14,17 +14,13 @@ from pathlib import Path
 from ..mesh import Supervisor, mesh_units
 from ..proc import Proc, clean_env, leaf_env, py
 from ..zconf import free_port
+from .depend import cp_shares
 
 
 def cp_sources(sc) -> dict[str, list[str]]:
     """name -> `saim-mesh source` arguments: one per child of the top unit (its subtree),
-    and the top's own share (everything else, with the tracks)."""
-    to = sc.taskorg
-    top = to.root
-    kids = sorted(u for u, p in to.parent.items() if p == top)
-    out = {f"cp.{k}": ["--units", k] for k in kids}
-    out[f"cp.{top}"] = ["--but", *kids, "--tracks"] if kids else ["--tracks"]
-    return out
+    and the top's own share (everything else, with the tracks): `depend.cp_shares`."""
+    return {name: sh.args() for name, sh in cp_shares(sc).items()}
 
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,

@@ -119,6 +119,11 @@ class SuoDomain:
         from .needs import needs
         return needs(self, radius_m)
 
+    def neighbours(self):
+        """Units under neighbouring boundaries, whose positions the fratricide rule pairs with ours."""
+        from .needs import neighbours
+        return neighbours(self)
+
     def needs_before(self, msg):
         """What must be up to date before `msg` is applied (a call for fire's surroundings);
         asked of every message a peer takes: the common answer costs one type test."""

@@ -56,3 +56,21 @@ def needs_before(dom, msg) -> Needs | None:
     believed = frozenset(pic.ents[i] for i in near if pic.ent_leaf[i] not in dom.own_leaves)
     return Needs((LocationReport.KEY,), by={"entity": believed} if believed else {},
                  circles=((float(x), float(y), r),))
+
+
+def neighbours(dom, margin_m: float = ENVELOPE_MARGIN_M) -> frozenset[str]:
+    """Units under another boundary near ours, from the plan: the fratricide rule pairs our
+    units with theirs when one strays across (paper 6.7.2), so their positions matter to
+    this EA wherever they come from. Near: boundaries within the longest weapons range
+    plus a margin. Static: a unit that strays beyond a neighbouring sector is not covered."""
+    to = dom.taskorg
+    mine = {b for u in dom.own_units if (b := to.nearest_with(u, "boundary")) is not None}
+    if not mine:
+        return frozenset()
+    rng = max([float(dom.voi_cfg["weapons_range_m"])] +
+              [float(r) for v in to.units.values() if (r := v.attrs.get("weapons_range_m")) is not None])
+    polys = {u: dom.overlay[v.attrs["boundary"]].area for u, v in to.units.items() if v.attrs.get("boundary")
+             and v.attrs["boundary"] in dom.overlay}
+    near = {b for b, p in polys.items() if b not in mine
+            and any(m in polys and p.distance(polys[m]) <= rng + margin_m for m in mine)}
+    return frozenset(u for u in to.units if to.nearest_with(u, "boundary") in near)
