@@ -6,8 +6,9 @@ Measures, into bench/results/live.json:
   EA can raise what a report in it implies) to the alert's raising, every peer;
   `due_to_alert_ms` from the alert's own time (a timer due mid-epoch waits for the close:
   up to one epoch, 2 s);
-- `killed_source_alert_s`: per peer, from the kill to the system-problem alert that names the
-  source (its `declared_wall`), and the worst, against `source_silence_s` + 1;
+- `killed_source_alert_s`: per peer that depends on the killed source (from its interest:
+  live/depend.py), from the kill to the system-problem alert that names the source (its
+  `declared_wall`), and the worst, against `source_silence_s` + 1;
 - `journal_replay_equal`: each peer's input journal replayed in process gives exactly the
   alerts it raised live."""
 from __future__ import annotations
@@ -45,7 +46,7 @@ def main(argv=None) -> int:
     kill_at = start + until / 2
     killed: dict = {}
 
-    def on_started(sup) -> None:
+    def on_started(sup, _t0) -> None:
         def killer():
             time.sleep(max(0.0, kill_at - time.time()))
             p = sup.procs[a.kill]
@@ -81,9 +82,11 @@ def main(argv=None) -> int:
            "journal_replay_equal": bool(equal) and all(equal.values()), "journal_replay_equal_by_peer": equal,
            "targets": {"report_to_alert_ms_p99": 100.0, "killed_source_alert_s_max": silence + 1.0},
            "wall_s": res["wall_s"]}
+    depending = sorted(u for u, s in res["peers"].items() if a.kill in s.get("depends", ()))
+    out["depending_on_killed"] = depending
     out["targets_met"] = (out["report_to_alert_ms"].get("p99", 1e9) <= 100.0 and worst is not None
                           and worst <= silence + 1.0 and out["journal_replay_equal"]
-                          and len(alert_s) == len(res["peers"]))
+                          and sorted(alert_s) == depending)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
     print(json.dumps({k: v for k, v in out.items() if k != "journal_replay_equal_by_peer"}, indent=1))

@@ -4,7 +4,15 @@ batches into the BN peer's real subscriptions, unpacked, filtered and decoded as
 peer does), the in-process EA on the same events, one EA through the mesh and its
 share of the in-process rate (the best of three interleaved rounds of each),
 report-to-alert latency at 1,000 events/s, and the whole battalion through one peer
-per unit at max speed with peak PSS and RSS per peer. Writes bench/results/mesh.json."""
+per unit at max speed with peak PSS and RSS per peer. Writes bench/results/mesh.json.
+
+The live phase (`live`, alone with `--only live`, merged into the existing mesh.json):
+the mesh with no centre (`saim_mesh.live.up`: one source per command post, one EA peer
+per unit, no replay, no global tick) on the battalion and battalion-sensors, secure, at
+max speed. Per scenario: each peer's alerts against the in-process run's (system problems
+left out), the CPU per message of the peers' main loops (decode, order, EA) against the
+same unit's EA in process fed exactly the messages the peer's EA received (its depended
+sources' shares, in the order's (t, source, seq) order), and peak PSS per EA peer."""
 from __future__ import annotations
 
 import argparse
@@ -160,6 +168,190 @@ def in_process(sc, unit: str) -> float:
     return feed(make_ea(sc, unit, config_for(sc, unit, None), sinks=[]), sc)
 
 
+# -- the live mesh (no centre) ---------------------------------------------------------------
+
+LIVE_SCENARIOS = ("battalion", "battalion-sensors")
+
+
+def alert_key(a: dict) -> tuple:
+    """What an alert is compared on, peer against in process."""
+    return (a["t"], a["owner"], a["type"], a["priority"], tuple(a["subjects"]), a["message"])
+
+
+def logged_alerts(path: Path) -> list[tuple]:
+    """A peer's alert log, system problems (the mesh's own: a lost source) left out."""
+    out = []
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            if line.endswith("\n"):
+                a = json.loads(line)
+                if a["category"] != "system-problem":
+                    out.append(alert_key(a))
+    return out
+
+
+def alerts_diff(got: list[tuple], want: list[tuple]) -> dict | None:
+    """None when equal; else how many alerts each side has that the other has not
+    (`order_only`: the same alerts in another order)."""
+    if got == want:
+        return None
+    from collections import Counter
+    g, w = Counter(got), Counter(want)
+    return {"peer": len(got), "in_process": len(want), "only_peer": sum((g - w).values()),
+            "only_in_process": sum((w - g).values()), "order_only": g == w}
+
+
+def source_streams(sc) -> dict[str, list]:
+    """What each command post's source publishes of the scenario (`play.share`), less what
+    its own watermark refuses (`play.publish` skips a message not after it)."""
+    from .live.depend import cp_shares
+    from .live.play import EPOCH_S, share
+    import math
+    out = {}
+    for name, sh in cp_shares(sc).items():
+        wm, msgs = -1.0, []
+        for m in share(sc, list(sh.units) if sh.units else None, sh.tracks, list(sh.but)):
+            if not math.isfinite(m.t) or m.t <= wm:
+                continue
+            wm = max(wm, math.ceil(m.t / EPOCH_S) * EPOCH_S - EPOCH_S)
+            msgs.append(m)
+        out[name] = msgs
+    return out
+
+
+def peer_inputs(sc, ea, streams: dict[str, list]) -> list:
+    """The messages a live peer's EA is given: those of the sources it depends on, in the
+    order's (t, source, seq, index) order (`live.order.EventTimeOrder`)."""
+    from .live.depend import depends
+    deps = depends(sc, ea, sorted(streams))
+    keyed = [(m.t, name, i, m) for name in deps for i, m in enumerate(streams[name])]
+    keyed.sort(key=lambda x: x[:3])
+    return [x[3] for x in keyed]
+
+
+def in_process_same_input(sc, units: list[str], streams: dict[str, list]) -> dict[str, dict]:
+    """Each unit's EA (the peer's configuration) in process on the messages its peer got:
+    main-thread CPU seconds of submit + finish, messages submitted, its alerts."""
+    out = {}
+    for u in units:
+        ea = make_ea(sc, u, config_for(sc, u, None), sinks=[])
+        ea.start(0.0)
+        msgs = peer_inputs(sc, ea, streams)
+        submit = ea.submit
+        c0 = time.thread_time()
+        for m in msgs:
+            submit(m)
+        ea.finish(sc.duration_s)
+        cpu = time.thread_time() - c0
+        out[u] = {"cpu_s": cpu, "messages": ea.n_in,
+                  "alerts": [alert_key(x.to_json_dict()) for x in ea.alerts if x.category != "system-problem"]}
+    return out
+
+
+def live_scenario(scenario: str, out_dir: Path) -> dict:
+    """One scenario through the live mesh, against the in-process runs in the same process."""
+    from .live.up import up as live_up
+    sc = S.load(scenario)
+    name = Path(scenario).name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "pids.json").unlink(missing_ok=True)   # the sampler must not read an earlier run's pids
+    with Sampler(out_dir / "pids.json", every_s=0.25) as mem:
+        res = live_up(scenario, units=None, out_dir=out_dir, speed="max", show=False, insecure=False)
+    peers = res["peers"]
+    units = list(res["units"])
+    missing = [u for u in units if u not in peers]
+    print(f"{name}: live mesh {len(peers)}/{len(units)} peers done in {res['wall_s']} s", flush=True)
+    # the in-process run (every EA hears every event), for the alerts; its CPU per event apart
+    c0 = time.thread_time()
+    eas = run(sc, units)
+    all_cpu = time.thread_time() - c0
+    want = {ea.owner: [alert_key(x.to_json_dict()) for x in ea.alerts if x.category != "system-problem"]
+            for ea in eas}
+    all_msgs = sum(ea.n_in for ea in eas)
+    del eas
+    streams = source_streams(sc)
+    same_in = in_process_same_input(sc, units, streams)
+    got = {u: logged_alerts(out_dir / f"{u}.jsonl") for u in peers}
+    unequal = {u: d for u in peers if (d := alerts_diff(got[u], want[u])) is not None}
+    unequal_same_input = {u: d for u in peers if (d := alerts_diff(got[u], same_in[u]["alerts"])) is not None}
+    msgs = sum(s["messages"] for s in peers.values())
+    thr = sum(s["thread_cpu_s"] for s in peers.values())
+    proc = sum(s["process_cpu_s"] for s in peers.values())
+    ip_msgs = sum(same_in[u]["messages"] for u in peers)
+    ip_cpu = sum(same_in[u]["cpu_s"] for u in peers)
+    ea_us = 1e6 * thr / msgs
+    ip_us = 1e6 * ip_cpu / ip_msgs
+    ea_mem = {u: mem.peak[u] for u in units if u in mem.peak}
+    out = {
+        "scenario": name, "wall_s": res["wall_s"], "secure": res["secure"], "sources": res["sources"],
+        "live_peers": len(peers), "live_peers_missing": missing,
+        "live_peers_equal": len(peers) - len(unequal), "live_unequal": unequal,
+        "live_all_equal": not unequal and not missing,
+        # the peer against its own unit's EA in process on exactly the messages the peer got
+        # (its depended sources): tells a difference of input from one of the live machinery
+        "live_unequal_same_input": unequal_same_input,
+        "supervisor_events": res["events"],
+        "ea_cpu_us_per_event": round(ea_us, 2),
+        "in_process_cpu_us_per_event": round(ip_us, 2),
+        "ea_cpu_ratio": round(ea_us / ip_us, 3),
+        "ea_process_cpu_us_per_event": round(1e6 * proc / msgs, 2),
+        "in_process_all_events_cpu_us_per_event": round(1e6 * all_cpu / all_msgs, 2),
+        "messages": msgs, "in_process_messages": ip_msgs,
+        "messages_match": {u: same_in[u]["messages"] == peers[u]["messages"] for u in peers},
+        "ea_cpu_s": round(thr, 3), "ea_process_cpu_s": round(proc, 3), "in_process_cpu_s": round(ip_cpu, 3),
+        "live_pss_mb_max": round(max(m["pss_mb"] for m in ea_mem.values()), 1),
+        "live_pss_mb_any_max": round(max(m["pss_mb_any"] for m in ea_mem.values()), 1),
+        "live_rss_mb_max": round(max(m["rss_mb"] for m in ea_mem.values()), 1),
+        "memory_by_process": mem.peak_memory,
+        "by_peer": {u: {"messages": s["messages"], "in_process_messages": same_in[u]["messages"],
+                        "thread_cpu_s": s["thread_cpu_s"], "process_cpu_s": s["process_cpu_s"],
+                        "in_process_cpu_s": round(same_in[u]["cpu_s"], 3), "frames": s.get("frames"),
+                        "alerts": s.get("alerts"), "lost": s.get("lost"), "gaps": s.get("gaps"),
+                        "misses": s.get("misses"), "wall_s": s.get("wall_s")} for u, s in peers.items()},
+    }
+    print(f"{name}: alerts equal in process {out['live_peers_equal']}/{len(peers)}"
+          + (f", unequal {unequal}" if unequal else "")
+          + (f"; against the same input unequal {unequal_same_input}" if unequal_same_input else "")
+          + f"; EA CPU {ea_us:.1f} us/message (process {out['ea_process_cpu_us_per_event']}) against "
+          f"{ip_us:.1f} in process: ratio {out['ea_cpu_ratio']}; peak PSS per EA peer {out['live_pss_mb_max']} MB",
+          flush=True)
+    return out
+
+
+def live_phase(root: Path, tmp: Path) -> dict:
+    """The live mesh on the battalion and battalion-sensors: the `live` key and the top-level
+    figures (the battalion's) for mesh.json."""
+    live = {}
+    for name in LIVE_SCENARIOS:
+        path = root / name
+        if path.is_dir():
+            live[name] = live_scenario(str(path), tmp / f"live-{name}")
+    bn = live.get("battalion") or next(iter(live.values()))
+    return {
+        "live": live,
+        "ea_cpu_us_per_event": bn["ea_cpu_us_per_event"],
+        "in_process_cpu_us_per_event": bn["in_process_cpu_us_per_event"],
+        "ea_cpu_ratio": bn["ea_cpu_ratio"],
+        "ea_process_cpu_us_per_event": bn["ea_process_cpu_us_per_event"],
+        "live_pss_mb_max": max(x["live_pss_mb_max"] for x in live.values()),
+        "live_alerts_equal_in_process": {k: x["live_all_equal"] for k, x in live.items()},
+    }
+
+
+LIVE_TARGETS = {"ea_cpu_ratio": 1.5, "live_pss_mb_max": 40}
+
+
+def merge_live(path: Path, live: dict) -> dict:
+    """The existing mesh.json (the other phases' figures kept) with the live phase's keys."""
+    try:
+        out = json.loads(path.read_text())
+    except (OSError, ValueError):
+        out = {}
+    out.update(live)
+    out["targets"] = {**out.get("targets", {}), **LIVE_TARGETS}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--role", choices=["pub", "sub"])
@@ -170,6 +362,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "battalion"))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "mesh.json"))
     ap.add_argument("--tmp", default=str(ROOT / "out" / "bench-mesh"))
+    ap.add_argument("--only", choices=["live"], help="run this phase alone, merged into the existing --out")
     a = ap.parse_args(argv)
     if a.role == "pub":
         role_pub(a.endpoint, a.n, a.scenario)
@@ -179,6 +372,15 @@ def main(argv=None) -> int:
         return 0
     tmp = Path(a.tmp)
     tmp.mkdir(parents=True, exist_ok=True)
+    scen_root = Path(a.scenario).parent
+    if a.only == "live":
+        out = merge_live(Path(a.out), live_phase(scen_root, tmp))
+        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
+        print(json.dumps({k: out[k] for k in ("ea_cpu_us_per_event", "in_process_cpu_us_per_event", "ea_cpu_ratio",
+                                              "ea_process_cpu_us_per_event", "live_pss_mb_max",
+                                              "live_alerts_equal_in_process")}))
+        return 0
     sc = S.load(a.scenario)
     n_ev = len(sc.events)
     fine, zsubs = peer_interest(sc, "BN", RAW_ROOT)
@@ -257,8 +459,9 @@ def main(argv=None) -> int:
         "sensors_wall_s": round(rs["wall_s"], 2) if sens_same is not None else None,
         "sensors_alerts_equal_in_process": sens_same,
         "targets": {"ea_share_of_in_process": 0.6, "peak_pss_mb_per_ea_peer": 40, "latency_p99_ms": 20,
-                    "battalion_wall_s": 60, "peak_rss_mb": 200},
+                    "battalion_wall_s": 60, "peak_rss_mb": 200, **LIVE_TARGETS},
     }
+    out.update(live_phase(scen_root, tmp))   # the mesh with no centre, in the same run
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
     print(json.dumps({k: out[k] for k in ("raw_msgs_per_s", "in_process_events_per_s", "ea_events_per_s",

@@ -230,13 +230,15 @@ def _start_of(a) -> float | None:
     """--live: the wall time of event time 0 (--start ISO8601, default now)."""
     if not getattr(a, "live", False):
         return None
-    if not a.start:
-        return time.time()
+    return _instant(a.start) if a.start else time.time()
+
+
+def _instant(text: str) -> float:
     from datetime import datetime, timezone
     try:
-        d = datetime.fromisoformat(a.start.replace("Z", "+00:00"))
+        d = datetime.fromisoformat(text.replace("Z", "+00:00"))
     except ValueError:
-        raise ValueError(f"--start {a.start!r}: expected an ISO 8601 time, e.g. 2026-11-27T09:00:00Z") from None
+        raise ValueError(f"--start {text!r}: expected an ISO 8601 time, e.g. 2026-11-27T09:00:00Z") from None
     return (d if d.tzinfo else d.replace(tzinfo=timezone.utc)).timestamp()
 
 
@@ -256,6 +258,11 @@ def cmd_source(a) -> int:
             raise KeyError(f"--units/--but {u}: unknown unit {u!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     start = _start_of(a)
+    paced = None   # --speed with --start: event time 0 at that instant (sources paced together)
+    if a.start and not a.live:
+        if not a.speed:
+            raise ValueError("--start without --live paces the stream: give --speed FACTOR too")
+        paced = _instant(a.start)
     if a.file is None:
         msgs = play.share(sc, a.units, a.tracks, a.but or ())
     else:
@@ -265,7 +272,7 @@ def cmd_source(a) -> int:
     with zenoh.open(conf) as s:
         src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state)
         print(f"ready source {a.name} epoch={src.epoch}", flush=True)
-        n = play.publish(src, msgs, a.speed, start, until=a.until)
+        n = play.publish(src, msgs, a.speed, start, until=a.until, paced_from=paced)
         src.close(end=not a.keep_open)
         print(f"end source {a.name} messages={n} frames={src.seq}", flush=True)
         if a.linger:
@@ -604,7 +611,8 @@ def main(argv: list[str] | None = None) -> int:
     so.add_argument("--entity", help="nmea, gpx: whose reports these are")
     so.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     so.add_argument("--live", action="store_true", help="event time is the wall clock from --start")
-    so.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
+    so.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now); "
+                    "with --speed: event time 0 is at that instant (sources paced together)")
     so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
     so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")

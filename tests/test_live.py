@@ -271,7 +271,6 @@ def test_a_frame_the_full_order_refuses_is_offered_again_never_dropped(sc):
     from saim_mesh.live import frames as F
     peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), "t/full", ["cp.a", "cp.b"])
     peer.order.max_buffered = 3
-    peer.ea.start(0.0)
     reps = [e for e in sc.events if type(e) is M.LocationReport][:8]
 
     def frame(src, seq, wm, ms):

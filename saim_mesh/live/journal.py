@@ -5,7 +5,7 @@ says what the EA decided and when in its input (../shared/notes/live-mesh.md: id
 detected by wall clock is not reproducible, a decision written down is).
 
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
-as written: ["frame", payload] or ["lost", source, released, why]. A half-written last
+as written: ["frame", payload], ["lost", source, released, why] or ["back", source]. A half-written last
 record (a kill) is ignored on reading."""
 from __future__ import annotations
 
@@ -34,6 +34,10 @@ class InputJournal:
     def lost(self, source: str, released: float, why: str) -> None:
         self._write(["lost", source, released, why])
 
+    def back(self, source: str) -> None:
+        """A lost source was heard again here: the EA was rebuilt (`LivePeer.back`)."""
+        self._write(["back", source])
+
     def close(self) -> None:
         self.f.close()
 
@@ -51,12 +55,15 @@ def records(path: str | Path) -> list[list]:
 
 
 def replay(peer, path: str | Path) -> list:
-    """Feed a fresh `LivePeer` (not running: no session) the journal's records; its alerts.
-    The peer's own journal and logs should be off (out_path None)."""
+    """Feed a fresh `LivePeer` (not running: no session) the journal's records; the alerts
+    it gives. The peer's own journal and logs should be off (out_path None). A source's
+    return rebuilds the EA from the records before it, as it did live."""
+    peer.history = []
     for rec in records(path):
         if rec[0] == "frame":
             peer.take(rec[1], "", journal=False)
         elif rec[0] == "lost":
             peer.lose(rec[1], rec[3], journal=False)
+        peer.history.append(rec)
     peer.ea.finish(peer.end_t())
-    return peer.ea.alerts
+    return peer.given

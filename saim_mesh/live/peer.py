@@ -43,6 +43,7 @@ from . import frames as F
 from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
+from .timeline import Timeline
 from .source import CACHE
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -70,6 +71,7 @@ class LivePeer:
         self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
+        self.armed = armed
         if armed:
             self.ea.arm()
         self.ea.start(0.0)
@@ -100,11 +102,23 @@ class LivePeer:
         self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
         self.frames = 0
         self.late = 0
+        self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given
+        self.given: list[M.Alert] = []        # every alert given, in order (the log's)
+        self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
+        self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
+        self.rebuilds = 0
+        self.history: list | None = None      # journal replay: the records taken so far (else the file)
         self.t0 = time.monotonic()
         self.cpu0 = (time.thread_time(), time.process_time())
+        self.timeline = Timeline(self.ea.epoch_s)   # for benchmarks: wall times of epochs and alerts
 
     # -- sinks ---------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
+        key = (a.t, a.type, a.subjects, a.message)
+        if key in self.emitted:
+            return   # raised already (by the EA before a rebuild): never twice
+        self.emitted.add(key)
+        self.timeline.raised(a)
         if self.live_start is not None and not a.details.get("wall_clock_driven"):
             # live: from the close of the epoch the alert falls in (on event time, the earliest
             # it can be raised: an epoch closes once every source promised it) to its raising;
@@ -113,9 +127,13 @@ class LivePeer:
             ep = self.ea.epoch_s
             self.alert_lat.append(now - math.ceil(a.t / ep - 1e-9) * ep)
             self.due_lat.append(now - a.t)
-        if self.late_from is not None:
-            a = replace(a, details={**a.details, "late": True, "due_from": round(self.late_from, 3)})
+        due = self.late_from
+        if due is None and a.t <= self.caught_up_to and not a.details.get("wall_clock_driven"):
+            due = a.t   # a rebuilt EA raises what fell due while a source was lost: late
+        if due is not None:
+            a = replace(a, details={**a.details, "late": True, "due_from": round(due, 3)})
             self.late += 1
+        self.given.append(a)
         if self.alog:
             self.alog.write(a)
         if self.session is not None:
@@ -201,6 +219,10 @@ class LivePeer:
         if self.retry.get(f.source) and journal:
             self.retry[f.source].append((payload, key, f))
             return False
+        if f.source in self.order.lost and self.rebuilding is None:   # back: rebuild as if never lost
+            if journal and self.journal is not None:
+                self.journal.back(f.source)
+            self.back(f.source)
         items = []
         for b in f.msgs:
             m = self.gate.data(b, key or f"src/{f.source}")
@@ -215,7 +237,6 @@ class LivePeer:
                 u = self.sc.taskorg.entity_unit.get(m.entity)
                 if u is not None:
                     self.reports.setdefault(f.source, set()).add(u)
-        was_lost = f.source in self.order.lost
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             self.retry.setdefault(f.source, []).append((payload, key, f))
@@ -229,11 +250,50 @@ class LivePeer:
         self.heard[f.source] = time.monotonic()
         if f.end:
             self.ended.add(f.source)
-        if was_lost:
-            self._system(f.source, f"source {f.source} is back (its facts since "
-                                   f"{hms(self.order.released)} are taken late)", event="source-back")
         self._apply()
         return True
+
+    def back(self, source: str) -> None:
+        """A lost source is heard again. Its facts since the loss cannot be put in order by
+        the EA that went on without them, so a fresh EA takes every input journalled so far
+        in event-time order as if the source had never been lost (the other losses stand),
+        then waits for the source to catch up: what it raises that the old EA had not
+        raised is given, marked late with when it was due; what both raised is not given
+        again. Alerts the old EA raised on the partial picture stay in the log (never
+        withdrawn). A commander's commands to the old EA are not carried over."""
+        records = self._history()
+        since = self.order.released
+        self.caught_up_to = max(self.caught_up_to, self.ea.now)
+        self._system(source, f"source {source} is back (its facts since {hms(since)} are taken late)",
+                     event="source-back")
+        self.rebuilds += 1
+        self.rebuilding = source
+        self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
+        self.ea.notice_sinks.append(self._notice)
+        if self.armed:
+            self.ea.arm()
+        self.ea.start(0.0)
+        self.order = EventTimeOrder(self.sources)
+        self.retry = {}
+        returned = {source} | {r[1] for r in records if r[0] == "back"}
+        try:
+            for rec in records:
+                if rec[0] == "frame":
+                    self.take(rec[1], "", journal=False)
+                elif rec[0] == "lost" and rec[1] not in returned:
+                    self.lose(rec[1], rec[3], journal=False)
+        finally:
+            self.rebuilding = None
+
+    def _history(self) -> list:
+        """The input records so far (the journal's, flushed as written, or those a journal
+        replay fed)."""
+        if self.history is not None:
+            return list(self.history)
+        if self.journal is None:
+            raise RuntimeError("a live peer with no input journal cannot rebuild its EA when a source returns")
+        from .journal import records
+        return records(self.journal.path)
 
     def _retry(self) -> None:
         """Offer the frames the order refused as full again, each source's in its order."""
@@ -282,6 +342,7 @@ class LivePeer:
         r = self.order.released
         if math.isfinite(r) and r > self.ea.now:
             self.ea.advance(r)
+        self.timeline.released(r)
         if self.order.late:
             late, self.order.late[:] = list(self.order.late), []
             self.late_from = min(m.t for _, m in late)
@@ -398,7 +459,7 @@ class LivePeer:
         return summary
 
     def summary(self) -> dict:
-        return {"unit": self.unit, "alerts": len(self.ea.alerts), "frames": self.frames, "misses": self.misses,
+        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "frames": self.frames, "misses": self.misses,
                 "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
@@ -407,7 +468,8 @@ class LivePeer:
                 # CPU of the loop that decodes, orders and runs the EA, and of the whole process
                 # (Zenoh's threads too): for benchmarks, robust to this machine's varying share
                 "thread_cpu_s": round(time.thread_time() - self.cpu0[0], 3),
-                "process_cpu_s": round(time.process_time() - self.cpu0[1], 3)}
+                "process_cpu_s": round(time.process_time() - self.cpu0[1], 3),
+                "timeline": self.timeline.as_dict()}
 
 
 def main_live_peer(sc: Scenario, unit: str, conf, root: str, sources: list[str], out: str | None, config_path=None,

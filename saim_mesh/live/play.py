@@ -103,11 +103,17 @@ def read_lines(f: IO[str], fmt: str, entity: str | None, start: float | None) ->
 
 
 def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = None, live_start: float | None = None,
-            epoch_s: float = EPOCH_S, log=print, until: float | None = None) -> int:
+            epoch_s: float = EPOCH_S, log=print, until: float | None = None, paced_from: float | None = None) -> int:
     """Publish `msgs` (in event-time order) with a watermark at every epoch boundary they
     pass; at `speed` x real time, as fast as possible (None), or live (wait until each
-    message's event time on the wall clock, and keep watermarks going while idle)."""
-    t0 = time.monotonic()
+    message's event time on the wall clock, and keep watermarks going while idle).
+    `paced_from`: with a speed, the wall time of event time 0 (several sources in step)."""
+    t0 = time.monotonic() if paced_from is None else time.monotonic() - (time.time() - paced_from)
+    clock = None   # event time now, and how to sleep until an event time
+    if live_start is not None:
+        clock = (lambda: time.time() - live_start, lambda t: t - (time.time() - live_start))
+    elif speed:
+        clock = (lambda: (time.monotonic() - t0) * speed, lambda t: (t0 + t / speed) - time.monotonic())
     n = 0
     last_wm = src.wm
     next_say = 600.0
@@ -120,12 +126,8 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
         if not math.isfinite(m.t) or m.t <= src.wm:
             log(f"source {src.name}: skipped a {m.KIND} at t={m.t} (not after its watermark {src.wm})", flush=True)
             continue
-        if live_start is not None:
-            last_wm = _idle(src, live_start, m.t, epoch_s, last_wm)
-        elif speed:
-            wait = t0 + m.t / speed - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
+        if clock is not None:   # live or paced: promise each epoch as its clock passes it
+            last_wm = _idle(src, clock, m.t, epoch_s, last_wm)
         w = math.ceil(m.t / epoch_s) * epoch_s - epoch_s   # the last boundary strictly before m.t
         if w > last_wm:
             src.watermark(w)
@@ -137,22 +139,22 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
             continue
         n += 1
     if until is not None:   # the stream ends at `until`: live, keep promising epochs as the wall clock passes them
-        if live_start is not None:
-            _idle(src, live_start, until, epoch_s, last_wm, inclusive=True)
+        if clock is not None:
+            _idle(src, clock, until, epoch_s, last_wm, inclusive=True)
         src.watermark(until)
     return n
 
 
-def _idle(src: LiveSource, live_start: float, t: float, epoch_s: float, last_wm: float,
-          inclusive: bool = False) -> float:
-    """Live, nothing to send before event time `t`: promise each epoch boundary as the wall
-    clock passes it (a silent source would be declared lost), waking exactly at each one.
-    Returns the last watermark given."""
-    while (now := time.time() - live_start) < t:
+def _idle(src: LiveSource, clock, t: float, epoch_s: float, last_wm: float, inclusive: bool = False) -> float:
+    """Nothing to send before event time `t`: promise each epoch boundary as the clock
+    (live: the wall clock; paced: event time at the speed) passes it (a silent source would
+    be declared lost), waking exactly at each one. Returns the last watermark given."""
+    now_of, wait_for = clock
+    while (now := now_of()) < t:
         w = math.floor(now / epoch_s) * epoch_s
         if w > last_wm and (w < t or inclusive and w <= t):
             src.watermark(w)
             last_wm = w
         nxt = (math.floor(now / epoch_s) + 1) * epoch_s
-        time.sleep(max(0.0, min(t, nxt) - now))
+        time.sleep(max(0.0, wait_for(min(t, nxt))))
     return last_wm

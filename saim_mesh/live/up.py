@@ -25,9 +25,16 @@ def cp_sources(sc) -> dict[str, list[str]]:
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,
        echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
-       start: float | None = None, insecure: bool = False) -> dict:
-    """`on_started(sup)`: called once every source runs (a benchmark kills one). `start`
-    (live): the wall time of event time 0 (default 20 s from now: everyone is up by then)."""
+       start: float | None = None, insecure: bool = False, topology: str | None = None,
+       link: dict | None = None, paced_start: float | None = None) -> dict:
+    """`on_started(sup, t0)`: called once every source runs, with the wall time of event time 0 (a benchmark kills one). `start`
+    (live): the wall time of event time 0 (default 20 s from now: everyone is up by then).
+    `topology`: a topology file or "derive": one router per command post (`mesh up
+    --topology`), each EA and each command post's source attached to its own command
+    post's router, router links through emulated links when `link` is given (a benchmark
+    cuts them: `sup.procs["link-<lower>-<upper>"]`, SIGUSR1 cuts, SIGUSR2 heals).
+    `paced_start`: with a speed, the wall time of event time 0 for every source (default:
+    5 s after every EA is ready)."""
     from .. import scenario as S
     from ..sinks import COLOURS, RESET
     from ea_agent.core.alert import hms
@@ -40,8 +47,18 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     logs.mkdir(exist_ok=True)
     root = f"saim/{sc.name}/live"
     sources = cp_sources(sc)
+    topo = None
+    if topology is not None:
+        from .. import topology as T
+        topo = T.derive(sc.taskorg) if topology == "derive" else T.load(topology, sc.taskorg, set(sources))
     sec: list[str] = []
-    if insecure:
+    if topo is not None:
+        pki = None
+        if not insecure:
+            from ..security.pki import make_pki, names_for
+            pki = out_dir / "pki"
+            make_pki(pki, names_for(sc, consoles=True) + [f"router.{n}" for n in topo.routers])
+    elif insecure:
         echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
              "feed this mesh positions and end its sources' streams")
         hub = f"tcp/127.0.0.1:{free_port()}"
@@ -50,40 +67,51 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         pki = out_dir / "pki"
         make_pki(pki, names_for(sc, consoles=True) + ["router.hub"])
         hub = f"tls/127.0.0.1:{free_port()}"
-        topo = out_dir / "topology.json"
-        topo.write_text(json.dumps({"topology": {"routers": {"hub": {"cp": sc.taskorg.root, "links": []}},
-                                                 "attach": {}, "top": "hub"}, "endpoints": {"hub": hub}}))
-        sec = ["--pki", str(pki), "--topology", str(topo)]
+        hub_topo = out_dir / "topology.json"
+        hub_topo.write_text(json.dumps({"topology": {"routers": {"hub": {"cp": sc.taskorg.root, "links": []}},
+                                                     "attach": {}, "top": "hub"}, "endpoints": {"hub": hub}}))
+        sec = ["--pki", str(pki), "--topology", str(hub_topo)]
     sup = Supervisor(echo, pids_path=out_dir / "pids.json")
     start = start if start is not None else time.time() + 20.0
     live_args = ["--live", "--start", _iso(start)] if live else []
+
     until_args = ["--until", str(until)] if until is not None else []
     summaries: dict[str, dict] = {}
     seen: dict[str, int] = {}
     shown = Counter()
     t0 = time.monotonic()
     try:
-        # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
-        # peers do not relay for each other: ../shared/notes/live-mesh.md)
-        router = sup.add(Proc("router", [*py(), "router", "--scenario", scenario, "--name", "hub", "--listen", hub,
-                                         "--root", root, *sec], env=clean_env(), log_dir=logs))
-        router.wait_for("router ready", 60)
-        net = ["--connect", hub, "--mode", "client", *sec]
+        if topo is not None:   # a router per command post, linked as the topology says
+            from .. import routed
+            eps, _links, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
+            secure = ["--pki", str(pki)] if pki else []
+            where = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], "--mode", "client",  # noqa: E731
+                                 "--topology", str(resolved), *secure]
+        else:
+            # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
+            # peers do not relay for each other: ../shared/notes/live-mesh.md)
+            router = sup.add(Proc("router", [*py(), "router", "--scenario", scenario, "--name", "hub",
+                                             "--listen", hub, "--root", root, *sec], env=clean_env(), log_dir=logs))
+            router.wait_for("router ready", 60)
+            where = lambda who: ["--connect", hub, "--mode", "client", *sec]  # noqa: E731
         for u in units:
             for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
                 (out_dir / f).unlink(missing_ok=True)
-            sup.add(Proc(u, [*py(), "peer", "--scenario", scenario, "--unit", u, *net, "--root", root,
+            sup.add(Proc(u, [*py(), "peer", "--scenario", scenario, "--unit", u, *where(u), "--root", root,
                              "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args],
                          env=leaf_env(), log_dir=logs))
         for u in units:
             sup.procs[u].wait_for(f"ready {u}", 120)
+        if not live and speed != "max":   # every source paced on one clock: event time 0 at this instant
+            paced_start = paced_start if paced_start is not None else time.time() + 5.0
+        pace_args = ["--start", _iso(paced_start)] if paced_start is not None and not live else []
         for name, args in sources.items():
-            sup.add(Proc(name, [*py(), "source", scenario, "--name", name, *args, "--connect", hub, "--root", root,
-                                "--speed", speed, "--state", str(out_dir / "sources"), "--linger", "30", *live_args,
-                                *until_args, "--mode", "client", *sec],
+            sup.add(Proc(name, [*py(), "source", scenario, "--name", name, *args, *where(name.removeprefix("cp.")),
+                                "--root", root, "--speed", speed, "--state", str(out_dir / "sources"),
+                                "--linger", "30", *live_args, *pace_args, *until_args],
                          env=clean_env(), log_dir=logs))
         if on_started is not None:
-            on_started(sup)
+            on_started(sup, paced_start if not live else start)
         end = time.monotonic() + timeout
         while time.monotonic() < end and len(summaries) < len(units):
             sup.check()
@@ -99,7 +127,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     wall = time.monotonic() - t0
     result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events,
               "secure": not insecure,
-              "start": start if live else None, "root": root, "units": units}
+              "start": start if live else None, "paced_start": paced_start, "root": root, "units": units,
+              "topology": topo.to_dict() if topo is not None else None}
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
     echo(table(out_dir, units, sc))
     echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}, "
