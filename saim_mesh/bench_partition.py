@@ -11,9 +11,11 @@ for `--cut-s` seconds of scenario time and healed. Writes bench/results/partitio
   time) of when the fault-free run raised them;
 - `lost_alert_s_max`: from the cut to the system-problem alert naming a source across it,
   the worst over the EAs that depend on one (target `source_silence_s` + 2);
-- `alerts_equal_after_heal`: every EA's final alerts (system problems apart) equal the
-  fault-free run's; `late` counts those raised on the late path, marked with when they
-  were due; `duplicates`: alerts raised twice by one EA (target 0).
+- `alerts_equal_after_heal`: every EA's final alerts as shown to its commander (system
+  problems apart, and what it concluded about a lost source's units on a partial picture,
+  logged inhibited by the loss: `inhibited_during_loss`) equal the fault-free run's; `late`
+  counts those raised when the source came back (the EA rebuilt from its journal), marked
+  with when they were due; `duplicates`: alerts shown twice by one EA (target 0).
 """
 from __future__ import annotations
 
@@ -34,6 +36,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _key(a: dict) -> tuple:
     return (a["t"], a["type"], tuple(a["subjects"]), a["message"])
+
+
+def _shown(a: dict) -> bool:
+    """An alert the commander is shown: not a system problem, not inhibited (an EA that lost
+    a source inhibits what it concludes about that source's units on a partial picture)."""
+    return a["category"] != "system-problem" and "inhibited_by" not in a["details"]
 
 
 def _alerts(path: Path) -> list[dict]:
@@ -79,6 +87,8 @@ def main(argv=None) -> int:
     ap.add_argument("--frozen-s", type=float, default=4.0,
                     help="wall seconds late an epoch must be released to count as frozen (the silence is 10)")
     ap.add_argument("--out-dir", default="out/bench-partition")
+    ap.add_argument("--analyze-only", action="store_true",
+                    help="no runs: the figures from the runs already in --out-dir (cut at its scheduled instant)")
     ap.add_argument("--out", default="bench/results/partition.json")
     a = ap.parse_args(argv)
     from . import scenario as S
@@ -99,8 +109,13 @@ def main(argv=None) -> int:
     timeout = sc.duration_s / a.speed + 900
     out_dir = Path(a.out_dir)
     t0 = time.monotonic()
-    free, _ = run(scenario, out_dir / "free", a.speed, None, 0, 0, timeout)
-    cutr, cut = run(scenario, out_dir / "cut", a.speed, f"link-{link[0]}-{link[1]}", a.cut_from, a.cut_s, timeout)
+    if a.analyze_only:
+        free, cutr = (json.loads((out_dir / d / "summary.json").read_text()) for d in ("free", "cut"))
+        cut = {"cut_wall": cutr["paced_start"] + a.cut_from / a.speed}
+    else:
+        free, _ = run(scenario, out_dir / "free", a.speed, None, 0, 0, timeout)
+        cutr, cut = run(scenario, out_dir / "cut", a.speed, f"link-{link[0]}-{link[1]}", a.cut_from, a.cut_s,
+                        timeout)
     eas = run_in_process(sc, free["units"])
     inproc = {ea.owner: sorted(_key(x.to_json_dict()) for x in ea.alerts) for ea in eas}
 
@@ -109,11 +124,13 @@ def main(argv=None) -> int:
     uncut, across, frozen, on_time, late, dups, unequal, lost_s = [], [], 0, [0, 0], 0, 0, {}, {}
     free_equal_inproc = {}
     lag_uncut = []
+    inhibited = 0
     for u in free["units"]:
         fs, cs = free["peers"].get(u), cutr["peers"].get(u)
-        fa = [x for x in _alerts(out_dir / "free" / f"{u}.jsonl") if x["category"] != "system-problem"]
+        fa = [x for x in _alerts(out_dir / "free" / f"{u}.jsonl") if _shown(x)]
         ca_all = _alerts(out_dir / "cut" / f"{u}.jsonl")
-        ca = [x for x in ca_all if x["category"] != "system-problem"]
+        ca = [x for x in ca_all if _shown(x)]
+        inhibited += sum(1 for x in ca_all if x["category"] != "system-problem" and "inhibited_by" in x["details"])
         free_equal_inproc[u] = sorted(map(_key, fa)) == inproc.get(u)
         c = Counter(map(_key, ca))
         dups += sum(n - 1 for n in c.values() if n > 1)
@@ -160,6 +177,7 @@ def main(argv=None) -> int:
            "on_time_alerts_uncut": on_time[1],
            "lost_alert_s": lost_s, "lost_alert_s_max": worst, "source_silence_s": silence,
            "alerts_equal_after_heal": not unequal, "unequal": unequal, "late": late, "duplicates": dups,
+           "inhibited_during_loss": inhibited,
            "fault_free_equal_in_process": all(free_equal_inproc.values()),
            "fault_free_unequal": sorted(u for u, ok in free_equal_inproc.items() if not ok),
            "targets": {"frozen_epochs_uncut": 0, "on_time_share_uncut": 0.99, "lost_alert_s_max": silence + 2,

@@ -102,7 +102,8 @@ class LivePeer:
         self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
         self.frames = 0
         self.late = 0
-        self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given
+        self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given and shown
+        self.muted: set[tuple] = set()        # ... given inhibited
         self.given: list[M.Alert] = []        # every alert given, in order (the log's)
         self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
@@ -115,9 +116,11 @@ class LivePeer:
     # -- sinks ---------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
         key = (a.t, a.type, a.subjects, a.message)
-        if key in self.emitted:
+        quiet = "inhibited_by" in a.details
+        if key in self.emitted or quiet and key in self.muted:
             return   # raised already (by the EA before a rebuild): never twice
-        self.emitted.add(key)
+        # an alert given inhibited (never shown) that a rebuilt EA raises uninhibited is shown now
+        (self.muted if quiet else self.emitted).add(key)
         self.timeline.raised(a)
         if self.live_start is not None and not a.details.get("wall_clock_driven"):
             # live: from the close of the epoch the alert falls in (on event time, the earliest
@@ -316,6 +319,7 @@ class LivePeer:
         if journal and self.journal is not None:
             self.journal.lost(source, self.order.released, why)
         self.order.lose(source, why)
+        self._inhibit_unknown(source)
         units = self._units_of(source)
         named = ", ".join(units[:8]) + (f" and {len(units) - 8} more" if len(units) > 8 else "")
         wm = self.order.watermarks()[source]
@@ -324,6 +328,21 @@ class LivePeer:
                              f" ({why}); monitoring of {named or 'what it reports'} degraded",
                      event="source-lost", why=why, units=units, declared_wall=round(time.time(), 3))
         self._apply()
+
+    def _inhibit_unknown(self, source: str) -> None:
+        """While the loss stands, what the EA concludes about the units the source reported
+        (silent, late, off their route) rests on a picture it knows to be partial, as the
+        system problem says: those alerts are inhibited by it (logged, marked, not shown as
+        new; docs/console.md). When the source is back the rebuilt EA raises what really
+        fell due, shown, marked late. Rules of at most 64 units."""
+        carried = sorted(set(self.reports.get(source, ())) | set(self._units_of(source)))
+        for i in range(0, len(carried), 64):
+            try:
+                self.ea.inhibit({"id": f"lost-{source}-{i // 64}", "source": {"types": ["unknown-position"],
+                                 "subjects": [source]}, "target": {"subjects": carried[i:i + 64]}, "for_s": 86400.0,
+                                 "comment": f"source {source} lost: its units' silence is that loss"})
+            except ValueError as e:   # a unit name the rules refuse: say so, monitoring goes on
+                self.log(f"source {source}: no inhibition of its units' unknown positions: {e}", flush=True)
 
     def _units_of(self, source: str) -> list[str]:
         """The units whose positions the source carried (the platoons: the units an EA monitors)."""

@@ -1,0 +1,64 @@
+"""bench_mesh's live phase: the pieces that decide what is compared and counted (no mesh
+started here, no timing asserted)."""
+from __future__ import annotations
+
+import json
+from collections import Counter
+
+from saim_mesh import messages as M
+from saim_mesh.bench_mesh import (alerts_diff, in_process_same_input, logged_alerts, merge_live, peer_inputs,
+                                  source_streams)
+from saim_mesh.live.depend import cp_shares
+from saim_mesh.runner import config_for, make_ea
+
+
+def _alert(t, category="plan-constraint-violated", **kw):
+    return {"t": t, "owner": "A", "type": kw.get("type", "schedule"), "category": category, "priority": "priority",
+            "subjects": ["A1"], "message": f"at {t}", "details": {"id": "A/1"}}
+
+
+def test_logged_alerts_leave_out_system_problems_and_a_cut_line(tmp_path):
+    p = tmp_path / "A.jsonl"
+    lines = [json.dumps(_alert(10.0)), json.dumps(_alert(12.0, "system-problem")), json.dumps(_alert(14.0))]
+    p.write_text("\n".join(lines) + "\n" + json.dumps(_alert(16.0))[:20])   # the last one cut by a kill
+    assert logged_alerts(p) == [(10.0, "A", "schedule", "priority", ("A1",), "at 10.0"),
+                                (14.0, "A", "schedule", "priority", ("A1",), "at 14.0")]
+
+
+def test_alerts_diff():
+    a, b, c = (1.0, "A", "x", "p", (), "m"), (2.0, "A", "x", "p", (), "m"), (3.0, "A", "x", "p", (), "m")
+    assert alerts_diff([a, b], [a, b]) is None
+    assert alerts_diff([b, a], [a, b]) == {"peer": 2, "in_process": 2, "only_peer": 0, "only_in_process": 0,
+                                           "order_only": True}
+    assert alerts_diff([a, c, c], [a, b]) == {"peer": 3, "in_process": 2, "only_peer": 2, "only_in_process": 1,
+                                              "order_only": False}
+
+
+def test_merge_live_keeps_the_other_phases(tmp_path):
+    p = tmp_path / "mesh.json"
+    p.write_text(json.dumps({"raw_msgs_per_s": 1, "ea_cpu_us_per_event": 99, "targets": {"latency_p99_ms": 20}}))
+    out = merge_live(p, {"live": {}, "ea_cpu_us_per_event": 20.0, "in_process_cpu_us_per_event": 10.0})
+    assert out["raw_msgs_per_s"] == 1 and out["ea_cpu_us_per_event"] == 20.0
+    assert out["in_process_cpu_us_per_event"] == 10.0
+    assert out["targets"]["latency_p99_ms"] == 20 and out["targets"]["ea_cpu_ratio"] == 1.5
+    assert merge_live(tmp_path / "none.json", {"live": {}})["live"] == {}
+
+
+def test_sources_carry_each_event_once(small):
+    """The command posts' shares split the scenario: every event in exactly one source."""
+    streams = source_streams(small)
+    assert set(streams) == set(cp_shares(small))
+    sent = Counter(id(m) for ms in streams.values() for m in ms)
+    assert max(sent.values()) == 1
+    assert len(sent) == sum(type(e) is not M.SensorHit for e in small.events)
+
+
+def test_in_process_same_input_is_what_the_peer_gets(small):
+    streams = source_streams(small)
+    ea = make_ea(small, "A2", config_for(small, "A2", None), sinks=[])
+    ea.start(0.0)
+    msgs = peer_inputs(small, ea, streams)
+    assert [m.t for m in msgs] == sorted(m.t for m in msgs)
+    got = in_process_same_input(small, ["A2"], streams)["A2"]
+    assert got["messages"] == len(msgs) > 0
+    assert all(a[1] == "A2" for a in got["alerts"])
