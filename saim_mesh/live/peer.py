@@ -450,7 +450,8 @@ class LivePeer:
                     for src in self.sources:   # silence: a decision, journalled
                         last = self.heard.get(src)
                         quiet, limit = (now - started, self.join_s) if last is None else (now - last, self.silence_s)
-                        if src not in self.ended and src not in self.order.lost and quiet > limit:
+                        ahead = self.promised.get(src, -math.inf) > self.order.released   # holds nothing back
+                        if src not in self.ended and src not in self.order.lost and quiet > limit and not ahead:
                             self.lose(src, f"silent for {quiet:.0f} s" if last is not None else
                                       f"never heard in {quiet:.0f} s")
                     if self.live_start is not None:
