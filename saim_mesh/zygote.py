@@ -29,7 +29,8 @@ from pathlib import Path
 from .proc import clean_env
 
 PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "msgspec", "msgpack",
-           "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer",
+           "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer", "saim_mesh.live.peer",
+           "zenoh.ext",
            "ea_agent.domains.suo.domain", "ea_agent.domains.uv.domain")
 WARM_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "small"
 

@@ -127,6 +127,9 @@ def test_leaves_and_routers_never_scout_and_routers_are_trusted_relays():
     relay = next(r for r in acl["rules"] if r["id"] == "router_relay")
     assert "router_relay" in pol["rules"] and "put" in relay["messages"] and "delete" not in relay["messages"]
     assert "router_relay" not in next(p for p in acl["policies"] if p["subjects"] == ["ea.A"])["rules"]
+    # a live source's cache, recovery queries and replies and liveliness live under verbatim
+    # `@adv` chunks, which `**` does not reach: a relay must name them or no recovery crosses
+    assert "saim/x/src/*/@adv/**" in relay["key_exprs"] and {"query", "reply"} <= set(relay["messages"])
 
 
 def test_a_tick_is_taken_once_every_source_gave_it():

@@ -11,6 +11,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from .. import zygote
 from ..mesh import Supervisor, mesh_units
 from ..proc import Proc, clean_env, leaf_env, py
 from ..zconf import free_port
@@ -99,7 +100,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
                 (out_dir / f).unlink(missing_ok=True)
             sup.add(Proc(u, [*py(), "peer", "--scenario", scenario, "--unit", u, *where(u), "--root", root,
                              "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args],
-                         env=leaf_env(), log_dir=logs))
+                         env=leaf_env(), log_dir=logs,
+                         spawner=zygote.spawner()))   # EA peers fork from one zygote (saim_mesh/zygote.py)
         for u in units:
             sup.procs[u].wait_for(f"ready {u}", 120)
         if not live and speed != "max":   # every source paced on one clock: event time 0 at this instant

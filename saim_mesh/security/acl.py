@@ -172,7 +172,9 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     # the rules above on its own ingress, where it still sees the sender's certificate,
     # and authority is signed end to end (security/sign.py).
     if routers:
-        relay = rule("router_relay", SENT, [f"{r}/**"])
+        # ... the advanced publishers' caches and tokens too (`@adv` chunks are verbatim: not
+        # under `**`): without them no recovery query or reply crosses a router link
+        relay = rule("router_relay", SENT, [f"{r}/**", adv])
         for name in sorted(dict.fromkeys(_chunk("router", x) for x in routers)):
             subject(f"router.{name}", [out, relay])
     for kind, items in (("rule", rules), ("subject", subjects), ("policy", policies)):

@@ -59,6 +59,8 @@ class UvDomain:
         self.t0 = self.now = 0.0
         self.plan: PlanState | None = None
         self.missions: dict[str, Mission] = {}
+        self.handoffs: dict[tuple[str, str, str], tuple[int, float]] = {}   # open handoff stories -> (n, last t)
+        self.handoff_n = 0                          # handoff stories begun (their VOA keys never repeat)
         self._reset()
 
     def _reset(self) -> None:
@@ -137,7 +139,7 @@ class UvDomain:
         self.timers.occurred(("start", m.id), t)
         r = self.robots.get(m.unit)
         if r is not None and r.t != NEG:   # the stuck clock starts with the task
-            r.anchor_t, r.anchor_x, r.anchor_y = max(r.anchor_t, t), r.x, r.y
+            r.anchor_t, r.anchor_x, r.anchor_y, r.anchor_h = max(r.anchor_t, t), r.x, r.y, r.heading
         if m.id in self.photo_every:
             self._arm_photo(m, 1, t + self.photo_every[m.id])
         tc = m.spec.end

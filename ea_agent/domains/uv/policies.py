@@ -16,6 +16,8 @@ import shapely
 
 from ea_agent.core.plan import MissionSpec
 
+from .detectors.handoff import story_key
+
 if TYPE_CHECKING:
     from .domain import UvDomain
     from .missions import Mission
@@ -89,7 +91,7 @@ class Policies:
                         shapely.contains_xy(dom.world[area].geom, tg.x, tg.y):
                     cands.append(dom.cand(t, "handoff", m, (m.unit, rid, target),
                                           f"{dom.name(m.unit)} hands pursuit of {target} to {dom.name(rid)} "
-                                          f"(target entered {area})", ("handoff", m.id, m.unit, rid), None,
+                                          f"(target entered {area})", story_key(dom, m.unit, rid, target, t), None,
                                           {"from": m.unit, "to": rid, "task": m.id, "target": target,
                                            "act": "policy", "places": [area]}))
                     return

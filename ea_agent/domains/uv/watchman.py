@@ -23,7 +23,7 @@ class Robot:
     history the stuck and divergent detectors keep (paper 7.4)."""
     __slots__ = ("id", "kind", "x", "y", "vx", "vy", "speed", "heading", "mode", "sigma", "t", "n",
                  "max_speed", "turn_rate", "sensor_range", "comm_range", "radius",
-                 "anchor_t", "anchor_x", "anchor_y", "paused_t",
+                 "anchor_t", "anchor_x", "anchor_y", "anchor_h", "paused_t", "spin_until",
                  "ref_goal", "ref_d", "ref_t", "turn_until", "aligned", "silence")
 
     def __init__(self, rid: str, attrs: dict, kind: str = "ugv"):
@@ -39,11 +39,13 @@ class Robot:
         self.comm_range = float(attrs.get("comm_range_m", math.inf))
         self.radius = float(attrs.get("radius_m", 0.5))
         self.anchor_t, self.anchor_x, self.anchor_y = NEG, 0.0, 0.0   # stuck: where it last moved from
+        self.anchor_h = 0.0                                           # ... and its heading then
+        self.spin_until = NEG         # a turn in place seen there could have finished by this time
         self.paused_t = NEG                                           # last paused / waiting-gps state
         self.ref_goal: str | None = None                              # divergent: best distance to goal
         self.ref_d = math.inf
         self.ref_t = NEG
-        self.turn_until = NEG
+        self.turn_until = NEG         # a turn toward the waypoint could have finished by this time
         self.aligned = True
         self.silence: tuple[float, bool] | None = None   # no-status of a teammate: (last state t, was in range)
 

@@ -4,7 +4,18 @@ Each robot keeps an event history on its `Robot` record: where it last moved fro
 (stuck) and its best distance to the current waypoint since the last progress
 check (divergent). Subtleties: a robot paused or waiting for GPS is not stuck; a
 turning robot is neither stuck nor divergent until its turn could have completed
-(heading error / turn rate); the divergent threshold grows with expected speed.
+(heading error / turn rate, plus `turn_settle_s`); the divergent threshold grows with
+expected speed.
+
+A turn restarts the stuck clock where it could have completed, as a pause does where
+it ends: a robot that turns in place for the whole stuck interval and then drives off
+is not stuck, one that stays put after its turn is, `stuck_s` after the turn could have
+completed. A turn is known from the heading error to the goto's waypoint, or seen: a
+robot in place whose heading moved more than `turn_tolerance_deg` from the one it
+stopped with, within `stuck_s` of stopping, is turning in place (at most half a turn
+from there, so it could have completed by now + (180 - turned) / turn rate + settle).
+A heading turned only after that, or never by more than the tolerance (jitter), does
+not hold the clock back: a robot really stuck is still told, late by one turn at most.
 """
 from __future__ import annotations
 
@@ -24,14 +35,25 @@ def heading_error(r: Robot, gx: float, gy: float) -> float:
     return abs((bearing - r.heading + 180.0) % 360.0 - 180.0)
 
 
+def turned(a: float, b: float) -> float:
+    """Degrees between two compass headings (0..180)."""
+    return abs((a - b + 180.0) % 360.0 - 180.0)
+
+
 def track(dom: "UvDomain", t: float) -> None:
     """Update the stuck anchor and turn state of every robot heard this epoch."""
-    stuck_m = float(dom.uv["stuck_m"])
+    uv = dom.uv
+    stuck_m, stuck_s = float(uv["stuck_m"]), float(uv["stuck_s"])
+    tol, settle = float(uv["turn_tolerance_deg"]), float(uv["turn_settle_s"])
     for rid in dom.watchman.dirty:
         r = dom.robots[rid]
         if r.anchor_t == NEG or r.paused_t >= r.anchor_t or math.hypot(r.x - r.anchor_x, r.y - r.anchor_y) > stuck_m:
             # moved (or paused / waiting for GPS): the stuck clock starts again from here
-            r.anchor_t, r.anchor_x, r.anchor_y = max(r.t, r.paused_t), r.x, r.y
+            r.anchor_t, r.anchor_x, r.anchor_y, r.anchor_h = max(r.t, r.paused_t), r.x, r.y, r.heading
+        elif r.t - r.anchor_t < stuck_s:
+            done = turned(r.heading, r.anchor_h)
+            if done > tol:   # turning in place: at most half a turn from where it stopped
+                r.spin_until = max(r.spin_until, r.t + (180.0 - done) / r.turn_rate + settle)
 
 
 def at_goal(dom: "UvDomain", t: float, cands: list) -> None:
@@ -67,14 +89,16 @@ def at_goal(dom: "UvDomain", t: float, cands: list) -> None:
 
 def stuck(dom: "UvDomain", t: float, cands: list) -> None:
     """Moved less than stuck_m in stuck_s while a moving task is active, not at its
-    goal, in `moving` mode and not turning."""
+    goal and in `moving` mode, counted from when its last turn could have completed."""
     stuck_s = float(dom.uv["stuck_s"])
     fresh = float(dom.uv["no_status_s"])
     for rid, m in dom.moving_tasks().items():
         r = dom.robots[rid]
-        if r.t == NEG or r.mode != "moving" or t - r.t > fresh or t < r.turn_until:
-            continue   # silent robots are no-status, paused ones are waiting, turning ones turning
-        still = t - max(r.anchor_t, dom.started_at(m))
+        if r.t == NEG or r.mode != "moving" or t - r.t > fresh:
+            continue   # silent robots are no-status, paused ones are waiting
+        # the stuck clock: from the task's start, the robot's last move, or where its turn could have completed
+        turn = r.turn_until if r.turn_until > r.spin_until else r.spin_until
+        still = t - max(r.anchor_t, dom.started_at(m), turn)
         if still < stuck_s:
             continue
         goal = m.goal()
