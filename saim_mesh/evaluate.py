@@ -28,19 +28,24 @@ def _matches(a: Alert, item: dict) -> bool:
 
 
 def _projections(alerts: list[Alert], incidents: list[dict]) -> dict:
-    """Projected violations: how long before each violation it was foretold (lead), and
-    the projections that foretold nothing (false)."""
+    """Projected violations: how long before each violation it was foretold (lead: from
+    the alert to when the oracle says the violation happened, its `at`; the window's
+    start t0 is earlier by the slack it grants for stale reports, and can come before
+    the unit has done anything), the projections raised at or after the violation they
+    foretell (after_the_fact: a late alert under a misleading name), and those that
+    foretold nothing (false). Where a projection matches several incidents, the earliest
+    violation counts."""
     proj = [a for a in alerts if a.details.get("projects") is not None]
     leads, false = [], 0
     for a in proj:
         hit = [i for i in incidents if _matches(a, i)]
         if hit:
-            leads.append(round(min(i["t0"] for i in hit) - a.t, 1))
+            leads.append(round(min(i.get("at", i["t0"]) for i in hit) - a.t, 1))
         else:
             false += 1
     leads.sort()
-    return {"alerts": len(proj), "false": false, "lead_s": leads,
-            "lead_s_median": leads[len(leads) // 2] if leads else None}
+    return {"alerts": len(proj), "false": false, "after_the_fact": sum(1 for x in leads if x <= 0.0),
+            "lead_s": leads, "lead_s_median": leads[len(leads) // 2] if leads else None}
 
 
 # What makes a later alert about the same story news: its severity (a detail of the alert)

@@ -12,11 +12,12 @@ from .test_uv_alerts import PATROL1, PATROL2, ea, line, of, robot, run, scenario
 def policy_then_agents():
     """E1 leaves UGV1's sector SEC1 into SEC2, UGV2's patrol area: the EAs' policy hands
     the pursuit to UGV2 (target-gone, about 5 s); then the robots' own delegate (8 s) and
-    accept (8.5 s) of that pursuit."""
+    accept (8.5 s) of that pursuit, under the robot's own name for its task (as in
+    scenarios/uv-team), not the EA's."""
     msgs = still("UGV1", 0, 0, 0, 20) + still("UGV2", 150, 0, 0, 20) \
         + [sg(2 + k / 2, "UGV1", "E1", 60 + 10 * k, 0) for k in range(10)]
-    msgs.append(UvAgent(8.0, "UGV1", "UGV2", "delegate", "P1/pursue-E1-1", "E1"))
-    msgs.append(UvAgent(8.5, "UGV2", "UGV1", "accept", "P1/pursue-E1-1", "E1"))
+    msgs.append(UvAgent(8.0, "UGV1", "UGV2", "delegate", "UGV1-pursue-E1", "E1"))
+    msgs.append(UvAgent(8.5, "UGV2", "UGV1", "accept", "UGV1-pursue-E1", "E1"))
     return msgs
 
 

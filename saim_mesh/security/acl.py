@@ -114,7 +114,8 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                       "key_exprs": keys})
         return rid
 
-    out = rule("egress", SENT, [f"{r}/**"], "egress")
+    adv = f"{r}/src/*/@adv/**"   # zenoh.ext's verbatim chunks (below): named wherever they flow
+    out = rule("egress", SENT, [f"{r}/**", adv], "egress")
     read_all = rule("read", READ, [f"{r}/**"])
     read_public = rule("read_public", READ, [f"{r}/alert/**", f"{r}/alive/**"])
     query_store = rule("query_store", ["query"], [f"{r}/store/**"])
@@ -122,7 +123,6 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     # and liveliness token under src/<name>/@adv/...; `@` chunks are verbatim (`**` does not
     # reach them), so they are named. An EA's advanced subscriber queries those caches and
     # declares its own token under src/*/@adv/...
-    adv = f"{r}/src/*/@adv/**"
     ea_src = [rule("ea_src_read", READ, [adv]), rule("ea_src", ["query", "liveliness_token"], [adv, f"{r}/src/**"])]
 
     def subject(cn: str, rule_ids: list[str]) -> None:

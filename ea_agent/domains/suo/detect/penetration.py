@@ -1,6 +1,8 @@
 """Projected penetration (beyond the paper, as the other projections): before a hostile
 enters an area no hostile may enter (block, retain, guard, a defence's rear line), from
-how its track has been moving; and a rear line crossed between two reports. The actual penetration is the Areas component's alert
+how its track has been moving (only when the first of them would be in at least `[voi]
+projection_min_lead_s` ahead: a projection is worth its name only before what it
+projects); and a rear line crossed between two reports. The actual penetration is the Areas component's alert
 of kind "penetration"; the projection sets that alert's history, so VOA tells the
 story once unless the penetration proves much stronger."""
 from __future__ import annotations
@@ -125,6 +127,8 @@ class ProjectedPenetrations(Detector):
             if not coming:
                 continue
             lead, first, speed = min(coming)
+            if lead < dom.voi(m, "projection_min_lead_s"):
+                continue   # the first comes in too soon for a projection: the actual penetration tells it
             ids = sorted(k for _, k, _ in coming)
             strength = sum(tracks[k].strength for k in ids)
             cands.append(Candidate(

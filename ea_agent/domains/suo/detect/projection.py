@@ -2,13 +2,28 @@
 unit leaves its route or axis, or arrives after its mission's END-NLT, from how it has
 been moving.
 
-Why trends and not straight-line extrapolation: a unit that follows a bending route
-would be projected off it at every bend. What is extrapolated is the measure the
-actual alert judges: the distance to the route (growing, it will cross the threshold
-at ...), and the distance still to go to the destination (shrinking at this rate, it
-arrives at ...). A projection and the later actual alert are one story for VOA: the
-projection sets the history of the actual alert's key, so the actual violation is not
-told again unless it is much worse (the type's repeat ratio)."""
+A projection is worth its name only ahead of what it projects: one is raised only when
+the model puts the violation at least `[voi] projection_min_lead_s` ahead (less, and
+the actual alert is due within about a report interval: a late alert with a misleading
+name).
+
+A route departure is projected from the unit's recent trend against its route: its
+cross-track rate, from the heading of its members' latest reports against the route's
+direction, confirmed by the sampled growth of its distance off the route. Only once the
+picture has settled: every member heard recently shows the drift (while some have not
+reported since the unit turned, the mean heading and the centroid lag the unit, and a
+projection made then comes after the fact). A unit that cannot be projected that far
+ahead (it leaves faster than its reports can tell) is told by the actual alert alone.
+
+Why not straight-line extrapolation of the position: a unit that follows a bending
+route would be projected off it at every bend. What is extrapolated is the measure the
+actual alert judges (the distance off the route: at this rate it crosses the threshold
+at ...; the distance still to go to the destination: at this rate it arrives at ...), and
+the route's direction a unit's heading is judged against is any the route takes over
+the ground the unit may have covered since its members' reports (it may have turned
+with the route since). A projection and the later actual alert are one story for VOA:
+the projection sets the history of the actual alert's key, so the actual violation is
+not told again unless it is much worse (the type's repeat ratio)."""
 from __future__ import annotations
 
 import math
@@ -26,6 +41,11 @@ from .base import Changes, Detector
 KEEP_S = 300.0   # history kept per mission
 SAMPLE_S = 10.0  # scenario seconds between samples of the trends
 MARGIN = 2.0     # a late arrival is projected only this many schedule thresholds late
+CONFIRM_S = 30.0  # a route departure's heading is confirmed by the distance off the route over this much history
+CONFIRM = 0.5     # ... grown at least this share of the rate the heading gives
+AGREE = 0.5       # the picture has settled when every member heard recently drifts at least this share of the mean
+MIN_RATE = 0.1    # m/s: a slower cross-track drift is noise (150 m would take 25 min)
+STEP_M = 5.0      # a route's direction is taken over this much of it
 
 
 class Projections(Detector):
@@ -190,46 +210,115 @@ class Projections(Detector):
         span = float(dom.voi_cfg["projection_trend_s"])
         for m in self.due:   # sampled this epoch
             h = self.hist.get(m.id)
-            if not h:
+            if not h or h[-1][0] < t:
                 continue
+            min_lead = self.dom.voi(m, "projection_min_lead_s")
+            self._off_route_ahead(m, t, h, horizon, min_lead, cands)
             old = h[0] if h[0][0] <= t - span else None   # samples are in time order
-            now = h[-1]
-            if old is None or now[0] < t:
-                continue
-            dt = now[0] - old[0]
-            if dt <= 0.0:
-                continue
-            self._off_route_ahead(m, t, old, now, dt, horizon, cands)
-            self._late_ahead(m, t, old, now, dt, horizon, cands)
+            if old is not None and h[-1][0] > old[0]:
+                self._late_ahead(m, t, old, h[-1], h[-1][0] - old[0], horizon, min_lead, cands)
 
-    def _off_route_ahead(self, m, t, old, now, dt, horizon, cands) -> None:
-        d0, d1 = old[1], now[1]
-        if d0 is None or d1 is None:
+    def _off_route_ahead(self, m, t, h, horizon, min_lead, cands) -> None:
+        """A unit drifting off its route, projected from its cross-track rate (see the module
+        note): raised when it would cross the threshold in min_lead..horizon."""
+        now = h[-1]
+        d1 = now[1]
+        if d1 is None:
             return
         thr = self.dom.voi(m, "out_of_position_m")
-        rate = (d1 - d0) / dt
-        if d1 > thr or rate <= 0.1:   # already out (the actual alert's business) or not drifting away
+        if d1 >= thr:
+            return   # already out: the actual alert's business
+        prev = None   # the latest sample at least CONFIRM_S old
+        for x in h:
+            if x[0] > t - CONFIRM_S:
+                break
+            prev = x
+        if prev is None or prev[1] is None:
             return
+        grown = (d1 - prev[1]) / (now[0] - prev[0])
+        if grown <= MIN_RATE:   # not drifting away (checked first: the heading costs more)
+            return
+        drift = self._drift(m, t)
+        if drift is None:
+            return
+        heading_rate, settled, members = drift
+        if not settled or heading_rate <= MIN_RATE or grown < CONFIRM * heading_rate:
+            return   # the picture lags the unit, or its heading and its distance off the route disagree
+        rate = max(heading_rate, grown)   # the faster: a projection errs early, never late
         ahead = (thr - d1) / rate
-        if ahead > horizon:
+        if ahead < min_lead or ahead > horizon:
             return
-        r = self._route(m)
-        geom, what = r
-        if what == "corridor":
-            geom = self.dom.location.corridor_to[geom][1]
+        geom, what = self._route(m)
         name = self.dom.name(m.unit)
         cands.append(Candidate(
             t, "projected-out-of-position", m.compute_priority("projected-out-of-position"), (m.unit,),
-            f"{name} projected to leave {'the corridor to ' if what == 'corridor' else ''}{geom} in {ahead:.0f} s (at {hms(t + ahead)}): {km(d1)} off it now, "
+            f"{name} projected to leave {geom} in {ahead:.0f} s (at {hms(t + ahead)}): {km(d1)} off it now, "
             f"drifting {rate:.1f} m/s",
             key=("projected-out-of-position", m.id, what), measure=horizon - ahead,
             details={"mission": m.id, "projects": "out-of-position", "control_measure": geom, "check": what,
                      "projected_t": round(t + ahead, 1),
                      "lead_s": round(ahead, 1), "distance_m": round(d1, 1), "rate_mps": round(rate, 2),
+                     "heading_rate_mps": round(heading_rate, 2), "trend_rate_mps": round(grown, 2),
+                     "members": members, "min_lead_s": min_lead,
                      "threshold_m": thr, "places": [geom]},
             also=((("out-of-position", m.id, what), thr),), projection=True))
 
-    def _late_ahead(self, m, t, old, now, dt, horizon, cands) -> None:
+    def _drift(self, m: Mission, t: float) -> tuple[float, bool, int] | None:
+        """The unit's cross-track rate away from its route (m/s) from the velocities its
+        members' latest reports showed (standing still: none), whether the picture has
+        settled (every member heard within unknown_position_s drifts at least AGREE of the
+        mean: none still shows the heading it had before the unit turned), and how many
+        members were judged. The route's direction is the one that makes the rate least
+        of those it takes from the unit's nearest point back over the ground the unit
+        covered since its oldest report judged (it may have turned with the route since).
+        None without members heard or a position."""
+        dom = self.dom
+        pos = dom.unit_now.get(m.unit)
+        pic = dom.pic
+        idx = pic.members.get(m.unit)
+        if pos is None or idx is None or not len(idx):
+            return None
+        seen = pic.seen[idx]
+        heard = ~np.isnan(pic.xy[idx, 0]) & (t - seen <= float(dom.voi_cfg["unknown_position_s"]))
+        if not heard.any():
+            return None
+        idx, seen = idx[heard], seen[heard]
+        vel = pic.vel[idx].copy()
+        vel[seen > pic.moved_t[idx] + 0.5] = 0.0   # its last report showed it standing still
+        mean = vel.mean(axis=0)
+        speed = float(np.hypot(*mean))
+        line = self._line(self._route(m))
+        p = shapely.Point(pos)
+        s = float(line.project(p))
+        near = line.interpolate(s)
+        off = (pos[0] - near.x, pos[1] - near.y)
+        back = speed * float(min(t - seen.min(), float(dom.voi_cfg["dead_reckon_s"])))
+        rates = []
+        local = None
+        for k, at in enumerate((s, s - back / 2, s - back) if back > STEP_M else (s,)):
+            a = line.interpolate(max(0.0, at - STEP_M))
+            b = line.interpolate(min(line.length, at + STEP_M))
+            tx, ty = b.x - a.x, b.y - a.y
+            n = math.hypot(tx, ty)
+            if n <= 0.0:
+                continue
+            nx, ny = -ty / n, tx / n   # normal to the route there, turned to the unit's side
+            side = nx * off[0] + ny * off[1]
+            if abs(side) < 1.0:   # on the route: the side it heads to
+                side = nx * mean[0] + ny * mean[1]
+            if side < 0.0:
+                nx, ny = -nx, -ny
+            w = vel @ np.array((nx, ny))
+            rates.append(float(w.mean()))
+            if k == 0:
+                local = w
+        if local is None:
+            return None
+        rate = min(rates)
+        settled = rate > 0.0 and float(local.min()) >= AGREE * float(local.mean())
+        return rate, settled, int(len(idx))
+
+    def _late_ahead(self, m, t, old, now, dt, horizon, min_lead, cands) -> None:
         g0, g1 = old[2], now[2]
         if g0 is None or g1 is None:
             return
@@ -238,8 +327,9 @@ class Projections(Detector):
             return   # the deadline too far to judge by a trend
         dom = self.dom
         thr_m, thr_s = dom.voi(m, "out_of_position_m"), dom.voi(m, "schedule_s")
-        if g1 <= thr_m or t >= end + thr_s:
-            return   # there already, the actual late alert is due, or the deadline too far to judge by a trend
+        lead = end + thr_s - t   # the actual late alert is due at end + schedule_s
+        if g1 <= thr_m or lead <= 0.0 or lead < min_lead:
+            return   # there already, or the violation too near to be worth a projection
         closing = (g0 - g1) / dt
         eta = t + g1 / closing if closing > 0.05 else math.inf
         late = eta - end
