@@ -352,8 +352,8 @@ class Peer(Intake, TickWait):
         try:
             if tick.end:
                 self.ea.finish(tick.t)
-            else:
-                self.ea.advance(tick.t)
+            else:   # a tick at t promises what is before t: what is at t comes after it
+                self.ea.advance(tick.t, strict=True)
         finally:
             self.gap = None
         if tick.w is not None:   # wall-clock latency from the tick's publication to its processing
@@ -576,7 +576,7 @@ class Peer(Intake, TickWait):
         try:
             self._feed(sorted(((seq, m) for seq, p in entries if (m := self.gate.data(p, "store")) is not None),
                               key=lambda x: x[0]))
-            self.ea.advance(t)
+            self.ea.advance(t, strict=True)
         finally:
             self.replaying = False
         self.t = self.clock_t = t

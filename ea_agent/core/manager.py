@@ -133,12 +133,14 @@ class ExecutionAssistant:
         except (KeyError, ValueError, TypeError) as e:  # a bug-level failure: count it, keep running
             self.error(f"batch of {len(facts)} facts from t={facts[0].t}: {e}")
 
-    def advance(self, t: float) -> None:
-        """Scenario time reached t: process what is pending and close finished epochs."""
+    def advance(self, t: float, strict: bool = False) -> None:
+        """Scenario time reached t: process what is pending and close finished epochs
+        (`strict`: facts at t itself may still come, as after a clock tick that promises
+        only what is before it: the epoch ending at t stays open)."""
         if t > self.now:
             self.now = t
         self.process()
-        self._close_until(t)
+        self._close_until(t, strict)
 
     def _close_until(self, t: float, strict: bool = False) -> None:
         """Close the epochs that end at or before t (`strict`: before t, when a fact at t

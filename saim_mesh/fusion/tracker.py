@@ -44,6 +44,10 @@ class Track:
     alt: float | None = None         # metres above ground (mean of its hits' altitudes), if measured
     told: "Report | None" = None     # the last report of it (what receivers extrapolate from)
     trail: deque = field(default_factory=lambda: deque(maxlen=32))   # (t, x, y) after each update
+    xs: np.ndarray | None = None     # per motion model (steady, manoeuvring): its state, 2 x 4
+    Ps: np.ndarray | None = None     # and covariance, 2 x 4 x 4 (x and P above: their mixture)
+    mu: np.ndarray | None = None     # the models' probabilities
+    P_upd: np.ndarray | None = None  # P at the last update (what a report's own sigma is)
 
 
 @dataclass
@@ -66,17 +70,25 @@ class KalmanTracker:
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
                  dr_m: float | None = 50.0, dr_k: float = 4.0, heartbeat_s: float = 60.0,
-                 dr_lag_s: float = 2.0, still_m: float = 50.0, still_s: float = 30.0):
-        if not (math.isfinite(q) and q > 0 and math.isfinite(q_fast) and q_fast > 0):
-            raise ValueError(f"process noise must be finite and > 0 (q={q!r}, q_fast={q_fast!r})")
+                 dr_lag_s: float = 2.0, still_m: float = 50.0, still_s: float = 30.0,
+                 q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0,
+                 steady_s: float = 60.0, man_s: float = 20.0,
+                 dr_m_air: float = 50.0, dr_lag_ground_s: float = 2.0):
+        for k, v in (("q", q), ("q_fast", q_fast), ("q_man", q_man), ("q_air", q_air), ("q_air_man", q_air_man),
+                     ("steady_s", steady_s), ("man_s", man_s)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise ValueError(f"process noise must be finite and > 0 ({k}={v!r})")
         if not 1 <= m <= n:
             raise ValueError(f"confirmation M-of-N needs 1 <= M <= N, got M={m}, N={n}")
         self.name, self.sigma = name, sigma
         self.q, self.q_fast, self.fast = q, q_fast, fast_mps
+        self.motion = {"ground": (q, q_man), "air": (q_air, q_air_man), "tentative": (q_fast, q_fast)}
+        self.switch = (1.0 / steady_s, 1.0 / man_s)   # rates of leaving the steady / the manoeuvring model
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
         self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
+        self.dr_m_air, self.dr_lag_ground_s = dr_m_air, dr_lag_ground_s
         self.still_m, self.still_s = still_m, still_s
         self.tracks: list[Track] = []
         self.seq = 0
@@ -134,31 +146,66 @@ class KalmanTracker:
             m = float(a.mean())
             tr.alt = m if tr.alt is None else 0.5 * tr.alt + 0.5 * m
 
+    # -- motion models ------------------------------------------------------------------
+    def mover(self, tr: Track) -> str:
+        """What the track moves like: `tentative` until confirmed, then `air` when it flies
+        (height above `air_agl_m`) or is faster than `fast_mps` (no ground vehicle is), else
+        `ground`. Each has a steady and a manoeuvring constant-velocity model (`motion`)."""
+        if not tr.confirmed:
+            return "tentative"
+        fast = math.hypot(tr.x_upd[2], tr.x_upd[3]) > self.fast
+        return "air" if fast or (tr.alt is not None and tr.alt > self.air_agl_m) else "ground"
+
+    def _mixing(self, dt: float) -> np.ndarray:
+        """P(model j at t + dt | model i at t): a two-state Markov chain in continuous time."""
+        a, b = self.switch
+        e = 1.0 - math.exp(-(a + b) * dt)
+        pa, pb = a / (a + b) * e, b / (a + b) * e
+        return np.array([[1.0 - pa, pa], [pb, 1.0 - pb]])
+
     def _predict(self, t: float) -> None:
+        """Interacting multiple models (IMM): mix the models' states by the chance each came
+        from the other, then predict each with its own process noise."""
         for tr in self.tracks:
             dt = t - tr.t
             if dt <= 0:
                 continue
             F = I4.copy()
             F[0, 2] = F[1, 3] = dt
-            q = self.q_fast if math.hypot(tr.x[2], tr.x[3]) > self.fast or not tr.confirmed else self.q
             d3, d2_, d1 = dt ** 3 / 3, dt ** 2 / 2, dt
-            Q = q * np.array([[d3, 0, d2_, 0], [0, d3, 0, d2_], [d2_, 0, d1, 0], [0, d2_, 0, d1]])
-            tr.x = F @ tr.x
-            tr.P = F @ tr.P @ F.T + Q
+            Q = np.array([[d3, 0, d2_, 0], [0, d3, 0, d2_], [d2_, 0, d1, 0], [0, d2_, 0, d1]])
+            Pi = self._mixing(dt)
+            c = tr.mu @ Pi                                   # predicted model probabilities
+            w = tr.mu[:, None] * Pi / c[None, :]             # w[i, j]: P(was i | is j)
+            x0 = w.T @ tr.xs                                 # 2 x 4
+            dx = tr.xs[:, None, :] - x0[None, :, :]          # i x j x 4
+            P0 = np.einsum("ij,ikl->jkl", w, tr.Ps) + np.einsum("ij,ijk,ijl->jkl", w, dx, dx)
+            qs = self.motion[self.mover(tr)]
+            tr.xs = x0 @ F.T
+            tr.Ps = np.stack([F @ P0[j] @ F.T + qs[j] * Q for j in range(2)])
+            tr.mu = c
+            self._combine(tr)
             tr.t = t
 
+    @staticmethod
+    def _combine(tr: Track) -> None:
+        tr.x = tr.mu @ tr.xs
+        dx = tr.xs - tr.x
+        tr.P = np.einsum("j,jkl->kl", tr.mu, tr.Ps) + np.einsum("j,jk,jl->kl", tr.mu, dx, dx)
+
     def _d2(self, z: np.ndarray, r2: float, with_ext: bool) -> np.ndarray:
-        """Squared Mahalanobis distance of every hit to every track's predicted position."""
-        X = np.array([tr.x[:2] for tr in self.tracks])
-        S = np.array([tr.P[:2, :2] for tr in self.tracks]).copy()
-        add = r2 + (np.array([tr.ext for tr in self.tracks]) if with_ext else 0.0)
+        """Squared Mahalanobis distance of every hit to every track's predicted position:
+        the least over its motion models (a hit a manoeuvre explains is in the gate)."""
+        X = np.concatenate([tr.xs[:, :2] for tr in self.tracks])             # 2T x 2
+        S = np.concatenate([tr.Ps[:, :2, :2] for tr in self.tracks]).copy()
+        add = r2 + (np.repeat([tr.ext for tr in self.tracks], 2) if with_ext else 0.0)
         S[:, 0, 0] += add
         S[:, 1, 1] += add
         det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-        v = z[None, :, :] - X[:, None, :]                      # tracks x hits x 2
+        v = z[None, :, :] - X[:, None, :]                      # 2T x hits x 2
         a, b, c = S[:, 1, 1, None], -S[:, 0, 1, None], S[:, 0, 0, None]
-        return (a * v[..., 0] ** 2 + 2 * b * v[..., 0] * v[..., 1] + c * v[..., 1] ** 2) / det[:, None]
+        d2 = (a * v[..., 0] ** 2 + 2 * b * v[..., 0] * v[..., 1] + c * v[..., 1] ** 2) / det[:, None]
+        return d2.reshape(len(self.tracks), 2, len(z)).min(axis=1)
 
     def _update(self, tr: Track, zs: np.ndarray, r2: float, t: float) -> None:
         n = len(zs)
@@ -167,11 +214,22 @@ class KalmanTracker:
             spread = float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0)
             tr.ext = 0.7 * tr.ext + 0.3 * max(spread - r2, 0.0)
         R = np.eye(2) * (r2 + tr.ext) / n
-        S = tr.P[:2, :2] + R
-        K = tr.P[:, :2] @ np.linalg.inv(S)
-        tr.x = tr.x + K @ (zc - tr.x[:2])
-        tr.P = (I4 - K @ np.eye(2, 4)) @ tr.P
-        tr.P = (tr.P + tr.P.T) / 2.0
+        ll = np.empty(2)
+        for j in range(2):
+            P = tr.Ps[j]
+            S = P[:2, :2] + R
+            Si = np.linalg.inv(S)
+            nu = zc - tr.xs[j, :2]
+            K = P[:, :2] @ Si
+            tr.xs[j] = tr.xs[j] + K @ nu
+            P = (I4 - K @ np.eye(2, 4)) @ P
+            tr.Ps[j] = (P + P.T) / 2.0
+            ll[j] = -0.5 * float(nu @ Si @ nu) - 0.5 * math.log(float(np.linalg.det(S)))
+        mu = tr.mu * np.exp(ll - ll.max())
+        tr.mu = np.clip(mu / mu.sum(), 1e-6, 1.0)
+        tr.mu /= tr.mu.sum()
+        self._combine(tr)
+        tr.P_upd = tr.P.copy()
         tr.t = tr.t_upd = t
         tr.x_upd = tr.x.copy()
         tr.counts.append(n)
@@ -192,6 +250,7 @@ class KalmanTracker:
                 for j in np.nonzero((d[i] <= self.birth_m) & (label < 0))[0]:
                     label[j] = s
                     stack.append(int(j))
+        a, b = self.switch
         for lab in np.unique(label):
             mine = label == lab
             zs = z[mine]
@@ -200,8 +259,10 @@ class KalmanTracker:
             pv = r2 + ext
             self.seq += 1
             x = np.array([zc[0], zc[1], 0.0, 0.0])
-            tr = Track(f"{self.name}-{self.seq}", x, np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2]), t, t, x.copy(),
-                       ext)
+            P = np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2])
+            tr = Track(f"{self.name}-{self.seq}", x, P, t, t, x.copy(), ext)
+            tr.xs, tr.Ps = np.stack([x, x]), np.stack([P, P])
+            tr.mu, tr.P_upd = np.array([b, a]) / (a + b), P.copy()   # the chain's long-run shares
             tr.counts.append(len(zs))
             tr.hit_window = True
             self._height(tr, alt, mine)
@@ -245,9 +306,16 @@ class KalmanTracker:
         if r.t - last.t >= self.heartbeat_s:
             return True
         dt = r.t - last.t
-        own = self.dr_k * math.sqrt(max(float(tr.P[0, 0]), float(tr.P[1, 1])))   # its own noise is no news
-        lag = self.dr_lag_s * math.hypot(r.vx, r.vy)   # nor an error of where it is a moment later
-        return math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > max(self.dr_m, own, lag)
+        return math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > self.dr_threshold(tr)
+
+    def dr_threshold(self, tr: Track) -> float:
+        """How far the receivers' extrapolation may be off before a report is news."""
+        air = self.mover(tr) == "air"
+        sig = math.sqrt(max(float(tr.P_upd[0, 0]), float(tr.P_upd[1, 1])))
+        speed = math.hypot(tr.x_upd[2], tr.x_upd[3])
+        floor = self.dr_m_air if air else self.dr_m
+        lag = self.dr_lag_s if air else self.dr_lag_ground_s
+        return max(floor, self.dr_k * sig, lag * speed)
 
     def domain(self, tr: Track) -> str:
         """Air when it flies (height above `air_agl_m`) or moves faster than any ground
