@@ -26,11 +26,16 @@ EPOCH = datetime(2026, 1, 1)
 
 
 # -- trackers on (t, sensor, x, y) scans ----------------------------------------------------
-def scans(hits) -> list[tuple[float, str, np.ndarray]]:
+def scans(hits) -> list[tuple[float, str, np.ndarray, np.ndarray | None]]:
+    """(t, sensor, hits k x 2, their heights or None where the sensor gives none) per scan."""
     out: dict[tuple[float, str], list] = defaultdict(list)
     for h in hits:
-        out[(h.t, h.sensor)].append((h.x, h.y))
-    return [(t, s, np.array(v)) for (t, s), v in sorted(out.items())]
+        out[(h.t, h.sensor)].append((h.x, h.y, np.nan if h.alt is None else h.alt))
+    res = []
+    for (t, s), v in sorted(out.items()):
+        a = np.array(v)
+        res.append((t, s, a[:, :2], a[:, 2] if np.isfinite(a[:, 2]).any() else None))
+    return res
 
 
 def run_kalman(ds: DataSet, window_s: float = 5.0) -> tuple[list[tuple], float]:
@@ -38,11 +43,11 @@ def run_kalman(ds: DataSet, window_s: float = 5.0) -> tuple[list[tuple], float]:
     sc = scans(ds.hits)
     t0 = time.perf_counter()
     reps, end = [], window_s
-    for t, s, z in sc:
+    for t, s, z, alt in sc:
         while t >= end:
             reps += tr.close_window(end)
             end += window_s
-        tr.scan(t, s, z)
+        tr.scan(t, s, z, alt)
     reps += tr.close_window(end)
     dt = time.perf_counter() - t0
     return [(r.t, r.track, r.x, r.y, r.vx, r.vy) for r in reps if r.strength > 0], len(ds.hits) / dt

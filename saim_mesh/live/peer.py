@@ -48,6 +48,7 @@ from .source import CACHE
 
 BLOCK = zenoh.CongestionControl.BLOCK
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
+CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, silences) while frames flow
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 DATA = (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
         M.Reorganization)
@@ -359,7 +360,7 @@ class LivePeer:
         for m in self.order.release(upto):
             self.ea.submit(m)
         r = self.order.released
-        if math.isfinite(r) and r > self.ea.now:
+        if math.isfinite(r) and r >= self.ea.epoch_end:   # an epoch can close (else facts keep batching)
             self.ea.advance(r)
         self.timeline.released(r)
         if self.order.late:
@@ -429,6 +430,7 @@ class LivePeer:
                          + (f" (not depending on {','.join(sorted(set(self.named) - set(self.sources)))})"
                             if len(self.sources) < len(self.named) else ""), flush=True)
                 started = time.monotonic()
+                next_check = 0.0
                 while not self.done() and time.monotonic() < end_wall:
                     try:
                         key, payload = self.q.get(timeout=0.5)
@@ -441,9 +443,12 @@ class LivePeer:
                         self.command(*payload)
                     elif key is not None:
                         self.receive(payload, key)
+                    now = time.monotonic()
+                    if key is not None and now < next_check:
+                        continue   # while frames flow, the checks below run every CHECK_S
+                    next_check = now + CHECK_S
                     if self.retry:
                         self._retry()
-                    now = time.monotonic()
                     for src, since in list(self.gap_since.items()):
                         if now - since > GAP_WAIT_S:
                             self._drain_held(src, force=True)
