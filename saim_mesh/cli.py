@@ -350,12 +350,12 @@ def cmd_mesh(a) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     if a.live or a.sources_per_cp:   # the mesh with no centre: sources per command post, no replay
         from .live.up import up as live_up
-        for bad, flag in ((a.console is not None, "--console"), (a.topology, "--topology"), (a.tak, "--tak"),
-                          (a.pki, "--pki (it makes its own test PKI)")):
+        for bad, flag in ((a.tak, "--tak"), (a.pki, "--pki (it makes its own test PKI)")):
             if bad:
                 raise ValueError(f"mesh up --live: {flag} is not built for the live mesh yet (issue 31)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
-                      live=a.live, insecure=a.insecure)
+                      live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
+                      console=a.console, console_linger=a.console_linger)
         return 0 if len(res["peers"]) == len(a.units or res["peers"]) else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
@@ -473,7 +473,7 @@ def cmd_console(a) -> int:
         raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"console.{unit}", sc, root, **_zmode(a))
-    return main_console(sc, conf, root, unit, a.port, a.linger)
+    return main_console(sc, conf, root, unit, a.port, a.linger, live=a.sources)
 
 
 def cmd_report(a) -> int:
@@ -726,6 +726,8 @@ def main(argv: list[str] | None = None) -> int:
     co.add_argument("--unit", help="whose commander (default: the top unit); acts for the unit's subtree")
     co.add_argument("--port", type=int, default=8470, help="HTTP port on 127.0.0.1 (0: a free port)")
     co.add_argument("--linger", type=_seconds, default=30.0, help="seconds to stay up after the scenario's end")
+    co.add_argument("--sources", action="store_true",
+                    help="the live mesh (no replay): draw the sources' frames, the clock from their watermarks")
     _zenoh_args(co)
     co.set_defaults(fn=cmd_console)
     from .tak.gateway import add_arguments as tak_arguments

@@ -8,15 +8,17 @@ import threading
 import time
 from typing import Callable
 
-from .feed import MeshFeed, mesh_actions, serve_inprocess
+from .feed import LiveFeed, MeshFeed, mesh_actions, serve_inprocess
 from .server import Server, make_app
 from .state import State
 
 
-def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, linger_s: float = 30.0) -> int:
+def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, linger_s: float = 30.0,
+                 live: bool = False) -> int:
     """Serve the console for the mesh at `conf` until the replay's end tick plus `linger_s`
     (wall seconds), SIGTERM or Ctrl-C. `conf`: a zenoh.Config (zconf.config(...,
-    name=f"console.{unit}") under --pki). Returns the exit code."""
+    name=f"console.{unit}") under --pki). `live`: the mesh with no centre (the sources'
+    frames and watermarks instead of the replay's data keys and clock). Returns the exit code."""
     unit = unit or sc.taskorg.root
     if unit not in sc.taskorg.units:
         print(f"saim-mesh console: unknown unit {unit!r}: not in the task organization of {sc.name}",
@@ -25,7 +27,7 @@ def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, li
     log = lambda *a, **k: print(*a, **k, file=sys.stdout)   # noqa: E731
     from ..mesh import mesh_units
     state = State(sc, unit, eligible=mesh_units(sc))   # acts for the EA peers under it, as organised now
-    feed = MeshFeed(sc, conf, root, state, log=log)
+    feed = (LiveFeed if live else MeshFeed)(sc, conf, root, state, log=log)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())

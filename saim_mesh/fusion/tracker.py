@@ -25,14 +25,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-I4 = np.eye(4)
+I5 = np.eye(5)
+H = np.eye(2, 5)
+W0 = 1e-6   # the steady model's turn-rate variance (rad^2/s^2): it does not turn
 
 
 @dataclass
 class Track:
     id: str
-    x: np.ndarray                    # [x, y, vx, vy] at time t
-    P: np.ndarray                    # 4 x 4 covariance
+    x: np.ndarray                    # [x, y, vx, vy, turn rate] at time t
+    P: np.ndarray                    # 5 x 5 covariance
     t: float                         # the time x and P describe (the last prediction)
     t_upd: float                     # the last update (what a report describes)
     x_upd: np.ndarray                # the state then
@@ -44,8 +46,8 @@ class Track:
     alt: float | None = None         # metres above ground (mean of its hits' altitudes), if measured
     told: "Report | None" = None     # the last report of it (what receivers extrapolate from)
     trail: deque = field(default_factory=lambda: deque(maxlen=32))   # (t, x, y) after each update
-    xs: np.ndarray | None = None     # per motion model (steady, manoeuvring): its state, 2 x 4
-    Ps: np.ndarray | None = None     # and covariance, 2 x 4 x 4 (x and P above: their mixture)
+    xs: np.ndarray | None = None     # per motion model (steady, manoeuvring): its state, 2 x 5
+    Ps: np.ndarray | None = None     # and covariance, 2 x 5 x 5 (x and P above: their mixture)
     mu: np.ndarray | None = None     # the models' probabilities
     P_upd: np.ndarray | None = None  # P at the last update (what a report's own sigma is)
 
@@ -64,6 +66,16 @@ class Report:
     domain: str = "ground"
 
 
+def _q4(q: float, dt: float) -> np.ndarray:
+    """White-acceleration process noise (spectral density q) on position and velocity, 5 x 5."""
+    d3, d2, d1 = q * dt ** 3 / 3, q * dt ** 2 / 2, q * dt
+    Q = np.zeros((5, 5))
+    Q[0, 0] = Q[1, 1] = d3
+    Q[0, 2] = Q[2, 0] = Q[1, 3] = Q[3, 1] = d2
+    Q[2, 2] = Q[3, 3] = d1
+    return Q
+
+
 class KalmanTracker:
     def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.5,
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
@@ -71,11 +83,12 @@ class KalmanTracker:
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
                  dr_m: float | None = 50.0, dr_k: float = 4.0, heartbeat_s: float = 60.0,
                  dr_lag_s: float = 2.0, still_m: float = 50.0, still_s: float = 30.0,
-                 q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0,
+                 q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0, q_turn: float = 1e-3,
                  steady_s: float = 60.0, man_s: float = 20.0,
-                 dr_m_air: float = 50.0, dr_lag_ground_s: float = 2.0):
+                 dr_m_air: float = 50.0, dr_lag_ground_s: float = 2.0, turn_h_s: float = 0.0,
+                 max_turn_dps: float = 30.0):
         for k, v in (("q", q), ("q_fast", q_fast), ("q_man", q_man), ("q_air", q_air), ("q_air_man", q_air_man),
-                     ("steady_s", steady_s), ("man_s", man_s)):
+                     ("q_turn", q_turn), ("steady_s", steady_s), ("man_s", man_s)):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
                 raise ValueError(f"process noise must be finite and > 0 ({k}={v!r})")
         if not 1 <= m <= n:
@@ -90,6 +103,8 @@ class KalmanTracker:
         self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
         self.dr_m_air, self.dr_lag_ground_s = dr_m_air, dr_lag_ground_s
         self.still_m, self.still_s = still_m, still_s
+        self.q_turn, self.turn_h_s = q_turn, turn_h_s
+        self.max_turn = math.radians(max_turn_dps)
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -150,7 +165,9 @@ class KalmanTracker:
     def mover(self, tr: Track) -> str:
         """What the track moves like: `tentative` until confirmed, then `air` when it flies
         (height above `air_agl_m`) or is faster than `fast_mps` (no ground vehicle is), else
-        `ground`. Each has a steady and a manoeuvring constant-velocity model (`motion`)."""
+        `ground`. Each has a steady model (constant velocity, little process noise) and a
+        manoeuvring one: a coordinated turn for aircraft (they orbit and turn at a rate,
+        estimated), a noisier constant velocity on the ground (a vehicle turns a corner)."""
         if not tr.confirmed:
             return "tentative"
         fast = math.hypot(tr.x_upd[2], tr.x_upd[3]) > self.fast
@@ -163,27 +180,58 @@ class KalmanTracker:
         pa, pb = a / (a + b) * e, b / (a + b) * e
         return np.array([[1.0 - pa, pa], [pb, 1.0 - pb]])
 
+    @staticmethod
+    def _cv(x: np.ndarray, P: np.ndarray, q: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Constant velocity; the turn rate is reset to 0 (this model does not turn)."""
+        F = I5.copy()
+        F[0, 2] = F[1, 3] = dt
+        F[4, 4] = 0.0
+        Q = _q4(q, dt)
+        Q[4, 4] = W0
+        return F @ x, F @ P @ F.T + Q
+
+    def _ct(self, x: np.ndarray, P: np.ndarray, q: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Coordinated turn at the estimated rate w (extended Kalman filter); w a random walk."""
+        px, py, vx, vy, w = x
+        w = min(max(w, -self.max_turn), self.max_turn)
+        wt = w * dt
+        if abs(wt) < 1e-4:   # the limit w -> 0, to second order
+            s_w, c_w = dt - w * w * dt ** 3 / 6.0, w * dt * dt / 2.0
+            ds, dc = -w * dt ** 3 / 3.0, dt * dt / 2.0
+        else:
+            sn, cs = math.sin(wt), math.cos(wt)
+            s_w, c_w = sn / w, (1.0 - cs) / w
+            ds, dc = (wt * cs - sn) / (w * w), (wt * sn - 1.0 + cs) / (w * w)
+        sn, cs = math.sin(wt), math.cos(wt)
+        nx = np.array([px + s_w * vx - c_w * vy, py + c_w * vx + s_w * vy,
+                       cs * vx - sn * vy, sn * vx + cs * vy, w])
+        F = np.array([[1, 0, s_w, -c_w, ds * vx - dc * vy],
+                      [0, 1, c_w, s_w, dc * vx + ds * vy],
+                      [0, 0, cs, -sn, -dt * (sn * vx + cs * vy)],
+                      [0, 0, sn, cs, dt * (cs * vx - sn * vy)],
+                      [0, 0, 0, 0, 1.0]])
+        Q = _q4(q, dt)
+        Q[4, 4] = self.q_turn * dt
+        return nx, F @ P @ F.T + Q
+
     def _predict(self, t: float) -> None:
         """Interacting multiple models (IMM): mix the models' states by the chance each came
-        from the other, then predict each with its own process noise."""
+        from the other, then predict each by its own motion."""
         for tr in self.tracks:
             dt = t - tr.t
             if dt <= 0:
                 continue
-            F = I4.copy()
-            F[0, 2] = F[1, 3] = dt
-            d3, d2_, d1 = dt ** 3 / 3, dt ** 2 / 2, dt
-            Q = np.array([[d3, 0, d2_, 0], [0, d3, 0, d2_], [d2_, 0, d1, 0], [0, d2_, 0, d1]])
             Pi = self._mixing(dt)
             c = tr.mu @ Pi                                   # predicted model probabilities
             w = tr.mu[:, None] * Pi / c[None, :]             # w[i, j]: P(was i | is j)
-            x0 = w.T @ tr.xs                                 # 2 x 4
-            dx = tr.xs[:, None, :] - x0[None, :, :]          # i x j x 4
+            x0 = w.T @ tr.xs                                 # 2 x 5
+            dx = tr.xs[:, None, :] - x0[None, :, :]          # i x j x 5
             P0 = np.einsum("ij,ikl->jkl", w, tr.Ps) + np.einsum("ij,ijk,ijl->jkl", w, dx, dx)
-            qs = self.motion[self.mover(tr)]
-            tr.xs = x0 @ F.T
-            tr.Ps = np.stack([F @ P0[j] @ F.T + qs[j] * Q for j in range(2)])
-            tr.mu = c
+            kind = self.mover(tr)
+            q0, q1 = self.motion[kind]
+            x_a, P_a = self._cv(x0[0], P0[0], q0, dt)
+            x_b, P_b = self._ct(x0[1], P0[1], q1, dt) if kind == "air" else self._cv(x0[1], P0[1], q1, dt)
+            tr.xs, tr.Ps, tr.mu = np.stack([x_a, x_b]), np.stack([P_a, P_b]), c
             self._combine(tr)
             tr.t = t
 
@@ -222,7 +270,7 @@ class KalmanTracker:
             nu = zc - tr.xs[j, :2]
             K = P[:, :2] @ Si
             tr.xs[j] = tr.xs[j] + K @ nu
-            P = (I4 - K @ np.eye(2, 4)) @ P
+            P = (I5 - K @ H) @ P
             tr.Ps[j] = (P + P.T) / 2.0
             ll[j] = -0.5 * float(nu @ Si @ nu) - 0.5 * math.log(float(np.linalg.det(S)))
         mu = tr.mu * np.exp(ll - ll.max())
@@ -258,8 +306,8 @@ class KalmanTracker:
             ext = max(float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0) - r2, 0.0) if len(zs) > 1 else 0.0
             pv = r2 + ext
             self.seq += 1
-            x = np.array([zc[0], zc[1], 0.0, 0.0])
-            P = np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2])
+            x = np.array([zc[0], zc[1], 0.0, 0.0, 0.0])
+            P = np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2, W0])
             tr = Track(f"{self.name}-{self.seq}", x, P, t, t, x.copy(), ext)
             tr.xs, tr.Ps = np.stack([x, x]), np.stack([P, P])
             tr.mu, tr.P_upd = np.array([b, a]) / (a + b), P.copy()   # the chain's long-run shares
@@ -338,6 +386,11 @@ class KalmanTracker:
         vx, vy = float(x[2]), float(x[3])
         if self._halted(tr):
             vx = vy = 0.0   # receivers must not drift a halted group by its velocity noise
+        elif self.turn_h_s > 0 and abs(x[4]) * self.turn_h_s > 1e-3:
+            th = float(x[4]) * self.turn_h_s / 2.0   # the chord of the next turn_h_s of the arc
+            f = math.sin(th) / th
+            c, s_ = math.cos(th), math.sin(th)
+            vx, vy = f * (c * vx - s_ * vy), f * (s_ * vx + c * vy)
         return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), vx, vy,
                       max(tr.counts) if strength is None else strength,
                       None if tr.alt is None else round(tr.alt, 1), self.domain(tr))

@@ -70,6 +70,12 @@ class LivePeer:
         self.join_s = max(self.silence_s, float(mesh["source_join_s"]))
         self.max_bytes = int(max_bytes or mesh["max_payload_bytes"])
         self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
+        # a commander's commands are signed end to end (secure mode): checked by their own gate.
+        # A source's frame is trusted by its key (only source.<name> may put on src/<name>),
+        # its contents not signed one by one (issue 33: authority over the mesh)
+        from ..security.sign import verifier_for
+        self.cmd_gate = W.Gate(self.gate.t_max, self.max_bytes, log=log, verifier=verifier_for(conf, root))
+        self.cmd_gate.rejects = self.gate.rejects   # one count of what was refused
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         self.armed = armed
@@ -383,7 +389,7 @@ class LivePeer:
         if unit != self.unit or cls is None or not by:
             self.gate.rejects.add(M.MessageError("cmd", "(key)", f"not a command to {self.unit}: {key[:80]}"), key)
             return
-        cmd = self.gate.control(cls, payload, key, signed=True)
+        cmd = self.cmd_gate.control(cls, payload, key, signed=True)
         if cmd is None:
             return
         refused = C.authority(getattr(self.ea.domain, "taskorg", None), by, self.unit)

@@ -27,7 +27,8 @@ def cp_sources(sc) -> dict[str, list[str]]:
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,
        echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
        start: float | None = None, insecure: bool = False, topology: str | None = None,
-       link: dict | None = None, paced_start: float | None = None) -> dict:
+       link: dict | None = None, paced_start: float | None = None, console: int | None = None,
+       console_linger: float = 30.0) -> dict:
     """`on_started(sup, t0)`: called once every source runs, with the wall time of event time 0 (a benchmark kills one). `start`
     (live): the wall time of event time 0 (default 20 s from now: everyone is up by then).
     `topology`: a topology file or "derive": one router per command post (`mesh up
@@ -35,7 +36,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     post's router, router links through emulated links when `link` is given (a benchmark
     cuts them: `sup.procs["link-<lower>-<upper>"]`, SIGUSR1 cuts, SIGUSR2 heals).
     `paced_start`: with a speed, the wall time of event time 0 for every source (default:
-    5 s after every EA is ready)."""
+    5 s after every EA is ready). `console`: the top unit's commander's console on that
+    port (0: a free one), drawing the sources' frames; the EAs armed (urgent alerts are
+    re-notified and escalated until acknowledged)."""
     from .. import scenario as S
     from ..sinks import COLOURS, RESET
     from ea_agent.core.alert import hms
@@ -81,6 +84,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     seen: dict[str, int] = {}
     shown = Counter()
     t0 = time.monotonic()
+    con = None
     try:
         if topo is not None:   # a router per command post, linked as the topology says
             from .. import routed
@@ -98,12 +102,18 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
         for u in units:
             for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
                 (out_dir / f).unlink(missing_ok=True)
+            armed = ["--armed"] if console is not None else []
             sup.add(Proc(u, [*py(), "peer", "--scenario", scenario, "--unit", u, *where(u), "--root", root,
-                             "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args],
+                             "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args, *armed],
                          env=leaf_env(), log_dir=logs,
                          spawner=zygote.spawner()))   # EA peers fork from one zygote (saim_mesh/zygote.py)
         for u in units:
             sup.procs[u].wait_for(f"ready {u}", 120)
+        if console is not None:   # not supervised: it ends after its linger
+            con = Proc("console", [*py(), "console", scenario, "--sources", *where("console"), "--root", root,
+                                   "--port", str(console), "--linger", str(console_linger)],
+                       env=clean_env(), log_dir=logs)
+            echo(con.wait_for("console http", 60).split(" ", 1)[1] + "  <- the commander's console", flush=True)
         if not live and speed != "max":   # every source paced on one clock: event time 0 at this instant
             paced_start = paced_start if paced_start is not None else time.time() + 5.0
         pace_args = ["--start", _iso(paced_start)] if paced_start is not None and not live else []
@@ -124,7 +134,14 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
                 if u not in summaries and (line := p.find("summary ")) is not None:
                     summaries[u] = json.loads(line[len("summary "):])
             time.sleep(0.1)
+        if con is not None:   # the page stays up for its linger after the end
+            try:
+                con.p.wait(console_linger + 60)
+            except Exception:   # a console that does not end is stopped below
+                pass
     finally:
+        if con is not None:
+            con.stop()
         sup.stop()
     wall = time.monotonic() - t0
     result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events,

@@ -154,7 +154,8 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     subject("observer", [out, read_public])
     read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**"), f"{r}/notice/**"])
     subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
-    seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit")]
+    # ... and on the live mesh, the sources' frames (the same messages, batched per source)
+    seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit"), ks.src("*")]
     read_seen = rule("read_console", READ, seen)
     # the TAK gateway: reads what a console reads, but no commands; its PLI go to the
     # replay's ingest key, never straight to the EAs

@@ -53,7 +53,7 @@ class Projections(Detector):
              "projected-late": "constraint-violation-projected"}
 
     def reset(self) -> None:
-        self.hist: dict[str, deque] = {}   # mission -> (t, distance off its route, distance to go)
+        self.hist: dict[str, deque] = {}   # mission -> (t, distance off its route, to go, reported centroid)
         self.next_t = -1.0   # the next sample's time; none yet: the first grid time from the next look
         self.due: list[Mission] = []
         self.routes: dict[str, tuple] = {}      # mission -> (its monitor list, its length, _route of it)
@@ -64,7 +64,9 @@ class Projections(Detector):
     def observe(self, t: float, ch: Changes) -> None:
         """Every SAMPLE_S of scenario time (a trend over minutes needs no finer samples),
         each active mission's distance off its route and still to go, from its members'
-        positions dead-reckoned to now (a stale report alone would make it seem behind)."""
+        positions dead-reckoned to now (a stale report alone would make it seem behind),
+        and the centroid of their last reports (what confirms a drift: dead reckoning
+        carries a unit on past where it stopped)."""
         dom = self.dom
         self.due = []
         if dom.plan is None or float(dom.voi_cfg["projection_horizon_s"]) <= 0.0:
@@ -97,8 +99,9 @@ class Projections(Detector):
         else:
             measured = self._measure([self.due[i] for i, _, _ in rows], [pos for _, _, pos in rows])
         old = t - KEEP_S
-        for (_, h, _), off, to_go in zip(rows, *measured):
-            h.append((t, off, to_go))
+        unit_pos = dom.unit_pos
+        for (i, h, _), off, to_go in zip(rows, *measured):
+            h.append((t, off, to_go, unit_pos.get(self.due[i].unit)))
             while h and h[0][0] < old:
                 h.popleft()
 
@@ -233,17 +236,23 @@ class Projections(Detector):
             if x[0] > t - CONFIRM_S:
                 break
             prev = x
-        if prev is None or prev[1] is None:
+        if prev is None or prev[1] is None or prev[3] is None or now[3] is None:
             return
-        grown = (d1 - prev[1]) / (now[0] - prev[0])
-        if grown <= MIN_RATE:   # not drifting away (checked first: the heading costs more)
+        dt = now[0] - prev[0]
+        if (d1 - prev[1]) / dt <= MIN_RATE:   # not drifting away (checked first: the rest costs more)
             return
         drift = self._drift(m, t)
         if drift is None:
             return
         heading_rate, settled, members = drift
-        if not settled or heading_rate <= MIN_RATE or grown < CONFIRM * heading_rate:
-            return   # the picture lags the unit, or its heading and its distance off the route disagree
+        if not settled or heading_rate <= MIN_RATE:
+            return   # the picture lags the unit (some members still show how it went before)
+        # confirmed by the reports themselves: dead reckoning carries a unit that has
+        # stopped drifting (back on its route) on past it until each member reports again
+        line = self._line(self._route(m))
+        grown = (float(line.distance(shapely.Point(now[3]))) - float(line.distance(shapely.Point(prev[3])))) / dt
+        if grown < CONFIRM * heading_rate:
+            return
         rate = max(heading_rate, grown)   # the faster: a projection errs early, never late
         ahead = (thr - d1) / rate
         if ahead < min_lead or ahead > horizon:
