@@ -114,6 +114,47 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
     return result(cmd, True, t)
 
 
+def receive(ea, unit: str, root: str, gate: W.Gate, key: str, payload: bytes, t: float,
+            clog=None) -> W.CmdResult | None:
+    """A command off the wire for `unit`'s EA, as every peer takes one: its key (to this
+    unit, a known kind, a sender), the gate (size, type, signature in secure mode), the
+    sender's authority in the task organization as the EA knows it now (reorganizations
+    included); applied at `t` and logged (`clog`). Returns the result to answer on
+    cmdlog/<unit>, a refusal when the command's req can be read, else None (counted)."""
+    prefix = f"{root}/cmd/"
+    to, kind, by = (key[len(prefix):].split("/") + ["", "", ""])[:3] if key.startswith(prefix) else ("", "", "")
+    cls = W.COMMANDS.get(kind)
+    if to != unit or cls is None or not by:
+        why = (f"not a command to {unit}" if to != unit else
+               f"unknown command kind {kind[:32]!r}" if cls is None else "no sender unit in the key")
+        gate.rejects.add(M.MessageError("cmd", "(key)", why), key)
+        return refusal(payload, kind, why, gate.max_bytes, t)
+    cmd = gate.control(cls, payload, key, signed=True)
+    if cmd is None:
+        return refusal(payload, kind, gate.rejects.recent[-1] if gate.rejects.recent else "bad", gate.max_bytes, t)
+    refused = authority(getattr(ea.domain, "taskorg", None), by, unit)
+    if refused is not None:
+        gate.rejects.add(M.MessageError("cmd", "(authority)", refused), key)
+        return result(cmd, False, t, refused)
+    res = apply(ea, cmd, t)
+    if clog is not None:
+        clog.write(unit, t, cmd, res)
+    return res
+
+
+def refusal(payload: bytes, kind: str, why: str, max_bytes: int, t: float) -> W.CmdResult | None:
+    """ok=false for a command we cannot take, if its req can be read (else silence)."""
+    if len(payload) > max_bytes:
+        return None
+    try:
+        req = msgspec.msgpack.decode(payload).get("req")
+    except Exception:   # anything undecodable: no req to answer
+        return None
+    if not isinstance(req, str) or not 1 <= len(req) <= 64:
+        return None
+    return W.make(W.CmdResult, req=req, kind=kind[:32], ok=False, error=why[:1000], t=t)
+
+
 def rule_of(cmd: W.InhibitCmd) -> dict:
     """The rule an `inhibit` command carries, as a config table would give it."""
     def m(spec: W.MatcherSpec) -> dict:

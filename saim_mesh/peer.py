@@ -388,38 +388,8 @@ class Peer(Intake, TickWait):
                          + (f" error={res.error}" if res.error else ""), flush=True)
 
     def _command(self, key: str, payload: bytes) -> W.CmdResult | None:
-        self.n_cmds += 1
-        prefix = f"{self.ks.root}/cmd/"
-        unit, kind, by = (key[len(prefix):].split("/") + ["", "", ""])[:3] if key.startswith(prefix) else ("", "", "")
-        cls = W.COMMANDS.get(kind)
-        if unit != self.unit or cls is None or not by:
-            why = (f"not a command to {self.unit}" if unit != self.unit else
-                   f"unknown command kind {kind[:32]!r}" if cls is None else "no sender unit in the key")
-            self._reject("cmd", "(key)", why, key)
-            return self._refusal(payload, kind, why)
-        cmd = self.gate.control(cls, payload, key, signed=True)
-        if cmd is None:
-            return self._refusal(payload, kind, self.gate.rejects.recent[-1] if self.gate.rejects.recent else "bad")
-        refused = C.authority(getattr(self.ea.domain, "taskorg", None), by, self.unit)
-        if refused is not None:   # the hierarchy as this EA knows it now (reorganizations included)
-            self._reject("cmd", "(authority)", refused, key)
-            return C.result(cmd, False, self.t, refused)
-        res = C.apply(self.ea, cmd, self.t)
-        if self.clog is not None:   # applied after the tick at self.t: `run --commands` does the same
-            self.clog.write(self.unit, self.t, cmd, res)
-        return res
-
-    def _refusal(self, payload: bytes, kind: str, why: str) -> W.CmdResult | None:
-        """ok=false for a command we cannot take, if its req can be read (else silence)."""
-        if len(payload) > self.gate.max_bytes:
-            return None
-        try:
-            req = msgspec.msgpack.decode(payload).get("req")
-        except Exception:   # anything undecodable: no req to answer
-            return None
-        if not isinstance(req, str) or not 1 <= len(req) <= 64:
-            return None
-        return W.make(W.CmdResult, req=req, kind=kind[:32], ok=False, error=why[:1000], t=self.t)
+        self.n_cmds += 1   # applied after the tick at self.t: `run --commands` does the same
+        return C.receive(self.ea, self.unit, self.ks.root, self.gate, key, payload, self.t, self.clog)
 
     def _report_health(self) -> None:
         """Tell our superior (health/<unit>) when rejects pass the next threshold."""

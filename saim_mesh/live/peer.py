@@ -380,22 +380,11 @@ class LivePeer:
                 self.late_from = None
 
     def command(self, key: str, payload: bytes) -> None:
-        """A commander's command (docs/console.md 1): checked as the replay-driven peer checks
-        it (key, gate, authority in the task organization now), applied at the EA's time,
-        logged and answered on cmdlog/<unit>."""
-        prefix = f"{self.ks.root}/cmd/"
-        unit, kind, by = (key[len(prefix):].split("/") + ["", "", ""])[:3] if key.startswith(prefix) else ("", "", "")
-        cls = W.COMMANDS.get(kind)
-        if unit != self.unit or cls is None or not by:
-            self.gate.rejects.add(M.MessageError("cmd", "(key)", f"not a command to {self.unit}: {key[:80]}"), key)
+        """A commander's command (docs/console.md 1), taken as every peer takes one
+        (`commands.receive`) at the EA's time, answered on cmdlog/<unit>."""
+        res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.clog)
+        if res is None:
             return
-        cmd = self.cmd_gate.control(cls, payload, key, signed=True)
-        if cmd is None:
-            return
-        refused = C.authority(getattr(self.ea.domain, "taskorg", None), by, self.unit)
-        res = C.result(cmd, False, self.ea.now, refused) if refused else C.apply(self.ea, cmd, self.ea.now)
-        if self.clog is not None:
-            self.clog.write(self.unit, self.ea.now, cmd, res)
         if self.session is not None:
             self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
         self.log(f"cmd {res.kind} req={res.req} ok={res.ok}" + (f" error={res.error}" if res.error else ""), flush=True)
