@@ -293,6 +293,10 @@ class KeySpace:
         per-source order, a cache for recovery and late joiners, and miss detection."""
         return f"{self.root}/src/{source}"
 
+    def srcj(self, source: str = "*") -> str:
+        """A live source's durable journal, served for catch-up beyond its publisher's cache."""
+        return f"{self.root}/srcj/{source}"
+
     def cmdlog(self, unit: str = "*") -> str:
         """`unit`'s EA answers every command here."""
         return f"{self.root}/cmdlog/{unit}"

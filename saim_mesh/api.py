@@ -102,6 +102,7 @@ class Source(_Session):
 
     def _closing(self) -> None:
         self.src.close(end=True)   # the end of the stream: the EAs need not wait for it
+        self.src.stop()
 
 
 class Alerts(_Session):

@@ -270,13 +270,14 @@ def cmd_source(a) -> int:
         msgs = play.read_lines(f, a.format, a.entity, start)
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"source.{a.name}", sc, root, **_zmode(a))
     with zenoh.open(conf) as s:
-        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state)
+        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache)
         print(f"ready source {a.name} epoch={src.epoch}", flush=True)
         n = play.publish(src, msgs, a.speed, start, until=a.until, paced_from=paced)
         src.close(end=not a.keep_open)
         print(f"end source {a.name} messages={n} frames={src.seq}", flush=True)
         if a.linger:
             time.sleep(a.linger)   # the publisher's cache serves late joiners and recoveries meanwhile
+        src.stop()
     return 0
 
 
@@ -613,7 +614,10 @@ def main(argv: list[str] | None = None) -> int:
     so.add_argument("--live", action="store_true", help="event time is the wall clock from --start")
     so.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now); "
                     "with --speed: event time 0 is at that instant (sources paced together)")
-    so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start)")
+    so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start) and its "
+                    "durable journal of frames, served for catch-up beyond the publisher's cache")
+    so.add_argument("--cache", type=int, default=None, metavar="N",
+                    help="frames the publisher keeps in memory for recovery and late joiners (default 100000)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
     so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
     so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")

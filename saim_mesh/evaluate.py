@@ -27,25 +27,35 @@ def _matches(a: Alert, item: dict) -> bool:
     return ok and a.owner == item["owner"] and not set(item.get("about") or item["subjects"]).isdisjoint(about)
 
 
-def _projections(alerts: list[Alert], incidents: list[dict]) -> dict:
+def _projections(alerts: list[Alert], incidents: list[dict]) -> tuple[dict, dict]:
     """Projected violations: how long before each violation it was foretold (lead: from
     the alert to when the oracle says the violation happened, its `at`; the window's
     start t0 is earlier by the slack it grants for stale reports, and can come before
     the unit has done anything), the projections raised at or after the violation they
     foretell (after_the_fact: a late alert under a misleading name), and those that
-    foretold nothing (false). Where a projection matches several incidents, the earliest
-    violation counts."""
+    foretold nothing (false); and the same per projected type. Where a projection
+    matches several incidents, the earliest violation counts."""
     proj = [a for a in alerts if a.details.get("projects") is not None]
     leads, false = [], 0
+    by_type: dict[str, dict] = {}
     for a in proj:
+        b = by_type.setdefault(a.type, {"alerts": 0, "false": 0, "after_the_fact": 0, "lead_s": []})
+        b["alerts"] += 1
         hit = [i for i in incidents if _matches(a, i)]
         if hit:
-            leads.append(round(min(i.get("at", i["t0"]) for i in hit) - a.t, 1))
+            lead = round(min(i.get("at", i["t0"]) for i in hit) - a.t, 1)
+            leads.append(lead)
+            b["lead_s"].append(lead)
+            b["after_the_fact"] += lead <= 0.0
         else:
             false += 1
+            b["false"] += 1
     leads.sort()
-    return {"alerts": len(proj), "false": false, "after_the_fact": sum(1 for x in leads if x <= 0.0),
-            "lead_s": leads, "lead_s_median": leads[len(leads) // 2] if leads else None}
+    for b in by_type.values():
+        b["lead_s"].sort()
+    return ({"alerts": len(proj), "false": false, "after_the_fact": sum(1 for x in leads if x <= 0.0),
+             "lead_s": leads, "lead_s_median": leads[len(leads) // 2] if leads else None},
+            dict(sorted(by_type.items())))
 
 
 # What makes a later alert about the same story news: its severity (a detail of the alert)
@@ -133,10 +143,12 @@ def score(alerts: list[Alert], truth: dict) -> dict:
     repeats = _no_news(alerts, incidents + situations)
     wrong = _wrong_priority(alerts, incidents)
     unwanted = list({id(a): a for a in unmatched + repeats + wrong}.values())
+    projections, projections_by_type = _projections(alerts, incidents)
     return {
         "unwanted_repeats": len(repeats),
         "wrong_priority": len(wrong),
-        "projections": _projections(alerts, incidents),
+        "projections": projections,
+        "projections_by_type": projections_by_type,
         "incidents": len(incidents),
         "recall": round(1 - len(missed) / len(incidents), 4) if incidents else 1.0,
         "delay_s_median": _pct(delays, 0.5),

@@ -16,8 +16,11 @@ import time
 from pathlib import Path
 
 # recall on every seed, the unwanted share on every seed, flash over all seeds, reduction
-# over all seeds together (reduction_worst is reported beside it)
-TARGETS = {"recall": 1.0, "unwanted_share_max": 0.05, "unwanted_flash": 0, "reduction_min": 50.0}
+# over all seeds together (reduction_worst is reported beside it); projections (issue 34):
+# none raised at or after the violation it projects, and the median lead over every
+# projection of every seed (evaluate._projections: to the oracle's `at`) at least this
+TARGETS = {"recall": 1.0, "unwanted_share_max": 0.05, "unwanted_flash": 0, "reduction_min": 50.0,
+           "after_the_fact": 0, "projection_lead_s_median_min": 30.0}
 
 
 ARMED_TARGETS = {"unwanted_share_worst": 0.05, "unwanted_flash_total": 0}
@@ -49,6 +52,8 @@ def one(args: tuple) -> dict:
             "wrong_priority", "delay_s_median", "delay_s_p95", "naive_alerts", "reduction")
     row = {"seed": seed, **{k: res[k] for k in keep}, "naive_unwanted_share": res["naive"]["unwanted_share"],
            "events": gen["events"], "wall_s": round(time.perf_counter() - t0, 1),
+           "projections": {**{k: res["projections"][k] for k in ("alerts", "false", "after_the_fact", "lead_s")},
+                           "by_type": res["projections_by_type"]},
            "missed": [f"{m['owner']} {m['type']} {m['subjects']} t={m['at']}: {m['label']}" for m in res["missed"]],
            "unwanted_alerts": [f"{a['owner']} t={a['t']} {a['priority']} {a['type']} {a['subjects']}"
                                for a in res["unwanted_alerts"]], **({"armed": armed} if armed else {})}
@@ -73,6 +78,26 @@ def summarize(rows: list[dict]) -> dict:
          "reduction_total": round(sum(col("naive_alerts")) / max(1, sum(col("alerts"))), 1),
          "naive_unwanted_share_mean": round(sum(col("naive_unwanted_share")) / len(rows), 4),
          "incidents_total": sum(col("incidents")), "alerts_total": sum(col("alerts"))}
+    # projected violations over every seed: how far ahead of the violation (the oracle's
+    # `at`) each was raised, and how many came at or after it
+    leads = sorted(x for r in rows for x in r.get("projections", {}).get("lead_s", ()))
+    s["projections_total"] = sum(r.get("projections", {}).get("alerts", 0) for r in rows)
+    s["projections_false_total"] = sum(r.get("projections", {}).get("false", 0) for r in rows)
+    s["after_the_fact_total"] = sum(r.get("projections", {}).get("after_the_fact", 0) for r in rows)
+    s["projection_lead_s_median"] = leads[len(leads) // 2] if leads else None
+    s["projection_lead_s_min"] = leads[0] if leads else None
+    by_type: dict[str, dict] = {}
+    for r in rows:
+        for typ, v in r.get("projections", {}).get("by_type", {}).items():
+            b = by_type.setdefault(typ, {"alerts": 0, "false": 0, "after_the_fact": 0, "lead_s": []})
+            for k in ("alerts", "false", "after_the_fact"):
+                b[k] += v[k]
+            b["lead_s"] += v["lead_s"]
+    s["projections_by_type"] = {}
+    for typ, b in sorted(by_type.items()):
+        ls = sorted(b.pop("lead_s"))
+        s["projections_by_type"][typ] = {**b, "lead_s_median": ls[len(ls) // 2] if ls else None,
+                                         "lead_s_min": ls[0] if ls else None}
     models = sorted({m for r in rows for m in r.get("armed", {})})
     if models:   # what each modelled commander saw, over every seed
         s["armed"] = {}
@@ -94,7 +119,10 @@ def summarize(rows: list[dict]) -> dict:
     s["met"] = {"recall": s["recall_worst"] >= TARGETS["recall"],
                 "unwanted_share": s["unwanted_share_worst"] <= TARGETS["unwanted_share_max"],
                 "unwanted_flash": s["unwanted_flash_total"] == TARGETS["unwanted_flash"],
-                "reduction": s["reduction_total"] >= TARGETS["reduction_min"]}
+                "reduction": s["reduction_total"] >= TARGETS["reduction_min"],
+                "after_the_fact": s["after_the_fact_total"] == TARGETS["after_the_fact"],
+                "projection_lead": (s["projection_lead_s_median"] is not None
+                                    and s["projection_lead_s_median"] >= TARGETS["projection_lead_s_median_min"])}
     for m, v in s.get("armed", {}).items():
         s["met"][f"armed_{m}"] = (v["unwanted_share_worst"] <= ARMED_TARGETS["unwanted_share_worst"]
                                   and v["unwanted_flash_total"] == ARMED_TARGETS["unwanted_flash_total"]

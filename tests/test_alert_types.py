@@ -17,7 +17,9 @@ def test_every_alert_is_complete(small_run):
             seen.add(a.type)
             assert a.owner == ea.owner and a.category in CATEGORIES and a.priority in PRIORITIES
             assert a.message and a.subjects and isinstance(a.details, dict)
-    assert set(ALERT_TYPES) <= seen, set(ALERT_TYPES) - seen
+    # the small scenario's strays leave their routes faster than a projection could lead them
+    # (test_out_of_position): route departures are projected in tests/test_projection_lead.py
+    assert set(ALERT_TYPES) - {"projected-out-of-position"} <= seen, set(ALERT_TYPES) - seen
     assert "call-for-fire" in seen
 
 
@@ -38,17 +40,16 @@ def test_fratricide_same_for_battalion_and_company(small_run):
 
 
 def test_out_of_position(small_run):
-    """A2 drifts off its route from about 930 s: it is told first as a projection, and the
-    actual violation, once it is twice the threshold, at its own priority (one story)."""
+    """A2 drifts off its route from 900 s at 7.7 m/s: 150 m off by 920, sooner than a
+    projection could lead it (projection_min_lead_s, 30 s, after its members' reports
+    show the drift), so nothing projects it after the fact; the actual violation is told
+    once past the threshold, at its own priority."""
     for owner in ("BN", "A", "A2"):
-        story = [a for a in alerts_of(small_run, owner, "projected-out-of-position")
-                 + alerts_of(small_run, owner, "out-of-position") if a.subjects == ("A2",)]
-        first = min(story, key=lambda a: a.t)
-        assert first.type == "projected-out-of-position" and first.subjects == ("A2",) and 900 <= first.t <= 1000
-        assert first.category == "constraint-violation-projected" and 0 < first.details["lead_s"] <= 300
-        actual = [a for a in alerts_of(small_run, owner, "out-of-position") if a.subjects == ("A2",)][0]
-        assert actual.t > first.t and actual.priority == "immediate" and actual.details["projected_at_t"] == first.t
-        assert actual.details["distance_m"] >= 2 * actual.details["threshold_m"]
+        assert not [a for a in alerts_of(small_run, owner, "projected-out-of-position") if a.subjects == ("A2",)]
+        actual = [a for a in alerts_of(small_run, owner, "out-of-position") if a.subjects == ("A2",)]
+        first = actual[0]
+        assert 920 <= first.t <= 960 and first.priority == "immediate" and not first.details.get("repeat")
+        assert first.details["distance_m"] >= first.details["threshold_m"]
     # the strays (A2 at ~930 s, C3 at ~680 s) and the companies they pull off their corridors, and
     # B1 whose squad B1S4 detours to the link-up point during its attack: nobody else
     told = {(a.subjects, a.details["check"]) for a in alerts_of(small_run, "BN", "out-of-position")}

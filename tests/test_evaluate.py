@@ -58,7 +58,8 @@ def test_a_projection_is_scored_by_lead_time_or_as_false():
     early = Alert(700.0, "A", "projected-out-of-position", "constraint-violation-projected", "priority", ("A2",),
                   "A2 will leave its route", {"projects": "out-of-position"})
     r = score([early], truth)
-    assert r["recall"] == 1.0 and r["projections"] == {"alerts": 1, "false": 0, "lead_s": [300.0], "lead_s_median": 300.0}
+    assert r["recall"] == 1.0 and r["projections"] == {"alerts": 1, "false": 0, "after_the_fact": 0, "lead_s": [300.0],
+                                                   "lead_s_median": 300.0}
     too_early = Alert(300.0, "A", "projected-out-of-position", "constraint-violation-projected", "priority", ("A2",),
                       "A2 will leave its route", {"projects": "out-of-position"})
     r = score([too_early], truth)   # 700 s ahead: foretold nothing that came within the window

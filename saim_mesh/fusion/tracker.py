@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-I5 = np.eye(5)
+I3, I5 = np.eye(3), np.eye(5)
 H = np.eye(2, 5)
 W0 = 1e-6   # the steady model's turn-rate variance (rad^2/s^2): it does not turn
 
@@ -46,8 +46,8 @@ class Track:
     alt: float | None = None         # metres above ground (mean of its hits' altitudes), if measured
     told: "Report | None" = None     # the last report of it (what receivers extrapolate from)
     trail: deque = field(default_factory=lambda: deque(maxlen=32))   # (t, x, y) after each update
-    xs: np.ndarray | None = None     # per motion model (steady, manoeuvring): its state, 2 x 5
-    Ps: np.ndarray | None = None     # and covariance, 2 x 5 x 5 (x and P above: their mixture)
+    xs: np.ndarray | None = None     # per motion model (steady, turning, manoeuvring): its state, 3 x 5
+    Ps: np.ndarray | None = None     # and covariance, 3 x 5 x 5 (x and P above: their mixture)
     mu: np.ndarray | None = None     # the models' probabilities
     P_upd: np.ndarray | None = None  # P at the last update (what a report's own sigma is)
 
@@ -83,20 +83,28 @@ class KalmanTracker:
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
                  dr_m: float | None = 50.0, dr_k: float = 4.0, heartbeat_s: float = 60.0,
                  dr_lag_s: float = 2.0, still_m: float = 50.0, still_s: float = 30.0,
-                 q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0, q_turn: float = 1e-3,
-                 steady_s: float = 60.0, man_s: float = 20.0,
+                 q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0, q_air_ct: float = 1.0,
+                 q_turn: float = 1e-5, steady_s: float = 60.0, turn_s: float = 120.0, man_s: float = 20.0,
                  dr_m_air: float = 50.0, dr_lag_ground_s: float = 2.0, turn_h_s: float = 0.0,
-                 max_turn_dps: float = 30.0):
+                 max_turn_dps: float = 30.0, dr_ahead_s: float = 0.0):
         for k, v in (("q", q), ("q_fast", q_fast), ("q_man", q_man), ("q_air", q_air), ("q_air_man", q_air_man),
-                     ("q_turn", q_turn), ("steady_s", steady_s), ("man_s", man_s)):
+                     ("q_air_ct", q_air_ct), ("q_turn", q_turn), ("steady_s", steady_s), ("turn_s", turn_s),
+                     ("man_s", man_s)):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
                 raise ValueError(f"process noise must be finite and > 0 ({k}={v!r})")
         if not 1 <= m <= n:
             raise ValueError(f"confirmation M-of-N needs 1 <= M <= N, got M={m}, N={n}")
         self.name, self.sigma = name, sigma
         self.q, self.q_fast, self.fast = q, q_fast, fast_mps
-        self.motion = {"ground": (q, q_man), "air": (q_air, q_air_man), "tentative": (q_fast, q_fast)}
-        self.switch = (1.0 / steady_s, 1.0 / man_s)   # rates of leaving the steady / the manoeuvring model
+        self.motion = {"ground": (("cv", q), ("cv", q_man), ("cv", q_man)),
+                       "air": (("cv", q_air), ("ct", q_air_ct), ("cv", q_air_man)),
+                       "tentative": (("cv", q_fast),) * 3}
+        # the models' Markov chain: each is left at 1 / its mean sojourn, for either other one alike
+        out = np.array([1.0 / steady_s, 1.0 / turn_s, 1.0 / man_s])
+        self.rates = (np.ones((3, 3)) - I3) * (out / 2.0)[:, None] - np.diag(out)
+        ev, vec = np.linalg.eig(self.rates.T)
+        pi = np.real(vec[:, np.argmin(np.abs(ev))])
+        self.mu0 = pi / pi.sum()                        # its long-run shares: a new track's
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
@@ -105,6 +113,7 @@ class KalmanTracker:
         self.still_m, self.still_s = still_m, still_s
         self.q_turn, self.turn_h_s = q_turn, turn_h_s
         self.max_turn = math.radians(max_turn_dps)
+        self.dr_ahead_s = dr_ahead_s
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -174,11 +183,17 @@ class KalmanTracker:
         return "air" if fast or (tr.alt is not None and tr.alt > self.air_agl_m) else "ground"
 
     def _mixing(self, dt: float) -> np.ndarray:
-        """P(model j at t + dt | model i at t): a two-state Markov chain in continuous time."""
-        a, b = self.switch
-        e = 1.0 - math.exp(-(a + b) * dt)
-        pa, pb = a / (a + b) * e, b / (a + b) * e
-        return np.array([[1.0 - pa, pa], [pb, 1.0 - pb]])
+        """P(model j at t + dt | model i at t) = expm(rates x dt), by scaling and squaring."""
+        A = self.rates * dt
+        k = max(0, int(math.ceil(math.log2(max(np.abs(A).sum(axis=1).max(), 1e-12)))) + 1)
+        A = A / 2.0 ** k
+        E, term = I3.copy(), I3.copy()
+        for i in range(1, 8):
+            term = term @ A / i
+            E = E + term
+        for _ in range(k):
+            E = E @ E
+        return E
 
     @staticmethod
     def _cv(x: np.ndarray, P: np.ndarray, q: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -224,14 +239,12 @@ class KalmanTracker:
             Pi = self._mixing(dt)
             c = tr.mu @ Pi                                   # predicted model probabilities
             w = tr.mu[:, None] * Pi / c[None, :]             # w[i, j]: P(was i | is j)
-            x0 = w.T @ tr.xs                                 # 2 x 5
+            x0 = w.T @ tr.xs                                 # models x 5
             dx = tr.xs[:, None, :] - x0[None, :, :]          # i x j x 5
             P0 = np.einsum("ij,ikl->jkl", w, tr.Ps) + np.einsum("ij,ijk,ijl->jkl", w, dx, dx)
-            kind = self.mover(tr)
-            q0, q1 = self.motion[kind]
-            x_a, P_a = self._cv(x0[0], P0[0], q0, dt)
-            x_b, P_b = self._ct(x0[1], P0[1], q1, dt) if kind == "air" else self._cv(x0[1], P0[1], q1, dt)
-            tr.xs, tr.Ps, tr.mu = np.stack([x_a, x_b]), np.stack([P_a, P_b]), c
+            for j, (how, q) in enumerate(self.motion[self.mover(tr)]):
+                tr.xs[j], tr.Ps[j] = (self._ct if how == "ct" else self._cv)(x0[j], P0[j], q, dt)
+            tr.mu = c
             self._combine(tr)
             tr.t = t
 
@@ -244,16 +257,16 @@ class KalmanTracker:
     def _d2(self, z: np.ndarray, r2: float, with_ext: bool) -> np.ndarray:
         """Squared Mahalanobis distance of every hit to every track's predicted position:
         the least over its motion models (a hit a manoeuvre explains is in the gate)."""
-        X = np.concatenate([tr.xs[:, :2] for tr in self.tracks])             # 2T x 2
+        X = np.concatenate([tr.xs[:, :2] for tr in self.tracks])             # 3T x 2
         S = np.concatenate([tr.Ps[:, :2, :2] for tr in self.tracks]).copy()
-        add = r2 + (np.repeat([tr.ext for tr in self.tracks], 2) if with_ext else 0.0)
+        add = r2 + (np.repeat([tr.ext for tr in self.tracks], 3) if with_ext else 0.0)
         S[:, 0, 0] += add
         S[:, 1, 1] += add
         det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-        v = z[None, :, :] - X[:, None, :]                      # 2T x hits x 2
+        v = z[None, :, :] - X[:, None, :]                      # 3T x hits x 2
         a, b, c = S[:, 1, 1, None], -S[:, 0, 1, None], S[:, 0, 0, None]
         d2 = (a * v[..., 0] ** 2 + 2 * b * v[..., 0] * v[..., 1] + c * v[..., 1] ** 2) / det[:, None]
-        return d2.reshape(len(self.tracks), 2, len(z)).min(axis=1)
+        return d2.reshape(len(self.tracks), 3, len(z)).min(axis=1)
 
     def _update(self, tr: Track, zs: np.ndarray, r2: float, t: float) -> None:
         n = len(zs)
@@ -262,8 +275,8 @@ class KalmanTracker:
             spread = float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0)
             tr.ext = 0.7 * tr.ext + 0.3 * max(spread - r2, 0.0)
         R = np.eye(2) * (r2 + tr.ext) / n
-        ll = np.empty(2)
-        for j in range(2):
+        ll = np.empty(3)
+        for j in range(3):
             P = tr.Ps[j]
             S = P[:2, :2] + R
             Si = np.linalg.inv(S)
@@ -298,7 +311,6 @@ class KalmanTracker:
                 for j in np.nonzero((d[i] <= self.birth_m) & (label < 0))[0]:
                     label[j] = s
                     stack.append(int(j))
-        a, b = self.switch
         for lab in np.unique(label):
             mine = label == lab
             zs = z[mine]
@@ -309,8 +321,8 @@ class KalmanTracker:
             x = np.array([zc[0], zc[1], 0.0, 0.0, 0.0])
             P = np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2, W0])
             tr = Track(f"{self.name}-{self.seq}", x, P, t, t, x.copy(), ext)
-            tr.xs, tr.Ps = np.stack([x, x]), np.stack([P, P])
-            tr.mu, tr.P_upd = np.array([b, a]) / (a + b), P.copy()   # the chain's long-run shares
+            tr.xs, tr.Ps = np.stack([x, x, x]), np.stack([P, P, P])
+            tr.mu, tr.P_upd = self.mu0.copy(), P.copy()
             tr.counts.append(len(zs))
             tr.hit_window = True
             self._height(tr, alt, mine)
@@ -354,7 +366,25 @@ class KalmanTracker:
         if r.t - last.t >= self.heartbeat_s:
             return True
         dt = r.t - last.t
-        return math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > self.dr_threshold(tr)
+        lim = self.dr_threshold(tr)
+        if math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > lim:
+            return True
+        if self.dr_ahead_s <= 0:
+            return False
+        h = r.t + self.dr_ahead_s   # where it will be at the next look, by its own motion models
+        px, py = self._ahead(tr, h)
+        return math.hypot(last.x + last.vx * (h - last.t) - px, last.y + last.vy * (h - last.t) - py) > lim
+
+    def _ahead(self, tr: Track, t: float) -> tuple[float, float]:
+        """The track's expected position at `t` (its models' predictions, by their weights)."""
+        dt = t - tr.t
+        if dt <= 0:
+            return float(tr.x[0]), float(tr.x[1])
+        zero = np.zeros((5, 5))
+        pos = [(self._ct if how == "ct" else self._cv)(tr.xs[j], zero, 0.0, dt)[0][:2]
+               for j, (how, _) in enumerate(self.motion[self.mover(tr)])]
+        x = tr.mu @ np.array(pos)
+        return float(x[0]), float(x[1])
 
     def dr_threshold(self, tr: Track) -> float:
         """How far the receivers' extrapolation may be off before a report is news."""

@@ -43,6 +43,7 @@ from . import frames as F
 from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
+from .srcjournal import ask
 from .timeline import Timeline
 from .source import CACHE
 
@@ -108,6 +109,7 @@ class LivePeer:
         self.promised: dict[str, float] = {}          # source -> the furthest watermark its frames gave
         self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
         self.frames = 0
+        self.fetched = 0                      # frames caught up from sources' journals
         self.late = 0
         self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given and shown
         self.muted: set[tuple] = set()        # ... given inhibited
@@ -172,6 +174,8 @@ class LivePeer:
         if f is None:
             return
         st = self.seq_of.get(f.source)
+        if st is not None and f.epoch > st[0]:   # the source restarted: the rest of its last epoch first
+            self._catch_up(f.source, st[0], st[1], W.SEQ_LIMIT, take=True)
         if st is None or f.epoch > st[0]:   # first heard, or the source restarted: its seq starts at 1
             st = self.seq_of[f.source] = [f.epoch, 1]
             self.held[f.source] = {}
@@ -193,6 +197,8 @@ class LivePeer:
         """Held frames now in sequence (or, `force`d after the wait, from the lowest held on:
         the missing ones are gone, counted as a gap)."""
         st, held = self.seq_of[source], self.held[source]
+        if force and held and st[1] not in held:   # beyond recovery: the source's journal, if it keeps one
+            self._catch_up(source, st[0], st[1], min(held) - 1)
         if force and held and st[1] not in held:
             low = min(held)
             self.gaps += low - st[1]
@@ -204,6 +210,26 @@ class LivePeer:
             st[1] += 1
         if not held:
             self.gap_since.pop(source, None)
+
+    def _catch_up(self, source: str, epoch: int, lo: int, hi: int, take: bool = False) -> None:
+        """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>): held
+        for `_drain_held`, or (`take`: an epoch that ended with a restart) taken now."""
+        if self.session is None or lo > hi:
+            return
+        key = self.ks.src(source)
+        got = 0
+        for b in ask(self.session, self.ks.srcj(source), epoch, lo, hi):
+            f = self._frame(b, key)
+            if f is None or f.source != source or f.epoch != epoch or f.seq < lo:
+                continue
+            got += 1
+            if take:
+                self.take(b, key, f=f)
+            else:
+                self.held[source].setdefault(f.seq, (b, key, f))
+        if got:
+            self.fetched += got
+            self.log(f"source {source}: {got} frames of epoch {epoch} from its journal", flush=True)
 
     def _frame(self, payload: bytes, key: str):
         try:
@@ -479,7 +505,7 @@ class LivePeer:
         return summary
 
     def summary(self) -> dict:
-        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "frames": self.frames, "misses": self.misses,
+        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "frames": self.frames, "misses": self.misses, "fetched": self.fetched,
                 "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,

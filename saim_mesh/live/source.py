@@ -20,6 +20,7 @@ from dissemination.keyspace import KeySpace
 
 from .. import messages as M
 from . import frames as F
+from .srcjournal import SourceJournal
 
 BLOCK = zenoh.CongestionControl.BLOCK
 CACHE = 100_000        # frames kept for recovery and late joiners (a frame is one flush)
@@ -47,7 +48,10 @@ class LiveSource:
     """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
 
     def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
-                 cache: int = CACHE, frame_bytes: int = FRAME_BYTES):
+                 cache: int | None = CACHE, frame_bytes: int = FRAME_BYTES):
+        cache = CACHE if cache is None else cache
+        if cache < 1:
+            raise ValueError(f"source {name}: --cache {cache}: at least 1 frame")
         F.Frame(v=1, source=name, epoch=0, seq=1, wm=0.0)   # the name is checked as a frame checks it
         self.name, self.ks = name, ks
         self.epoch = next_epoch(state_dir, name)
@@ -57,6 +61,12 @@ class LiveSource:
         self.pending: list[bytes] = []
         self.size = 0
         self.sent = 0
+        # the durable journal (with a state directory), served for catch-up beyond the cache
+        self.journal = SourceJournal(state_dir, name, self.epoch) if state_dir is not None else None
+        self.queryable = None
+        if self.journal is not None:
+            jkey = ks.srcj(name)
+            self.queryable = session.declare_queryable(jkey, lambda q: self.journal.serve(q, jkey))
         self.pub = zx.declare_advanced_publisher(
             session, ks.src(name), congestion_control=BLOCK, cache=zx.CacheConfig(max_samples=cache),
             sample_miss_detection=zx.MissDetectionConfig(heartbeat=0.5), publisher_detection=True)
@@ -81,14 +91,26 @@ class LiveSource:
         self._send(max(t, self.wm))
 
     def close(self, end: bool = True) -> None:
-        """The last frame (`end`: the source is done: its watermark is +inf), then undeclare."""
+        """The last frame (`end`: the source is done: its watermark is +inf). The publisher
+        (its cache, for late joiners and recoveries) and the journal's queryable stay until
+        `stop` or the session's end: a source lingers to serve them."""
         self._send(self.wm, end=end)
+
+    def stop(self) -> None:
+        """Undeclare the publisher and the journal's queryable; close the journal."""
         self.pub.undeclare()
+        if self.queryable is not None:
+            self.queryable.undeclare()
+        if self.journal is not None:
+            self.journal.close()
 
     def _send(self, wm: float, end: bool = False) -> None:
         self.seq += 1
         self.wm = max(self.wm, wm)
         f = F.Frame(v=1, source=self.name, epoch=self.epoch, seq=self.seq, wm=self.wm, msgs=self.pending, end=end)
-        self.pub.put(F.encode(f))
+        payload = F.encode(f)
+        if self.journal is not None:   # on disk before it is on the wire
+            self.journal.append(self.seq, payload)
+        self.pub.put(payload)
         self.sent += len(self.pending)
         self.pending, self.size = [], 0

@@ -123,7 +123,8 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     # and liveliness token under src/<name>/@adv/...; `@` chunks are verbatim (`**` does not
     # reach them), so they are named. An EA's advanced subscriber queries those caches and
     # declares its own token under src/*/@adv/...
-    ea_src = [rule("ea_src_read", READ, [adv]), rule("ea_src", ["query", "liveliness_token"], [adv, f"{r}/src/**"])]
+    ea_src = [rule("ea_src_read", READ, [adv]), rule("ea_src", ["query", "liveliness_token"], [adv, f"{r}/src/**"]),
+              rule("ea_srcj", ["query"], [ks.srcj("*")])]   # the sources' durable journals
 
     def subject(cn: str, rule_ids: list[str]) -> None:
         subjects.append({"id": cn, "cert_common_names": [cn]})
@@ -140,7 +141,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                                                           ks.cmdlog(u), ks.notice("*", u)]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
     for n in source_names(units, taskorg):
-        mine = [ks.src(n), f"{r}/src/{n}/@adv/**"]
+        mine = [ks.src(n), f"{r}/src/{n}/@adv/**", ks.srcj(n)]
         subject(f"source.{n}", [out, rule(f"source.{n}.read", READ, [f"{r}/src/**", adv]),
                                 rule(f"source.{n}.put", ["put", "declare_queryable", "reply", "liveliness_token"],
                                      mine),

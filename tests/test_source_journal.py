@@ -1,0 +1,81 @@
+"""A source's durable journal (issue 31.1): what it published, served on srcj/<name> for
+catch-up beyond the advanced publisher's in-memory cache. A late joiner that the cache
+no longer covers gets the rest from the journal and raises what an EA fed everything
+raises; a bad query is answered with an error and the source lives on."""
+from __future__ import annotations
+
+import json
+import uuid
+
+import msgspec
+import pytest
+
+from saim_mesh import scenario as S
+from saim_mesh.live import play
+from saim_mesh.live.srcjournal import JournalQuery, SourceJournal
+from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.zconf import free_port
+
+from .conftest import SMALL
+from .test_live import in_process, load, plan_alerts, reap
+
+pytestmark = pytest.mark.timeout(300)
+
+
+class FakeQuery:
+    def __init__(self, payload: bytes):
+        self.payload = type("P", (), {"to_bytes": lambda _s: payload})()
+        self.replies: list[bytes] = []
+        self.error: bytes | None = None
+
+    def reply(self, key, b):
+        self.replies.append(b)
+
+    def reply_err(self, b):
+        self.error = b
+
+
+def test_the_journal_keeps_every_epoch_and_answers_bad_queries_with_an_error(tmp_path):
+    j = SourceJournal(tmp_path, "cp.x", 1)
+    for seq in range(1, 6):
+        j.append(seq, f"frame-{seq}".encode())
+    j.close()
+    j2 = SourceJournal(tmp_path, "cp.x", 2)   # restarted: a new epoch, the old one still served
+    j2.append(1, b"new-1")
+    assert j2.frames(1, 2, 4) == [b"frame-2", b"frame-3", b"frame-4"]
+    assert j2.frames(1, 4, 99) == [b"frame-4", b"frame-5"] and j2.frames(2, 1, 1) == [b"new-1"]
+    assert j2.frames(7, 1, 3) == []
+    with pytest.raises(ValueError, match="seq 3 after 1"):
+        j2.append(3, b"skipped one")
+    q = FakeQuery(msgspec.msgpack.encode(JournalQuery(epoch=1, lo=1, hi=2)))
+    j2.serve(q, "k")
+    assert q.replies == [b"frame-1", b"frame-2"] and q.error is None
+    for bad in (b"\xc1", msgspec.msgpack.encode({"epoch": -1, "lo": 1, "hi": 2}), b"x" * 300,
+                msgspec.msgpack.encode({"epoch": 1, "lo": 1, "hi": 2, "extra": 1})):
+        q = FakeQuery(bad)
+        j2.serve(q, "k")
+        assert q.error and not q.replies
+    assert j2.errors == 4
+
+
+def test_a_late_joiner_beyond_the_cache_catches_up_from_the_journal(tmp_path):
+    sc = S.load(SMALL)
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    procs = []
+    try:
+        procs.append(Proc("source-cp.all", [*py(), "source", str(SMALL), "--name", "cp.all", "--listen", ep,
+                                            "--root", root, "--tracks", "--speed", "max", "--cache", "3",
+                                            "--state", str(tmp_path / "state"), "--linger", "600"],
+                          env=clean_env(), log_dir=tmp_path))
+        procs[0].wait_for("end source cp.all", 120)   # all published before the EA exists
+        procs.append(Proc("peer-A2", [*py(), "peer", "--scenario", str(SMALL), "--unit", "A2", "--connect", ep,
+                                      "--root", root, "--sources", "cp.all", "--out", str(tmp_path / "A2.jsonl")],
+                          env=clean_env(), log_dir=tmp_path))
+        line = procs[1].wait_for("summary ", 180)
+    finally:
+        reap(procs)
+    summary = json.loads(line.split(" ", 1)[1])
+    assert summary["fetched"] > 3 and summary["gaps"] == 0 and summary["lost"] == {}, \
+        {k: summary[k] for k in ("fetched", "gaps", "lost", "frames")}
+    want = plan_alerts(in_process(sc, "A2", {"cp.all": list(play.share(sc, None, True))}))
+    assert len(want) >= 5 and plan_alerts(load(tmp_path / "A2.jsonl")) == want
