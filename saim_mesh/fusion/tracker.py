@@ -50,6 +50,7 @@ class Track:
     Ps: np.ndarray | None = None     # and covariance, 3 x 5 x 5 (x and P above: their mixture)
     mu: np.ndarray | None = None     # the models' probabilities
     P_upd: np.ndarray | None = None  # P at the last update (what a report's own sigma is)
+    Ps_upd: np.ndarray | None = None
 
 
 @dataclass
@@ -86,7 +87,7 @@ class KalmanTracker:
                  q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0, q_air_ct: float = 1.0,
                  q_turn: float = 1e-5, steady_s: float = 60.0, turn_s: float = 120.0, man_s: float = 20.0,
                  dr_m_air: float = 50.0, dr_lag_ground_s: float = 2.0, turn_h_s: float = 0.0,
-                 max_turn_dps: float = 30.0, dr_ahead_s: float = 0.0):
+                 max_turn_dps: float = 30.0, dr_ahead_s: float = 0.0, dr_sig: str = "mix"):
         for k, v in (("q", q), ("q_fast", q_fast), ("q_man", q_man), ("q_air", q_air), ("q_air_man", q_air_man),
                      ("q_air_ct", q_air_ct), ("q_turn", q_turn), ("steady_s", steady_s), ("turn_s", turn_s),
                      ("man_s", man_s)):
@@ -96,7 +97,7 @@ class KalmanTracker:
             raise ValueError(f"confirmation M-of-N needs 1 <= M <= N, got M={m}, N={n}")
         self.name, self.sigma = name, sigma
         self.q, self.q_fast, self.fast = q, q_fast, fast_mps
-        self.motion = {"ground": (("cv", q), ("cv", q_man), ("cv", q_man)),
+        self.motion = {"ground": (("cv", q), ("cv", q), ("cv", q_man)),
                        "air": (("cv", q_air), ("ct", q_air_ct), ("cv", q_air_man)),
                        "tentative": (("cv", q_fast),) * 3}
         # the models' Markov chain: each is left at 1 / its mean sojourn, for either other one alike
@@ -114,6 +115,7 @@ class KalmanTracker:
         self.q_turn, self.turn_h_s = q_turn, turn_h_s
         self.max_turn = math.radians(max_turn_dps)
         self.dr_ahead_s = dr_ahead_s
+        self.dr_sig = dr_sig
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -291,6 +293,7 @@ class KalmanTracker:
         tr.mu /= tr.mu.sum()
         self._combine(tr)
         tr.P_upd = tr.P.copy()
+        tr.Ps_upd = tr.Ps.copy()
         tr.t = tr.t_upd = t
         tr.x_upd = tr.x.copy()
         tr.counts.append(n)
@@ -323,6 +326,7 @@ class KalmanTracker:
             tr = Track(f"{self.name}-{self.seq}", x, P, t, t, x.copy(), ext)
             tr.xs, tr.Ps = np.stack([x, x, x]), np.stack([P, P, P])
             tr.mu, tr.P_upd = self.mu0.copy(), P.copy()
+            tr.Ps_upd = tr.Ps.copy()
             tr.counts.append(len(zs))
             tr.hit_window = True
             self._height(tr, alt, mine)
@@ -389,7 +393,8 @@ class KalmanTracker:
     def dr_threshold(self, tr: Track) -> float:
         """How far the receivers' extrapolation may be off before a report is news."""
         air = self.mover(tr) == "air"
-        sig = math.sqrt(max(float(tr.P_upd[0, 0]), float(tr.P_upd[1, 1])))
+        Pr = tr.P_upd if self.dr_sig == "mix" else tr.Ps_upd[0]
+        sig = math.sqrt(max(float(Pr[0, 0]), float(Pr[1, 1])))
         speed = math.hypot(tr.x_upd[2], tr.x_upd[3])
         floor = self.dr_m_air if air else self.dr_m
         lag = self.dr_lag_s if air else self.dr_lag_ground_s

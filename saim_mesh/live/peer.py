@@ -51,6 +51,7 @@ BLOCK = zenoh.CongestionControl.BLOCK
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
 CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, silences) while frames flow
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
+ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report, its heap entry: 315 B measured)
 DATA = (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
         M.Reorganization)
 
@@ -70,6 +71,10 @@ class LivePeer:
         self.silence_s = float(mesh["source_silence_s"] if silence_s is None else silence_s)
         self.join_s = max(self.silence_s, float(mesh["source_join_s"]))
         self.max_bytes = int(max_bytes or mesh["max_payload_bytes"])
+        # memory held for the order: frames waiting (out of sequence, or for room in the
+        # order) up to half of it, facts in the order the other half; beyond, a source's
+        # frames are dropped and fetched again from its journal when there is room
+        self.max_held = int(float(mesh["max_held_mb"]) * 2**20)
         self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
         # a commander's commands are signed end to end (secure mode): checked by their own gate.
         # A source's frame is trusted by its key (only source.<name> may put on src/<name>),
@@ -86,7 +91,7 @@ class LivePeer:
         # the sources its interest needs among those named: only these gate its epochs
         self.named = sorted(dict.fromkeys(sources))
         self.sources = depends(sc, self.ea, self.named)
-        self.order = EventTimeOrder(self.sources)
+        self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
         self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
         self.nlog = noticelog.NoticeLog(noticelog.path_for(out_path)) if out_path else None
         self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
@@ -108,6 +113,9 @@ class LivePeer:
         self.gap_since: dict[str, float] = {}
         self.promised: dict[str, float] = {}          # source -> the furthest watermark its frames gave
         self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
+        self.stored = 0                       # bytes of the frames held or waiting for room
+        self.behind: dict[str, bool] = {}     # sources whose frames are dropped until fetched again
+        self.dropped = 0                      # ... how many (all fetched again from the journal, or gaps)
         self.frames = 0
         self.fetched = 0                      # frames caught up from sources' journals
         self.late = 0
@@ -182,11 +190,21 @@ class LivePeer:
         if f.epoch < st[0] or f.seq < st[1]:
             return   # an old epoch's frame, or one taken already
         held = self.held[f.source]
+        if self.behind.get(f.source) or self.stored + len(payload) > self.max_held // 2 and (
+                f.seq > st[1] or self.retry.get(f.source)):
+            if not self.behind.get(f.source):
+                self.log(f"source {f.source}: over {self.max_held >> 21} MB held: its frames from {st[1]} "
+                         f"are fetched again from its journal when there is room", flush=True)
+            self.behind[f.source] = True   # heard (not silent), but not kept
+            self.heard[f.source] = time.monotonic()
+            self.dropped += 1
+            return
         if f.seq > st[1]:
             if not held:
                 self.log(f"source {f.source}: frame {f.seq} came before {st[1]}: waiting for it", flush=True)
             if len(held) < HELD_FRAMES:
                 held[f.seq] = (payload, key, f)
+                self.stored += len(payload)
                 self.gap_since.setdefault(f.source, time.monotonic())
             return
         self.take(payload, key, f=f)
@@ -206,10 +224,39 @@ class LivePeer:
             st[1] = low
         while st[1] in held:
             payload, key, f = held.pop(st[1])
+            self.stored -= len(payload)
             self.take(payload, key, f=f)
             st[1] += 1
         if not held:
             self.gap_since.pop(source, None)
+
+    def _order_bound(self) -> int:
+        return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
+
+    def _resume(self) -> None:
+        """Sources we fell behind on: their frames fetched again from their journals, in
+        sequence, while there is room (what no journal holds is a gap, said and counted)."""
+        for src in [s for s, b in self.behind.items() if b]:
+            st = self.seq_of[src]
+            while (self.stored < self.max_held // 4 and not self.retry.get(src)
+                   and self.order.buffered() < self.order.max_buffered // 2):
+                got = ask(self.session, self.ks.srcj(src), st[0], st[1], st[1] + 499) if self.session else []
+                key = self.ks.src(src)
+                n = 0
+                for b in got:
+                    f = self._frame(b, key)
+                    if f is None or f.epoch != st[0] or f.seq != st[1]:
+                        continue
+                    n += 1
+                    self.fetched += 1
+                    ok = self.take(b, key, f=f)
+                    st[1] = f.seq + 1
+                    if not ok:
+                        break
+                if not n:   # the journal has no more (the live edge, or no journal): live frames again
+                    self.behind[src] = False
+                    self.log(f"source {src}: caught up from its journal to {st[1] - 1}", flush=True)
+                    break
 
     def _catch_up(self, source: str, epoch: int, lo: int, hi: int, take: bool = False) -> None:
         """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>): held
@@ -254,6 +301,7 @@ class LivePeer:
                 return True
         if self.retry.get(f.source) and journal:
             self.retry[f.source].append((payload, key, f))
+            self.stored += len(payload)
             return False
         if f.source in self.order.lost and self.rebuilding is None:   # back: rebuild as if never lost
             if journal and self.journal is not None:
@@ -276,6 +324,7 @@ class LivePeer:
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             self.retry.setdefault(f.source, []).append((payload, key, f))
+            self.stored += len(payload)
             return False
         if why is not None:
             return True
@@ -309,8 +358,9 @@ class LivePeer:
         if self.armed:
             self.ea.arm()
         self.ea.start(0.0)
-        self.order = EventTimeOrder(self.sources)
+        self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
         self.retry = {}
+        self.stored = sum(len(x[0]) for q in self.held.values() for x in q.values())
         returned = {source} | {r[1] for r in records if r[0] == "back"}
         try:
             for rec in records:
@@ -341,8 +391,10 @@ class LivePeer:
                 ok = self.take(payload, key, f=f)
                 if not ok:                    # still full: put it back at the head, keep the rest
                     self.retry[src] = [q[0], *q[1:]]
+                    self.stored -= len(payload)   # counted again by take()
                     break
                 q.pop(0)
+                self.stored -= len(payload)
                 self.retry[src] = q
 
     def lose(self, source: str, why: str, journal: bool = True) -> None:
@@ -470,6 +522,8 @@ class LivePeer:
                     next_check = now + CHECK_S
                     if self.retry:
                         self._retry()
+                    if self.behind:
+                        self._resume()
                     for src, since in list(self.gap_since.items()):
                         if now - since > GAP_WAIT_S:
                             self._drain_held(src, force=True)
@@ -505,7 +559,7 @@ class LivePeer:
         return summary
 
     def summary(self) -> dict:
-        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "frames": self.frames, "misses": self.misses, "fetched": self.fetched,
+        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "frames": self.frames, "misses": self.misses, "fetched": self.fetched, "dropped": self.dropped,
                 "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,

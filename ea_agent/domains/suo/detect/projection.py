@@ -244,7 +244,7 @@ class Projections(Detector):
         drift = self._drift(m, t)
         if drift is None:
             return
-        heading_rate, settled, members = drift
+        heading_rate, fastest, settled, members = drift
         if not settled or heading_rate <= MIN_RATE:
             return   # the picture lags the unit (some members still show how it went before)
         # confirmed by the reports themselves: dead reckoning carries a unit that has
@@ -253,7 +253,9 @@ class Projections(Detector):
         grown = (float(line.distance(shapely.Point(now[3]))) - float(line.distance(shapely.Point(prev[3])))) / dt
         if grown < CONFIRM * heading_rate:
             return
-        rate = max(heading_rate, grown)   # the faster: a projection errs early, never late
+        # the fastest reading: a member's report straddling the turn shows part of the
+        # drift, so the mean can still lag; a projection errs early, never late
+        rate = max(heading_rate, fastest, grown)
         ahead = (thr - d1) / rate
         if ahead < min_lead or ahead > horizon:
             return
@@ -272,15 +274,16 @@ class Projections(Detector):
                      "threshold_m": thr, "places": [geom]},
             also=((("out-of-position", m.id, what), thr),), projection=True))
 
-    def _drift(self, m: Mission, t: float) -> tuple[float, bool, int] | None:
-        """The unit's cross-track rate away from its route (m/s) from the velocities its
-        members' latest reports showed (standing still: none), whether the picture has
-        settled (every member heard within unknown_position_s drifts at least AGREE of the
-        mean: none still shows the heading it had before the unit turned), and how many
-        members were judged. The route's direction is the one that makes the rate least
-        of those it takes from the unit's nearest point back over the ground the unit
-        covered since its oldest report judged (it may have turned with the route since).
-        None without members heard or a position."""
+    def _drift(self, m: Mission, t: float) -> tuple[float, float, bool, int] | None:
+        """The unit's cross-track rate away from its route (m/s): the mean of the velocities
+        its members' latest reports showed (none for one that showed it standing still)
+        across the route, and the fastest member's; whether the picture has settled (every
+        member heard within unknown_position_s drifts at least AGREE of the mean: none still
+        shows the heading it had before the unit turned); how many members were judged.
+        The route's direction is the one that makes the rate least of those the route takes
+        from the unit's nearest point back over the ground the unit covered since its oldest
+        report judged (it may have turned with the route since). None without members heard
+        or a position."""
         dom = self.dom
         pos = dom.unit_now.get(m.unit)
         pic = dom.pic
@@ -318,14 +321,14 @@ class Projections(Detector):
             if side < 0.0:
                 nx, ny = -nx, -ny
             w = vel @ np.array((nx, ny))
-            rates.append(float(w.mean()))
+            rates.append((float(w.mean()), float(w.max())))
             if k == 0:
                 local = w
         if local is None:
             return None
-        rate = min(rates)
+        rate, fastest = min(r for r, _ in rates), min(f for _, f in rates)
         settled = rate > 0.0 and float(local.min()) >= AGREE * float(local.mean())
-        return rate, settled, int(len(idx))
+        return rate, fastest, settled, int(len(idx))
 
     def _late_ahead(self, m, t, old, now, dt, horizon, min_lead, cands) -> None:
         g0, g1 = old[2], now[2]
