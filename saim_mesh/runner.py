@@ -117,14 +117,15 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
     for i, ev in enumerate(evs):
         if cmds:
             command_until(ev.t)
+        trs = fusion.feed(ev) if fusion is not None else ()   # tracks of closed windows: dated before ev
         if speed:
             wait = t0 + ev.t / speed - time.monotonic()
             if wait > 0:
-                for ea in eas:
-                    ea.advance(ev.t - 1e-9)
+                for ea in eas:   # everything before the earliest fact still to come is in
+                    ea.advance(min([ev.t, *(tr.t for tr in trs)]) - 1e-9)
                 time.sleep(wait)
         if fusion is not None:   # hits go to the fusion nodes; the EAs get their tracks
-            for tr in fusion.feed(ev):
+            for tr in trs:
                 for ea in eas:
                     ea.submit(tr)
             if type(ev) is SensorHit:

@@ -57,10 +57,11 @@ def both(sc, unit: str) -> tuple[list[str], list[str], dict[str, int]]:
         while reorgs and reorgs[0][0] <= ev.t:
             _, u, parent = reorgs.pop(0)
             to.resubordinate(u, parent)
-        if ev.t >= next_t:   # re-register on what the EA knows by now
-            near.advance(ev.t - 1e-9)
+        trs = fusion.feed(ev)   # tracks of windows that closed: dated before ev
+        if ev.t >= next_t:   # re-register on what the EA knows by now (all before the earliest still to come)
+            near.advance(min([ev.t, *(tr.t for tr in trs)]) - 1e-9)
             want, next_t = exact(interest.keys(near.domain), ks.root), next_t + every_s
-        for tr in fusion.feed(ev):
+        for tr in trs:
             take(tr, "tracks")
         if type(ev) is not SensorHit:
             take(ev, "others")

@@ -78,18 +78,18 @@ def _q4(q: float, dt: float) -> np.ndarray:
 
 
 class KalmanTracker:
-    def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.5,
+    def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.1,
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
-                 dr_m: float | None = 50.0, dr_k: float = 4.0, heartbeat_s: float = 60.0,
-                 dr_lag_s: float = 2.0, still_m: float = 50.0, still_s: float = 30.0,
-                 q_man: float = 0.5, q_air: float = 40.0, q_air_man: float = 40.0, q_air_ct: float = 1.0,
-                 q_turn: float = 1e-5, steady_s: float = 60.0, turn_s: float = 120.0, man_s: float = 20.0,
-                 dr_m_air: float = 50.0, dr_lag_ground_s: float = 2.0, turn_h_s: float = 0.0,
-                 max_turn_dps: float = 30.0, dr_ahead_s: float = 0.0, dr_sig: str = "mix"):
-        for k, v in (("q", q), ("q_fast", q_fast), ("q_man", q_man), ("q_air", q_air), ("q_air_man", q_air_man),
-                     ("q_air_ct", q_air_ct), ("q_turn", q_turn), ("steady_s", steady_s), ("turn_s", turn_s),
+                 dr_m: float | None = 0.0, dr_k: float = 3.0, heartbeat_s: float = 60.0,
+                 dr_lag_s: float = 0.5, still_m: float = 50.0, still_s: float = 30.0,
+                 q_man: float = 2.0, q_air: float = 0.1, q_air_ct: float = 0.2, q_turn: float = 1e-5,
+                 q_air_man: float = 100.0, steady_s: float = 60.0, turn_s: float = 300.0, man_s: float = 10.0,
+                 max_turn_dps: float = 30.0, dr_m_air: float = 0.0, dr_k_air: float = 4.0,
+                 dr_ahead_s: float = 2.5, chord_s: float = 10.0):
+        for k, v in (("q", q), ("q_fast", q_fast), ("q_man", q_man), ("q_air", q_air), ("q_air_ct", q_air_ct),
+                     ("q_turn", q_turn), ("q_air_man", q_air_man), ("steady_s", steady_s), ("turn_s", turn_s),
                      ("man_s", man_s)):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
                 raise ValueError(f"process noise must be finite and > 0 ({k}={v!r})")
@@ -97,6 +97,8 @@ class KalmanTracker:
             raise ValueError(f"confirmation M-of-N needs 1 <= M <= N, got M={m}, N={n}")
         self.name, self.sigma = name, sigma
         self.q, self.q_fast, self.fast = q, q_fast, fast_mps
+        # per kind of mover, three models (steady, turning, manoeuvring): a ground vehicle
+        # goes straight or turns a corner; an aircraft also flies coordinated turns and orbits
         self.motion = {"ground": (("cv", q), ("cv", q), ("cv", q_man)),
                        "air": (("cv", q_air), ("ct", q_air_ct), ("cv", q_air_man)),
                        "tentative": (("cv", q_fast),) * 3}
@@ -106,16 +108,13 @@ class KalmanTracker:
         ev, vec = np.linalg.eig(self.rates.T)
         pi = np.real(vec[:, np.argmin(np.abs(ev))])
         self.mu0 = pi / pi.sum()                        # its long-run shares: a new track's
+        self.q_turn, self.max_turn = q_turn, math.radians(max_turn_dps)
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
         self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
-        self.dr_m_air, self.dr_lag_ground_s = dr_m_air, dr_lag_ground_s
+        self.dr_m_air, self.dr_k_air, self.dr_ahead_s, self.chord_s = dr_m_air, dr_k_air, dr_ahead_s, chord_s
         self.still_m, self.still_s = still_m, still_s
-        self.q_turn, self.turn_h_s = q_turn, turn_h_s
-        self.max_turn = math.radians(max_turn_dps)
-        self.dr_ahead_s = dr_ahead_s
-        self.dr_sig = dr_sig
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -393,12 +392,11 @@ class KalmanTracker:
     def dr_threshold(self, tr: Track) -> float:
         """How far the receivers' extrapolation may be off before a report is news."""
         air = self.mover(tr) == "air"
-        Pr = tr.P_upd if self.dr_sig == "mix" else tr.Ps_upd[0]
-        sig = math.sqrt(max(float(Pr[0, 0]), float(Pr[1, 1])))
+        P = tr.Ps_upd[0]
+        sig = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
         speed = math.hypot(tr.x_upd[2], tr.x_upd[3])
-        floor = self.dr_m_air if air else self.dr_m
-        lag = self.dr_lag_s if air else self.dr_lag_ground_s
-        return max(floor, self.dr_k * sig, lag * speed)
+        floor, k = (self.dr_m_air, self.dr_k_air) if air else (self.dr_m, self.dr_k)
+        return max(floor, k * sig, self.dr_lag_s * speed)
 
     def domain(self, tr: Track) -> str:
         """Air when it flies (height above `air_agl_m`) or moves faster than any ground
@@ -421,8 +419,8 @@ class KalmanTracker:
         vx, vy = float(x[2]), float(x[3])
         if self._halted(tr):
             vx = vy = 0.0   # receivers must not drift a halted group by its velocity noise
-        elif self.turn_h_s > 0 and abs(x[4]) * self.turn_h_s > 1e-3:
-            th = float(x[4]) * self.turn_h_s / 2.0   # the chord of the next turn_h_s of the arc
+        elif self.chord_s > 0 and abs(x[4]) * self.chord_s > 1e-3:
+            th = float(x[4]) * self.chord_s / 2.0   # the chord of the next chord_s of the arc
             f = math.sin(th) / th
             c, s_ = math.cos(th), math.sin(th)
             vx, vy = f * (c * vx - s_ * vy), f * (s_ * vx + c * vy)
