@@ -92,7 +92,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="bench/results/partition.json")
     a = ap.parse_args(argv)
     from . import scenario as S
-    from . import topology as T
+    from .net import topology as T
     from .live.up import cp_sources
     from .ondemand import ensure
     from .runner import config_for, run as run_in_process

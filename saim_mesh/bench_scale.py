@@ -27,8 +27,8 @@ from pathlib import Path
 
 import zenoh
 
-from . import routed
-from . import topology as T
+from .net import routed
+from .net import topology as T
 from .mesh import Supervisor, mesh_units, start_replay, up
 from .proc import Proc, clean_env
 from .procstat import Sampler

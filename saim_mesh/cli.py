@@ -218,7 +218,7 @@ def cmd_replay(a) -> int:
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "replay", sc, root, **_zmode(a))
     sources, topo = None, None
     if a.topology:   # one client session per router: each unit's reports enter at its own command post
-        from .topology import read_resolved
+        from .net.topology import read_resolved
         topo, eps = read_resolved(a.topology)
         sources = {n: config(None, [ep], a.zenoh_config, False, a.pki, "replay", sc, root, mode="client",
                              routers=sorted(eps)) for n, ep in eps.items()}
@@ -295,7 +295,7 @@ def cmd_peer(a) -> int:
                               a.linger)
     misplaced = None
     if a.topology:   # attached to another command post's router: it works, but its reports cross a radio link
-        from .topology import read_resolved
+        from .net.topology import read_resolved
         topo, eps = read_resolved(a.topology)
         own = topo.router_of(a.unit, sc.taskorg)
         if eps[own] not in (a.connect or []):
@@ -318,7 +318,7 @@ def cmd_fusion(a) -> int:
 
 
 def cmd_router(a) -> int:
-    from .router import main_router
+    from .net.router import main_router
     from .zconf import config
     sc = S.load(a.scenario, events=False)
     root = a.root or f"saim/{sc.name}"
@@ -331,7 +331,7 @@ def cmd_router(a) -> int:
 
 
 def cmd_topology(a) -> int:
-    from . import topology as T
+    from .net import topology as T
     sc = S.load(a.scenario, events=False)
     topo = T.load(a.file, sc.taskorg) if a.file else T.derive(sc.taskorg)
     if a.out:
@@ -501,7 +501,7 @@ def _zmode(a) -> dict:
     """--mode and the routers of --topology (a resolved topology written by `mesh up`)."""
     routers: list[str] = []
     if getattr(a, "topology", None):
-        from .topology import routers_of_resolved
+        from .net.topology import routers_of_resolved
         routers = routers_of_resolved(a.topology)
     return {"mode": getattr(a, "mode", None), "routers": routers}
 
@@ -741,7 +741,7 @@ def main(argv: list[str] | None = None) -> int:
     tak_arguments(tk)
     _zenoh_args(tk)
     tk.set_defaults(fn=cmd_tak)
-    from .linkemu import add_arguments as link_arguments, cmd_link
+    from .net.linkemu import add_arguments as link_arguments, cmd_link
     li = sub.add_parser("link", help="an emulated radio link: a TCP proxy on loopback with delay, loss, "
                                      "cut (SIGUSR1) and heal (SIGUSR2)")
     link_arguments(li)

@@ -132,7 +132,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     root = root or f"saim/{sc.name}/{os.getpid()}"
     topo = None
     if topology is not None:
-        from . import topology as T
+        from .net import topology as T
         procs = {"replay", "tak", "console", *(f"fusion-{g}" for g in groups)}
         topo = T.derive(sc.taskorg) if topology == "derive" else T.load(topology, sc.taskorg, procs)
     if insecure:
@@ -155,7 +155,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     replay_net = None
     try:
         if topo is not None:
-            from . import routed
+            from .net import routed
             eps, link_files, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
             client = ["--mode", "client", "--topology", str(resolved)]
             net = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], *client]   # noqa: E731
@@ -217,7 +217,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     result = {"peers": summaries, "wall_s": wall, "events": sup.events, "replay": replay.lines,
               "secure": not insecure, "given_up": sorted(sup.given_up)}
     if topo is not None:
-        from .routed import link_stats
+        from .net.routed import link_stats
         result["topology"] = topo.to_dict()
         result["links"] = link_stats(link_files)
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))

@@ -96,7 +96,7 @@ def overhead(sc, n: int = 3000) -> dict:
     """Bytes on the router link per message, beyond payload + attachment (Zenoh framing + key)."""
     import zenoh
     from saim_mesh import zconf
-    from saim_mesh.linkemu import Link
+    from saim_mesh.net.linkemu import Link
     ks = KeySpace.of(sc, "saim/battalion")
     msgs = [(ks.key(ev, sc.taskorg, sc.projection), M.encode(ev)) for ev in sc.events
             if type(ev).__name__ == "LocationReport"][:n]

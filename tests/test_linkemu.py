@@ -1,4 +1,4 @@
-"""The emulated radio link (saim_mesh/linkemu.py): plain sockets through it first,
+"""The emulated radio link (saim_mesh/net/linkemu.py): plain sockets through it first,
 then two Zenoh sessions (a router and a client) joined through it, then the process."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from saim_mesh.linkemu import CHUNK, Link
+from saim_mesh.net.linkemu import CHUNK, Link
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 

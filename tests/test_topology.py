@@ -17,7 +17,7 @@ import pytest
 
 from ea_agent.core.plan import TaskOrg, Unit
 from saim_mesh import scenario as S
-from saim_mesh import topology as T
+from saim_mesh.net import topology as T
 from saim_mesh import wire as W
 from saim_mesh.mesh import up
 from saim_mesh.proc import Proc

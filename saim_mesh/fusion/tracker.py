@@ -396,7 +396,7 @@ class KalmanTracker:
         sig = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
         speed = math.hypot(tr.x_upd[2], tr.x_upd[3])
         floor, k = (self.dr_m_air, self.dr_k_air) if air else (self.dr_m, self.dr_k)
-        return max(floor, k * sig, self.dr_lag_s * speed)
+        return max(floor, k * sig + self.dr_lag_s * speed)
 
     def domain(self, tr: Track) -> str:
         """Air when it flies (height above `air_agl_m`) or moves faster than any ground

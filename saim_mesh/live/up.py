@@ -53,7 +53,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     sources = cp_sources(sc)
     topo = None
     if topology is not None:
-        from .. import topology as T
+        from ..net import topology as T
         topo = T.derive(sc.taskorg) if topology == "derive" else T.load(topology, sc.taskorg, set(sources))
     sec: list[str] = []
     if topo is not None:
@@ -87,7 +87,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     con = None
     try:
         if topo is not None:   # a router per command post, linked as the topology says
-            from .. import routed
+            from ..net import routed
             eps, _links, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
             secure = ["--pki", str(pki)] if pki else []
             where = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], "--mode", "client",  # noqa: E731
