@@ -36,11 +36,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from .proc import Proc, clean_env, py
-from . import results
-from .stats import percentiles
+from ..proc import Proc, clean_env, py
+from .. import results
+from ..stats import percentiles
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LONGTASKS = """window.__longTasks = [];
 try { new PerformanceObserver((l) => { for (const e of l.getEntries()) window.__longTasks.push(e.duration); })
       .observe({ type: "longtask", buffered: true }); } catch (e) {}"""
@@ -240,8 +240,8 @@ def unarmed_mesh(scenario: Path, out_dir: Path, speed: str, timeout_s: float) ->
 
 def unarmed_inprocess(scenario: Path, units: list[str]) -> dict[str, list[dict]]:
     """The same units in process, unarmed: their alerts as JSON lines would have them."""
-    from . import scenario as S
-    from .runner import run
+    from .. import scenario as S
+    from ..runner import run
     sc = S.load(scenario)
     logs: dict[str, list[dict]] = {u: [] for u in units}
     eas = run(sc, units)

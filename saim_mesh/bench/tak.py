@@ -17,13 +17,13 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from . import messages as M
-from . import scenario as S
-from .tak import cot as C
-from .tak.picture import Options, Picture
-from . import results
+from .. import messages as M
+from .. import scenario as S
+from ..tak import cot as C
+from ..tak.picture import Options, Picture
+from .. import results
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EPOCH = datetime(2026, 5, 1, 6, 0, 0, tzinfo=timezone.utc)
 TICK_S = 2.0
 

@@ -28,10 +28,10 @@ import numpy as np
 from ea_agent.core.geo import Projection
 from ea_agent.domains.uv import load_uv_config, make_ea
 
-from . import messages as M
-from . import scenario as S
+from .. import messages as M
+from .. import scenario as S
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EPSG, LON0, LAT0 = 32611, -116.60, 35.26
 HZ = 2.0
 
@@ -112,8 +112,8 @@ def pct(xs: list[float]) -> dict:
 
 def detection_delays() -> dict:
     """Scenario seconds from each true incident's onset to the first alert matching it."""
-    from .evaluate import _matches
-    from .runner import run
+    from ..evaluate import _matches
+    from ..runner import run
     sc = S.load(ROOT / "scenarios" / "uv-team")
     truth = sc.truth()
     alerts = [a for ea in run(sc, truth["owners"]) for a in ea.alerts]
@@ -131,7 +131,7 @@ def detection_delays() -> dict:
 def mesh_latency(n: int, duration_s: float, timeout: float = 400.0) -> dict:
     """The team on the mesh at real time: every robot's and the operator's peer, over a
     scenario as long as the run (peers reject an end of time before the scenario's)."""
-    from .mesh import up
+    from ..mesh import up
     folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), n, duration_s)
     sc = S.load(folder, events=False)
     out = Path(tempfile.mkdtemp(prefix="uvbench-"))

@@ -17,10 +17,10 @@ from pathlib import Path
 from ea_agent.core.config import load_config
 from ea_agent.domains.suo import make_ea
 
-from . import messages as M
-from . import scenario as S
+from .. import messages as M
+from .. import scenario as S
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def feed(ea, sc) -> float:

@@ -17,12 +17,12 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from dissemination.keyspace import KeySpace
 
-from . import messages as M
-from . import wire as W
-from .security import sign as G
-from . import results
+from .. import messages as M
+from .. import wire as W
+from ..security import sign as G
+from .. import results
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def per_message_us(fn, n: int, rounds: int) -> float:

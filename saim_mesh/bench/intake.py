@@ -16,12 +16,12 @@ import sys
 import time
 from pathlib import Path
 
-from . import scenario as S
-from .bench_ea import feed
-from .offline import run, stream
-from .runner import config_for, make_ea
+from .. import scenario as S
+from .ea import feed
+from ..offline import run, stream
+from ..runner import config_for, make_ea
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _same(a) -> tuple:

@@ -14,10 +14,10 @@ import threading
 import time
 from pathlib import Path
 
-from .proc import Proc, clean_env, py
-from . import results
+from ..proc import Proc, clean_env, py
+from .. import results
 
-OUT = Path(__file__).resolve().parents[1] / "bench" / "results" / "link.json"
+OUT = Path(__file__).resolve().parents[2] / "bench" / "results" / "link.json"
 
 
 def _cpu_s(pid: int) -> float:
