@@ -196,8 +196,10 @@ def main(argv=None) -> int:
     ap.add_argument("--latency-s", type=float, default=420.0,
                     help="scenario seconds run at 1x for latency (the brigade's first alerts come at 330 s)")
     ap.add_argument("--insecure", action="store_true")
-    ap.add_argument("--skip", nargs="*", default=[], choices=["brigade", "flood", "latency", "inproc"],
+    ap.add_argument("--skip", nargs="*", default=[], choices=["brigade", "flood", "latency", "inproc", "live"],
                     help="phases to leave out; with `brigade`, the others update the results already in --out")
+    ap.add_argument("--live-only", action="store_true",
+                    help="only the live mesh (a source per command post, no replay): its results into --out's `live`")
     a = ap.parse_args(argv)
     if a.role == "tap":
         role_tap(a.connect, a.root, [])
@@ -212,6 +214,12 @@ def main(argv=None) -> int:
     res_path = tmp / "brigade"
     print(f"brigade: {len(units)} EA peers, {len(sc.taskorg.entity_unit)} entities, "
           f"{sc.duration_s:.0f} s of scenario", flush=True)
+    if a.live_only:
+        out = json.loads(Path(a.out).read_text()) if Path(a.out).exists() else {}
+        out["live"] = live_phase(scenario, tmp / "live", link, a.insecure, units)
+        Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
+        print(json.dumps(out["live"], indent=1))
+        return 0
     if "brigade" in a.skip:   # update the other phases' results in place
         out = json.loads(Path(a.out).read_text())
         _other_phases(a, scenario, tmp, link, res_path, out, {u: None for u in out["processes"] if u in units})
@@ -265,6 +273,42 @@ def main(argv=None) -> int:
     return 0
 
 
+def live_phase(scenario: str, tmp: Path, link: dict, insecure: bool, units: list[str],
+               want: dict[str, list[str]] | None = None) -> dict:
+    """The brigade as the mesh with no centre: a source per command post at max speed, a
+    router per battalion command post, every EA depending only on what its interest needs;
+    wall time, peak PSS per EA peer, bytes per router link, alerts against in-process."""
+    from .. import zygote
+    from ..live.up import up as live_up
+    zyg = lambda: {"zygote": zygote._shared.p.pid} if zygote._shared is not None and zygote._shared.alive() else {}  # noqa
+    tmp.mkdir(parents=True, exist_ok=True)
+    with Sampler(tmp / "pids.json", extra=zyg) as smp:
+        res = live_up(scenario, units, tmp, "max", show=False, topology="derive", link=link, insecure=insecure,
+                      timeout=7200, echo=lambda *x, **k: print(*x, flush=True))
+    procs = smp.report()
+    peers = res["peers"]
+    sc_s = json.loads((tmp / "summary.json").read_text()).get("wall_s", res["wall_s"])
+    from .. import scenario as S
+    dur = S.load(scenario, events=False).duration_s
+    pss = [procs.get(u, {}).get("pss_mb") for u in peers]
+    pss = [x for x in pss if x]
+    want = want if want is not None else in_process(scenario, sorted(peers))
+    same = {u: plan_lines(tmp / f"{u}.jsonl") == want.get(u) for u in sorted(peers)}
+    out = {"wall_s": round(sc_s, 1), "times_real_time": round(dur / sc_s, 1), "ea_peers": len(peers),
+           "sources": res["sources"], "secure": res["secure"],
+           "ea_peer_pss_mb": {"max": max(pss, default=None), "mean": round(sum(pss) / len(pss), 1) if pss else None},
+           "ea_peers_within_40_mb": sum(1 for x in pss if x <= 40.0),
+           "links": _link_bytes(res.get("links") or {}),
+           "alerts_equal_in_process": sum(same.values()), "alerts_differ": sorted(u for u, ok in same.items() if not ok),
+           "gaps": sum(s.get("gaps", 0) for s in peers.values()),
+           "lost": sorted({x for s in peers.values() for x in s.get("lost", {})}),
+           "cpu_s_total": round(sum(p.get("cpu_s") or 0 for p in procs.values()), 1),
+           "targets": {"times_real_time": 10.0, "ea_peer_pss_mb": 40.0, "alerts_equal_in_process": len(units)}}
+    print(f"live: {out['times_real_time']}x real time, {out['alerts_equal_in_process']}/{len(same)} equal, "
+          f"PSS max {out['ea_peer_pss_mb']['max']} MB", flush=True)
+    return out
+
+
 def _other_phases(a, scenario: str, tmp: Path, link: dict, res_path: Path, out: dict, peers: dict) -> None:
     """The flood baseline, 1x latency and the in-process comparison, as not skipped."""
     if "flood" not in a.skip:
@@ -291,6 +335,9 @@ def _other_phases(a, scenario: str, tmp: Path, link: dict, res_path: Path, out: 
         out["alerts_differ"] = sorted(u for u, ok in same.items() if not ok)
         out["alerts"] = sum(len(v) for v in want.values())
         print(f"alerts equal in process: {sum(same.values())}/{len(same)}", flush=True)
+    if "live" not in a.skip:
+        out["live"] = live_phase(scenario, tmp / "live", link, a.insecure, sorted(peers) or None,
+                                 want if "inproc" not in a.skip else None)
 
 
 if __name__ == "__main__":

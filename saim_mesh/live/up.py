@@ -85,10 +85,11 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     shown = Counter()
     t0 = time.monotonic()
     con = None
+    link_files: dict = {}
     try:
         if topo is not None:   # a router per command post, linked as the topology says
             from ..net import routed
-            eps, _links, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
+            eps, link_files, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
             secure = ["--pki", str(pki)] if pki else []
             where = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], "--mode", "client",  # noqa: E731
                                  "--topology", str(resolved), *secure]
@@ -148,6 +149,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
               "secure": not insecure,
               "start": start if live else None, "paced_start": paced_start, "root": root, "units": units,
               "topology": topo.to_dict() if topo is not None else None}
+    if link_files:   # bytes per router link (the emulated links' counters)
+        from ..net.routed import link_stats
+        result["links"] = link_stats(link_files)
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
     echo(table(out_dir, units, sc))
     echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}, "
