@@ -171,6 +171,30 @@ def test_a_unit_back_on_its_route_is_not_projected_off_the_other_side(tmp_path, 
     assert [a for a in of(ea, "projected-out-of-position") if a.t >= 550], "the guard was not exercised"
 
 
+RTE_BEND = line("RTE-BEND", "route", (-500, 0), (2000, 0), (2000, 6000))
+
+
+def test_a_unit_following_a_bend_in_its_route_is_not_projected_off_it(tmp_path, monkeypatch):
+    """RTE-BEND turns north at (2000, 0); A1 marches east at 2 m/s and turns with it at
+    t=1100, its members reporting 60 s apart. Until each reports again, dead reckoning
+    carries them on east off the new leg, every member agreeing; their reports stay on
+    the route: nothing projected. (Without that confirmation it would have been.)"""
+    def where(t):
+        d = 2.0 * max(0.0, t - 100.0)
+        return min(d, 2000.0), max(0.0, d - 2000.0)
+
+    def bend_run(d):
+        sc = FOUR.scenario(d, [RTE_BEND, AA_E], [mission("A1-move", "A1", "move", route="RTE-BEND",
+                                                          destination="AA-E")])
+        msgs = (staggered(FOUR.entities["A1"], where, 10, 1500, 60.0) + FOUR.stays("A2", 0, -3000, 10, 1500)
+                + [start(100, "A1-move", "A1")])
+        return play(sc, msgs, 1500)
+    ea = bend_run(tmp_path)
+    assert not of(ea, "projected-out-of-position") and not of(ea, "out-of-position"), table(*ea.alerts)
+    monkeypatch.setattr(P, "CONFIRM", -1e9)
+    assert of(bend_run(tmp_path / "unconfirmed"), "projected-out-of-position"), "the guard was not exercised"
+
+
 # ------------------------------------------------------------------------ lateness, penetration
 def test_a_late_arrival_is_projected_only_with_the_minimum_lead(tmp_path):
     """A march at 2 m/s to AA-E (8 km) with END-NLT 1500: it cannot make it. Projected late

@@ -9,7 +9,7 @@ name).
 
 A route departure is projected from the unit's recent trend against its route: its
 cross-track rate, from the heading of its members' latest reports against the route's
-direction, confirmed by the sampled growth of its distance off the route. Only once the
+direction, confirmed by the growth of its reported distance off the route. Only once the
 picture has settled: every member heard recently shows the drift (while some have not
 reported since the unit turned, the mean heading and the centroid lag the unit, and a
 projection made then comes after the fact). A unit that cannot be projected that far
@@ -19,9 +19,9 @@ Why not straight-line extrapolation of the position: a unit that follows a bendi
 route would be projected off it at every bend. What is extrapolated is the measure the
 actual alert judges (the distance off the route: at this rate it crosses the threshold
 at ...; the distance still to go to the destination: at this rate it arrives at ...), and
-the route's direction a unit's heading is judged against is any the route takes over
-the ground the unit may have covered since its members' reports (it may have turned
-with the route since). A projection and the later actual alert are one story for VOA:
+a drift counts only where the members' own reports move away from the route (dead
+reckoning carries a unit on along its old heading past a bend it has taken, or past the
+route it came back to). A projection and the later actual alert are one story for VOA:
 the projection sets the history of the actual alert's key, so the actual violation is
 not told again unless it is much worse (the type's repeat ratio)."""
 from __future__ import annotations
@@ -277,13 +277,13 @@ class Projections(Detector):
     def _drift(self, m: Mission, t: float) -> tuple[float, float, bool, int] | None:
         """The unit's cross-track rate away from its route (m/s): the mean of the velocities
         its members' latest reports showed (none for one that showed it standing still)
-        across the route, and the fastest member's; whether the picture has settled (every
-        member heard within unknown_position_s drifts at least AGREE of the mean: none still
-        shows the heading it had before the unit turned); how many members were judged.
-        The route's direction is the one that makes the rate least of those the route takes
-        from the unit's nearest point back over the ground the unit covered since its oldest
-        report judged (it may have turned with the route since). None without members heard
-        or a position."""
+        across the route's direction at its nearest point, and the fastest member's;
+        whether the picture has settled (every member heard within unknown_position_s
+        drifts at least AGREE of the mean: none still shows the heading it had before the
+        unit turned); how many members were judged. None without members heard or a
+        position. (At a bend, a unit that follows the route is dead-reckoned past it on its
+        old heading until its members report again, every member agreeing: what its reports
+        themselves show, in _off_route_ahead, tells the two apart.)"""
         dom = self.dom
         pos = dom.unit_now.get(m.unit)
         pic = dom.pic
@@ -297,38 +297,26 @@ class Projections(Detector):
         idx, seen = idx[heard], seen[heard]
         vel = pic.vel[idx].copy()
         vel[seen > pic.moved_t[idx] + 0.5] = 0.0   # its last report showed it standing still
-        mean = vel.mean(axis=0)
-        speed = float(np.hypot(*mean))
         line = self._line(self._route(m))
-        p = shapely.Point(pos)
-        s = float(line.project(p))
+        s = float(line.project(shapely.Point(pos)))
         near = line.interpolate(s)
-        off = (pos[0] - near.x, pos[1] - near.y)
-        back = speed * float(min(t - seen.min(), float(dom.voi_cfg["dead_reckon_s"])))
-        rates = []
-        local = None
-        for k, at in enumerate((s, s - back / 2, s - back) if back > STEP_M else (s,)):
-            a = line.interpolate(max(0.0, at - STEP_M))
-            b = line.interpolate(min(line.length, at + STEP_M))
-            tx, ty = b.x - a.x, b.y - a.y
-            n = math.hypot(tx, ty)
-            if n <= 0.0:
-                continue
-            nx, ny = -ty / n, tx / n   # normal to the route there, turned to the unit's side
-            side = nx * off[0] + ny * off[1]
-            if abs(side) < 1.0:   # on the route: the side it heads to
-                side = nx * mean[0] + ny * mean[1]
-            if side < 0.0:
-                nx, ny = -nx, -ny
-            w = vel @ np.array((nx, ny))
-            rates.append((float(w.mean()), float(w.max())))
-            if k == 0:
-                local = w
-        if local is None:
+        a = line.interpolate(max(0.0, s - STEP_M))
+        b = line.interpolate(min(line.length, s + STEP_M))
+        tx, ty = b.x - a.x, b.y - a.y
+        n = math.hypot(tx, ty)
+        if n <= 0.0:
             return None
-        rate, fastest = min(r for r, _ in rates), min(f for _, f in rates)
-        settled = rate > 0.0 and float(local.min()) >= AGREE * float(local.mean())
-        return rate, fastest, settled, int(len(idx))
+        nx, ny = -ty / n, tx / n   # normal to the route there, turned to the unit's side
+        side = nx * (pos[0] - near.x) + ny * (pos[1] - near.y)
+        if abs(side) < 1.0:   # on the route: the side it heads to
+            mean = vel.mean(axis=0)
+            side = nx * mean[0] + ny * mean[1]
+        if side < 0.0:
+            nx, ny = -nx, -ny
+        w = vel @ np.array((nx, ny))
+        rate = float(w.mean())
+        settled = rate > 0.0 and float(w.min()) >= AGREE * rate
+        return rate, float(w.max()), settled, int(len(idx))
 
     def _late_ahead(self, m, t, old, now, dt, horizon, min_lead, cands) -> None:
         g0, g1 = old[2], now[2]
