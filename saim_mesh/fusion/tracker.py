@@ -1,4 +1,5 @@
-"""A constant-velocity Kalman multi-target tracker for forward fusion, in local metres.
+"""A Kalman multi-target tracker for forward fusion, in local metres, with motion models
+fit for what it tracks (interacting multiple models, IMM).
 
 Why not the scan-window averager (node.py): it confirms a track only with two hits per
 sensor in a cluster, so a lone vehicle is never tracked; it averages a window's hits
@@ -7,8 +8,29 @@ metres. Here each sensor scan is used at its own time; gates come from each trac
 covariance (a 300 m/s target and a parked truck get the gates they need); a track is
 confirmed when it was updated in M of its last N windows, whatever its size; and a
 report describes the track at its last update, with velocity, and is sent only when the
-receivers' extrapolation of the last one would be off by more than `dr_m` (or the
-strength or domain changed, or on a heartbeat): dead reckoning, as DIS does.
+receivers' extrapolation of the last one would be off by more than the track's
+dead-reckoning threshold (or the strength or domain changed, or on a heartbeat): dead
+reckoning, as DIS does.
+
+Motion models: each track runs three, mixed by an IMM (each is the chance the mover is
+doing that now, given the hits): a steady constant velocity with little process noise, a
+turning model and a manoeuvring constant velocity with much. What each is depends on
+what the track is (`mover`): a ground vehicle drives straight or turns a corner (steady
+0.1, manoeuvre 2 m^2/s^3); an aircraft (higher than `air_agl_m`, or faster than any
+ground vehicle) also flies coordinated turns and orbits, so its turning model is a
+coordinated turn at an estimated turn rate (an extended Kalman filter), and its
+manoeuvre model (100 m^2/s^3) catches a hard turn's onset; a tentative track has one
+noisy model (it may be anything). A slow aircraft was a ground vehicle to the single
+constant-velocity filter this replaces (0.5 m^2/s^3 under 40 m/s): an orbiting UAV got
+a new track at every turn.
+
+The dead-reckoning threshold (`dr_threshold`) scales with the track's class and speed:
+k times its steady model's position sigma plus `dr_lag_s` of its motion, and for ground
+tracks at least `dr_m` (k = 3 on the ground, 4 in the air), so what receivers hold
+between reports stays within about 1.5x of the tracker's own error at 5x fewer reports
+than hits; the check also looks `dr_ahead_s` ahead along the track's own models (a turn
+is told as it begins). An aircraft's report in a turn carries the chord of its next
+`chord_s` of arc as velocity (receivers extrapolate in straight lines).
 
 A track is a group of entities seen together (a hostile unit) or a lone one: the hits
 of one scan that fall in a track's gate all update it, their count is its strength,
@@ -49,8 +71,7 @@ class Track:
     xs: np.ndarray | None = None     # per motion model (steady, turning, manoeuvring): its state, 3 x 5
     Ps: np.ndarray | None = None     # and covariance, 3 x 5 x 5 (x and P above: their mixture)
     mu: np.ndarray | None = None     # the models' probabilities
-    P_upd: np.ndarray | None = None  # P at the last update (what a report's own sigma is)
-    Ps_upd: np.ndarray | None = None
+    Ps_upd: np.ndarray | None = None  # the models' covariances at the last update (a report's own sigma)
 
 
 @dataclass
@@ -82,8 +103,8 @@ class KalmanTracker:
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
                  max_speed_mps: float = 300.0, m: int = 3, n: int = 5, drop_s: float = 35.0,
                  window_s: float = 5.0, air_agl_m: float = 150.0, air_mps: float = 70.0,
-                 dr_m: float | None = 0.0, dr_k: float = 3.0, heartbeat_s: float = 60.0,
-                 dr_lag_s: float = 0.5, still_m: float = 50.0, still_s: float = 30.0,
+                 dr_m: float | None = 40.0, dr_k: float = 3.0, heartbeat_s: float = 60.0,
+                 dr_lag_s: float = 0.1, still_m: float = 50.0, still_s: float = 30.0,
                  q_man: float = 2.0, q_air: float = 0.1, q_air_ct: float = 0.2, q_turn: float = 1e-5,
                  q_air_man: float = 100.0, steady_s: float = 60.0, turn_s: float = 300.0, man_s: float = 10.0,
                  max_turn_dps: float = 30.0, dr_m_air: float = 0.0, dr_k_air: float = 4.0,
@@ -115,6 +136,7 @@ class KalmanTracker:
         self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
         self.dr_m_air, self.dr_k_air, self.dr_ahead_s, self.chord_s = dr_m_air, dr_k_air, dr_ahead_s, chord_s
         self.still_m, self.still_s = still_m, still_s
+        self._steps: dict[float, tuple] = {}
         self.tracks: list[Track] = []
         self.seq = 0
 
@@ -230,24 +252,53 @@ class KalmanTracker:
         Q[4, 4] = self.q_turn * dt
         return nx, F @ P @ F.T + Q
 
+    def _step(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(the models' mixing matrix, the constant-velocity F, unit process noise) for `dt`:
+        the same for every track of a scan, so kept for the last few dts."""
+        got = self._steps.get(dt)
+        if got is None:
+            F = I5.copy()
+            F[0, 2] = F[1, 3] = dt
+            F[4, 4] = 0.0
+            got = (self._mixing(dt), F, _q4(1.0, dt))
+            if len(self._steps) > 64:
+                self._steps.clear()
+            self._steps[dt] = got
+        return got
+
     def _predict(self, t: float) -> None:
         """Interacting multiple models (IMM): mix the models' states by the chance each came
-        from the other, then predict each by its own motion."""
+        from the other, then predict each by its own motion (the tracks predicted to the
+        same time at once)."""
+        by: dict[float, list[Track]] = {}
         for tr in self.tracks:
-            dt = t - tr.t
-            if dt <= 0:
-                continue
-            Pi = self._mixing(dt)
-            c = tr.mu @ Pi                                   # predicted model probabilities
-            w = tr.mu[:, None] * Pi / c[None, :]             # w[i, j]: P(was i | is j)
-            x0 = w.T @ tr.xs                                 # models x 5
-            dx = tr.xs[:, None, :] - x0[None, :, :]          # i x j x 5
-            P0 = np.einsum("ij,ikl->jkl", w, tr.Ps) + np.einsum("ij,ijk,ijl->jkl", w, dx, dx)
-            for j, (how, q) in enumerate(self.motion[self.mover(tr)]):
-                tr.xs[j], tr.Ps[j] = (self._ct if how == "ct" else self._cv)(x0[j], P0[j], q, dt)
-            tr.mu = c
-            self._combine(tr)
-            tr.t = t
+            if t > tr.t:
+                by.setdefault(t - tr.t, []).append(tr)
+        for dt, trs in by.items():
+            Pi, F, Q1 = self._step(dt)
+            mu = np.array([tr.mu for tr in trs])                    # tracks x models
+            xs = np.array([tr.xs for tr in trs])                    # tracks x models x 5
+            Ps = np.array([tr.Ps for tr in trs])
+            c = mu @ Pi                                             # predicted model probabilities
+            w = mu[:, :, None] * Pi[None] / c[:, None, :]           # w[., i, j]: P(was i | is j)
+            x0 = np.einsum("tij,tik->tjk", w, xs)
+            dx = xs[:, :, None, :] - x0[:, None, :, :]
+            P0 = np.einsum("tij,tikl->tjkl", w, Ps) + np.einsum("tij,tijk,tijl->tjkl", w, dx, dx)
+            models = [self.motion[self.mover(tr)] for tr in trs]
+            qs = np.array([[q for _, q in m] for m in models])
+            nx = x0 @ F.T                                           # every model as constant velocity first
+            nP = F @ P0 @ F.T + qs[:, :, None, None] * Q1
+            nP[:, :, 4, 4] += W0
+            X = np.einsum("tj,tjk->tk", c, nx)                      # the mixture, for gating and reports
+            d = nx - X[:, None, :]
+            P = np.einsum("tj,tjkl->tkl", c, nP) + np.einsum("tj,tjk,tjl->tkl", c, d, d)
+            for i, tr in enumerate(trs):
+                tr.xs, tr.Ps, tr.mu, tr.x, tr.P, tr.t = nx[i], nP[i], c[i], X[i], P[i], t
+                ct = [j for j, (how, _) in enumerate(models[i]) if how == "ct"]
+                for j in ct:
+                    tr.xs[j], tr.Ps[j] = self._ct(x0[i, j], P0[i, j], models[i][j][1], dt)
+                if ct:
+                    self._combine(tr)
 
     @staticmethod
     def _combine(tr: Track) -> None:
@@ -275,23 +326,22 @@ class KalmanTracker:
         if n >= 2:   # the members' spread, beyond the sensor's noise
             spread = float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0)
             tr.ext = 0.7 * tr.ext + 0.3 * max(spread - r2, 0.0)
-        R = np.eye(2) * (r2 + tr.ext) / n
-        ll = np.empty(3)
-        for j in range(3):
-            P = tr.Ps[j]
-            S = P[:2, :2] + R
-            Si = np.linalg.inv(S)
-            nu = zc - tr.xs[j, :2]
-            K = P[:, :2] @ Si
-            tr.xs[j] = tr.xs[j] + K @ nu
-            P = (I5 - K @ H) @ P
-            tr.Ps[j] = (P + P.T) / 2.0
-            ll[j] = -0.5 * float(nu @ Si @ nu) - 0.5 * math.log(float(np.linalg.det(S)))
+        R = (r2 + tr.ext) / n
+        P = tr.Ps                                            # every model at once
+        a, b, d = P[:, 0, 0] + R, P[:, 0, 1], P[:, 1, 1] + R
+        det = a * d - b * b
+        Si = np.empty((len(P), 2, 2))
+        Si[:, 0, 0], Si[:, 0, 1], Si[:, 1, 0], Si[:, 1, 1] = d / det, -b / det, -b / det, a / det
+        nu = zc[None, :] - tr.xs[:, :2]
+        K = P[:, :, :2] @ Si                                 # models x 5 x 2
+        tr.xs = tr.xs + (K @ nu[:, :, None])[:, :, 0]
+        P = P - K @ P[:, :2, :]
+        tr.Ps = (P + P.transpose(0, 2, 1)) / 2.0
+        ll = -0.5 * np.einsum("mi,mij,mj->m", nu, Si, nu) - 0.5 * np.log(det)
         mu = tr.mu * np.exp(ll - ll.max())
         tr.mu = np.clip(mu / mu.sum(), 1e-6, 1.0)
         tr.mu /= tr.mu.sum()
         self._combine(tr)
-        tr.P_upd = tr.P.copy()
         tr.Ps_upd = tr.Ps.copy()
         tr.t = tr.t_upd = t
         tr.x_upd = tr.x.copy()
@@ -324,8 +374,7 @@ class KalmanTracker:
             P = np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2, W0])
             tr = Track(f"{self.name}-{self.seq}", x, P, t, t, x.copy(), ext)
             tr.xs, tr.Ps = np.stack([x, x, x]), np.stack([P, P, P])
-            tr.mu, tr.P_upd = self.mu0.copy(), P.copy()
-            tr.Ps_upd = tr.Ps.copy()
+            tr.mu, tr.Ps_upd = self.mu0.copy(), tr.Ps.copy()
             tr.counts.append(len(zs))
             tr.hit_window = True
             self._height(tr, alt, mine)
@@ -361,8 +410,9 @@ class KalmanTracker:
 
     def _news(self, tr: Track, r: "Report") -> bool:
         """Whether receivers need this report: the first one, a new strength or domain, the
-        heartbeat, or their extrapolation of the last one (position + velocity x time) now
-        off by more than `dr_m` (dead reckoning; `dr_m` None: every update is sent)."""
+        heartbeat, or their extrapolation of the last one (position + velocity x time) off
+        by more than `dr_threshold` now or `dr_ahead_s` ahead (dead reckoning; `dr_m` None:
+        every update is sent)."""
         last = tr.told
         if self.dr_m is None or last is None or (r.strength, r.domain) != (last.strength, last.domain):
             return True
@@ -390,7 +440,12 @@ class KalmanTracker:
         return float(x[0]), float(x[1])
 
     def dr_threshold(self, tr: Track) -> float:
-        """How far the receivers' extrapolation may be off before a report is news."""
+        """How far the receivers' extrapolation may be off before a report is news: k x the
+        track's own position sigma (its steady model's: its noise is no news) plus
+        `dr_lag_s` of its motion (nor is an error of where it is a moment later), k by its
+        class (`dr_k` ground, `dr_k_air` air), at least `dr_m` for ground tracks (`dr_m_air`
+        in the air). A fast jet's threshold is wider than a slow aircraft's, an aircraft's
+        follows its own error where a ground unit's has a floor in metres."""
         air = self.mover(tr) == "air"
         P = tr.Ps_upd[0]
         sig = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))

@@ -537,7 +537,9 @@ class LivePeer:
                     if self.live_start is not None:
                         self._apply()
                 self.ea.finish(self.end_t())
-                self.log("end " + json.dumps(self.summary(), sort_keys=True), flush=True)
+                self.log("end " + json.dumps({k: v for k, v in self.summary().items()
+                                              if k not in ("timeline", "alert_latencies_ms", "due_latencies_ms")},
+                                             sort_keys=True), flush=True)
                 linger_end = time.monotonic() + linger_s   # still answering commands (a late ack)
                 while (left := linger_end - time.monotonic()) > 0:
                     try:

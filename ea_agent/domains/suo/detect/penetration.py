@@ -1,10 +1,10 @@
 """Projected penetration (beyond the paper, as the other projections): before a hostile
 enters an area no hostile may enter (block, retain, guard, a defence's rear line), from
-how its track has been moving (only when the first of them would be in at least `[voi]
-projection_min_lead_s` ahead: a projection is worth its name only before what it
-projects); and a rear line crossed between two reports. The actual penetration is the Areas component's alert
-of kind "penetration"; the projection sets that alert's history, so VOA tells the
-story once unless the penetration proves much stronger."""
+how its track has been moving, only when the first of them would be in at least `[voi]
+projection_min_lead_s` ahead (a projection is worth its name only before what it
+projects); and a rear line crossed between two reports. The actual penetration is the
+Areas component's alert of kind "penetration"; the projection sets that alert's history,
+so VOA tells the story once unless the penetration proves much stronger."""
 from __future__ import annotations
 
 from collections import deque
