@@ -388,6 +388,9 @@ def cmd_tak(a) -> int:
     sc = S.load(a.scenario, events=False)
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root, **_zmode(a))
+    if a.live and not a.sources:
+        raise ValueError("tak --live: give --sources too (the live mesh; the replay mesh has its own clock)")
+    a.live_start = _start_of(a)
     return main_tak(sc, conf, root, a)
 
 

@@ -161,7 +161,10 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     # the TAK gateway: reads what a console reads, but no commands; its PLI go to the
     # replay's ingest key, never straight to the EAs
     subject("tak", [out, read_public, read_seen, read_cmdlog, query_store,
-                    rule("tak_put", ["put"], [ks.ingest("tak")])])
+                    rule("tak_put", ["put"], [ks.ingest("tak")]),
+                    # on the live mesh its PLI are its own source's stream
+                    rule("tak_src", ["put", "declare_queryable", "reply", "liveliness_token"],
+                         [ks.src("tak"), f"{r}/src/tak/@adv/**", ks.srcj("tak")])])
     if taskorg is not None:
         # the last chunk of a command's key names the console's unit: the certificate holds
         # it to that; the receiving EA decides whether that unit commands it at that moment

@@ -96,6 +96,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--alert-stale", type=_positive, default=1800.0, metavar="S",
                    help="seconds an alert stays on a TAK client after its time")
     g.add_argument("--uid-prefix", metavar="P", help="prefix of every uid we send (default saim.<scenario>)")
+    g.add_argument("--sources", action="store_true",
+                   help="the live mesh (no replay): the picture from the sources' frames; with --live, PLI go "
+                        "out as the live source `tak` (EAs take them with `--sources ... tak`)")
+    g.add_argument("--live", action="store_true", help="with --sources: event time is the wall clock from --start")
+    g.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
     g.add_argument("--linger", type=float, default=10.0, metavar="S",
                    help="wall seconds to stay up after the scenario's end (PLI in, last events out)")
     t = p.add_argument_group("TLS to a TAK server (tls:// URLs)")
@@ -204,6 +209,106 @@ class TakFeed(MeshReader):
                 self.picture.message(m)
 
 
+class LiveTakFeed(TakFeed):
+    """The gateway on the live mesh (no replay): the picture from the sources' frames, its
+    clock the event time every source it heard has promised. PLI in (only with `live_start`,
+    event time = wall clock from it) go out as the gateway's own live source `tak`, with a
+    watermark every epoch of wall time so that it holds no EA back; an EA takes them when
+    `tak` is among its --sources."""
+    NAME = "tak-live"
+    EPOCH_S = 2.0
+
+    def __init__(self, sc, conf, root: str, picture: Picture, send: Callable[[bytes], None],
+                 overlay_every: float | None = 300.0, log: Callable = print, live_start: float | None = None):
+        super().__init__(sc, conf, root, picture, send, overlay_every, log)
+        self.caught_up = True   # nothing to catch up from: the sources' caches serve history
+        # a frame is trusted by its key (only source.<name> may put on src/<name>): its
+        # messages are checked as the EAs check them, not signed one by one
+        self.frames_gate = W.Gate(sc.duration_s, log=log)
+        self.frames_gate.rejects = self.gate.rejects
+        self.wm: dict[str, float] = {}
+        self.ended: set[str] = set()
+        self.live_start = live_start
+        self.src = None
+        self.src_lock = threading.Lock()
+        self.pli_refused = 0
+        self._stop = threading.Event()
+
+    def keys(self) -> list[str]:
+        r = self.ks.root
+        return [f"{r}/alert/**", self.ks.cmdlog("*"), self.ks.notice("*", "*"), self.ks.src("*")]
+
+    def opened(self, session) -> None:
+        if self.live_start is None:
+            return
+        from ..live.source import LiveSource
+        self.src = LiveSource(session, self.ks, IDENTITY, None)
+        threading.Thread(target=self._promise, name="tak-watermarks", daemon=True).start()
+
+    def _promise(self) -> None:
+        """A watermark at every epoch boundary the wall clock passes: PLI come when they come."""
+        while not self._stop.wait(max(0.0, self.EPOCH_S - (time.time() - self.live_start) % self.EPOCH_S)):
+            now = time.time() - self.live_start
+            with self.src_lock:
+                if self.src is not None:
+                    self.src.watermark(now - now % self.EPOCH_S)
+
+    def closing(self) -> None:
+        self._stop.set()
+        with self.src_lock:
+            if self.src is not None:
+                self.src.close(end=True)
+                self.src.stop()
+                self.src = None
+
+    def publish(self, rep) -> None:
+        """A checked LocationReport from a TAK client: into the `tak` source at the wall
+        clock's event time (refused, counted, without --live: no event time to give it)."""
+        if self.live_start is None:
+            self.pli_refused += 1
+            if self.pli_refused == 1:
+                self.log("tak: PLI into the live mesh need --live (event time = the wall clock): refused", flush=True)
+            return
+        import msgspec
+        with self.src_lock:
+            if self.src is None:
+                return
+            t = max(round(time.time() - self.live_start, 3), self.src.wm + 0.001)
+            try:
+                self.src.put(msgspec.structs.replace(rep, t=t))
+            except (ValueError, M.MessageError) as e:
+                self.gate.rejects.add(M.MessageError("pli", "(source)", str(e)[:160]), self.ks.src(IDENTITY))
+
+    def take(self, key: str, payload: bytes) -> None:
+        if self.ks.family(key) != "src":
+            return super().take(key, payload)
+        from ..live import frames as F
+        try:
+            f = F.decode(payload, self.gate.max_bytes)
+        except M.MessageError as e:
+            self.gate.rejects.add(e, key)
+            return
+        if key != self.ks.src(f.source):
+            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
+            return
+        pic = self.picture
+        with self.lock:
+            for b in f.msgs:
+                m = self.frames_gate.data(b, key)
+                if m is not None and type(m) in self.classes:
+                    pic.message(m)
+            self.wm[f.source] = max(self.wm.get(f.source, -1.0), f.wm)
+            if f.end:
+                self.ended.add(f.source)
+            live = [w for src, w in self.wm.items() if src not in self.ended]
+            end = not live
+            pic.clock(min(live) if live else max(self.wm.values()), end)
+            if self.overlay_every is not None and pic.t >= self._overlay_next:
+                self._overlay_next = pic.t + self.overlay_every
+                self._emit(pic.overlay_events())
+            self._emit(pic.due(force=end))
+
+
 def picture_options(sc, opts) -> Options:
     return Options(period_s=opts.period, refresh_s=opts.refresh, entities=opts.entities, pos_stale_s=opts.stale,
                    alert_stale_s=opts.alert_stale, uid_prefix=opts.uid_prefix,
@@ -236,7 +341,11 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
                      opts.tls_no_verify, opts.tls_server_name)
     net = Network(urls, opts.proto, opts.listen_cot, opts.mcast_if, opts.mcast_ttl, tls, on_data, log=log,
                   hello=picture.presence_event())
-    feed = TakFeed(sc, conf, root, picture, net.send, None if opts.no_overlay else opts.overlay_every, log=log)
+    every = None if opts.no_overlay else opts.overlay_every
+    if getattr(opts, "sources", False):   # the live mesh: frames and watermarks, PLI as the `tak` source
+        feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log, live_start=getattr(opts, "live_start", None))
+    else:
+        feed = TakFeed(sc, conf, root, picture, net.send, every, log=log)
     feed_box.append(feed)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
