@@ -269,13 +269,13 @@ class LiveTakFeed(TakFeed):
             if self.pli_refused == 1:
                 self.log("tak: PLI into the live mesh need --live (event time = the wall clock): refused", flush=True)
             return
-        import msgspec
+        from dataclasses import replace
         with self.src_lock:
             if self.src is None:
                 return
             t = max(round(time.time() - self.live_start, 3), self.src.wm + 0.001)
             try:
-                self.src.put(msgspec.structs.replace(rep, t=t))
+                self.src.put(replace(rep, t=t))
             except (ValueError, M.MessageError) as e:
                 self.gate.rejects.add(M.MessageError("pli", "(source)", str(e)[:160]), self.ks.src(IDENTITY))
 
