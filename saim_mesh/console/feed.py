@@ -167,12 +167,8 @@ class LiveFeed(MeshFeed):
     def __init__(self, sc, conf: zenoh.Config, root: str, state: State, log: Callable = print):
         super().__init__(sc, conf, root, state, log)
         self.caught_up = True   # nothing to catch up from: the sources' caches serve history
-        # a frame is trusted by its key (only source.<name> may put on src/<name>), its
-        # messages are not signed one by one: checked as the EAs check them
-        self.frames_gate = W.Gate(sc.duration_s, log=log)
-        self.frames_gate.rejects = self.gate.rejects
-        self.wm: dict[str, float] = {}
-        self.ended: set[str] = set()
+        from ..live.frames import FrameReader
+        self.frames = FrameReader(self.ks, self.gate, sc.duration_s, log)
 
     def keys(self) -> list[str]:
         r = self.ks.root
@@ -181,24 +177,11 @@ class LiveFeed(MeshFeed):
     def take(self, key: str, payload: bytes) -> None:
         if self.ks.family(key) != "src":
             return super().take(key, payload)
-        from ..live import frames as F
-        try:
-            f = F.decode(payload, self.gate.max_bytes)
-        except M.MessageError as e:
-            self.gate.rejects.add(e, key)
+        msgs = self.frames.read(key, payload)
+        if msgs is None:
             return
-        if key != self.ks.src(f.source):
-            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
-            return
-        for b in f.msgs:
-            m = self.frames_gate.data(b, key)
-            if m is not None and type(m) in self.classes:
+        for m in msgs:
+            if type(m) in self.classes:
                 self.state.message(m)
-        self.wm[f.source] = max(self.wm.get(f.source, -1.0), f.wm)
-        if f.end:
-            self.ended.add(f.source)
-        live = [w for s, w in self.wm.items() if s not in self.ended]
-        if live:
-            self.state.clock(min(live))
-        elif self.wm:
-            self.state.clock(max(self.wm.values()), end=True)
+        t, end = self.frames.clock()
+        self.state.clock(t, end)

@@ -48,3 +48,40 @@ def decode(payload: bytes, max_bytes: int) -> Frame:
         return _DEC.decode(payload)
     except (msgspec.ValidationError, msgspec.DecodeError) as e:
         raise M.MessageError("frame", "(decode)", str(e)[:160]) from None
+
+
+class FrameReader:
+    """For a reader of the live mesh that is not an EA (the console, the TAK gateway): each
+    frame checked (size, decoding, the key it came on), its messages checked one by one as
+    the EAs check them (a frame is trusted by its key: only source.<name> may put on
+    src/<name>; its messages are not signed one by one), and a clock: the event time every
+    source heard so far has promised, the end once each of them has ended."""
+
+    def __init__(self, ks, gate: W.Gate, t_max: float, log=print):
+        self.ks, self.gate = ks, gate
+        self.data_gate = W.Gate(t_max, gate.max_bytes, log=log)
+        self.data_gate.rejects = gate.rejects   # one count of what was refused
+        self.wm: dict[str, float] = {}
+        self.ended: set[str] = set()
+
+    def read(self, key: str, payload: bytes) -> list | None:
+        """The frame's messages (checked), or None when the frame itself is refused (counted)."""
+        try:
+            f = decode(payload, self.gate.max_bytes)
+        except M.MessageError as e:
+            self.gate.rejects.add(e, key)
+            return None
+        if key != self.ks.src(f.source):
+            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
+            return None
+        self.wm[f.source] = max(self.wm.get(f.source, -1.0), f.wm)
+        if f.end:
+            self.ended.add(f.source)
+        return [m for b in f.msgs if (m := self.data_gate.data(b, key)) is not None]
+
+    def clock(self) -> tuple[float, bool]:
+        """(event time promised by every source heard and not ended, whether all have ended)."""
+        live = [w for s, w in self.wm.items() if s not in self.ended]
+        if live:
+            return min(live), False
+        return max(self.wm.values(), default=0.0), bool(self.wm)

@@ -222,12 +222,8 @@ class LiveTakFeed(TakFeed):
                  overlay_every: float | None = 300.0, log: Callable = print, live_start: float | None = None):
         super().__init__(sc, conf, root, picture, send, overlay_every, log)
         self.caught_up = True   # nothing to catch up from: the sources' caches serve history
-        # a frame is trusted by its key (only source.<name> may put on src/<name>): its
-        # messages are checked as the EAs check them, not signed one by one
-        self.frames_gate = W.Gate(sc.duration_s, log=log)
-        self.frames_gate.rejects = self.gate.rejects
-        self.wm: dict[str, float] = {}
-        self.ended: set[str] = set()
+        from ..live.frames import FrameReader
+        self.frames = FrameReader(self.ks, self.gate, sc.duration_s, log)
         self.live_start = live_start
         self.src = None
         self.src_lock = threading.Lock()
@@ -282,27 +278,16 @@ class LiveTakFeed(TakFeed):
     def take(self, key: str, payload: bytes) -> None:
         if self.ks.family(key) != "src":
             return super().take(key, payload)
-        from ..live import frames as F
-        try:
-            f = F.decode(payload, self.gate.max_bytes)
-        except M.MessageError as e:
-            self.gate.rejects.add(e, key)
-            return
-        if key != self.ks.src(f.source):
-            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
+        msgs = self.frames.read(key, payload)
+        if msgs is None:
             return
         pic = self.picture
         with self.lock:
-            for b in f.msgs:
-                m = self.frames_gate.data(b, key)
-                if m is not None and type(m) in self.classes:
+            for m in msgs:
+                if type(m) in self.classes:
                     pic.message(m)
-            self.wm[f.source] = max(self.wm.get(f.source, -1.0), f.wm)
-            if f.end:
-                self.ended.add(f.source)
-            live = [w for src, w in self.wm.items() if src not in self.ended]
-            end = not live
-            pic.clock(min(live) if live else max(self.wm.values()), end)
+            t, end = self.frames.clock()
+            pic.clock(t, end)
             if self.overlay_every is not None and pic.t >= self._overlay_next:
                 self._overlay_next = pic.t + self.overlay_every
                 self._emit(pic.overlay_events())
