@@ -62,5 +62,32 @@ def test_the_console_draws_the_live_mesh_and_acks_reach_the_ea(tmp_path):
         t_late = get(f"{url}/api/state")["t"]
         assert t_late >= st["t"]   # the clock only moves forward
     finally:
-        p.stop()
-        p.p.wait(60)
+        left = stop_mesh(p, tmp_path)
+    assert not left, f"children of mesh up still running (killed now): {left}"
+
+
+def stop_mesh(p: Proc, out) -> list[str]:
+    """SIGTERM to mesh up, time for it to stop its children (more than Proc.stop's 5 s),
+    then any child still alive is named and killed: none may outlive the test."""
+    import os
+    import signal
+    import subprocess
+    if p.p.poll() is None:
+        p.p.terminate()
+        try:
+            p.p.wait(90)
+        except subprocess.TimeoutExpired:
+            p.p.kill()
+            p.p.wait()
+    p.stop()
+    pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
+    left = []
+    for name, pid in pids.items():
+        try:
+            os.kill(int(pid), 0)
+            if not open(f"/proc/{int(pid)}/stat").read().split(") ", 1)[1].startswith("Z"):
+                left.append(name)
+                os.kill(int(pid), signal.SIGKILL)
+        except (ProcessLookupError, ValueError, TypeError, FileNotFoundError):
+            pass
+    return left
