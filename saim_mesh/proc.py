@@ -78,11 +78,12 @@ class Proc:
             time.sleep(0.01)
         raise TimeoutError(f"{self.name}: no '{prefix}' within {timeout} s")
 
-    def stop(self) -> None:
+    def stop(self, timeout: float = 5.0) -> None:
+        """SIGTERM, `timeout` seconds to exit (a supervisor stopping its children needs more), then SIGKILL."""
         if self.p.poll() is None:
             self.p.terminate()
             try:
-                self.p.wait(5)
+                self.p.wait(timeout)
             except subprocess.TimeoutExpired:
                 self.p.kill()
                 self.p.wait()

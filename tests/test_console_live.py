@@ -71,15 +71,7 @@ def stop_mesh(p: Proc, out) -> list[str]:
     then any child still alive is named and killed: none may outlive the test."""
     import os
     import signal
-    import subprocess
-    if p.p.poll() is None:
-        p.p.terminate()
-        try:
-            p.p.wait(90)
-        except subprocess.TimeoutExpired:
-            p.p.kill()
-            p.p.wait()
-    p.stop()
+    p.stop(timeout=90)
     pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
     left = []
     for name, pid in pids.items():
