@@ -10,9 +10,10 @@ import zenoh
 DEFAULT = Path(__file__).resolve().parents[1] / "configs" / "zenoh-peer.json5"
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
+def free_port(host: str = "127.0.0.1") -> int:
+    """A port nobody listens on at `host` now (the OS's choice; v4 or v6)."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        s.bind((host, 0))
         return s.getsockname()[1]
 
 

@@ -7,21 +7,47 @@ restarted (a restarted source takes a new epoch; a restarted peer starts a new l
 from __future__ import annotations
 
 import json
-import time
 from collections import Counter
 from pathlib import Path
 
-from .. import zygote
-from ..mesh import Supervisor, mesh_units
-from ..proc import Proc, clean_env, leaf_env, py
-from ..zconf import free_port
+from ..mesh import mesh_units
 from .depend import cp_shares
+
+LOCAL = "local"   # the one host's name in its deployment
 
 
 def cp_sources(sc) -> dict[str, list[str]]:
     """name -> `saim-mesh source` arguments: one per child of the top unit (its subtree),
     and the top's own share (everything else, with the tracks): `depend.cp_shares`."""
     return {name: sh.args() for name, sh in cp_shares(sc).items()}
+
+
+def one_host(sc, scenario: str, units: list[str], out_dir: Path, speed: str = "max", live: bool = False,
+             until: float | None = None, insecure: bool = False, topology: str | None = None,
+             console: int | None = None):
+    """The deployment `mesh up` runs: everything on this host at 127.0.0.1 with free ports;
+    one router (`hub`), or a topology's routers (a file, or "derive": one per battalion
+    command post and the top); a test PKI made under OUT_DIR/pki. Returns (deployment,
+    topology or None)."""
+    from ..deploy.file import Console, Deployment, Host, RouterSpec
+    topo = None
+    if topology is not None:
+        from ..net import topology as T
+        topo = T.derive(sc.taskorg) if topology == "derive" else T.load(topology, sc.taskorg, set(cp_shares(sc)))
+        routers = {n: RouterSpec(n, LOCAL, r.cp, 0, r.links) for n, r in topo.routers.items()}
+    else:   # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
+        # peers do not relay for each other: ../shared/notes/live-mesh.md)
+        routers = {"hub": RouterSpec("hub", LOCAL, sc.taskorg.root, 0, ())}
+    pki = None
+    if not insecure:   # mTLS and access control; each router a relay every client's rules accept
+        from ..security.pki import make_pki, names_for
+        pki = out_dir / "pki"
+        make_pki(pki, names_for(sc, consoles=True) + [f"router.{n}" for n in routers])
+    cons = (Console(sc.taskorg.root, console),) if console is not None else ()
+    host = Host(LOCAL, ("127.0.0.1",), (), None, None, tuple(units), tuple(cp_shares(sc)), (), cons, None)
+    dep = Deployment(scenario, {LOCAL: host}, routers, f"saim/{sc.name}/live", not insecure, pki, speed, live,
+                     None, until, 30.0, None, dict(topo.attach) if topo is not None else {})
+    return dep, topo
 
 
 def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max", timeout: float = 1800.0,
@@ -38,126 +64,29 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     `paced_start`: with a speed, the wall time of event time 0 for every source (default:
     5 s after every EA is ready). `console`: the top unit's commander's console on that
     port (0: a free one), drawing the sources' frames; the EAs armed (urgent alerts are
-    re-notified and escalated until acknowledged)."""
+    re-notified and escalated until acknowledged).
+
+    The one-host case of `saim-mesh deploy` (`deploy.launch.run_host`)."""
     from .. import scenario as S
-    from ..sinks import COLOURS, RESET
-    from ea_agent.core.alert import hms
-    import sys
+    from ..deploy.launch import run_host
     sc = S.load(scenario, events=False)
     units = units or mesh_units(sc)
-    colours = COLOURS if sys.stdout.isatty() else None
     out_dir.mkdir(parents=True, exist_ok=True)
-    logs = out_dir / "logs"
-    logs.mkdir(exist_ok=True)
-    root = f"saim/{sc.name}/live"
-    sources = cp_sources(sc)
-    topo = None
-    if topology is not None:
-        from ..net import topology as T
-        topo = T.derive(sc.taskorg) if topology == "derive" else T.load(topology, sc.taskorg, set(sources))
-    sec: list[str] = []
-    if topo is not None:
-        pki = None
-        if not insecure:
-            from ..security.pki import make_pki, names_for
-            pki = out_dir / "pki"
-            make_pki(pki, names_for(sc, consoles=True) + [f"router.{n}" for n in topo.routers])
-    elif insecure:
+    if insecure and topology is None:
         echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
              "feed this mesh positions and end its sources' streams")
-        hub = f"tcp/127.0.0.1:{free_port()}"
-    else:   # mTLS and access control; the one router is a relay every client's rules accept
-        from ..security.pki import make_pki, names_for
-        pki = out_dir / "pki"
-        make_pki(pki, names_for(sc, consoles=True) + ["router.hub"])
-        hub = f"tls/127.0.0.1:{free_port()}"
-        hub_topo = out_dir / "topology.json"
-        hub_topo.write_text(json.dumps({"topology": {"routers": {"hub": {"cp": sc.taskorg.root, "links": []}},
-                                                     "attach": {}, "top": "hub"}, "endpoints": {"hub": hub}}))
-        sec = ["--pki", str(pki), "--topology", str(hub_topo)]
-    sup = Supervisor(echo, pids_path=out_dir / "pids.json")
-    start = start if start is not None else time.time() + 20.0
-    live_args = ["--live", "--start", _iso(start)] if live else []
+    dep, topo = one_host(sc, scenario, units, out_dir, speed, live, until, insecure, topology, console)
+    res = run_host(dep, sc, LOCAL, out_dir, echo=echo, show=show, timeout=timeout, until_done=True,
+                   on_started=on_started, start=start, paced_start=paced_start, link=link,
+                   console_linger=console_linger)
+    res["topology"] = topo.to_dict() if topo is not None else None
+    (out_dir / "summary.json").write_text(json.dumps(res, indent=1, default=str))
+    return res
 
-    until_args = ["--until", str(until)] if until is not None else []
-    summaries: dict[str, dict] = {}
-    seen: dict[str, int] = {}
-    shown = Counter()
-    t0 = time.monotonic()
-    con = None
-    link_files: dict = {}
-    try:
-        if topo is not None:   # a router per command post, linked as the topology says
-            from ..net import routed
-            eps, link_files, resolved = routed.start(scenario, topo, out_dir, root, sup, pki, link, echo)
-            secure = ["--pki", str(pki)] if pki else []
-            where = lambda who: ["--connect", eps[topo.router_of(who, sc.taskorg)], "--mode", "client",  # noqa: E731
-                                 "--topology", str(resolved), *secure]
-        else:
-            # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
-            # peers do not relay for each other: ../shared/notes/live-mesh.md)
-            router = sup.add(Proc("router", [*py(), "router", "--scenario", scenario, "--name", "hub",
-                                             "--listen", hub, "--root", root, *sec], env=clean_env(), log_dir=logs))
-            router.wait_for("router ready", 60)
-            where = lambda who: ["--connect", hub, "--mode", "client", *sec]  # noqa: E731
-        for u in units:
-            for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
-                (out_dir / f).unlink(missing_ok=True)
-            armed = ["--armed"] if console is not None else []
-            sup.add(Proc(u, [*py(), "peer", "--scenario", scenario, "--unit", u, *where(u), "--root", root,
-                             "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args, *armed],
-                         env=leaf_env(), log_dir=logs,
-                         spawner=zygote.spawner()))   # EA peers fork from one zygote (saim_mesh/zygote.py)
-        for u in units:
-            sup.procs[u].wait_for(f"ready {u}", 120)
-        if console is not None:   # not supervised: it ends after its linger
-            con = Proc("console", [*py(), "console", scenario, "--sources", *where("console"), "--root", root,
-                                   "--port", str(console), "--linger", str(console_linger)],
-                       env=clean_env(), log_dir=logs)
-            echo(con.wait_for("console http", 60).split(" ", 1)[1] + "  <- the commander's console", flush=True)
-        if not live and speed != "max":   # every source paced on one clock: event time 0 at this instant
-            paced_start = paced_start if paced_start is not None else time.time() + 5.0
-        pace_args = ["--start", _iso(paced_start)] if paced_start is not None and not live else []
-        for name, args in sources.items():
-            sup.add(Proc(name, [*py(), "source", scenario, "--name", name, *args, *where(name.removeprefix("cp.")),
-                                "--root", root, "--speed", speed, "--state", str(out_dir / "sources"),
-                                "--linger", "30", *live_args, *pace_args, *until_args],
-                         env=clean_env(), log_dir=logs))
-        if on_started is not None:
-            on_started(sup, paced_start if not live else start)
-        end = time.monotonic() + timeout
-        while time.monotonic() < end and len(summaries) < len(units):
-            sup.check()
-            for u in units:
-                p = sup.procs[u]
-                if show:
-                    seen[u] = _show(out_dir / f"{u}.jsonl", seen.get(u, 0), echo, colours, RESET, hms, shown)
-                if u not in summaries and (line := p.find("summary ")) is not None:
-                    summaries[u] = json.loads(line[len("summary "):])
-            time.sleep(0.1)
-        if con is not None:   # the page stays up for its linger after the end
-            try:
-                con.p.wait(console_linger + 60)
-            except Exception:   # a console that does not end is stopped below
-                pass
-    finally:
-        if con is not None:
-            con.stop()
-        sup.stop()
-    wall = time.monotonic() - t0
-    result = {"peers": summaries, "wall_s": round(wall, 1), "sources": sorted(sources), "events": sup.events,
-              "secure": not insecure,
-              "start": start if live else None, "paced_start": paced_start, "root": root, "units": units,
-              "topology": topo.to_dict() if topo is not None else None}
-    if link_files:   # bytes per router link (the emulated links' counters)
-        from ..net.routed import link_stats
-        result["links"] = link_stats(link_files)
-    (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
-    echo(table(out_dir, units, sc))
-    echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s, sources {', '.join(sources)}, "
-         f"{'insecure' if insecure else 'mTLS + access control'}; "
-         f"alerts in {out_dir}/, logs in {logs}/")
-    return result
+
+def show_alerts(path: Path, done: int, echo, colours, reset, hms, shown: Counter) -> int:
+    """Print the alerts a peer logged since the last look (quiet ones left out)."""
+    return _show(path, done, echo, colours, reset, hms, shown)
 
 
 def _show(path: Path, done: int, echo, colours, reset, hms, shown: Counter) -> int:

@@ -2,7 +2,8 @@
 (CN = role name), all ECDSA P-256, made with the `cryptography` package.
 
   ca.pem, ca.key        self-signed CA (CA:true, keyCertSign)
-  NAME.pem, NAME.key    leaf: CN=NAME, SAN IP:127.0.0.1 + DNS:localhost,
+  NAME.pem, NAME.key    leaf: CN=NAME, SAN IP:127.0.0.1 + DNS:localhost (+ the addresses and
+                        names of the host it runs on: `sans`, from a deployment file),
                         EKU serverAuth + clientAuth (every peer listens and connects)
   NAME.sign.pem         NAME's Ed25519 signing key (authority that survives relays: sign.py)
   signers.json          every identity's Ed25519 public key
@@ -187,7 +188,42 @@ def _make_ca(days: int):
     return cert, key
 
 
-def _make_leaf(name: str, ca: x509.Certificate, ca_key, days: int):
+LOCAL_SANS = ("127.0.0.1", "localhost")
+
+
+def _san_entry(text: str) -> x509.GeneralName:
+    """An IP address (v4 or v6) as IP:, anything else as DNS:."""
+    try:
+        return x509.IPAddress(ipaddress.ip_address(text))
+    except ValueError:
+        return x509.DNSName(text)
+
+
+def _san_set(cert: x509.Certificate) -> set[str]:
+    try:
+        ext = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return set()
+    return {str(a) for a in ext.get_values_for_type(x509.IPAddress)} | set(ext.get_values_for_type(x509.DNSName))
+
+
+def _norm_sans(extra) -> list[str]:
+    """Loopback first (every process reaches its own host's router there too), then the
+    host's addresses and names, each once; an address in its canonical text form."""
+    out: list[str] = []
+    for x in (*LOCAL_SANS, *(extra or ())):
+        x = str(x).strip()
+        try:
+            x = str(ipaddress.ip_address(x))
+        except ValueError:
+            if not x or not re.fullmatch(r"[A-Za-z0-9*]([A-Za-z0-9.-]*[A-Za-z0-9])?", x):
+                raise SecurityError(f"bad subject alternative name {x!r}: an IP address or a DNS name") from None
+        if x not in out:
+            out.append(x)
+    return out
+
+
+def _make_leaf(name: str, ca: x509.Certificate, ca_key, days: int, sans=()):
     key = _new_key()
     now = _now()
     not_after = min(now + dt.timedelta(days=days), ca.not_valid_after_utc)
@@ -205,8 +241,7 @@ def _make_leaf(name: str, ca: x509.Certificate, ca_key, days: int):
                                          encipher_only=False, decipher_only=False), critical=True)
             .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
                                                   ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False)
-            .add_extension(x509.SubjectAlternativeName([x509.IPAddress(ipaddress.ip_address("127.0.0.1")),
-                                                        x509.DNSName("localhost")]), critical=False)
+            .add_extension(x509.SubjectAlternativeName([_san_entry(x) for x in _norm_sans(sans)]), critical=False)
             .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()),
                            critical=False)
@@ -214,7 +249,7 @@ def _make_leaf(name: str, ca: x509.Certificate, ca_key, days: int):
     return cert, key
 
 
-def _leaf_ok(name: str, cert_p: Path, key_p: Path, ca: x509.Certificate) -> bool:
+def _leaf_ok(name: str, cert_p: Path, key_p: Path, ca: x509.Certificate, sans=()) -> bool:
     if not (cert_p.is_file() and key_p.is_file()):
         return False
     try:
@@ -223,12 +258,12 @@ def _leaf_ok(name: str, cert_p: Path, key_p: Path, ca: x509.Certificate) -> bool
     except SecurityError:
         return False
     now = _now()
-    return (_cn(cert) == name and _signed_by(cert, ca) and _same_key(cert, key)
+    return (_cn(cert) == name and _signed_by(cert, ca) and _same_key(cert, key) and _san_set(cert) == set(sans)
             and cert.not_valid_before_utc <= now and cert.not_valid_after_utc > now + MARGIN)
 
 
 def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: int | None = None,
-             echo=None) -> dict[str, tuple[Path, Path]]:
+             echo=None, sans: dict[str, list[str]] | None = None) -> dict[str, tuple[Path, Path]]:
     """Make (or reuse) the CA in OUT_DIR and one certificate + key per name.
 
     The CA is made when ca.pem or ca.key is absent (every leaf is then made again);
@@ -237,9 +272,13 @@ def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: 
     another hour, signed by this CA and matches its key; otherwise it is made again,
     valid `days` days (never past the CA, valid `ca_days`, default max(365, days)).
     Each name also gets an Ed25519 signing key (kept when readable) and signers.json
-    lists every one (`sign.make_keys`).
+    lists every one (`sign.make_keys`). `sans`: name -> the addresses (IP) and DNS names
+    of the host it runs on, put in its certificate beside 127.0.0.1 and localhost (a
+    process listening on a host's address must show it: the connecting side checks it);
+    a leaf whose names differ from these is made again.
     Returns {name: (NAME.pem, NAME.key)} as absolute paths; `echo` gets one line per file."""
     say = echo or (lambda _line: None)
+    want = {n: _norm_sans((sans or {}).get(n, ())) for n in names}
     for n in names:
         if not NAME_RE.match(n) or n == CA_NAME:
             raise SecurityError(f"bad identity name {n!r} (letters, digits, '.', '_', '-'; not {CA_NAME!r})")
@@ -265,11 +304,11 @@ def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: 
     out: dict[str, tuple[Path, Path]] = {}
     for n in dict.fromkeys(names):
         cert_p, key_p = _paths(d, n)
-        if _leaf_ok(n, cert_p, key_p, ca):
+        if _leaf_ok(n, cert_p, key_p, ca, want[n]):
             os.chmod(key_p, 0o600)
             say(f"kept {n} {cert_p}")
         else:
-            cert, key = _make_leaf(n, ca, ca_key, days)
+            cert, key = _make_leaf(n, ca, ca_key, days, want[n])
             _write(key_p, _key_bytes(key), 0o600)
             _write(cert_p, cert.public_bytes(serialization.Encoding.PEM), 0o644)
             say(f"made {n} {cert_p}")

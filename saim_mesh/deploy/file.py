@@ -1,0 +1,513 @@
+"""The deployment file (docs/deployment.md): which host runs which routers, EA peers,
+sources, consoles and TAK gateway of a live mesh, and where the routers listen.
+
+It is read whole and checked before anything starts: every problem is one line naming
+the file, the host or router and the field (`check` returns them all; `load` raises
+`DeployError` with them), never a traceback. The same `Deployment` drives one host of
+a real deployment (`saim-mesh deploy FILE --host NAME`) and the one-host `mesh up`
+(built in code, with free ports: `port = 0`).
+"""
+from __future__ import annotations
+
+import ipaddress
+import math
+import re
+import socket
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+DEFAULT_PORT = 7447           # Zenoh's own default
+NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+DNS_RE = re.compile(r"^[A-Za-z0-9]([A-Za-z0-9.-]*[A-Za-z0-9])?$")
+TOP_KEYS = {"scenario", "root", "secure", "pki", "speed", "live", "start", "until", "source_linger", "host",
+            "router"}
+HOST_KEYS = {"name", "addresses", "names", "interface", "attach", "eas", "sources", "fusion", "consoles", "tak"}
+ROUTER_KEYS = {"name", "host", "cp", "port", "links"}
+CONSOLE_KEYS = {"unit", "port"}
+TAK_KEYS = {"cot", "listen_cot", "uids"}
+
+
+class DeployError(ValueError):
+    """A deployment that cannot run; `lines` says each thing wrong, one line each."""
+
+    def __init__(self, lines: list[str]):
+        super().__init__("\n".join(lines))
+        self.lines = lines
+
+
+@dataclass(frozen=True)
+class Console:
+    unit: str
+    port: int = 0              # HTTP on 127.0.0.1 (0: a free port)
+
+
+@dataclass(frozen=True)
+class Tak:
+    cot: tuple[str, ...] = ()          # where CoT goes (gateway --cot-url)
+    listen_cot: tuple[str, ...] = ()   # where TAK PLI come in (gateway --listen-cot)
+    uids: str | None = None            # uid -> entity map (path, relative to the file)
+
+
+@dataclass(frozen=True)
+class Host:
+    name: str
+    addresses: tuple[str, ...] = ()    # where its routers listen and other hosts reach them
+    names: tuple[str, ...] = ()        # DNS names (certificates; endpoints when no address)
+    interface: str | None = None       # listen on this interface's addresses (checked on the host)
+    attach: str | None = None          # the router its leaves attach to (default: its own, nearest CP)
+    eas: tuple[str, ...] = ()
+    sources: tuple[str, ...] = ()
+    fusion: tuple[str, ...] = ()
+    consoles: tuple[Console, ...] = ()
+    tak: Tak | None = None
+
+    def reach(self) -> str | None:
+        """The address (or name) other hosts connect to."""
+        return (self.addresses or self.names or (None,))[0]
+
+
+@dataclass(frozen=True)
+class RouterSpec:
+    name: str
+    host: str
+    cp: str                    # the unit whose command post it serves
+    port: int = DEFAULT_PORT   # 0: a free port (one host only)
+    links: tuple[str, ...] = ()
+
+
+@dataclass
+class Deployment:
+    scenario: str                       # path of the scenario folder
+    hosts: dict[str, Host]
+    routers: dict[str, RouterSpec]
+    root: str | None = None             # key-expression root (default saim/<scenario>/live)
+    secure: bool = True
+    pki: Path | None = None             # certificates (saim-mesh certs --deploy)
+    speed: str = "max"                  # the recorded battle's pace: "max" or a factor
+    live: bool = False                  # event time is the wall clock from `start`
+    start: str | None = None            # ISO 8601: event time 0 (live, or paced sources)
+    until: float | None = None
+    source_linger: float = 30.0
+    path: Path | None = None            # the file it came from
+    attach_map: dict[str, str] = field(default_factory=dict)   # unit -> router (a topology file's [attach])
+
+    # -- who runs where ---------------------------------------------------------------
+    def host_of(self, what: str, kind: str = "eas") -> str | None:
+        return next((h.name for h in self.hosts.values() if what in getattr(h, kind)), None)
+
+    def sources(self) -> list[str]:
+        return sorted(s for h in self.hosts.values() for s in h.sources)
+
+    def eas(self) -> list[str]:
+        return [u for h in self.hosts.values() for u in h.eas]
+
+    def topology(self):
+        """The routers as a `net.topology.Topology` (top: the router at the top unit's CP)."""
+        from ..net import topology as T
+        return T.Topology({n: T.Router(n, r.cp, r.links) for n, r in self.routers.items()}, {}, self._top())
+
+    def _top(self, taskorg=None) -> str:
+        cps = {r.cp for r in self.routers.values()}
+        if taskorg is not None:
+            top = taskorg.root
+        else:   # the CP no other router's CP is under: the one with no links up
+            top = next((r.cp for r in self.routers.values() if not r.links), None)
+        return next((n for n, r in sorted(self.routers.items()) if r.cp == top), "") if top in cps else ""
+
+    def attach(self, host: str, unit: str, taskorg) -> str:
+        """The router a process of `host` acting for `unit` connects to: the host's `attach`,
+        else the host's router serving the nearest command post at or above the unit, else
+        any router of the host, else the router of the nearest command post anywhere."""
+        h = self.hosts[host]
+        if unit in self.attach_map:
+            return self.attach_map[unit]
+        if h.attach:
+            return h.attach
+        mine = {r.cp: n for n, r in sorted(self.routers.items(), reverse=True) if r.host == host}
+        chain = (unit, *taskorg.ancestors(unit)) if unit in taskorg.units else ()
+        for u in chain:
+            if u in mine:
+                return mine[u]
+        if mine:
+            return sorted(n for n, r in self.routers.items() if r.host == host)[0]
+        every = {r.cp: n for n, r in sorted(self.routers.items(), reverse=True)}
+        for u in chain:
+            if u in every:
+                return every[u]
+        return self._top(taskorg) or sorted(self.routers)[0]
+
+    def proto(self) -> str:
+        return "tls" if self.secure else "tcp"
+
+    def endpoint(self, router: str, address: str | None = None, port: int | None = None) -> str:
+        """`tls/ADDR:PORT` where others connect to `router` (its host's first address)."""
+        r = self.routers[router]
+        return endpoint(self.proto(), address or self.hosts[r.host].reach() or "127.0.0.1",
+                        r.port if port is None else port)
+
+
+def endpoint(proto: str, address: str, port: int) -> str:
+    try:
+        if ipaddress.ip_address(address).version == 6:
+            address = f"[{address}]"
+    except ValueError:
+        pass
+    return f"{proto}/{address}:{port}"
+
+
+# ------------------------------------------------------------------------- reading
+
+class _Errors:
+    def __init__(self, where: str):
+        self.where, self.lines = where, []
+
+    def __call__(self, what: str) -> None:
+        self.lines.append(f"{self.where}: {' '.join(str(what).split())}")
+
+
+def _str(v, e, where: str, required: bool = False) -> str | None:
+    if v is None:
+        if required:
+            e(f"{where}: missing")
+        return None
+    if not isinstance(v, str) or not v.strip():
+        e(f"{where}: expected a non-empty string, not {v!r}")
+        return None
+    return v
+
+
+def _strs(v, e, where: str) -> tuple[str, ...]:
+    if v is None:
+        return ()
+    if not isinstance(v, list) or not all(isinstance(x, str) and x.strip() for x in v):
+        e(f"{where}: expected a list of non-empty strings, not {v!r}")
+        return ()
+    return tuple(v)
+
+
+def _number(v, e, where: str, low: float = 0.0) -> float | None:
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        e(f"{where}: expected a number, not {v!r}")
+        return None
+    if not math.isfinite(v) or v < low:
+        e(f"{where}: expected a finite number >= {low:g}, not {v!r}")
+        return None
+    return float(v)
+
+
+def _port(v, e, where: str, default: int, zero: bool = False) -> int:
+    if v is None:
+        return default
+    if isinstance(v, bool) or not isinstance(v, int):
+        e(f"{where}: expected a whole port number, not {v!r}")
+        return default
+    if not (0 if zero else 1) <= v <= 65535:
+        e(f"{where}: port {v} out of range ({0 if zero else 1}-65535)")
+        return default
+    return v
+
+
+def _bool(v, e, where: str, default: bool) -> bool:
+    if v is None:
+        return default
+    if not isinstance(v, bool):
+        e(f"{where}: expected true or false, not {v!r}")
+        return default
+    return v
+
+
+def _unknown(d: dict, known: set[str], e, where: str) -> None:
+    extra = sorted(set(d) - known)
+    if extra:
+        e(f"{where}: unknown keys {', '.join(map(repr, extra))} (known: {', '.join(sorted(known))})")
+
+
+def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[str]]:
+    """The file's structure and types (no scenario needed): a Deployment, and every
+    problem found, one line each."""
+    e = _Errors(str(path) if path else "deployment")
+    base = path.parent if path else Path(".")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as x:
+        e(f"not valid TOML ({x})")
+        return None, e.lines
+    _unknown(doc, TOP_KEYS, e, "top level")
+    scen = _str(doc.get("scenario"), e, "scenario", required=True)
+    root = _str(doc.get("root"), e, "root")
+    if root is not None and (set("*$#? ") & set(root) or root.startswith("/") or root.endswith("/") or "//" in root):
+        e(f"root: {root!r} is not a key-expression prefix (no * $ # ? spaces, no empty chunk)")
+        root = None
+    pki = _str(doc.get("pki"), e, "pki")
+    speed = doc.get("speed", "max")
+    if speed != "max":
+        f = _number(speed, e, "speed ('max' or a factor)")
+        speed = "max" if f is None else f"{f:g}"
+        if f == 0:
+            e("speed: a factor must be > 0 (or 'max')")
+    live = _bool(doc.get("live"), e, "live", False)
+    start = _str(doc.get("start"), e, "start")
+    if start is not None:
+        from datetime import datetime
+        try:
+            datetime.fromisoformat(start.replace("Z", "+00:00"))
+        except ValueError:
+            e(f"start: {start!r} is not an ISO 8601 time (e.g. 2026-11-27T09:00:00Z)")
+    until = _number(doc.get("until"), e, "until")
+    linger = _number(doc.get("source_linger"), e, "source_linger")
+    hosts: dict[str, Host] = {}
+    raw_hosts = doc.get("host", [])
+    if not isinstance(raw_hosts, list) or not all(isinstance(h, dict) for h in raw_hosts):
+        e("host: expected [[host]] tables")
+        raw_hosts = []
+    if not raw_hosts:
+        e("no [[host]] entries")
+    for i, h in enumerate(raw_hosts):
+        name = h.get("name")
+        where = f"host #{i + 1}" + (f" {name!r}" if isinstance(name, str) else "")
+        _unknown(h, HOST_KEYS, e, where)
+        if not isinstance(name, str) or not NAME_RE.match(name):
+            e(f"{where}: name: expected letters, digits, '.', '_' or '-', not {name!r}")
+            continue
+        if name in hosts:
+            e(f"{where}: host {name!r} named twice")
+            continue
+        addrs = []
+        for a in _strs(h.get("addresses"), e, f"{where}: addresses"):
+            try:
+                addrs.append(str(ipaddress.ip_address(a)))
+            except ValueError:
+                e(f"{where}: addresses: {a!r} is not an IP address (DNS names go in 'names')")
+        names = _strs(h.get("names"), e, f"{where}: names")
+        for n in names:
+            if not DNS_RE.match(n):
+                e(f"{where}: names: {n!r} is not a DNS name")
+        iface = _str(h.get("interface"), e, f"{where}: interface")
+        if not addrs and not iface:
+            e(f"{where}: give its addresses (or an interface to listen on)")
+        consoles = []
+        raw_c = h.get("consoles", [])
+        if not isinstance(raw_c, list):
+            e(f"{where}: consoles: expected a list of {{unit = ..., port = ...}}")
+            raw_c = []
+        for c in raw_c:
+            if isinstance(c, str):
+                c = {"unit": c}
+            if not isinstance(c, dict):
+                e(f"{where}: consoles: expected {{unit = ..., port = ...}}, not {c!r}")
+                continue
+            _unknown(c, CONSOLE_KEYS, e, f"{where}: console")
+            u = _str(c.get("unit"), e, f"{where}: console unit", required=True)
+            port = _port(c.get("port"), e, f"{where}: console {u} port", 0, zero=True)
+            if u:
+                consoles.append(Console(u, port))
+        tak = None
+        if "tak" in h:
+            t = h["tak"]
+            if not isinstance(t, dict):
+                e(f"{where}: tak: expected a table {{cot = [...], listen_cot = [...], uids = ...}}")
+            else:
+                _unknown(t, TAK_KEYS, e, f"{where}: tak")
+                uids = _str(t.get("uids"), e, f"{where}: tak uids")
+                tak = Tak(_strs(t.get("cot"), e, f"{where}: tak cot"), _strs(t.get("listen_cot"), e, f"{where}: tak "
+                                                                                 "listen_cot"),
+                          str((base / uids).resolve()) if uids else None)
+        hosts[name] = Host(name, tuple(addrs), names, iface, _str(h.get("attach"), e, f"{where}: attach"),
+                           _strs(h.get("eas"), e, f"{where}: eas"), _strs(h.get("sources"), e, f"{where}: sources"),
+                           _strs(h.get("fusion"), e, f"{where}: fusion"), tuple(consoles), tak)
+    routers: dict[str, RouterSpec] = {}
+    raw_r = doc.get("router", [])
+    if not isinstance(raw_r, list) or not all(isinstance(r, dict) for r in raw_r):
+        e("router: expected [[router]] tables")
+        raw_r = []
+    if not raw_r:
+        e("no [[router]] entries (every host's processes attach to a router)")
+    for i, r in enumerate(raw_r):
+        name = r.get("name")
+        where = f"router #{i + 1}" + (f" {name!r}" if isinstance(name, str) else "")
+        _unknown(r, ROUTER_KEYS, e, where)
+        if not isinstance(name, str) or not NAME_RE.match(name):
+            e(f"{where}: name: expected letters, digits, '.', '_' or '-', not {name!r}")
+            continue
+        if name in routers:
+            e(f"{where}: router {name!r} named twice")
+            continue
+        host = _str(r.get("host"), e, f"{where}: host", required=True)
+        cp = _str(r.get("cp"), e, f"{where}: cp", required=True)
+        routers[name] = RouterSpec(name, host or "", cp or "", _port(r.get("port"), e, f"{where}: port", DEFAULT_PORT),
+                                   _strs(r.get("links"), e, f"{where}: links"))
+    if scen is None:
+        return None, e.lines
+    sc_path = Path(scen) if Path(scen).is_absolute() else (base / scen)
+    dep = Deployment(str(sc_path.resolve()) if path else scen, hosts, routers, root, _bool(doc.get("secure"), e,
+                     "secure", True), (base / pki).resolve() if pki else (base / "pki").resolve(), speed, live,
+                     start, until, 30.0 if linger is None else linger, path)
+    return dep, e.lines
+
+
+def check(dep: Deployment, sc, host: str | None = None, where: str = "deployment") -> list[str]:
+    """What is wrong with a parsed deployment against its scenario (one line each); with
+    `host`, also whether this machine is that host (its addresses, its interface)."""
+    from ..live.depend import cp_shares
+    from ..mesh import mesh_units
+    e = _Errors(where)
+    to = sc.taskorg
+    units = set(mesh_units(sc))
+    shares = set(cp_shares(sc))
+    groups = set(sc.meta.get("fusion", {}).get("groups", {}))
+    seen: dict[tuple[str, str], str] = {}
+    for h in dep.hosts.values():
+        w = f"host {h.name!r}"
+        for kind, known, what in (("eas", units, "a unit that runs an EA peer"),
+                                  ("sources", shares, "a command post's source")):
+            for x in getattr(h, kind):
+                if kind == "eas" and x not in to.units:
+                    e(f"{w}: eas: {x!r} is not a unit of {sc.name}'s task organization")
+                elif x not in known:
+                    e(f"{w}: {kind}: {x!r} is not {what} of {sc.name} ({', '.join(sorted(known))})")
+                elif (kind, x) in seen:
+                    other = seen[(kind, x)]
+                    e(f"{w}: {kind}: {x} runs on two hosts ({other} and {h.name})" if other != h.name else
+                      f"{w}: {kind}: {x} named twice")
+                seen.setdefault((kind, x), h.name)
+        for g in h.fusion:
+            e(f"{w}: fusion: {g!r}: " + ("fusion nodes are not built for the live mesh yet (its sources carry no "
+                                         "sensor hits): leave fusion out" if g in groups else
+                                         f"no such fusion group in {sc.name} ({', '.join(sorted(groups)) or 'none'})"))
+        ports: set[int] = set()
+        for c in h.consoles:
+            if c.unit not in units:
+                e(f"{w}: console {c.unit!r}: not a unit that runs an EA peer (consoles act as console.<unit>)")
+            if c.port and c.port in ports:
+                e(f"{w}: console {c.unit}: port {c.port} used twice on this host")
+            ports.add(c.port)
+        if h.attach is not None and h.attach not in dep.routers:
+            e(f"{w}: attach: {h.attach!r} is not a router of this file ({', '.join(sorted(dep.routers))})")
+        if dep.secure and not (h.addresses or h.names):
+            e(f"{w}: secure mode needs its addresses (or DNS names) in the file: its certificates carry them")
+    taks = [h.name for h in dep.hosts.values() if h.tak is not None]
+    if len(taks) > 1:
+        e(f"a TAK gateway on {len(taks)} hosts ({', '.join(taks)}): the identity 'tak' is one gateway")
+    for s in sorted(shares - {x for (k, x) in seen if k == "sources"}):
+        e(f"source {s} runs on no host: its units' reports would be missing (add it to a host's sources)")
+    listen: dict[tuple[str, int], str] = {}
+    before = len(e.lines)
+    for r in dep.routers.values():
+        w = f"router {r.name!r}"
+        h = dep.hosts.get(r.host)
+        if h is None:
+            e(f"{w}: host {r.host!r} is not a host of this file ({', '.join(sorted(dep.hosts)) or 'none'})")
+        if r.cp and r.cp not in to.units:
+            e(f"{w}: cp {r.cp!r} is not a unit of {sc.name}'s task organization")
+        for up in r.links:
+            if up not in dep.routers:
+                e(f"{w}: links to {up!r}: no such router ({', '.join(sorted(dep.routers))})")
+            elif up == r.name:
+                e(f"{w}: links to itself")
+            elif h is not None and dep.routers[up].host != r.host and dep.hosts.get(dep.routers[up].host) is not None \
+                    and dep.hosts[dep.routers[up].host].reach() is None:
+                e(f"{w}: links to {up} on host {dep.routers[up].host}, which has no address or name to reach it at")
+        if h is not None and r.port:
+            for a in h.addresses or (h.interface,):
+                if (a, r.port) in listen:
+                    e(f"{w}: listens on {a} port {r.port} like router {listen[(a, r.port)]}")
+                listen[(a, r.port)] = r.name
+    routers_ok = len(e.lines) == before
+    if routers_ok and dep.routers:
+        from ..net import topology as T
+        topo = dep.topology()
+        topo.top = dep._top(to)
+        try:
+            T.check(topo, "routers")
+        except T.TopologyError as x:
+            e(str(x).replace("routers: ", "", 1).replace("the top unit's command post",
+                                                        f"the top unit's command post ({to.root})"))
+    for h in dep.hosts.values():   # leaves on a host without a router reach another host's
+        if routers_ok and (h.attach is None or h.attach in dep.routers) and (h.eas or h.sources) and not any(
+                r.host == h.name for r in dep.routers.values()):
+            for u in (*h.eas, *(s.removeprefix("cp.") for s in h.sources)):
+                r = dep.attach(h.name, u, to)
+                if dep.hosts[dep.routers[r].host].reach() is None:
+                    e(f"host {h.name!r}: {u} attaches to {r} on host {dep.routers[r].host}, which has no address")
+                    break
+    if host is not None:
+        e.lines += this_host(dep, host, where)
+    return e.lines
+
+
+def this_host(dep: Deployment, host: str, where: str = "deployment") -> list[str]:
+    """Whether this machine can be `host`: its addresses are this machine's, its interface exists."""
+    e = _Errors(where)
+    h = dep.hosts.get(host)
+    if h is None:
+        e(f"--host {host}: not a host of this file ({', '.join(sorted(dep.hosts))})")
+        return e.lines
+    if h.interface is not None:
+        try:
+            socket.if_nametoindex(h.interface)
+        except OSError:
+            e(f"host {host!r}: interface {h.interface!r} does not exist on this machine")
+            return e.lines
+        have = interface_addresses(h.interface)
+        for a in h.addresses:
+            if have is not None and a not in have:
+                e(f"host {host!r}: address {a} is not on interface {h.interface} ({', '.join(have) or 'none'})")
+    for a in h.addresses:
+        if not is_local(a):
+            e(f"host {host!r}: address {a} is not one of this machine's (is this {host}?)")
+    return e.lines
+
+
+def is_local(address: str) -> bool:
+    """Whether this machine can listen on `address` (binding says so, namespaces included)."""
+    fam = socket.AF_INET6 if ipaddress.ip_address(address).version == 6 else socket.AF_INET
+    try:
+        with socket.socket(fam, socket.SOCK_STREAM) as s:
+            s.bind((address, 0))
+        return True
+    except OSError:
+        return False
+
+
+def interface_addresses(name: str) -> list[str] | None:
+    """The addresses on interface `name` (`ip -j addr`), None when `ip` cannot tell."""
+    import json
+    import subprocess
+    try:
+        out = subprocess.run(["ip", "-j", "addr", "show", "dev", name], capture_output=True, text=True, timeout=10)
+        doc = json.loads(out.stdout) if out.returncode == 0 else None
+    except (OSError, ValueError, subprocess.SubprocessError):
+        return None
+    if not doc:
+        return None
+    return [str(ipaddress.ip_address(a["local"])) for d in doc for a in d.get("addr_info", []) if "local" in a]
+
+
+def load(path: str | Path, host: str | None = None):
+    """Read, parse and check a deployment file: (Deployment, Scenario), or DeployError
+    with every line that is wrong."""
+    from .. import scenario as S
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as x:
+        raise DeployError([f"{p}: cannot read the deployment file ({x.strerror or x})"]) from None
+    except UnicodeDecodeError:
+        raise DeployError([f"{p}: not a text file (UTF-8)"]) from None
+    dep, lines = parse(text, p)
+    if dep is None:
+        raise DeployError(lines)
+    try:
+        sc = S.load(dep.scenario, events=False)
+    except (S.ScenarioError, OSError, ValueError, KeyError) as x:
+        raise DeployError(lines + [f"{p}: scenario {dep.scenario}: cannot load it ({' '.join(str(x).split())})"]) \
+            from None
+    lines += check(dep, sc, host, str(p))
+    if lines:
+        raise DeployError(lines)
+    if dep.root is None:
+        dep.root = f"saim/{sc.name}/live"
+    return dep, sc

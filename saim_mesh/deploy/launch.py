@@ -1,0 +1,245 @@
+"""Start one host's share of a deployment under its own supervisor: its routers
+(listening on the host's addresses, linked to the routers the file names, wherever they
+run), its TAK gateway, its EA peers (clients of the host's router), its consoles, then
+its sources. A child that dies is reported and restarted with backoff; every child's
+output goes to its own log. `mesh up --sources-per-cp` is this with one host on
+127.0.0.1, free ports, and optionally emulated router links (`link`).
+
+The host's run ends when each of its EA peers said its summary (`until_done`), at
+`timeout`, or when stopped (SIGTERM / Ctrl-C); a host whose routers others still need
+keeps running after its EAs are done unless told otherwise."""
+from __future__ import annotations
+
+import json
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import zygote
+from ..mesh import Supervisor
+from ..proc import Proc, clean_env, leaf_env, py
+from ..zconf import free_port
+from .file import Deployment, endpoint, interface_addresses
+
+
+class HostSupervisor(Supervisor):
+    """The mesh's supervisor; a console that ended after its linger has finished too."""
+
+    def finished(self, p: Proc) -> bool:
+        return super().finished(p) or (p.exited() == 0 and p.find("console done") is not None)
+
+
+@dataclass
+class Plan:
+    """What one host starts, resolved: endpoints with real ports, each process's router."""
+    dep: Deployment
+    host: str
+    listen: dict[str, list[str]]          # local router -> its listen endpoints
+    endpoints: dict[str, str]             # every router -> where others connect to it
+    ports: dict[str, int]                 # local router -> its port
+    links: dict[str, list[str]] = field(default_factory=dict)   # local router -> routers it connects to
+
+
+def plan(dep: Deployment, host: str) -> Plan:
+    """Resolve the host's addresses (or its interface's) and free ports for `port = 0`."""
+    h = dep.hosts[host]
+    addrs = list(h.addresses)
+    if not addrs and h.interface:
+        addrs = interface_addresses(h.interface) or []
+        if not addrs:
+            raise ValueError(f"host {host}: interface {h.interface} has no address to listen on")
+    if not addrs:
+        addrs = ["127.0.0.1"]
+    listen, endpoints, ports = {}, {}, {}
+    for n, r in dep.routers.items():
+        if r.host == host:
+            ports[n] = r.port or free_port(addrs[0])
+            listen[n] = [endpoint(dep.proto(), a, ports[n]) for a in addrs]
+            endpoints[n] = dep.endpoint(n, h.reach() or addrs[0], ports[n])
+        else:
+            endpoints[n] = dep.endpoint(n)
+    return Plan(dep, host, listen, endpoints, ports, {n: list(r.links) for n, r in dep.routers.items()
+                                                       if r.host == host})
+
+
+def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show: bool = True,
+             timeout: float | None = 1800.0, until_done: bool = True, on_started=None, start: float | None = None,
+             paced_start: float | None = None, link: dict | None = None, console_linger: float = 30.0,
+             max_restarts: int = 10, fresh: bool = True) -> dict:
+    """Start `host`'s processes and supervise them (see the module's docstring).
+
+    `start` (live): the wall time of event time 0 (default: the file's, else 20 s from
+    now). `paced_start`: with a speed, event time 0 for every source (default: the file's
+    start, else 5 s after this host's EAs are ready). `on_started(sup, t0)`: called once
+    the host's sources run. `link`: emulate each router link between local routers
+    (delay_ms, loss; processes link-<lower>-<upper>: SIGUSR1 cuts, SIGUSR2 heals)."""
+    from ..live.up import show_alerts, table
+    from ..net import routed
+    from ..net import topology as T
+    from ..sinks import COLOURS, RESET
+    import sys
+    from ea_agent.core.alert import hms
+    pl = plan(dep, host)
+    h = dep.hosts[host]
+    to = sc.taskorg
+    root = dep.root or f"saim/{sc.name}/live"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    logs = out_dir / "logs"
+    logs.mkdir(exist_ok=True)
+    sources = dep.sources()
+    units = list(h.eas)
+    colours = COLOURS if sys.stdout.isatty() else None
+    secure = ["--pki", str(dep.pki)] if dep.secure else []
+    if dep.secure:
+        _check_pki(dep, host)
+    topo = dep.topology()
+    topo.top = dep._top(to)
+    resolved = out_dir / "topology.json"
+    T.resolve(topo, pl.endpoints, resolved)
+    live = dep.live
+    if dep.start is not None:
+        if live and start is None:
+            start = _instant(dep.start)
+        elif not live and paced_start is None:
+            paced_start = _instant(dep.start)
+    start = start if start is not None else time.time() + 20.0
+    live_args = ["--live", "--start", _iso(start)] if live else []
+    until_args = ["--until", str(dep.until)] if dep.until is not None else []
+    where = lambda unit: ["--connect", pl.endpoints[dep.attach(host, unit, to)], "--mode", "client",  # noqa: E731
+                          "--topology", str(resolved), *secure]
+    sup = HostSupervisor(echo, max_restarts, pids_path=out_dir / "pids.json")
+    summaries: dict[str, dict] = {}
+    seen: dict[str, int] = {}
+    shown = Counter()
+    link_files: dict[str, Path] = {}
+    consoles: list[Proc] = []
+    t0 = time.monotonic()
+    done_said = False
+    try:
+        local = [n for n in routed.parents_first(topo) if n in pl.listen]
+        for n in local:   # parents first; a router above on another host is reached when it is up
+            connect = []
+            for up in pl.links[n]:
+                if link is not None and up in pl.ports:
+                    ep, link_files[f"{n}->{up}"] = routed.start_link(sup, n, up, pl.ports[up], dep.secure, link,
+                                                                    out_dir, len(link_files))
+                    connect.append(ep)
+                else:
+                    connect.append(pl.endpoints[up])
+            routed.start_router(sup, dep.scenario, n, pl.listen[n], connect, root, resolved,
+                                dep.pki if dep.secure else None, logs)
+        if local:
+            said = ", ".join(n + " on " + " ".join(pl.listen[n]) for n in local)
+            echo(f"host {host}: routers {said}" + (f"; {len(link_files)} emulated links" if link_files else ""),
+                 flush=True)
+        if h.tak is not None:   # before the EA peers: it must hear their first alerts
+            tak = [x for u in h.tak.cot for x in ("--cot-url", u)] + [x for u in h.tak.listen_cot
+                                                                       for x in ("--listen-cot", u)]
+            tak += ["--uids", h.tak.uids] if h.tak.uids else []
+            sup.add(Proc("tak", [*py(), "tak", dep.scenario, "--sources", *live_args, *tak, *where(to.root),
+                                 "--root", root], env=clean_env(), log_dir=logs)).wait_for("tak ready", 60)
+        armed = ["--armed"] if h.consoles else []   # a console watches: urgent alerts repeat until acked
+        for u in units:
+            if fresh:
+                for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
+                    (out_dir / f).unlink(missing_ok=True)
+            sup.add(Proc(u, [*py(), "peer", "--scenario", dep.scenario, "--unit", u, *where(u), "--root", root,
+                             "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args, *armed],
+                         env=leaf_env(), log_dir=logs,
+                         spawner=zygote.spawner()))   # EA peers fork from one zygote (saim_mesh/zygote.py)
+        for u in units:
+            sup.procs[u].wait_for(f"ready {u}", 120)
+        if units:
+            echo(f"host {host}: {len(units)} EA peers ready ({' '.join(units)})", flush=True)
+        for c in h.consoles:
+            p = sup.add(Proc(f"console-{c.unit}", [*py(), "console", dep.scenario, "--unit", c.unit, "--sources",
+                                                   *where(c.unit), "--root", root, "--port", str(c.port),
+                                                   "--linger", str(console_linger)], env=clean_env(), log_dir=logs))
+            consoles.append(p)
+            echo(p.wait_for("console http", 60).split(" ", 1)[1] + f"  <- {c.unit}'s commander's console", flush=True)
+        if not live and dep.speed != "max" and paced_start is None:   # one clock: event time 0 at this instant
+            paced_start = time.time() + 5.0
+        pace_args = ["--start", _iso(paced_start)] if paced_start is not None and not live else []
+        share = _share_args(sc)
+        for name in h.sources:
+            sup.add(Proc(name, [*py(), "source", dep.scenario, "--name", name, *share[name],
+                                *where(name.removeprefix("cp.")), "--root", root, "--speed", dep.speed,
+                                "--state", str(out_dir / "sources"), "--linger", f"{dep.source_linger:g}",
+                                *live_args, *pace_args, *until_args], env=clean_env(), log_dir=logs))
+        if h.sources:
+            echo(f"host {host}: sources {', '.join(h.sources)} started", flush=True)
+        if on_started is not None:
+            on_started(sup, paced_start if not live else start)
+        end = time.monotonic() + timeout if timeout is not None else float("inf")
+        while time.monotonic() < end:
+            sup.check()
+            for u in units:
+                if show:
+                    seen[u] = show_alerts(out_dir / f"{u}.jsonl", seen.get(u, 0), echo, colours, RESET, hms, shown)
+                if u not in summaries and (line := sup.procs[u].find("summary ")) is not None:
+                    summaries[u] = json.loads(line[len("summary "):])
+            if units and len(summaries) == len(units) and not done_said:
+                done_said = True
+                echo(f"host {host}: {len(units)} of {len(units)} EA peers done", flush=True)
+                if until_done:
+                    break
+            time.sleep(0.1)
+        for p in consoles:   # a console stays up for its linger after the end
+            try:
+                p.p.wait(console_linger + 60)
+            except Exception:   # one that does not end is stopped below
+                pass
+    finally:
+        sup.stop()
+    wall = time.monotonic() - t0
+    result = {"host": host, "peers": summaries, "wall_s": round(wall, 1), "sources": sources, "events": sup.events,
+              "secure": dep.secure, "start": start if live else None, "paced_start": paced_start, "root": root,
+              "units": units, "topology": topo.to_dict(), "endpoints": pl.endpoints}
+    if link_files:   # bytes per router link (the emulated links' counters)
+        result["links"] = routed.link_stats(link_files)
+    (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
+    if units:
+        echo(table(out_dir, units, sc))
+    crashes = [e for e in sup.events if "exit_code" in e]
+    echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s on host {host}, sources "
+         f"{', '.join(h.sources) or 'none'}, {'mTLS + access control' if dep.secure else 'insecure'}; "
+         f"{len(crashes)} crash(es), {sum(1 for e in sup.events if 'restarted' in e)} restart(s); "
+         f"alerts in {out_dir}/, logs in {logs}/")
+    return result
+
+
+def _share_args(sc) -> dict[str, list[str]]:
+    from ..live.depend import cp_shares
+    return {n: s.args() for n, s in cp_shares(sc).items()}
+
+
+def _check_pki(dep: Deployment, host: str) -> None:
+    """Every identity this host runs has its certificate (Zenoh's connecting side would
+    retry forever in silence: ../shared/notes/zenoh-security.md)."""
+    from ..security.pki import SecurityError, check_identity
+    for ident in identities(dep, host):
+        try:
+            check_identity(dep.pki, ident)
+        except SecurityError as e:
+            raise SecurityError(f"host {host}: {e} (make the certificates with saim-mesh certs --deploy FILE)") \
+                from None
+
+
+def identities(dep: Deployment, host: str) -> list[str]:
+    """The certificate names of what `host` runs."""
+    h = dep.hosts[host]
+    return [*(f"router.{n}" for n, r in dep.routers.items() if r.host == host), *(f"ea.{u}" for u in h.eas),
+            *(f"source.{s}" for s in h.sources), *(f"console.{c.unit}" for c in h.consoles),
+            *(["tak"] if h.tak is not None else [])]
+
+
+def _instant(text: str) -> float:
+    from datetime import datetime, timezone
+    d = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    return (d if d.tzinfo else d.replace(tzinfo=timezone.utc)).timestamp()
+
+
+def _iso(t: float) -> str:
+    from datetime import datetime, timezone
+    return datetime.fromtimestamp(t, timezone.utc).isoformat()
