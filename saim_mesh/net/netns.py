@@ -1,0 +1,623 @@
+"""Hosts emulated on one machine: one network namespace per host, joined by veth pairs to a
+bridge, with real cuts and an optional rate per host link. Tests and benchmarks run the
+mesh across these hosts to see what a real network does (a silent cut, a slow link) without
+a proxy in the path (../shared/notes/live-mesh.md, "Emulating hosts and cuts here").
+
+Layout (nothing is created in the root namespace, so deleting the namespaces removes
+everything):
+
+    <prefix>hub        the bridge br0; port p<i> per host (its alias is the host's name)
+    <prefix><host>     eth0 (the other end of p<i>) with 198.18.0.<i+1>/24, and lo up
+
+Cuts are nftables drop rules on the hub's bridge (table `bridge saim`, chain `cuts`):
+frames of a cut host, or between two cut-apart hosts, vanish without an error on either
+side, like radio loss, so Zenoh finds out only when its lease expires. Without `nft`, a
+host is cut by detaching its bridge port and a pair by a neighbour entry pointing at no
+one (both silent too), said once. A rate is a `tc tbf` on both ends of the host's veth.
+
+Names carry a prefix unique to the creating process (`sm-<pid>-<n>-`), so `cleanup_stale()`
+can remove what a crashed run left without touching a live one's.
+
+CLI (`scripts/netns-hosts`): up N / down / cut HOST [PEER] / heal HOST [PEER] / status /
+exec HOST CMD... / cleanup.
+"""
+from __future__ import annotations
+
+import argparse
+import atexit
+import ipaddress
+import itertools
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+SUBNET = "198.18.0.0/24"   # from the benchmarking range 198.18.0.0/15 (RFC 2544): never a real network
+BASE = "sm-"               # every namespace this module makes starts with it
+HUB = "hub"
+BRIDGE = "br0"
+IFACE = "eth0"
+NFT_TABLE = "saim"         # `bridge saim` in the hub namespace
+NFT_CHAIN = "cuts"
+NOWHERE_MAC = "02:00:00:00:00:00"   # the fallback pair cut: a neighbour entry that reaches no host
+_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_STALE = re.compile(r"^sm-(\d+)-")
+_counter = itertools.count()
+_said: set[str] = set()
+
+
+class NetnsError(RuntimeError):
+    """A system command failed: the message names the command and what it said."""
+
+
+def _say_once(key: str, msg: str, log: Callable[[str], None]) -> None:
+    if key not in _said:
+        _said.add(key)
+        log(msg)
+
+
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def sh(argv: Sequence[str], what: str, *, input: str | None = None, check: bool = True,
+       timeout: float = 30.0) -> str:
+    """Run a system command; on failure raise one line: what we tried, the command, its error."""
+    try:
+        r = subprocess.run(list(argv), input=input, capture_output=True, text=True, timeout=timeout)
+    except FileNotFoundError as e:
+        raise NetnsError(f"{what}: {argv[0]} not found ({e})") from None
+    except subprocess.TimeoutExpired:
+        raise NetnsError(f"{what}: `{' '.join(argv)}` did not finish within {timeout} s") from None
+    if check and r.returncode != 0:
+        err = (r.stderr or r.stdout).strip().replace("\n", " | ")
+        raise NetnsError(f"{what}: `{' '.join(argv)}` exited {r.returncode}: {err}")
+    return r.stdout
+
+
+def namespaces() -> list[str]:
+    """Every named network namespace (`ip netns list`)."""
+    out = sh(["ip", "netns", "list"], "listing network namespaces")
+    return [line.split()[0] for line in out.splitlines() if line.strip()]
+
+
+def ns_pids(ns: str) -> list[int]:
+    """The processes inside namespace `ns` (none when it is gone)."""
+    out = sh(["ip", "netns", "pids", ns], f"listing the processes of {ns}", check=False)
+    return [int(x) for x in out.split() if x.isdigit()]
+
+
+def _kill_all(pids: Sequence[int], sig: int = signal.SIGKILL) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            pass
+
+
+def _alive(pid: int) -> bool:
+    """True while the pid exists and is not a zombie (a zombie no longer holds its namespace)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+
+
+def _empty_namespace(ns: str, timeout: float = 5.0) -> list[int]:
+    """SIGKILL everything in `ns` until nothing is left (or the deadline); returns survivors."""
+    end = time.monotonic() + timeout
+    while True:
+        pids = [p for p in ns_pids(ns) if _alive(p)]
+        if not pids or time.monotonic() > end:
+            return pids
+        _kill_all(pids)
+        time.sleep(0.02)
+
+
+def cleanup(prefix: str) -> list[str]:
+    """Remove every namespace whose name starts with `prefix` (its bridge, veths and tbf go
+    with it), after killing every process inside. For the leftovers of a crashed run;
+    returns the namespaces removed. Errors are collected and raised at the end, once
+    everything was tried."""
+    if not prefix.startswith(BASE) or len(prefix) <= len(BASE):
+        raise ValueError(f"cleanup prefix {prefix!r}: expected {BASE}<something> (not to remove others' namespaces)")
+    gone, errors = [], []
+    mine = sorted((n for n in namespaces() if n.startswith(prefix)), key=lambda n: n.endswith(HUB))  # hub last
+    for ns in mine:
+        if left := _empty_namespace(ns):
+            errors.append(f"{ns}: processes {left} survived SIGKILL")
+    for ns in mine:
+        try:
+            sh(["ip", "netns", "del", ns], f"removing namespace {ns}")
+            gone.append(ns)
+        except NetnsError as e:
+            errors.append(str(e))
+    if errors:
+        raise NetnsError("; ".join(errors))
+    return gone
+
+
+def stale_prefixes() -> list[str]:
+    """Prefixes `sm-<pid>-` of namespaces whose creating process is dead."""
+    out = set()
+    for ns in namespaces():
+        if (m := _STALE.match(ns)) and not _alive(int(m.group(1))):
+            out.add(m.group(0))
+    return sorted(out)
+
+
+def cleanup_stale() -> list[str]:
+    """What crashed runs left (their pid is dead); a live run's namespaces are untouched."""
+    return [ns for p in stale_prefixes() for ns in cleanup(p)]
+
+
+def unavailable() -> str | None:
+    """Why namespaced hosts cannot be made here (one line), or None when they can."""
+    if not sys.platform.startswith("linux"):
+        return f"network namespaces need Linux, not {sys.platform}"
+    if os.geteuid() != 0:
+        return "network namespaces need root (ip netns add)"
+    if shutil.which("ip") is None:
+        return "no `ip` command (iproute2) on PATH"
+    probe = f"{BASE}{os.getpid()}-probe"
+    try:
+        sh(["ip", "netns", "add", probe], "creating a probe namespace")
+        try:
+            sh(["ip", "-n", probe, "link", "add", "name", "pbr0", "type", "bridge"], "creating a bridge in it")
+            sh(["ip", "-n", probe, "link", "add", "name", "pv0", "type", "veth", "peer", "name", "pv1"], "creating a veth pair")
+        finally:
+            sh(["ip", "netns", "del", probe], "removing the probe namespace", check=False)
+    except NetnsError as e:
+        return str(e)
+    return None
+
+
+@dataclass(frozen=True)
+class Host:
+    """One emulated host: its namespace, its address and its port on the hub's bridge."""
+    name: str
+    index: int
+    netns: str
+    address: str
+    prefixlen: int
+    port: str
+
+
+@dataclass(eq=False)
+class Hosts:
+    """Namespaced hosts on one bridge, as a context manager: everything made, and every
+    process started, is gone after the `with` block, whatever happened inside it.
+
+    `hosts`: a count (h0, h1, ...) or names. `rate_kbit`: a tbf rate for every host link
+    or per host name (kbit/s, both directions). `use_nft`: None = nft when it works,
+    else the fallback (said once); False forces the fallback.
+    """
+    hosts_spec: int | Sequence[str] = 2
+    rate_kbit: int | Mapping[str, int | None] | None = None
+    prefix: str | None = None
+    subnet: str = SUBNET
+    use_nft: bool | None = None
+    stop_timeout: float = 3.0
+    log: Callable[[str], None] = _stderr
+    hosts: dict[str, Host] = field(default_factory=dict, init=False)
+    procs: list[subprocess.Popen] = field(default_factory=list, init=False)
+    nft: bool = field(default=False, init=False)
+    _made: list[str] = field(default_factory=list, init=False)   # namespaces made, in order
+    _up: bool = field(default=False, init=False)
+
+    def __post_init__(self) -> None:
+        if self.prefix is None:
+            self.prefix = f"{BASE}{os.getpid()}-{next(_counter)}-"
+        if not self.prefix.startswith(BASE):
+            raise ValueError(f"prefix {self.prefix!r} must start with {BASE!r} (cleanup finds leftovers by it)")
+        names = [f"h{i}" for i in range(self.hosts_spec)] if isinstance(self.hosts_spec, int) else list(self.hosts_spec)
+        net = ipaddress.ip_network(self.subnet)
+        if not names:
+            raise ValueError("no hosts")
+        if len(names) > net.num_addresses - 2:
+            raise ValueError(f"{len(names)} hosts do not fit in {net}")
+        for n in names:
+            if not _NAME.match(n) or n == HUB:
+                raise ValueError(f"host name {n!r}: letters, digits, '_', '.', '-' (at most 64) and not {HUB!r}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"a host named twice in {names}")
+        for i, n in enumerate(names):
+            self.hosts[n] = Host(n, i, f"{self.prefix}{n}", str(net[i + 1]), net.prefixlen, f"p{i}")
+
+    # --- set up and tear down -------------------------------------------------------------
+
+    @property
+    def hub(self) -> str:
+        return f"{self.prefix}{HUB}"
+
+    def __enter__(self) -> Hosts:
+        return self.up()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def up(self) -> Hosts:
+        """Create the hub and the hosts; on any failure, remove what was made and raise."""
+        if self._up:
+            return self
+        self._up = True
+        atexit.register(self.close)
+        try:
+            clash = [n for n in namespaces() if n.startswith(self.prefix)]
+            if clash:
+                raise NetnsError(f"namespaces {clash} already exist: `scripts/netns-hosts cleanup --prefix "
+                                 f"{self.prefix}` removes them")
+            self._add_ns(self.hub)
+            self._ip(self.hub, "link", "add", BRIDGE, "type", "bridge", what="creating the bridge")
+            self._ip(self.hub, "link", "set", BRIDGE, "up", what="bringing the bridge up")
+            self._ip(self.hub, "link", "set", "lo", "up", what="bringing lo up in the hub")
+            for h in self.hosts.values():
+                self._add_host(h)
+            self.nft = self._setup_nft()
+            rates = self.rate_kbit if isinstance(self.rate_kbit, Mapping) else {n: self.rate_kbit for n in self.hosts}
+            for n, r in rates.items():
+                if n not in self.hosts:
+                    raise KeyError(f"rate for unknown host {n!r} (hosts: {', '.join(self.hosts)})")
+                if r is not None:
+                    self.set_rate(n, r)
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _add_ns(self, ns: str) -> None:
+        sh(["ip", "netns", "add", ns], f"creating namespace {ns}")
+        self._made.append(ns)
+
+    def _ip(self, ns: str, *args: str, what: str) -> str:
+        return sh(["ip", "-n", ns, *args], f"{what} ({ns})")
+
+    def _add_host(self, h: Host) -> None:
+        self._add_ns(h.netns)
+        sh(["ip", "link", "add", IFACE, "netns", h.netns, "type", "veth", "peer", "name", h.port, "netns", self.hub],
+           f"creating the veth pair of host {h.name}")
+        self._ip(self.hub, "link", "set", h.port, "alias", h.name, what=f"naming port {h.port}")
+        self._ip(self.hub, "link", "set", h.port, "master", BRIDGE, what=f"attaching {h.port} to the bridge")
+        self._ip(self.hub, "link", "set", h.port, "up", what=f"bringing {h.port} up")
+        self._ip(h.netns, "link", "set", "lo", "up", what="bringing lo up")
+        self._ip(h.netns, "addr", "add", f"{h.address}/{h.prefixlen}", "dev", IFACE, what=f"addressing {h.name}")
+        self._ip(h.netns, "link", "set", IFACE, "up", what=f"bringing {h.name}'s {IFACE} up")
+
+    def _setup_nft(self) -> bool:
+        if self.use_nft is False:
+            _say_once("nofallback", "netns: cuts by bridge-port detach / neighbour entry (nft not used)", self.log)
+            return False
+        if shutil.which("nft") is None:
+            if self.use_nft:
+                raise NetnsError("use_nft=True but no `nft` on PATH (apt-get install nftables)")
+            _say_once("nonft", "netns: no `nft` (apt-get install nftables): a host is cut by detaching its bridge "
+                      "port, a pair by a dead neighbour entry (both silent)", self.log)
+            return False
+        rules = (f"table bridge {NFT_TABLE} {{\n chain {NFT_CHAIN} {{ type filter hook forward priority 0; "
+                 f"policy accept; }}\n}}\n")
+        try:
+            sh(["ip", "netns", "exec", self.hub, "nft", "-f", "-"], "creating the cut table", input=rules)
+        except NetnsError as e:
+            if self.use_nft:
+                raise
+            _say_once("nftfail", f"netns: nft unusable ({e}); cutting by bridge-port detach instead", self.log)
+            return False
+        return True
+
+    def close(self) -> None:
+        """Stop every process started here, kill anything else in the namespaces, remove
+        them (their bridge, veths and qdiscs go with them). Idempotent; tries everything
+        and raises at the end if something could not be removed."""
+        if not self._up:
+            return
+        self._up = False
+        atexit.unregister(self.close)
+        errors: list[str] = []
+        for p in self.procs:
+            if p.poll() is None:
+                try:
+                    os.killpg(p.pid, signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+        end = time.monotonic() + self.stop_timeout
+        for p in self.procs:
+            try:
+                p.wait(max(0.0, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+            try:
+                os.killpg(p.pid, signal.SIGKILL)   # the group: children it left behind too
+            except (ProcessLookupError, PermissionError):
+                pass
+            try:
+                p.wait(5)
+            except subprocess.TimeoutExpired:
+                errors.append(f"process {p.pid} ({' '.join(map(str, p.args))[:80]}) survived SIGKILL")
+        for ns in reversed(self._made):
+            if left := _empty_namespace(ns):
+                errors.append(f"{ns}: processes {left} survived SIGKILL")
+        for ns in reversed(self._made):   # hosts first, the hub last
+            try:
+                sh(["ip", "netns", "del", ns], f"removing namespace {ns}")
+            except NetnsError as e:
+                if ns in namespaces():
+                    errors.append(str(e))
+        self._made.clear()
+        if errors:
+            raise NetnsError("teardown incomplete: " + "; ".join(errors))
+
+    # --- processes -------------------------------------------------------------------------
+
+    def __getitem__(self, name: str) -> Host:
+        try:
+            return self.hosts[name]
+        except KeyError:
+            raise KeyError(f"no host {name!r} (hosts: {', '.join(self.hosts)})") from None
+
+    def address(self, name: str) -> str:
+        return self[name].address
+
+    def wrap(self, host: str, argv: Sequence[str]) -> list[str]:
+        """`argv` as run inside `host` (for a supervisor that starts its own children;
+        teardown still kills them, as it kills everything in the namespace)."""
+        return ["ip", "netns", "exec", self[host].netns, *map(str, argv)]
+
+    def run(self, host: str, argv: Sequence[str], *, log: str | Path | None = None,
+            **popen: Any) -> subprocess.Popen:
+        """Start `argv` inside `host`, in its own process group (teardown stops the group).
+        `log`: append stdout and stderr to this file; else `popen` says (stdout=..., ...)."""
+        popen.setdefault("stdin", subprocess.DEVNULL)
+        f: IO[bytes] | None = None
+        if log is not None:
+            f = open(log, "ab")
+            popen.update(stdout=f, stderr=subprocess.STDOUT)
+        try:
+            p = subprocess.Popen(self.wrap(host, argv), start_new_session=True, **popen)
+        finally:
+            if f is not None:
+                f.close()
+        self.procs.append(p)
+        return p
+
+    def check(self, host: str, argv: Sequence[str], timeout: float = 30.0) -> str:
+        """Run a command in `host` to completion; its stdout, or NetnsError naming it."""
+        return sh(self.wrap(host, argv), f"running in {host}", timeout=timeout)
+
+    def pids(self, host: str) -> list[int]:
+        return [p for p in ns_pids(self[host].netns) if _alive(p)]
+
+    def kill(self, host: str) -> list[int]:
+        """The host dies: SIGKILL every process in its namespace (its network stays)."""
+        pids = self.pids(host)
+        if left := _empty_namespace(self[host].netns):
+            raise NetnsError(f"host {host}: processes {left} survived SIGKILL")
+        for p in self.procs:
+            if p.pid in pids:
+                p.wait(5)
+        return pids
+
+    # --- rate, cuts ------------------------------------------------------------------------
+
+    def set_rate(self, host: str, kbit: int | None) -> None:
+        """A `tc tbf` rate (kbit/s, 1000 bit) on both ends of the host's link; None removes it.
+        Burst: 50 ms of data, at least two full frames; queue: 400 ms."""
+        h = self[host]
+        for ns, dev in ((h.netns, IFACE), (self.hub, h.port)):
+            if kbit is None:
+                sh(["tc", "-n", ns, "qdisc", "del", "dev", dev, "root"], f"removing the rate of {host}", check=False)
+                continue
+            if kbit <= 0:
+                raise ValueError(f"rate {kbit} kbit/s for {host}: must be positive")
+            burst = max(2 * 1514, kbit * 1000 // 8 // 20)
+            sh(["tc", "-n", ns, "qdisc", "replace", "dev", dev, "root", "tbf", "rate", f"{kbit}kbit",
+                "burst", str(burst), "latency", "400ms"], f"limiting {host}'s link to {kbit} kbit/s")
+
+    def rate(self, host: str) -> int | None:
+        """The tbf rate on the host's side of its link (kbit/s), or None."""
+        out = json.loads(sh(["tc", "-n", self[host].netns, "-j", "qdisc", "show", "dev", IFACE], "reading qdiscs")
+                         or "[]")
+        return next((q["options"]["rate"] * 8 // 1000 for q in out if q.get("kind") == "tbf"), None)
+
+    def _nft(self, *args: str, what: str) -> str:
+        return sh(["ip", "netns", "exec", self.hub, "nft", *args], what)
+
+    def _rules(self) -> list[tuple[int, str]]:
+        """(handle, comment) of every cut rule."""
+        out = json.loads(self._nft("-j", "-a", "list", "chain", "bridge", NFT_TABLE, NFT_CHAIN,
+                                   what="listing cut rules"))
+        return [(r["rule"]["handle"], r["rule"].get("comment", "")) for r in out.get("nftables", []) if "rule" in r]
+
+    def _drop(self, tag: str, *matches: list[str]) -> None:
+        if any(c == tag for _, c in self._rules()):
+            return
+        for m in matches:
+            self._nft("add", "rule", "bridge", NFT_TABLE, NFT_CHAIN, *m, "drop", "comment", f'"{tag}"',
+                      what=f"adding drop rule {tag}")
+
+    def _undrop(self, tag: str) -> None:
+        for handle, c in self._rules():
+            if c == tag:
+                self._nft("delete", "rule", "bridge", NFT_TABLE, NFT_CHAIN, "handle", str(handle),
+                          what=f"removing drop rule {tag}")
+
+    def cut(self, host: str) -> None:
+        """Cut the host off from every other, silently (frames dropped on the bridge)."""
+        h = self[host]
+        if self.nft:
+            self._drop(f"host {host}", ["iifname", h.port], ["oifname", h.port])
+        else:
+            self._ip(self.hub, "link", "set", h.port, "nomaster", what=f"detaching {host}'s port")
+
+    def heal(self, host: str) -> None:
+        h = self[host]
+        if self.nft:
+            self._undrop(f"host {host}")
+        else:
+            self._ip(self.hub, "link", "set", h.port, "master", BRIDGE, what=f"re-attaching {host}'s port")
+
+    def _pair(self, a: str, b: str) -> tuple[Host, Host, str]:
+        ha, hb = self[a], self[b]
+        if a == b:
+            raise ValueError(f"a link from {a} to itself")
+        x, y = sorted((a, b))
+        return ha, hb, f"link {x} {y}"
+
+    def cut_link(self, a: str, b: str) -> None:
+        """Cut only what passes between hosts a and b (both ways); each still reaches the others."""
+        ha, hb, tag = self._pair(a, b)
+        if self.nft:
+            self._drop(tag, ["iifname", ha.port, "oifname", hb.port], ["iifname", hb.port, "oifname", ha.port])
+        else:
+            for x, y in ((ha, hb), (hb, ha)):
+                self._ip(x.netns, "neigh", "replace", y.address, "lladdr", NOWHERE_MAC, "dev", IFACE,
+                         "nud", "permanent", what=f"pointing {x.name}'s neighbour {y.name} nowhere")
+
+    def heal_link(self, a: str, b: str) -> None:
+        ha, hb, tag = self._pair(a, b)
+        if self.nft:
+            self._undrop(tag)
+        else:
+            for x, y in ((ha, hb), (hb, ha)):
+                sh(["ip", "-n", x.netns, "neigh", "del", y.address, "dev", IFACE], "restoring a neighbour",
+                   check=False)
+
+    def cuts(self) -> dict[str, list]:
+        """What is cut now: {"hosts": [...], "links": [[a, b], ...]}, read from the system."""
+        hosts: list[str] = []
+        links: list[list[str]] = []
+        if self.nft:
+            for _, c in self._rules():
+                kind, *names = c.split()
+                if kind == "host" and names[0] not in hosts:
+                    hosts.append(names[0])
+                elif kind == "link" and names not in links:
+                    links.append(names)
+        else:
+            out = json.loads(self._ip(self.hub, "-j", "link", "show", what="listing ports") or "[]")
+            attached = {i["ifname"] for i in out if i.get("master") == BRIDGE}
+            hosts = [h.name for h in self.hosts.values() if h.port not in attached]
+            for a, b in itertools.combinations(self.hosts.values(), 2):
+                neigh = json.loads(self._ip(a.netns, "-j", "neigh", "show", b.address, what="neighbours") or "[]")
+                if any(n.get("lladdr") == NOWHERE_MAC for n in neigh):
+                    links.append(sorted([a.name, b.name]))
+        return {"hosts": sorted(hosts), "links": sorted(links)}
+
+    def status(self) -> dict[str, Any]:
+        cuts = self.cuts()
+        return {"prefix": self.prefix, "hub": self.hub, "cut_by": "nft" if self.nft else "link",
+                "hosts": [{"name": h.name, "netns": h.netns, "address": h.address, "port": h.port,
+                           "rate_kbit": self.rate(h.name), "cut": h.name in cuts["hosts"], "pids": self.pids(h.name)}
+                          for h in self.hosts.values()],
+                "links_cut": cuts["links"]}
+
+    # --- the CLI's hosts outlive the CLI -----------------------------------------------------
+
+    @classmethod
+    def attach(cls, prefix: str, log: Callable[[str], None] = _stderr) -> Hosts:
+        """The hosts made earlier under `prefix` (by `scripts/netns-hosts up`), read back from
+        the system. Closing it removes them."""
+        hub = f"{prefix}{HUB}"
+        if hub not in namespaces():
+            raise NetnsError(f"no hosts under prefix {prefix!r} (no namespace {hub}): `up` first")
+        ports = json.loads(sh(["ip", "-n", hub, "-j", "link", "show"], "listing the hub's ports") or "[]")
+        names: dict[int, str] = {}
+        for p in ports:
+            if re.fullmatch(r"p\d+", p["ifname"]) and p.get("ifalias"):
+                names[int(p["ifname"][1:])] = p["ifalias"]
+        order = [names[i] for i in sorted(names)]
+        self = cls(order, prefix=prefix, log=log)
+        for n, h in self.hosts.items():   # the addresses the hosts really have
+            addrs = json.loads(sh(["ip", "-n", h.netns, "-j", "addr", "show", "dev", IFACE], "reading addresses"))
+            a = next(x for i in addrs for x in i.get("addr_info", []) if x.get("family") == "inet")
+            self.hosts[n] = Host(n, h.index, h.netns, a["local"], a["prefixlen"], h.port)
+        self.nft = shutil.which("nft") is not None and bool(
+            sh(["ip", "netns", "exec", hub, "nft", "list", "tables"], "listing nft tables", check=False).strip())
+        self._made = [hub, *(h.netns for h in self.hosts.values())]
+        self._up = True   # close() removes them; no atexit: they outlive this process on purpose
+        return self
+
+
+# --- CLI -------------------------------------------------------------------------------------
+
+
+def _prefix(a: argparse.Namespace) -> str:
+    return a.prefix or f"{BASE}{a.name or 'cli'}-"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="netns-hosts", description="Emulated hosts: a network namespace each, "
+                                 "on one bridge, 198.18.0.0/24; silent cuts; tbf rates.")
+    ap.add_argument("--name", help="names the set (namespaces sm-NAME-*); default cli")
+    ap.add_argument("--prefix", help="the namespaces' prefix itself (overrides --name)")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    u = sub.add_parser("up", help="make N hosts (h0..), or --hosts a,b,c; they stay until `down`")
+    u.add_argument("n", type=int, nargs="?")
+    u.add_argument("--hosts", help="comma-separated host names instead of N")
+    u.add_argument("--rate-kbit", type=int, help="tbf rate on every host link (kbit/s)")
+    u.add_argument("--no-nft", action="store_true", help="cut by detaching bridge ports, not nft rules")
+    sub.add_parser("down", help="remove the hosts, killing everything in them")
+    for c, h in (("cut", "cut HOST off (or only the link HOST-PEER)"), ("heal", "undo a cut")):
+        p = sub.add_parser(c, help=h)
+        p.add_argument("host")
+        p.add_argument("peer", nargs="?")
+    r = sub.add_parser("rate", help="set (or with no KBIT remove) a host link's tbf rate")
+    r.add_argument("host")
+    r.add_argument("kbit", type=int, nargs="?")
+    sub.add_parser("status", help="hosts, addresses, rates, cuts, processes (JSON)")
+    e = sub.add_parser("exec", help="run a command inside HOST (replaces this process)")
+    e.add_argument("host")
+    e.add_argument("argv", nargs=argparse.REMAINDER)
+    sub.add_parser("cleanup", help="remove leftovers: all under --prefix/--name, else those of dead runs (sm-<pid>-)")
+    a = ap.parse_args(argv)
+    try:
+        if a.cmd == "cleanup":
+            gone = cleanup(_prefix(a)) if a.prefix or a.name else cleanup_stale()
+            print(f"removed {len(gone)} namespaces" + (f": {' '.join(gone)}" if gone else ""))
+            return 0
+        if a.cmd == "up":
+            if why := unavailable():
+                print(f"netns-hosts: cannot make hosts here: {why}", file=sys.stderr)
+                return 3
+            names: int | list[str] = a.hosts.split(",") if a.hosts else (a.n if a.n is not None else 2)
+            hs = Hosts(names, rate_kbit=a.rate_kbit, prefix=_prefix(a), use_nft=False if a.no_nft else None)
+            hs.up()
+            atexit.unregister(hs.close)   # they outlive the CLI until `down`
+            for h in hs.hosts.values():
+                print(f"{h.name} {h.address} {h.netns}")
+            return 0
+        hs = Hosts.attach(_prefix(a))
+        if a.cmd == "down":
+            hs.close()
+            print(f"removed {_prefix(a)}*")
+        elif a.cmd in ("cut", "heal"):
+            if a.peer:
+                (hs.cut_link if a.cmd == "cut" else hs.heal_link)(a.host, a.peer)
+            else:
+                (hs.cut if a.cmd == "cut" else hs.heal)(a.host)
+            print(json.dumps(hs.cuts()))
+        elif a.cmd == "rate":
+            hs.set_rate(a.host, a.kbit)
+        elif a.cmd == "status":
+            print(json.dumps(hs.status(), indent=1))
+        elif a.cmd == "exec":
+            argv2 = a.argv[1:] if a.argv[:1] == ["--"] else a.argv
+            if not argv2:
+                ap.error("exec HOST CMD...: no command")
+            os.execvp("ip", hs.wrap(a.host, argv2))
+        return 0
+    except (NetnsError, KeyError, ValueError) as e:
+        print(f"netns-hosts: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
