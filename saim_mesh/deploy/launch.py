@@ -116,6 +116,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     consoles: list[Proc] = []
     t0 = time.monotonic()
     done_said = False
+    stopped: BaseException | None = None
     try:
         local = [n for n in routed.parents_first(topo) if n in pl.listen]
         for n in local:   # parents first; a router above on another host is reached when it is up
@@ -190,12 +191,14 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
                 p.p.wait(console_linger + 60)
             except Exception:   # one that does not end is stopped below
                 pass
+    except (KeyboardInterrupt, SystemExit) as e:   # stopped (SIGTERM, Ctrl-C): summarise, then go on stopping
+        stopped = e
     finally:
         sup.stop()
     wall = time.monotonic() - t0
     result = {"host": host, "peers": summaries, "wall_s": round(wall, 1), "sources": sources, "events": sup.events,
               "secure": dep.secure, "start": start if live else None, "paced_start": paced_start, "root": root,
-              "units": units, "topology": topo.to_dict(), "endpoints": pl.endpoints}
+              "units": units, "topology": topo.to_dict(), "endpoints": pl.endpoints, "stopped": stopped is not None}
     if link_files:   # bytes per router link (the emulated links' counters)
         result["links"] = routed.link_stats(link_files)
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
@@ -205,7 +208,9 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s on host {host}, sources "
          f"{', '.join(h.sources) or 'none'}, {'mTLS + access control' if dep.secure else 'insecure'}; "
          f"{len(crashes)} crash(es), {sum(1 for e in sup.events if 'restarted' in e)} restart(s); "
-         f"alerts in {out_dir}/, logs in {logs}/")
+         f"alerts in {out_dir}/, logs in {logs}/" + (" (stopped)" if stopped is not None else ""))
+    if stopped is not None:
+        raise stopped
     return result
 
 

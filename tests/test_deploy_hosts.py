@@ -1,0 +1,97 @@
+"""Four "hosts" on one machine (issue 32 items 1-3 end to end): `deploy init` on the
+small scenario gives the battalion's command post and its three companies' a host each,
+each on its own loopback address (127.X.Y.1-4: Linux answers on all of 127/8), routers
+at each linked to the battalion's; `certs --deploy` makes certificates naming those
+addresses; one `saim-mesh deploy FILE --host H` process per host, secure (mTLS + access
+control). Every EA's alerts equal the in-process run's. Waits on printed lines; every
+child is reaped (and any left named) even when the test fails."""
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import tomllib
+
+import pytest
+
+from saim_mesh import scenario as S
+from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.runner import run
+
+from .conftest import SMALL
+
+pytestmark = pytest.mark.timeout(900)
+
+
+def plan_alerts(path) -> list[tuple]:
+    out = []
+    for line in open(path):
+        if line.strip():
+            d = json.loads(line)
+            if d["category"] != "system-problem":
+                out.append((d["t"], d["type"], tuple(d["subjects"]), d["message"], d["priority"],
+                            d["details"].get("id")))
+    return out
+
+
+def in_process(alerts) -> list[tuple]:
+    return [(a.t, a.type, tuple(a.subjects), a.message, a.priority, a.to_json_dict()["details"].get("id"))
+            for a in alerts if a.category != "system-problem"]
+
+
+def stop_host(p: Proc, out) -> list[str]:
+    """SIGTERM to the host's supervisor, time to stop its children, then any child still
+    alive is named and killed."""
+    p.stop(timeout=90)
+    pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
+    left = []
+    for name, pid in pids.items():
+        try:
+            os.kill(int(pid), 0)
+            if not open(f"/proc/{int(pid)}/stat").read().split(") ", 1)[1].startswith("Z"):
+                left.append(name)
+                os.kill(int(pid), signal.SIGKILL)
+        except (ProcessLookupError, ValueError, TypeError, FileNotFoundError):
+            pass
+    return left
+
+
+def cli(tmp_path, name: str, *args: str) -> Proc:
+    return Proc(name, [*py(), *args], env=clean_env(), log_dir=tmp_path / "cli")
+
+
+def test_four_hosts_on_loopback_each_under_its_own_supervisor_give_the_in_process_alerts(tmp_path):
+    sc = S.load(SMALL)
+    base = f"127.{random.randrange(1, 255)}.{random.randrange(0, 255)}.0/24"   # no clash with another run
+    f = tmp_path / "deploy.toml"
+    init = cli(tmp_path, "init", "deploy", "init", str(SMALL), "--out", str(f), "--addresses", base, "--no-consoles")
+    assert init.p.wait(120) == 0, init.tail()
+    certs = cli(tmp_path, "certs", "certs", "--deploy", str(f))
+    assert certs.p.wait(120) == 0, certs.tail()
+    doc = tomllib.loads(f.read_text())
+    hosts = {h["name"]: h for h in doc["host"]}
+    assert list(hosts) == ["BN", "A", "B", "C"]
+    procs: dict[str, Proc] = {}
+    left: dict[str, list[str]] = {}
+    try:
+        for h in hosts:
+            procs[h] = Proc(f"host-{h}", [*py(), "deploy", str(f), "--host", h, "--out-dir", str(tmp_path / h),
+                                          "--quiet"], env=clean_env(), log_dir=tmp_path)
+        for h, spec in hosts.items():   # each router listens on its host's own address
+            line = procs[h].wait_for(f"host {h}: routers ", 120)
+            assert line == f"host {h}: routers r-{h} on tls/{spec['addresses'][0]}:7447", line
+        for h, spec in hosts.items():   # the hosts keep running after (others may need their routers)
+            n = len(spec["eas"])
+            procs[h].wait_for(f"host {h}: {n} of {n} EA peers done", 600)
+    finally:
+        for h, p in procs.items():
+            left[h] = stop_host(p, tmp_path / h)
+    assert not any(left.values()), f"children still running (killed now): {left}"
+    units = [u for spec in hosts.values() for u in spec["eas"]]
+    want = {ea.owner: in_process(ea.alerts) for ea in run(sc, units)}
+    for h, spec in hosts.items():
+        for u in spec["eas"]:
+            assert plan_alerts(tmp_path / h / f"{u}.jsonl") == want[u], (h, u)
+    summary = json.loads((tmp_path / "A" / "summary.json").read_text())
+    assert summary["secure"] and summary["endpoints"]["r-BN"] == f"tls/{hosts['BN']['addresses'][0]}:7447"
