@@ -190,3 +190,48 @@ class Commander(_Session):
                 to: str | None = None) -> dict:
         return self.send("inhibit", to, id=id, source=W.MatcherSpec(**source), target=W.MatcherSpec(**target),
                          equal=list(equal), for_s=for_s)
+
+    # -- directives: authority over the mesh (saim_mesh/directives.py) ------------------
+    def order(self, action: str, at: float, plan: str = "", mission: str = "", expect=(),
+              wait_s: float | None = None) -> dict[str, dict]:
+        """Order `unit`'s subtree (execute-plan PLAN, abort-plan, start-mission or
+        end-mission MISSION), taking effect at event time `at` in every EA it concerns.
+        Returns each EA's answer by unit: those in `expect` (waited for up to `wait_s`,
+        default the timeout), and any other that answered meanwhile."""
+        return self._direct("order", expect, wait_s, at=at, action=action, plan=plan, mission=mission)
+
+    def confirm_up(self, mission: str, phase: str, at: float, expect=(), wait_s: float | None = None
+                   ) -> dict[str, dict]:
+        """Confirm that `unit`'s mission started or ended, at event time `at`: its own EA and
+        its superiors' EAs take it (the paper's confirmation from a subordinate EA)."""
+        return self._direct("confirm", expect, wait_s, at=at, mission=mission, phase=phase)
+
+    def _direct(self, kind: str, expect, wait_s: float | None, **fields) -> dict[str, dict]:
+        import time
+        from . import directives as D
+        D.make(kind, req="check", n=1, **fields)   # a bad directive: ValueError before anything is declared
+        key = D.key(self.ks.root, self.unit, kind)
+        answers: queue.SimpleQueue = queue.SimpleQueue()
+        gate = W.Gate(W.T_LIMIT)
+        sub = self.session.declare_subscriber(self.ks.cmdlog("*"),
+                                              lambda smp: answers.put((str(smp.key_expr), smp.payload.to_bytes())))
+        pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        end = time.monotonic() + (self.timeout if wait_s is None else wait_s)
+        got: dict[str, dict] = {}
+        try:
+            C._wait_matching(pub, end)
+            d = D.publish(self.session, self.ks.root, self.signer, self.unit, kind, pub=pub, **fields)
+            want = set(expect)
+            while (left := end - time.monotonic()) > 0 and not (want and want <= set(got)):
+                try:
+                    k, payload = answers.get(timeout=left)
+                except queue.Empty:
+                    break
+                res = gate.control(W.CmdResult, payload, k)
+                if res is not None and res.req == d.req:
+                    got[k.rsplit("/", 1)[-1]] = C.to_dict(res)
+            return got
+        finally:
+            pub.undeclare()
+            sub.undeclare()
+

@@ -45,6 +45,15 @@ class CommandLog:
         self.f.flush()
         os.fsync(self.f.fileno())
 
+    def directive(self, unit: str, tk, res: W.CmdResult) -> None:
+        """A directive the EA took or refused (saim_mesh/directives.py): kind `dir.<kind>`,
+        with its issuer `by`; `run --commands` applies it again the same way."""
+        line = {"unit": unit, "t": tk.t, "kind": f"dir.{res.kind}", "by": tk.by, "cmd": msgspec.to_builtins(tk.d),
+                "ok": res.ok, "error": res.error}
+        self.f.write(json.dumps(line, sort_keys=True) + "\n")
+        self.f.flush()
+        os.fsync(self.f.fileno())
+
     def close(self) -> None:
         self.f.close()
 
@@ -85,6 +94,19 @@ def read(paths: list[str | Path], units: set[str] | None = None) -> list[Logged]
                 raise ValueError(f"{where}: unknown unit {unit!r}")
             if type(t) not in (int, float) or not math.isfinite(t) or not 0 <= t <= W.T_LIMIT:
                 raise ValueError(f"{where}: t must be a scenario time in seconds (got {t!r})")
+            if isinstance(kind, str) and kind.startswith("dir."):   # a directive (saim_mesh/directives.py)
+                from . import directives as D
+                by = d.get("by")
+                if not isinstance(by, str) or not by:
+                    raise ValueError(f"{where}: a directive with no issuer ('by')")
+                try:
+                    body = msgspec.msgpack.encode(d.get("cmd"))
+                    tk = D.Taken(by, D.decode(kind[4:], body, 1 << 16))
+                except Exception as e:
+                    raise ValueError(f"{where}: bad directive: {getattr(e, 'problem', e)}") from None
+                n += 1
+                out.append((float(t), n, Logged(unit, float(t), tk)))
+                continue
             cls = W.COMMANDS.get(kind) if isinstance(kind, str) else None
             if cls is None:
                 raise ValueError(f"{where}: unknown command kind {kind!r} (one of {', '.join(W.COMMANDS)})")

@@ -8,6 +8,8 @@ from ea_agent import domains
 from ea_agent.core.config import load_config
 from ea_agent.core.manager import ExecutionAssistant, Sink
 
+from . import directives as D
+from .cmdlog import Logged
 from .commands import apply, tap
 from .fusion import make_node
 from .messages import SensorHit
@@ -76,7 +78,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
         progress: Callable[[float], None] | None = None, overrides: dict | None = None,
         on_made: Callable[[list], None] | None = None, commands: list | None = None,
         armed: bool = False, notice_sinks: Iterable[Callable] = (),
-        ack_after_s: float | None = None) -> list[ExecutionAssistant]:
+        ack_after_s: float | None = None, directives: Iterable = ()) -> list[ExecutionAssistant]:
     """Feed every event to every EA in scenario-time order. speed=None runs as fast as
     possible; otherwise scenario time is paced at `speed` x wall-clock time.
     `commands`: a commander's commands (`cmdlog.Logged`, in time order), each applied
@@ -84,7 +86,9 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
     `armed`: urgent alerts are re-notified and escalated until acknowledged from the start
     (a console watching); `ack_after_s`: a modelled commander acknowledges each urgent alert
     that long after it (implies armed); `notice_sinks`: every EA's re-notifications and
-    escalations. An escalation to a superior run here reaches that EA (`take_notice`)."""
+    escalations. An escalation to a superior run here reaches that EA (`take_notice`).
+    `directives` (`directives.Taken`): orders and confirmations over the mesh, each taken
+    by every EA it concerns at its `at`, after the events before it, as a live peer does."""
     sinks = list(sinks)
     eas = []
     for o in owners:
@@ -102,11 +106,18 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
             tap(ea)   # a `cff confirm` needs the calls for fire seen before it (the peer taps at start too)
         ea.start(0.0)
     cmds = [c for c in commands or () if c.unit in by_owner]
+    dirs = sorted(directives, key=lambda tk: tk.sort_key())
+    if dirs:   # stable: commands first at equal times, directives in (at, by, n) order
+        cmds = sorted(cmds + [Logged(ea.owner, tk.t, tk) for tk in dirs for ea in eas], key=lambda c: c.t)
 
     def command_until(t: float) -> None:   # commands due before events at time >= their t
         while cmds and cmds[0].t <= t:
             c = cmds.pop(0)
             ea = by_owner[c.unit]
+            if isinstance(c.cmd, D.Taken):   # after the facts before it, before those at its time
+                ea.advance(c.t, strict=True)
+                D.take(ea, c.cmd)
+                continue
             ea.advance(c.t)
             apply(ea, c.cmd, c.t)
     fusion = Fusion.of(sc)

@@ -224,7 +224,8 @@ CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionRep
            *COMMANDS.values(), CmdResult, Notice)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
 KINDS = (frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}
-         | {"signed"})   # what rejects are counted under ("signed": a forged or replayed envelope)
+         | {"signed", "directive"})   # what rejects are counted under ("signed": a forged or replayed
+                                      # envelope; "directive": an order or confirmation refused)
 # a signed envelope is a msgpack ext (security/sign.py): no message, control or batch is one
 ENVELOPE_HEADS = frozenset(bytes([b]) for b in (0xC7, 0xC8, 0xC9, *range(0xD4, 0xD9)))
 _ENCODER = msgspec.msgpack.Encoder()

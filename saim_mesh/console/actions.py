@@ -37,13 +37,17 @@ class Actions(Protocol):
     def inhibit(self, unit: str, id: str, source: dict, target: dict, equal: list[str], for_s: float,
                 comment: str) -> dict: ...
     def uninhibit(self, unit: str, id: str) -> dict: ...
+    def order(self, unit: str, action: str, plan: str, mission: str, at: float) -> dict: ...
 
 
+ORDER_ACTIONS = ("execute-plan", "abort-plan", "start-mission", "end-mission")
+ORDER_LEAD_S = 10.0    # event seconds between an order given and when it takes effect (every EA the same)
 FIELDS = {"ack": ("unit", "alert"), "silence": ("unit", "types", "subjects", "areas", "for_s", "comment"),
           "unsilence": ("unit", "id"), "set": ("unit", "key", "value"), "confirm": ("unit", "mission", "phase"), "cff": ("unit", "cff", "action"),
           "decide": ("unit", "alert", "option"),
           "inhibit": ("unit", "id", "source", "target", "equal", "for_s", "comment"),
-          "uninhibit": ("unit", "id")}
+          "uninhibit": ("unit", "id"),
+          "order": ("unit", "action", "plan", "mission", "in_s")}
 
 
 def _text(body: dict, f: str, choices=None, default: str | None = None) -> str:
@@ -182,6 +186,27 @@ def validate(kind: str, body: Any, state) -> tuple[str, dict]:
         if not ok:
             raise BadRequest(f"field 'value': expected a number or a list of numbers, got {json_type(v)}")
         return unit, {"key": key, "value": v}
+    if kind == "order":   # to the unit's whole subtree, at the console's event time + in_s
+        action = _text(body, "action", ORDER_ACTIONS)
+        plan = _text(body, "plan", default="") if action == "execute-plan" else ""
+        mission = _text(body, "mission", default="") if action in ("start-mission", "end-mission") else ""
+        for f, v in (("plan", body.get("plan")), ("mission", body.get("mission"))):
+            if v not in (None, "") and not (f == "plan" and plan or f == "mission" and mission):
+                raise BadRequest(f"field {f!r}: an {action} order names no {f}")
+        if action == "execute-plan" and not plan:
+            raise BadRequest("field 'plan': an execute-plan order names its plan")
+        if action == "execute-plan" and plan not in state.sc.plans:
+            raise BadRequest(f"unknown plan {plan[:60]!r}: {state.sc.name} has {', '.join(state.sc.plans)}")
+        if mission:
+            spec = state.missions.specs.get(mission)
+            if spec is None:
+                raise BadRequest(f"unknown mission {mission[:60]!r}: in no plan of {state.sc.name}")
+        elif action in ("start-mission", "end-mission"):
+            raise BadRequest(f"field 'mission': an {action} order names its mission")
+        in_s = body.get("in_s", ORDER_LEAD_S)
+        if not _number(in_s) or not 0 <= in_s <= 3600:
+            raise BadRequest(f"field 'in_s': expected event seconds from now in [0, 3600], got {in_s!r:.60}")
+        return unit, {"action": action, "plan": plan, "mission": mission, "at": state.t + float(in_s)}
     if kind == "confirm":
         mid = _text(body, "mission")
         if mid not in state.missions.specs:
@@ -206,8 +231,12 @@ class CommandActions:
     """Actions as commands: built by `commands.make`, run by `run(unit, cmd)`; with
     `push`, results go to the state's event stream too (in process: no cmdlog to hear)."""
 
-    def __init__(self, run: Callable[[str, Any], Any], state=None, push: bool = False):
-        self.run, self.state, self.push = run, state, push
+    def __init__(self, run: Callable[[str, Any], Any], state=None, push: bool = False, direct=None,
+                 lead_s: float = ORDER_LEAD_S):
+        """`direct(unit, kind, fields)`: publish a directive (saim_mesh/directives.py) as
+        `unit` on the live mesh: orders to the subtree, confirmations up the chain
+        (None: this console cannot, e.g. over the replay)."""
+        self.run, self.state, self.push, self.direct, self.lead_s = run, state, push, direct, lead_s
         self._n = itertools.count(1)
         self._tag = f"console-{os.getpid()}"
 
@@ -239,7 +268,25 @@ class CommandActions:
         return self._do(unit, "set", key=key, value=value)
 
     def confirm(self, unit, mission, phase):
+        if self.direct is not None:   # live: a confirmation goes up the chain, at one event time for all
+            at = (self.state.t if self.state is not None else 0.0) + self.lead_s
+            return self._directed(unit, "confirm", mission=mission, phase=phase, at=at)
         return self._do(unit, "confirm", mission=mission, phase=phase)
+
+    def order(self, unit, action, plan, mission, at):
+        if self.direct is None:
+            return {"req": "", "kind": "order", "ok": False, "t": at, "unit": unit, "ref": action,
+                    "error": "orders to a subtree go over the live mesh (console --sources); this console cannot"}
+        return self._directed(unit, "order", action=action, plan=plan, mission=mission, at=at)
+
+    def _directed(self, unit: str, kind: str, **fields) -> dict:
+        """Sent: the EAs' own answers follow on cmdlog/** (the page shows each)."""
+        try:
+            req = self.direct(unit, kind, fields)
+        except ValueError as e:
+            return {"req": "", "kind": kind, "ok": False, "error": str(e)[:500], "t": fields["at"], "unit": unit}
+        return {"req": req, "kind": kind, "ok": True, "error": "", "t": fields["at"], "unit": unit,
+                "ref": fields.get("mission") or fields.get("plan") or fields.get("action", "")}
 
     def cff(self, unit, cff, action):
         return self._do(unit, "cff", cff=cff, action=action)

@@ -99,14 +99,19 @@ class MeshFeed(MeshReader):
 def mesh_actions(feed: MeshFeed, timeout: float = 10.0) -> CommandActions:
     """Commands on the mesh, sent as this console's unit (the EA checks it commands it);
     their results come back on cmdlog/** to every console. Signed as this console's
-    identity in secure mode."""
+    identity in secure mode. On the live mesh, orders and confirmations are directives
+    (saim_mesh/directives.py): published once, taken by every EA they concern."""
     from ..security.sign import signer_for
     signer = signer_for(feed.conf)
 
     def run(unit: str, cmd):
         from .. import commands
         return commands.send(feed.session, feed.ks, unit, cmd, feed.state.unit, timeout, signer)
-    return CommandActions(run, feed.state, push=False)
+
+    def direct(unit: str, kind: str, fields: dict) -> str:
+        from .. import directives as D
+        return D.publish(feed.session, feed.ks.root, signer, unit, kind, **fields).req
+    return CommandActions(run, feed.state, push=False, direct=direct if isinstance(feed, LiveFeed) else None)
 
 
 def hook_inprocess(eas: list, sc, state: State) -> CommandActions:

@@ -5,7 +5,8 @@ says what the EA decided and when in its input (../shared/notes/live-mesh.md: id
 detected by wall clock is not reproducible, a decision written down is).
 
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
-as written: ["frame", payload], ["lost", source, released, why] or ["back", source]. A half-written last
+as written: ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body]
+(a directive: saim_mesh/directives.py) or ["back", source]. A half-written last
 record (a kill) is ignored on reading."""
 from __future__ import annotations
 
@@ -33,6 +34,10 @@ class InputJournal:
 
     def lost(self, source: str, released: float, why: str) -> None:
         self._write(["lost", source, released, why])
+
+    def directive(self, by: str, kind: str, body: bytes) -> None:
+        """A directive taken (its body out of its envelope: checked when it came)."""
+        self._write(["dir", by, kind, body])
 
     def back(self, source: str) -> None:
         """A lost source was heard again here: the EA was rebuilt (`LivePeer.back`)."""
@@ -64,6 +69,8 @@ def replay(peer, path: str | Path) -> list:
             peer.take(rec[1], "", journal=False)
         elif rec[0] == "lost":
             peer.lose(rec[1], rec[3], journal=False)
+        elif rec[0] == "dir":
+            peer.journalled_directive(rec)
         peer.history.append(rec)
     peer.ea.finish(peer.end_t())
     return peer.given

@@ -32,6 +32,7 @@ from ea_agent.core.alert import hms
 
 from .. import cmdlog
 from .. import commands as C
+from .. import directives as D
 from .. import messages as M
 from .. import noticelog
 from .. import wire as W
@@ -40,6 +41,7 @@ from ..runner import config_for, make_ea
 from ..scenario import Scenario
 from ..security.sign import signer_for
 from . import frames as F
+from .authority import DirectiveIntake
 from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
@@ -82,6 +84,7 @@ class LivePeer:
         from ..security.sign import verifier_for
         self.cmd_gate = W.Gate(self.gate.t_max, self.max_bytes, log=log, verifier=verifier_for(conf, root))
         self.cmd_gate.rejects = self.gate.rejects   # one count of what was refused
+        self.dirs = DirectiveIntake(root, self.cmd_gate)   # orders down, confirmations up (issue 33)
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         self.armed = armed
@@ -359,6 +362,7 @@ class LivePeer:
             self.ea.arm()
         self.ea.start(0.0)
         self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
+        self.dirs.reset()
         self.retry = {}
         self.stored = sum(len(x[0]) for q in self.held.values() for x in q.values())
         returned = {source} | {r[1] for r in records if r[0] == "back"}
@@ -366,10 +370,17 @@ class LivePeer:
             for rec in records:
                 if rec[0] == "frame":
                     self.take(rec[1], "", journal=False)
+                elif rec[0] == "dir":
+                    self.journalled_directive(rec)
                 elif rec[0] == "lost" and rec[1] not in returned:
                     self.lose(rec[1], rec[3], journal=False)
         finally:
             self.rebuilding = None
+
+    def journalled_directive(self, rec: list) -> None:
+        """A directive as the input journal holds it (checked when it came): held again."""
+        _, by, kind, body = rec
+        self._hold(D.Taken(by, D.decode(kind, body, 1 << 16)))
 
     def _history(self) -> list:
         """The input records so far (the journal's, flushed as written, or those a journal
@@ -441,6 +452,13 @@ class LivePeer:
         upto = None   # every source ended or is lost: all they sent is released, nothing beyond
         if self.live_start is not None and math.isfinite(self.order.bound()):
             upto = time.time() - self.live_start   # live: never ahead of the wall clock either
+        if self.dirs.pending:   # a directive takes effect after the facts before its `at`, before those at it
+            lim = min(self.order.bound(), math.inf if upto is None else upto)
+            while (tk := self.dirs.due(lim)) is not None:
+                for m in self.order.release(math.nextafter(tk.t, -math.inf)):
+                    self.ea.submit(m)
+                self.ea.advance(tk.t, strict=True)
+                self._take_directive(tk)
         for m in self.order.release(upto):
             self.ea.submit(m)
         r = self.order.released
@@ -456,6 +474,57 @@ class LivePeer:
                 self.ea.advance(max(self.ea.now, r if math.isfinite(r) else self.ea.now) + self.ea.epoch_s)
             finally:
                 self.late_from = None
+
+    def directive(self, key: str, payload: bytes) -> None:
+        """A directive off the wire (or a late joiner's answer): checked, journalled, held
+        until the EA's event time reaches its `at` (`_apply`), or taken at once, late."""
+        got = self.dirs.check(key, payload)
+        if got is None:
+            return
+        tk, body = got
+        if self.journal is not None:
+            self.journal.directive(tk.by, D.KIND_OF[type(tk.d)], body)
+        self._hold(tk)
+
+    def _hold(self, tk: D.Taken) -> None:
+        if tk.t <= self.order.released:   # the EA is past it (cut off when it was issued): now, late
+            self._take_directive(tk, late=True)
+        else:
+            self.dirs.hold(tk)
+            self._apply()
+
+    def _take_directive(self, tk: D.Taken, late: bool = False) -> None:
+        if late:
+            tk = D.at_least(tk, self.ea.now)
+        got = D.take(self.ea, tk)
+        if got is None:
+            return   # not for this EA
+        ok, why = got
+        if not ok:
+            self.gate.rejects.add(M.MessageError("directive", "(authority)", why), D.key(self.ks.root, tk.by, "?"))
+        res = D.result(tk, ok, tk.t, why, late)
+        if self.clog is not None:
+            self.clog.directive(self.unit, tk, res)
+        if self.session is not None:
+            self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
+        self.log(f"directive {res.kind} by {tk.by} at {tk.t:.1f} ok={ok}" + (f" error={res.error}" if res.error else ""),
+                 flush=True)
+
+    def _serve_directives(self, query) -> None:
+        """A late joiner asks for the directives this EA took (each as it was received)."""
+        try:
+            query.reply(query.key_expr, D.wrap(self.dirs.kept))
+        except Exception as e:   # a bad query must not kill the peer
+            self.log(f"dirj: no answer to {str(query.key_expr)[:80]}: {e}", flush=True)
+
+    def _joined(self, payload: bytes) -> None:
+        try:
+            entries = D.unwrap(payload)
+        except M.MessageError as e:
+            self.gate.rejects.add(e, self.ks.root + "/dirj")
+            return
+        for k, p in entries:
+            self.directive(k, p)
 
     def command(self, key: str, payload: bytes) -> None:
         """A commander's command (docs/console.md 1), taken as every peer takes one
@@ -499,6 +568,12 @@ class LivePeer:
                 misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
                 cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"),
                                             lambda smp: put(("cmd", (str(smp.key_expr), smp.payload.to_bytes()))))
+                dirs = s.declare_subscriber(f"{self.ks.root}/dir/*/*",
+                                            lambda smp: put(("dir", (str(smp.key_expr), smp.payload.to_bytes()))))
+                dirj = s.declare_queryable(f"{self.ks.root}/dirj/{self.unit}", lambda q: put(("dirq", q)))
+                # a late joiner: the directives taken so far, from the other EAs' journals
+                s.get(f"{self.ks.root}/dirj/*", lambda r: put(("dirj", r.ok.payload.to_bytes())) if r.ok else None,
+                      consolidation=zenoh.ConsolidationMode.NONE, timeout=10.0)
                 self.log(f"ready {self.unit} sources={','.join(self.sources)}"
                          + (f" (not depending on {','.join(sorted(set(self.named) - set(self.sources)))})"
                             if len(self.sources) < len(self.named) else ""), flush=True)
@@ -514,6 +589,12 @@ class LivePeer:
                         self.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
                     elif key == "cmd":
                         self.command(*payload)
+                    elif key == "dir":
+                        self.directive(*payload)
+                    elif key == "dirq":
+                        self._serve_directives(payload)
+                    elif key == "dirj":
+                        self._joined(payload)
                     elif key is not None:
                         self.receive(payload, key)
                     now = time.monotonic()
@@ -548,7 +629,11 @@ class LivePeer:
                         break
                     if key == "cmd":
                         self.command(*payload)
+                    elif key == "dirq":
+                        self._serve_directives(payload)
                 cmds.undeclare()
+                dirs.undeclare()
+                dirj.undeclare()
                 for x in (*misses, *subs):
                     x.undeclare()
                 self.session = None

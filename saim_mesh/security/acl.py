@@ -14,12 +14,12 @@ rules and the keys cannot drift apart.
 | subject | ingress allowed, besides reading |
 |---|---|
 | `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log/*; query store/**; token alive/replay/* |
-| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations); token alive/<U>/*; query store/** |
+| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations), dir/<U>/confirm (confirmations it infers); queryable + reply dirj/<U>, query dirj/* (directives for late joiners); token alive/<U>/*; query store/** |
 | `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/** and notice/**, put cmd/** |
 | `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put ingest/tak (PLI for the replay to sequence); query store/** |
-| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now); reading what an observer reads plus cmdlog/**, notice/**, clock and the data families but raw hits; query store/** |
+| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now), dir/<U>/* (U's orders to its subtree, U's confirmations up: saim_mesh/directives.py); reading what an observer reads plus cmdlog/**, notice/**, clock and the data families but raw hits; query store/** |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
 (observer and console: on alert/** and alive/** only).
@@ -138,7 +138,11 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
         subject(f"ea.{u}", [out, read_all, query_store, *ea_src,
                             rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
                                                           f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
-                                                          ks.cmdlog(u), ks.notice("*", u)]),
+                                                          ks.cmdlog(u), ks.notice("*", u),
+                                                          f"{r}/dir/{u}/confirm"]),   # its inferred confirmations
+                            # directives it took, for late joiners (saim_mesh/directives.py)
+                            rule(f"ea.{u}.dirj", ["declare_queryable", "reply"], [f"{r}/dirj/{u}"]),
+                            rule(f"ea.{u}.dirq", ["query"], [f"{r}/dirj/*"]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
     for n in source_names(units, taskorg):
         mine = [ks.src(n), f"{r}/src/{n}/@adv/**", ks.srcj(n)]
@@ -171,7 +175,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
         # (its subtree changes with reorganizations, which access control cannot follow)
         for u in units:
             subject(f"console.{u}", [out, read_public, read_cmdlog, read_seen, query_store,
-                                     rule(f"console.{u}.put", ["put"], [ks.cmd("*", "*", u)])])
+                                     rule(f"console.{u}.put", ["put"], [ks.cmd("*", "*", u), f"{r}/dir/{u}/*"])])
     # a router relays what others sent: its link carries every role's traffic, so a
     # receiver behind it sees the router's CN (zenoh-security.md). Each router enforces
     # the rules above on its own ingress, where it still sees the sender's certificate,

@@ -52,6 +52,7 @@ AUTHORITY: tuple[type, ...] = (M.Order, M.Reorganization, M.MissionConfirm, M.Uv
 AUTHORITY_FAMILIES = tuple(template(c).family for c in AUTHORITY)   # ord, org, msn, agm
 COMMAND_FAMILY = "cmd"
 NOTICE_FAMILY = "notice"
+DIRECTIVE_FAMILY = "dir"    # orders down, confirmations up (saim_mesh/directives.py)
 
 Name = Annotated[str, msgspec.Meta(min_length=1, max_length=128, pattern=NAME_RE.pattern)]
 
@@ -148,10 +149,10 @@ def rules_for(identities: Iterable[str]) -> dict[str, list[str]]:
             out[name] = [f"{f}/**" for f in AUTHORITY_FAMILIES]
         elif name == "console":
             out[name] = [f"{COMMAND_FAMILY}/**"]
-        elif name.startswith("console.") and len(name) > 8:
-            out[name] = [f"{COMMAND_FAMILY}/*/*/{name[8:]}"]
+        elif name.startswith("console.") and len(name) > 8:   # ... and U's directives (orders, confirmations)
+            out[name] = [f"{COMMAND_FAMILY}/*/*/{name[8:]}", f"{DIRECTIVE_FAMILY}/{name[8:]}/*"]
         elif name.startswith("ea.") and len(name) > 3:   # its escalations cross routers to its superior
-            out[name] = [f"{NOTICE_FAMILY}/*/{name[3:]}"]
+            out[name] = [f"{NOTICE_FAMILY}/*/{name[3:]}", f"{DIRECTIVE_FAMILY}/{name[3:]}/confirm"]
     return out
 
 

@@ -1312,6 +1312,13 @@
     $("confirm-btn").addEventListener("click", () => {
       post("confirm", { unit: actor(), mission: $("confirm-mission").value, phase: $("confirm-phase").value });
     });
+    $("order-btn").addEventListener("click", () => {
+      const action = $("order-action").value, target = $("order-target").value.trim();
+      const body = { unit: actor(), action, in_s: Number($("order-in").value) };
+      if (action === "execute-plan") body.plan = target;
+      if (action.endsWith("-mission")) body.mission = target;
+      post("order", body);
+    });
     $("cff-confirm-btn").addEventListener("click", () => post("cff", { unit: actor(), cff: $("cff-id").value.trim(), action: "confirm" }));
     $("cff-cancel-btn").addEventListener("click", () => post("cff", { unit: actor(), cff: $("cff-id").value.trim(), action: "cancel" }));
 

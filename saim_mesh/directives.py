@@ -1,0 +1,257 @@
+"""Authority over the mesh (issue 33): what a commander orders flows down the chain of
+command, what a unit confirms flows up, and every EA concerned takes it at the same event
+time.
+
+A *directive* is a signed fact with an effective event time `at`, published once by its
+issuer on `<root>/dir/<by>/<kind>` (`by`: the unit whose console or EA issues it):
+
+* `order` (execute-plan, abort-plan, start-mission, end-mission): for every EA of `by`'s
+  subtree as the task organization stands in that EA (reorganizations included);
+* `confirm` (a mission of `by` started or ended: confirmed at `by`'s console or inferred
+  by its EA): for `by`'s EA and its superiors' EAs, the paper's "confirmation from a
+  subordinate EA".
+
+Why an effective time instead of "when it arrives": arrival differs from EA to EA; the
+issuer states when the directive takes effect (a few seconds of event time ahead of the
+picture it sees) and every EA applies it after the facts before `at` and before those at
+`at`, so their alerts stay identical and equal an in-process run given the same
+directive (`runner.run(directives=...)`). An EA that gets it after it passed `at` (cut off
+at the time) takes it at once, says so in its command log and marks it late.
+
+Authority is checked twice: the signature (secure mode: only `console.<U>` and `ea.<U>`
+sign `dir/<U>/...`, `security/sign.rules_for`), then the task organization (`refusal`):
+an order for a mission of a unit outside the issuer's subtree, or a confirmation for a
+mission that is not the issuer's, is refused and counted, and the refusal answered on the
+EA's command log."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import msgspec
+
+from . import messages as M
+from . import wire as W
+
+KINDS = ("order", "confirm")
+Name = W.Name
+Req = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+
+
+class OrderDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """An order of `by` to its subtree: execute a plan, abort it, start or end a mission."""
+    v: Literal[1]
+    req: Req
+    n: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]   # the issuer's own count: (at, by, n) orders them
+    at: W.Time
+    action: Literal["execute-plan", "abort-plan", "start-mission", "end-mission"]
+    plan: Annotated[str, msgspec.Meta(max_length=128)] = ""
+    mission: Annotated[str, msgspec.Meta(max_length=128)] = ""
+
+
+class ConfirmDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """`by` confirms that its mission started or ended."""
+    v: Literal[1]
+    req: Req
+    n: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
+    at: W.Time
+    mission: Name
+    phase: Literal["start", "end"]
+
+
+TYPES: dict[str, type] = {"order": OrderDirective, "confirm": ConfirmDirective}
+KIND_OF = {c: k for k, c in TYPES.items()}
+_DEC = {c: msgspec.msgpack.Decoder(c) for c in TYPES.values()}
+
+
+@dataclass(frozen=True, slots=True)
+class Taken:
+    """A directive as an EA takes it: who issued it and what."""
+    by: str
+    d: OrderDirective | ConfirmDirective
+
+    @property
+    def t(self) -> float:
+        return self.d.at
+
+    def sort_key(self) -> tuple:
+        return (self.d.at, self.by, self.d.n, self.d.req)
+
+
+def key(root: str, by: str, kind: str) -> str:
+    return f"{root}/dir/{by}/{kind}"
+
+
+def make(kind: str, **fields) -> OrderDirective | ConfirmDirective:
+    """A directive checked as an EA's gate checks it (ValueError naming what is wrong)."""
+    cls = TYPES.get(kind)
+    if cls is None:
+        raise ValueError(f"unknown directive kind {kind!r} (known: {', '.join(KINDS)})")
+    try:
+        d = cls(v=W.VERSION, **fields)
+        return decode(kind, msgspec.msgpack.encode(d), 1 << 16)
+    except TypeError as e:
+        raise ValueError(f"{kind}: {e}") from None
+    except M.MessageError as e:
+        raise ValueError(f"{kind}: {e.problem}") from None
+
+
+def decode(kind: str, payload: bytes, max_bytes: int):
+    """One directive payload (already out of its envelope); raises MessageError only."""
+    cls = TYPES.get(kind)
+    if cls is None:
+        raise M.MessageError("directive", "(key)", f"unknown directive kind {kind[:32]!r}")
+    if len(payload) > max_bytes:
+        raise M.MessageError("directive", "(bytes)", f"{len(payload)} bytes, over the {max_bytes} limit")
+    try:
+        d = _DEC[cls].decode(payload)
+    except (msgspec.ValidationError, msgspec.DecodeError) as e:
+        raise M.MessageError("directive", "(message)", str(e)[:200]) from None
+    except Exception as e:   # a decoder bug must not kill a peer
+        raise M.MessageError("directive", "(message)", f"undecodable: {type(e).__name__}") from None
+    if not math.isfinite(d.at):
+        raise M.MessageError("directive", "at", "not a finite event time")
+    if kind == "order":
+        if d.action == "execute-plan" and not d.plan:
+            raise M.MessageError("directive", "plan", "execute-plan names no plan")
+        if d.action in ("start-mission", "end-mission") and not d.mission:
+            raise M.MessageError("directive", "mission", f"{d.action} names no mission")
+    return d
+
+
+def parse_key(root: str, k: str) -> tuple[str, str] | None:
+    """(by, kind) of a directive's key, None when it is not one."""
+    prefix = f"{root}/dir/"
+    if not k.startswith(prefix):
+        return None
+    parts = k[len(prefix):].split("/")
+    if len(parts) != 2 or not parts[0] or parts[1] not in TYPES:
+        return None
+    return parts[0], parts[1]
+
+
+def concerns(domain, unit: str, tk: Taken) -> bool:
+    """Whether `unit`'s EA considers this directive at all (the key space carries every
+    directive to every EA): an order from itself or a superior, or one naming a mission of
+    its subtree (which it may have to refuse); a confirmation from itself or a subordinate.
+    Anything else is not for it: ignored, not refused."""
+    to = domain.taskorg
+    if tk.by == unit:
+        return True
+    if isinstance(tk.d, ConfirmDirective):
+        return tk.by in to.units and unit in to.ancestors(tk.by)
+    if tk.by in to.units and tk.by in to.ancestors(unit):
+        return True
+    m = (getattr(domain, "missions", {}) or {}).get(tk.d.mission) if tk.d.mission else None
+    return m is not None and (m.unit == unit or unit in to.ancestors(m.unit))
+
+
+def refusal(domain, tk: Taken) -> str | None:
+    """Why the EA refuses a directive that concerns it (None: it takes it), judged when
+    it takes effect: the task organization and plan as this EA knows them then decide who
+    may order or confirm what."""
+    to = domain.taskorg
+    d = tk.d
+    missions = getattr(domain, "missions", {}) or {}
+    if tk.by not in to.units:
+        return f"{tk.by[:64]!r} is not a unit of the task organization"
+    if isinstance(d, OrderDirective):
+        if d.action in ("start-mission", "end-mission"):
+            m = missions.get(d.mission)
+            if m is None:
+                return f"unknown mission {d.mission[:64]!r} (not in the plan this EA runs)"
+            if tk.by != m.unit and tk.by not in to.ancestors(m.unit):
+                return f"{tk.by} does not command {m.unit}: it cannot order {d.mission[:64]!r}"
+        elif d.action == "execute-plan" and d.plan not in (getattr(domain, "plans", None) or {}):
+            return f"unknown plan {d.plan[:64]!r}"
+        return None
+    m = missions.get(d.mission)
+    if m is None:
+        return f"unknown mission {d.mission[:64]!r} (not in the plan this EA runs)"
+    if m.unit != tk.by:
+        return f"mission {d.mission[:64]!r} is {m.unit}'s: {tk.by} cannot confirm it"
+    return None
+
+
+def apply(ea, tk: Taken) -> None:
+    """Carry it out in `ea` at its time (the caller advanced the EA to `at`)."""
+    d, t = tk.d, tk.d.at
+    if isinstance(d, OrderDirective):
+        ea.submit(M.Order(t, d.action, d.plan, tk.by, d.mission or None))
+        return
+    m = ea.domain.missions[d.mission]
+    ea.submit(M.MissionConfirm(t, d.mission, m.unit, d.phase, "local" if tk.by == ea.owner else "message"))
+
+
+def result(tk: Taken, ok: bool, t: float, error: str = "", late: bool = False) -> W.CmdResult:
+    kind = KIND_OF[type(tk.d)]
+    ref = tk.d.mission if isinstance(tk.d, ConfirmDirective) else (tk.d.mission or tk.d.plan or tk.d.action)
+    err = error or (f"taken late: due at {tk.d.at:.0f} s, the EA was past it" if late else "")
+    return W.make(W.CmdResult, req=tk.d.req, kind=kind, ok=ok, error=err[:1000],
+                  t=max(0.0, min(float(t), W.T_LIMIT)), ref=str(ref)[:128])
+
+
+def take(ea, tk: Taken) -> tuple[bool, str] | None:
+    """`ea` takes a due directive (advanced to its `at` by the caller): None when it does
+    not concern this EA (ignored), else (taken, why refused). The same in a peer and in
+    process (`runner.run(directives=...)`), so both give the same alerts."""
+    dom = ea.domain
+    if not concerns(dom, ea.owner, tk):
+        return None
+    why = refusal(dom, tk)
+    if why is not None:
+        return False, why
+    try:
+        apply(ea, tk)
+    except (KeyError, ValueError) as e:   # the domain's own check said no
+        return False, str(e.args[0] if e.args else e)[:500]
+    return True, ""
+
+
+def at_least(tk: Taken, t: float) -> Taken:
+    """The directive taken late, at `t` (the EA was past its `at`)."""
+    return Taken(tk.by, msgspec.structs.replace(tk.d, at=max(tk.d.at, t))) if t > tk.d.at else tk
+
+
+def wrap(entries: list[tuple[str, bytes]]) -> bytes:
+    """A late joiner's answer: the directives an EA took, each (key, payload as received)."""
+    return msgspec.msgpack.encode([[k, p] for k, p in entries])
+
+
+_WRAPPED = msgspec.msgpack.Decoder(
+    Annotated[list[tuple[Annotated[str, msgspec.Meta(max_length=W.KEY_LIMIT)],
+                         Annotated[bytes, msgspec.Meta(max_length=4096)]]], msgspec.Meta(max_length=10_000)])
+
+
+def unwrap(payload: bytes) -> list[tuple[str, bytes]]:
+    """Raises MessageError only."""
+    if len(payload) > 64 * 2**20:
+        raise M.MessageError("directive", "(bytes)", "a directive journal answer over 64 MB")
+    try:
+        return [(k, p) for k, p in _WRAPPED.decode(payload)]
+    except (msgspec.ValidationError, msgspec.DecodeError) as e:
+        raise M.MessageError("directive", "(journal)", str(e)[:200]) from None
+
+
+def publish(session, root: str, signer, by: str, kind: str, pub=None, **fields):
+    """Make, sign (secure mode: `signer` is `by`'s console or EA) and put one directive as
+    `by`; returns it. `pub`: a publisher declared on its key (to have waited for matching)."""
+    import time
+
+    import zenoh
+    n = signer.next_n() if signer is not None else time.time_ns() // 1000
+    d = make(kind, req=fields.pop("req", None) or _req(), n=n, **fields)
+    k = key(root, by, kind)
+    body = msgspec.msgpack.encode(d)
+    payload = body if signer is None else signer.sign(k, body, n)
+    if pub is not None:
+        pub.put(payload)
+    else:
+        session.put(k, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+    return d
+
+
+def _req() -> str:
+    import uuid
+    return uuid.uuid4().hex[:16]

@@ -1,0 +1,146 @@
+"""Authority over the mesh (issue 33): a commander's orders flow down its subtree and a
+unit's confirmations flow up, each taken by every EA concerned at the same event time.
+
+- in process: orders and a confirmation change what the EAs raise; a console that does
+  not command a unit cannot order its mission (refused, with why);
+- live: BN's console orders `abort-plan` and `execute-plan withdrawal`, A1's console
+  confirms its mission start, C's console orders the end of an A1 mission; every EA peer of
+  the subtree takes each at its event time (its command log says so), C's order is refused
+  and counted, and every peer's alerts equal an in-process run given the same directives;
+- a late-joining peer gets the directives from the other EAs' journals.
+"""
+from __future__ import annotations
+
+import json
+import uuid
+
+import pytest
+
+from saim_mesh import cmdlog
+from saim_mesh import directives as D
+from saim_mesh import scenario as S
+from saim_mesh.api import Commander
+from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.runner import run
+from saim_mesh.zconf import free_port
+
+from .conftest import SMALL
+from .test_live import load, plan_alerts, reap, start_source
+
+pytestmark = pytest.mark.timeout(300)
+SC = str(SMALL)
+
+
+@pytest.fixture(scope="module")
+def sc():
+    return S.load(SMALL)
+
+
+def peer(tmp, unit: str, ep: str, root: str) -> Proc:
+    """A live EA peer as a client of the test's router, depending on the one source."""
+    return Proc(f"peer-{unit}", [*py(), "peer", "--scenario", SC, "--unit", unit, "--connect", ep, "--mode", "client",
+                                 "--root", root, "--sources", "cp.all", "--out", str(tmp / f"{unit}.jsonl")],
+                env=clean_env(), log_dir=tmp)
+
+
+def order(by: str, n: int, at: float, action: str, plan: str = "", mission: str = "") -> D.Taken:
+    return D.Taken(by, D.make("order", req=f"r{n}", n=n, at=at, action=action, plan=plan, mission=mission))
+
+
+def confirm(by: str, n: int, at: float, mission: str, phase: str) -> D.Taken:
+    return D.Taken(by, D.make("confirm", req=f"c{n}", n=n, at=at, mission=mission, phase=phase))
+
+
+def test_orders_down_and_a_confirmation_up_change_what_the_eas_raise(sc):
+    units = ["BN", "A", "A1", "C"]
+    base = {ea.owner: plan_alerts(ea.alerts) for ea in run(sc, units)}
+    dirs = [order("BN", 1, 1500.0, "abort-plan"), order("BN", 2, 1600.0, "execute-plan", plan="withdrawal"),
+            confirm("A1", 3, 200.0, "A1-move", "start")]
+    got = {ea.owner: plan_alerts(ea.alerts) for ea in run(sc, units, directives=dirs)}
+    for u in units:   # the same before the first directive, different after
+        assert [a for a in got[u] if a[0] < 200] == [a for a in base[u] if a[0] < 200], u
+    assert got["BN"] != base["BN"] and got["A"] != base["A"]
+    # the withdrawal plan's missions run after 1600 in BN's subtree
+    eas = {ea.owner: ea for ea in run(sc, units, directives=dirs)}
+    for u in units:
+        assert set(eas[u].domain.missions) == {m.id for m in eas[u].domain.plans["withdrawal"].missions}, u
+
+
+def test_a_console_that_does_not_command_a_unit_cannot_order_its_mission(sc):
+    from saim_mesh.runner import config_for, make_ea
+    ea = make_ea(sc, "A", config_for(sc, "A"))
+    ea.start(0.0)
+    ea.advance(2500.0, strict=True)
+    bad = order("C", 1, 2500.0, "end-mission", mission="A1-attack")
+    assert D.concerns(ea.domain, "A", bad)          # it names A's subordinate's mission: A judges it
+    ok, why = D.take(ea, bad)
+    assert not ok and "C does not command A1" in why
+    assert D.take(ea, order("B", 2, 2500.0, "abort-plan")) is None   # B's own subtree: not A's business
+    ok, why = D.take(ea, confirm("A2", 3, 2500.0, "A1-attack", "start"))
+    assert not ok and "A1's" in why                 # A2 cannot confirm A1's mission
+    ok, why = D.take(ea, order("BN", 4, 2500.0, "execute-plan", plan="nosuch"))
+    assert not ok and "unknown plan" in why
+
+
+def test_bad_directives_are_refused_with_one_line():
+    with pytest.raises(ValueError, match="execute-plan names no plan"):
+        D.make("order", req="x", n=1, at=10.0, action="execute-plan")
+    with pytest.raises(ValueError, match="unknown directive kind"):
+        D.make("promote", req="x", n=1, at=10.0)
+    with pytest.raises(ValueError):
+        D.make("order", req="x", n=1, at=float("nan"), action="abort-plan")
+    with pytest.raises(ValueError):
+        D.make("confirm", req="x", n=1, at=10.0, mission="A1-move", phase="middle")
+
+
+def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tmp_path, sc):
+    units = ["BN", "A", "A1", "C"]
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    router = Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep, "--root", root],
+                  env=clean_env(), log_dir=tmp_path)
+    procs = []
+    try:
+        router.wait_for("router ready", 60)
+        for u in units:
+            procs.append(peer(tmp_path, u, ep, root))
+        for p, u in zip(procs, units):
+            p.wait_for(f"ready {u}", 60)
+        with Commander(SC, "BN", connect=[ep], root=root) as bn:
+            bn.order("abort-plan", at=1500.0, wait_s=0)
+            bn.order("execute-plan", at=1600.0, plan="withdrawal", wait_s=0)
+        with Commander(SC, "A1", connect=[ep], root=root) as a1:
+            a1.confirm_up("A1-move", "start", at=200.0, wait_s=0)
+        with Commander(SC, "C", connect=[ep], root=root) as c:
+            c.order("end-mission", at=1000.0, mission="A1-move", wait_s=0)
+        # a late joiner: A2 starts after the orders were given, and gets them from the others' journals
+        procs.append(peer(tmp_path, "A2", ep, root))
+        procs[-1].wait_for("ready A2", 60)
+        src = start_source(tmp_path, "cp.all", ep, root, "--tracks", "--speed", "max", "--mode", "client")
+        procs.append(src)
+        lines = {u: p.wait_for("summary ", 180) for p, u in zip(procs, [*units, "A2"])}
+    finally:
+        reap([*procs, router])
+    everyone = [*units, "A2"]
+    logged = {u: [c for c in cmdlog.read([tmp_path / f"{u}.cmdlog"]) if isinstance(c.cmd, D.Taken)]
+              for u in everyone}
+    taken = {u: [(c.cmd.by, c.cmd.d.req, c.t) for c in logged[u]] for u in everyone}
+    rows = {u: [json.loads(x) for x in open(tmp_path / f"{u}.cmdlog")] for u in everyone}
+    # every EA of BN's subtree took both orders at their event times (none late)
+    for u in everyone:
+        bn = [(req, t) for by, req, t in taken[u] if by == "BN"]
+        assert [t for _, t in bn] == [1500.0, 1600.0], (u, taken[u])
+        assert all(r["ok"] and not r["error"] for r in rows[u] if r.get("by") == "BN"), rows[u]
+    # A1's confirmation went up to A and BN (and A1's own EA), not to C or to its peer A2
+    for u in ("A1", "A", "BN"):
+        assert ("A1", 200.0) in [(by, t) for by, _, t in taken[u]], u
+    assert all(by != "A1" for by, _, _ in taken["C"] + taken["A2"])
+    # C's order for A1's mission: refused at C and at A1's chain, counted there
+    for u in ("C", "A", "A1"):
+        refused = [r for r in rows[u] if r.get("by") == "C"]
+        assert refused and not refused[0]["ok"] and "does not command A1" in refused[0]["error"], (u, rows[u])
+        assert json.loads(lines[u].split(" ", 1)[1])["rejects"].get("directive", 0) >= 1, u
+    # the same directives in process: the same alerts
+    dirs = {c.cmd.d.req: c.cmd for u in everyone for c in logged[u]}
+    eas = run(sc, everyone, directives=list(dirs.values()))
+    for ea in eas:
+        assert plan_alerts(load(tmp_path / f"{ea.owner}.jsonl")) == plan_alerts(ea.alerts), ea.owner
