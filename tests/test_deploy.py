@@ -206,5 +206,9 @@ def test_a_secure_host_without_its_certificates_is_one_line(tmp_path, capsys):
     assert "saim-mesh certs --deploy FILE" in err and "file missing" in err
 
 
-def test_ip_ranges_of_test_addresses():
-    assert ipaddress.ip_address("198.18.0.1") in ipaddress.ip_network("198.18.0.0/15")
+def test_the_example_deployment_checks(capsys):
+    f = SMALL.parents[1] / "configs" / "deploy-battalion.toml"
+    assert cli.main(["deploy", str(f), "--check"]) == 0, capsys.readouterr()
+    dep, _ = F.load(f)
+    assert all(ipaddress.ip_address(h.addresses[0]) in ipaddress.ip_network("198.18.0.0/15")
+               for h in dep.hosts.values())
