@@ -468,7 +468,7 @@ def cmd_deploy(a) -> int:
     try:
         res = run_host(dep, sc, a.host, out, show=not a.quiet, timeout=a.timeout, until_done=a.exit_when_done,
                        console_linger=a.console_linger, max_restarts=a.restarts)
-    except SecurityError as e:
+    except (SecurityError, RuntimeError, TimeoutError) as e:   # a child that would not start: one line
         return _fail(e)
     except KeyboardInterrupt:
         return 130

@@ -212,3 +212,15 @@ def test_the_example_deployment_checks(capsys):
     dep, _ = F.load(f)
     assert all(ipaddress.ip_address(h.addresses[0]) in ipaddress.ip_network("198.18.0.0/15")
                for h in dep.hosts.values())
+
+
+def test_check_for_a_host_says_when_a_routers_port_is_taken(tmp_path, capsys):
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        text = BASE.replace("198.18.0.2", "127.0.0.1").replace('cp = "A"', f'cp = "A"\nport = {port}')
+        rc, lines = check(tmp_path, text, "--host", "A", capsys=capsys)
+    assert rc == 2 and lines == [f"{tmp_path / 'deploy.toml'}: router 'r-A': port {port} on 127.0.0.1 is in use "
+                                 "(is this host's mesh running already?)"], lines

@@ -458,15 +458,21 @@ def this_host(dep: Deployment, host: str, where: str = "deployment") -> list[str
     for a in h.addresses:
         if not is_local(a):
             e(f"host {host!r}: address {a} is not one of this machine's (is this {host}?)")
+        else:
+            for r in dep.routers.values():
+                if r.host == host and r.port and not is_local(a, r.port):
+                    e(f"router {r.name!r}: port {r.port} on {a} is in use (is this host's mesh running already?)")
     return e.lines
 
 
-def is_local(address: str) -> bool:
-    """Whether this machine can listen on `address` (binding says so, namespaces included)."""
+def is_local(address: str, port: int = 0) -> bool:
+    """Whether this machine can listen on `address` (and `port`): binding says so,
+    namespaces included."""
     fam = socket.AF_INET6 if ipaddress.ip_address(address).version == 6 else socket.AF_INET
     try:
         with socket.socket(fam, socket.SOCK_STREAM) as s:
-            s.bind((address, 0))
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # a port in TIME_WAIT is free to Zenoh too
+            s.bind((address, port))
         return True
     except OSError:
         return False
