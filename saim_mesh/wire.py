@@ -253,13 +253,35 @@ def decode_control(cls: type, data: bytes, max_bytes: int) -> msgspec.Struct:
         raise M.MessageError(name, "(message)", f"undecodable: {type(e).__name__}") from None
 
 
-class Rejects:
-    """Counts rejected payloads per kind and logs each kind once with a sample, then a
-    summary at most every `every_s` of wall time: a flood costs a counter, not a log."""
+FLOOD_THRESHOLDS = (100, 1_000, 10_000, 100_000, 1_000_000)   # refusals per sender that are said
+MAX_SENDERS = 256      # senders counted by name (beyond: under "(others)")
+_SENDER_CHUNK = {"src": 0, "srcj": 0, "dir": 0, "cmd": 2, "alert": 0, "notice": 1, "health": 0, "bye": 0,
+                 "ack": 0, "cmdlog": 0}
 
-    def __init__(self, log=None, every_s: float = 10.0, sample_chars: int = 160):
+
+def sender_of(key: str) -> str:
+    """Who put a payload, as its key says (a source's name, a command's console unit, an
+    EA's unit): `family/<name>`; the family alone for keys that name nobody."""
+    parts = key.split("/")
+    for i, p in enumerate(parts):
+        c = _SENDER_CHUNK.get(p)
+        if c is not None and i + 1 + c < len(parts):
+            return f"{p}/{parts[i + 1 + c][:64]}"
+    return "(unknown)" if not key else "(other keys)"
+
+
+class Rejects:
+    """Counts rejected payloads per kind and per sender (as its key names it) and logs each
+    kind once with a sample, then a summary at most every `every_s` of wall time: a flood
+    costs a counter, not a log. `on_flood(sender, n, kinds)` is called when a sender's
+    refusals reach each of `FLOOD_THRESHOLDS` (the owner raises a system problem)."""
+
+    def __init__(self, log=None, every_s: float = 10.0, sample_chars: int = 160, on_flood=None):
         self.log, self.every_s, self.sample_chars = log, every_s, sample_chars
+        self.on_flood = on_flood
         self.by_kind: dict[str, int] = {}
+        self.by_sender: dict[str, int] = {}
+        self.kinds_of: dict[str, set[str]] = {}
         self.total = 0
         self.recent: list[str] = []
         self._said: dict[str, int] = {}
@@ -270,6 +292,15 @@ class Rejects:
         kind = err.kind if err.kind in KINDS else "undecodable" if err.kind == "?" else "other"
         n = self.by_kind[kind] = self.by_kind.get(kind, 0) + 1
         self.recent = (self.recent + [str(err)[:self.sample_chars]])[-20:]
+        who = sender_of(key)
+        if who not in self.by_sender and len(self.by_sender) >= MAX_SENDERS:
+            who = "(others)"
+        ns = self.by_sender[who] = self.by_sender.get(who, 0) + 1
+        ks = self.kinds_of.setdefault(who, set())
+        if len(ks) < 16:
+            ks.add(kind)
+        if ns in FLOOD_THRESHOLDS and self.on_flood is not None:
+            self.on_flood(who, ns, sorted(ks))
         if self.log is None:
             return
         if n == 1:

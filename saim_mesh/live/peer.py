@@ -84,6 +84,7 @@ class LivePeer:
         from ..security.sign import verifier_for
         self.cmd_gate = W.Gate(self.gate.t_max, self.max_bytes, log=log, verifier=verifier_for(conf, root))
         self.cmd_gate.rejects = self.gate.rejects   # one count of what was refused
+        self.gate.rejects.on_flood = self._flood     # ... per sender: a flood is said (threat model)
         self.dirs = DirectiveIntake(root, self.cmd_gate)   # orders down, confirmations up (issue 33)
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
@@ -175,6 +176,12 @@ class LivePeer:
         self.log(f"system {subject}: {text}", flush=True)
         self.ea.emit(M.Alert(round(max(self.ea.now, 0.0), 3), self.unit, "unknown-position", "system-problem",
                              "immediate", (subject,), text, {"source": subject, "wall_clock_driven": True, **details}))
+
+    def _flood(self, sender: str, n: int, kinds: list[str]) -> None:
+        """A sender's refused messages passed a threshold: one system problem each time
+        (100, 1,000, 10,000, ...), never one per message."""
+        self._system(sender.split("/", 1)[-1], f"{n} messages from {sender} refused ({', '.join(kinds)}): "
+                             f"a fault or someone feeding this EA junk", event="flood", refused=n, kinds=kinds)
 
     # -- input ---------------------------------------------------------------------------
     def receive(self, payload: bytes, key: str) -> None:
@@ -650,7 +657,8 @@ class LivePeer:
                 "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
-                "rejects": dict(self.gate.rejects.by_kind), "messages": self.ea.n_in,
+                "rejects": dict(self.gate.rejects.by_kind), "rejects_by_sender": dict(self.gate.rejects.by_sender),
+                "messages": self.ea.n_in,
                 "wall_s": round(time.monotonic() - self.t0, 2),
                 # CPU of the loop that decodes, orders and runs the EA, and of the whole process
                 # (Zenoh's threads too): for benchmarks, robust to this machine's varying share
