@@ -34,7 +34,7 @@ import msgspec
 from . import messages as M
 from . import wire as W
 
-KINDS = ("order", "confirm")
+KINDS = ("order", "confirm", "decide", "cff", "reorganize")
 Name = W.Name
 Req = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
 
@@ -60,7 +60,46 @@ class ConfirmDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, 
     phase: Literal["start", "end"]
 
 
-TYPES: dict[str, type] = {"order": OrderDirective, "confirm": ConfirmDirective}
+class DecideDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """`by`'s decision on an alert that asked for one (`option`: abort, continue, or
+    branch:<id>): every EA of `by`'s subtree that runs `mission` carries it out."""
+    v: Literal[1]
+    req: Req
+    n: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
+    at: W.Time
+    alert: Name
+    mission: Name
+    option: Name
+
+
+class CffDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A call for fire confirmed by `by` (the requester or a superior of it): every EA takes
+    it, so each warns of its own units near the target."""
+    v: Literal[1]
+    req: Req
+    n: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
+    at: W.Time
+    cff: Name
+    requester: Name
+    lon: Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+    lat: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+    radius_m: Annotated[float, msgspec.Meta(gt=0.0, le=100_000.0)]
+
+
+class ReorganizeDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """`by` puts `unit` (one of its subordinates) under `new_parent` (in its subtree): every
+    EA takes the change, so all agree on the chain of command from `at` on."""
+    v: Literal[1]
+    req: Req
+    n: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
+    at: W.Time
+    unit: Name
+    new_parent: Name
+
+
+Directive = OrderDirective | ConfirmDirective | DecideDirective | CffDirective | ReorganizeDirective
+TYPES: dict[str, type] = {"order": OrderDirective, "confirm": ConfirmDirective, "decide": DecideDirective,
+                          "cff": CffDirective, "reorganize": ReorganizeDirective}
 KIND_OF = {c: k for k, c in TYPES.items()}
 _DEC = {c: msgspec.msgpack.Decoder(c) for c in TYPES.values()}
 
@@ -69,7 +108,7 @@ _DEC = {c: msgspec.msgpack.Decoder(c) for c in TYPES.values()}
 class Taken:
     """A directive as an EA takes it: who issued it and what."""
     by: str
-    d: OrderDirective | ConfirmDirective
+    d: Directive
 
     @property
     def t(self) -> float:
@@ -83,7 +122,7 @@ def key(root: str, by: str, kind: str) -> str:
     return f"{root}/dir/{by}/{kind}"
 
 
-def make(kind: str, **fields) -> OrderDirective | ConfirmDirective:
+def make(kind: str, **fields) -> Directive:
     """A directive checked as an EA's gate checks it (ValueError naming what is wrong)."""
     cls = TYPES.get(kind)
     if cls is None:
@@ -112,6 +151,8 @@ def decode(kind: str, payload: bytes, max_bytes: int):
         raise M.MessageError("directive", "(message)", f"undecodable: {type(e).__name__}") from None
     if not math.isfinite(d.at):
         raise M.MessageError("directive", "at", "not a finite event time")
+    if kind == "decide" and d.option != "continue" and d.option != "abort" and not d.option.startswith("branch:"):
+        raise M.MessageError("directive", "option", f"{d.option[:64]!r}: abort, continue or branch:<id>")
     if kind == "order":
         if d.action == "execute-plan" and not d.plan:
             raise M.MessageError("directive", "plan", "execute-plan names no plan")
@@ -141,6 +182,8 @@ def concerns(domain, unit: str, tk: Taken) -> bool:
         return True
     if isinstance(tk.d, ConfirmDirective):
         return tk.by in to.units and unit in to.ancestors(tk.by)
+    if isinstance(tk.d, (CffDirective, ReorganizeDirective)):
+        return True   # every EA: each warns of its own units near the target; all keep one chain of command
     if tk.by in to.units and tk.by in to.ancestors(unit):
         return True
     m = (getattr(domain, "missions", {}) or {}).get(tk.d.mission) if tk.d.mission else None
@@ -166,6 +209,30 @@ def refusal(domain, tk: Taken) -> str | None:
         elif d.action == "execute-plan" and d.plan not in (getattr(domain, "plans", None) or {}):
             return f"unknown plan {d.plan[:64]!r}"
         return None
+    if isinstance(d, DecideDirective):
+        m = missions.get(d.mission)
+        if m is None:
+            return f"unknown mission {d.mission[:64]!r} (not in the plan this EA runs)"
+        if tk.by != m.unit and tk.by not in to.ancestors(m.unit):
+            return f"{tk.by} does not command {m.unit}: it cannot decide on {d.mission[:64]!r}"
+        return None
+    if isinstance(d, CffDirective):
+        if d.requester not in to.units:
+            return f"unknown requester {d.requester[:64]!r}"
+        if tk.by != d.requester and tk.by not in to.ancestors(d.requester):
+            return f"{tk.by} does not command {d.requester}: it cannot confirm its call for fire"
+        return None
+    if isinstance(d, ReorganizeDirective):
+        for u in (d.unit, d.new_parent):
+            if u not in to.units:
+                return f"unknown unit {u[:64]!r}"
+        if tk.by not in to.ancestors(d.unit):
+            return f"{tk.by} does not command {d.unit}: it cannot reorganize it"
+        if d.new_parent != tk.by and tk.by not in to.ancestors(d.new_parent):
+            return f"{d.new_parent} is not in {tk.by}'s subtree"
+        if d.new_parent == d.unit or d.unit in [d.new_parent, *to.ancestors(d.new_parent)]:
+            return f"{d.new_parent} is {d.unit} or under it: a cycle"
+        return None
     m = missions.get(d.mission)
     if m is None:
         return f"unknown mission {d.mission[:64]!r} (not in the plan this EA runs)"
@@ -180,13 +247,29 @@ def apply(ea, tk: Taken) -> None:
     if isinstance(d, OrderDirective):
         ea.submit(M.Order(t, d.action, d.plan, tk.by, d.mission or None))
         return
+    if isinstance(d, CffDirective):
+        ea.submit(M.CallForFireConfirm(t, d.cff, d.requester, d.lon, d.lat, d.radius_m))
+        return
+    if isinstance(d, ReorganizeDirective):
+        ea.submit(M.Reorganization(t, d.unit, d.new_parent))
+        return
+    if isinstance(d, DecideDirective):
+        ea.domain.decide({"decision": {"options": [d.option]}, "mission": d.mission}, d.option, t)
+        if d.alert.rsplit("/", 1)[0] == ea.owner:
+            try:
+                ea.ack(d.alert, t)
+            except KeyError:
+                pass   # not repeating: nothing to stop
+        return
     m = ea.domain.missions[d.mission]
     ea.submit(M.MissionConfirm(t, d.mission, m.unit, d.phase, "local" if tk.by == ea.owner else "message"))
 
 
 def result(tk: Taken, ok: bool, t: float, error: str = "", late: bool = False) -> W.CmdResult:
     kind = KIND_OF[type(tk.d)]
-    ref = tk.d.mission if isinstance(tk.d, ConfirmDirective) else (tk.d.mission or tk.d.plan or tk.d.action)
+    d = tk.d
+    ref = (d.mission if isinstance(d, (ConfirmDirective, DecideDirective)) else d.cff if isinstance(d, CffDirective)
+           else d.unit if isinstance(d, ReorganizeDirective) else (d.mission or d.plan or d.action))
     err = error or (f"taken late: due at {tk.d.at:.0f} s, the EA was past it" if late else "")
     return W.make(W.CmdResult, req=tk.d.req, kind=kind, ok=ok, error=err[:1000],
                   t=max(0.0, min(float(t), W.T_LIMIT)), ref=str(ref)[:128])

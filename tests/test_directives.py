@@ -144,3 +144,52 @@ def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tm
     eas = run(sc, everyone, directives=list(dirs.values()))
     for ea in eas:
         assert plan_alerts(load(tmp_path / f"{ea.owner}.jsonl")) == plan_alerts(ea.alerts), ea.owner
+
+
+def _ea(sc, unit: str, t: float):
+    from saim_mesh.runner import config_for, make_ea
+    ea = make_ea(sc, unit, config_for(sc, unit))
+    ea.start(0.0)
+    ea.advance(t, strict=True)
+    return ea
+
+
+def test_a_reorganization_is_taken_by_every_ea_when_the_issuer_commands_both_ends(sc):
+    ea = _ea(sc, "C2", 100.0)   # far from it: every EA keeps one chain of command
+    mk = lambda by, n, unit, parent: D.Taken(by, D.make("reorganize", req=f"o{n}", n=n, at=100.0, unit=unit,  # noqa: E731
+                                                        new_parent=parent))
+    ok, why = D.take(ea, mk("A", 1, "A3", "B"))
+    assert not ok and "B is not in A's subtree" in why
+    ok, why = D.take(ea, mk("C", 2, "A3", "C"))
+    assert not ok and "C does not command A3" in why
+    ok, why = D.take(ea, mk("BN", 3, "A", "A3"))
+    assert not ok and "a cycle" in why
+    assert D.take(ea, mk("BN", 4, "A3", "B")) == (True, "")
+    ea.advance(102.0)
+    assert ea.domain.taskorg.parent["A3"] == "B"
+
+
+def test_a_call_for_fire_is_confirmed_by_its_requester_or_a_superior_for_every_ea(sc):
+    ea = _ea(sc, "C2", 100.0)
+    mk = lambda by, n: D.Taken(by, D.make("cff", req=f"f{n}", n=n, at=100.0, cff="F1", requester="A1",  # noqa: E731
+                                         lon=10.0, lat=50.0, radius_m=300.0))
+    ok, why = D.take(ea, mk("C", 1))
+    assert not ok and "C does not command A1" in why
+    assert D.take(ea, mk("A", 2)) == (True, "")   # A commands A1; C2's EA warns of its own units near it
+
+
+def test_a_decision_reaches_the_missions_ea_and_a_bad_one_is_refused(sc):
+    ea = _ea(sc, "A", 400.0)
+    assert D.take(ea, confirm("A1", 9, 400.0, "A1-move", "start")) == (True, "")   # up from A1: it runs
+    ea.advance(402.0, strict=True)
+    assert ea.domain.plan.state["A1-move"] == "active"
+    mk = lambda by, n, option: D.Taken(by, D.make("decide", req=f"d{n}", n=n, at=402.0, alert="A/1",  # noqa: E731
+                                                  mission="A1-move", option=option))
+    ok, why = D.take(ea, mk("C", 1, "abort"))
+    assert not ok and "C does not command A1" in why
+    ok, why = D.take(ea, mk("A", 2, "branch:nosuch"))
+    assert not ok and "not waiting" in why
+    assert D.take(ea, mk("BN", 3, "abort")) == (True, "")
+    assert ea.domain.plan.state["A1-move"] == "aborted"
+    with pytest.raises(ValueError, match="abort, continue or branch"):
+        D.make("decide", req="x", n=1, at=1.0, alert="A/1", mission="A1-move", option="retreat")

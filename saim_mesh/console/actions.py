@@ -292,7 +292,20 @@ class CommandActions:
         return self._do(unit, "cff", cff=cff, action=action)
 
     def decide(self, unit, alert, option):
+        mission = self._mission_of(alert) if self.direct is not None else None
+        if mission:   # live: the decision reaches every EA of the unit's subtree that runs the mission
+            at = (self.state.t if self.state is not None else 0.0) + self.lead_s
+            return self._directed(unit, "decide", alert=alert, mission=mission, option=option, at=at)
         return self._do(unit, "decide", alert=alert, option=option)
+
+    def _mission_of(self, alert: str) -> str | None:
+        """The mission a decision alert is about, as the page saw the alert."""
+        if self.state is None:
+            return None
+        for d in [*self.state.alerts, *getattr(self.state, "quiet", ())]:
+            if d.get("details", {}).get("id") == alert:
+                return d["details"].get("mission")
+        return None
 
     def inhibit(self, unit, id, source, target, equal, for_s, comment):
         """`source`/`target`: {types, subjects, priorities, owners} (msgspec makes the
