@@ -235,3 +235,11 @@ class Commander(_Session):
             pub.undeclare()
             sub.undeclare()
 
+
+    def publish_plan(self, name: str, version: int, missions: list[dict], at: float, expect=(),
+                     wait_s: float | None = None) -> dict[str, dict]:
+        """A new plan version for `unit`'s subtree (missions as a plan file lists them):
+        every EA of the subtree validates it and executes it at `at` as `<name>.v<version>`."""
+        import json
+        return self._direct("plan", expect, wait_s, at=at, name=name, version=version,
+                            missions=json.dumps(missions).encode())

@@ -100,8 +100,11 @@ def read(paths: list[str | Path], units: set[str] | None = None) -> list[Logged]
                 if not isinstance(by, str) or not by:
                     raise ValueError(f"{where}: a directive with no issuer ('by')")
                 try:
-                    body = msgspec.msgpack.encode(d.get("cmd"))
-                    tk = D.Taken(by, D.decode(kind[4:], body, 1 << 16))
+                    cls = D.TYPES.get(kind[4:])
+                    if cls is None:
+                        raise ValueError(f"unknown directive kind {kind[4:]!r}")
+                    body = msgspec.msgpack.encode(msgspec.convert(d.get("cmd"), cls))   # JSON: bytes in base64
+                    tk = D.Taken(by, D.decode(kind[4:], body, 1 << 17))
                 except Exception as e:
                     raise ValueError(f"{where}: bad directive: {getattr(e, 'problem', e)}") from None
                 n += 1

@@ -34,7 +34,7 @@ import msgspec
 from . import messages as M
 from . import wire as W
 
-KINDS = ("order", "confirm", "decide", "cff", "reorganize")
+KINDS = ("order", "confirm", "decide", "cff", "reorganize", "plan")
 Name = W.Name
 Req = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
 
@@ -97,9 +97,26 @@ class ReorganizeDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=Tru
     new_parent: Name
 
 
-Directive = OrderDirective | ConfirmDirective | DecideDirective | CffDirective | ReorganizeDirective
+class PlanDirective(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A new plan version for `by`'s subtree (`missions`: the plan's missions as JSON, as a
+    plan file lists them): every EA of the subtree validates it and executes it at `at`
+    as plan `<name>.v<version>`."""
+    v: Literal[1]
+    req: Req
+    n: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
+    at: W.Time
+    name: Annotated[str, msgspec.Meta(min_length=1, max_length=48, pattern=r"^[A-Za-z0-9_\-]+$")]
+    version: Annotated[int, msgspec.Meta(ge=1, le=1_000_000)]
+    missions: Annotated[bytes, msgspec.Meta(max_length=48 * 1024)]
+
+    @property
+    def plan(self) -> str:
+        return f"{self.name}.v{self.version}"
+
+
+Directive = OrderDirective | ConfirmDirective | DecideDirective | CffDirective | ReorganizeDirective | PlanDirective
 TYPES: dict[str, type] = {"order": OrderDirective, "confirm": ConfirmDirective, "decide": DecideDirective,
-                          "cff": CffDirective, "reorganize": ReorganizeDirective}
+                          "cff": CffDirective, "reorganize": ReorganizeDirective, "plan": PlanDirective}
 KIND_OF = {c: k for k, c in TYPES.items()}
 _DEC = {c: msgspec.msgpack.Decoder(c) for c in TYPES.values()}
 
@@ -186,11 +203,13 @@ def concerns(domain, unit: str, tk: Taken) -> bool:
         return True   # every EA: each warns of its own units near the target; all keep one chain of command
     if tk.by in to.units and tk.by in to.ancestors(unit):
         return True
+    if isinstance(tk.d, PlanDirective):
+        return False
     m = (getattr(domain, "missions", {}) or {}).get(tk.d.mission) if tk.d.mission else None
     return m is not None and (m.unit == unit or unit in to.ancestors(m.unit))
 
 
-def refusal(domain, tk: Taken) -> str | None:
+def refusal(domain, tk: Taken, validate=None) -> str | None:
     """Why the EA refuses a directive that concerns it (None: it takes it), judged when
     it takes effect: the task organization and plan as this EA knows them then decide who
     may order or confirm what."""
@@ -208,6 +227,18 @@ def refusal(domain, tk: Taken) -> str | None:
                 return f"{tk.by} does not command {m.unit}: it cannot order {d.mission[:64]!r}"
         elif d.action == "execute-plan" and d.plan not in (getattr(domain, "plans", None) or {}):
             return f"unknown plan {d.plan[:64]!r}"
+        return None
+    if isinstance(d, PlanDirective):
+        if validate is None:
+            return "this EA cannot validate plan versions (no scenario to check them against)"
+        try:
+            spec = validate(d.plan, d.missions)
+        except ValueError as e:
+            return str(e)[:800]
+        mine = {tk.by, *to.subtree(tk.by)} if tk.by in to.units else set()
+        outside = sorted({m.unit for m in spec.missions} - mine)
+        if outside:
+            return f"plan {d.plan}: missions for {', '.join(outside[:5])}, outside {tk.by}'s subtree"
         return None
     if isinstance(d, DecideDirective):
         m = missions.get(d.mission)
@@ -241,7 +272,7 @@ def refusal(domain, tk: Taken) -> str | None:
     return None
 
 
-def apply(ea, tk: Taken) -> None:
+def apply(ea, tk: Taken, validate=None) -> None:
     """Carry it out in `ea` at its time (the caller advanced the EA to `at`)."""
     d, t = tk.d, tk.d.at
     if isinstance(d, OrderDirective):
@@ -252,6 +283,10 @@ def apply(ea, tk: Taken) -> None:
         return
     if isinstance(d, ReorganizeDirective):
         ea.submit(M.Reorganization(t, d.unit, d.new_parent))
+        return
+    if isinstance(d, PlanDirective):   # validated by `refusal`: the new version, then executed
+        ea.domain.plans = {**ea.domain.plans, d.plan: validate(d.plan, d.missions)}
+        ea.submit(M.Order(t, "execute-plan", d.plan, tk.by, None))
         return
     if isinstance(d, DecideDirective):
         ea.domain.decide({"decision": {"options": [d.option]}, "mission": d.mission}, d.option, t)
@@ -269,24 +304,25 @@ def result(tk: Taken, ok: bool, t: float, error: str = "", late: bool = False) -
     kind = KIND_OF[type(tk.d)]
     d = tk.d
     ref = (d.mission if isinstance(d, (ConfirmDirective, DecideDirective)) else d.cff if isinstance(d, CffDirective)
-           else d.unit if isinstance(d, ReorganizeDirective) else (d.mission or d.plan or d.action))
+           else d.unit if isinstance(d, ReorganizeDirective) else d.plan if isinstance(d, PlanDirective)
+           else (d.mission or d.plan or d.action))
     err = error or (f"taken late: due at {tk.d.at:.0f} s, the EA was past it" if late else "")
     return W.make(W.CmdResult, req=tk.d.req, kind=kind, ok=ok, error=err[:1000],
                   t=max(0.0, min(float(t), W.T_LIMIT)), ref=str(ref)[:128])
 
 
-def take(ea, tk: Taken) -> tuple[bool, str] | None:
+def take(ea, tk: Taken, validate=None) -> tuple[bool, str] | None:
     """`ea` takes a due directive (advanced to its `at` by the caller): None when it does
     not concern this EA (ignored), else (taken, why refused). The same in a peer and in
     process (`runner.run(directives=...)`), so both give the same alerts."""
     dom = ea.domain
     if not concerns(dom, ea.owner, tk):
         return None
-    why = refusal(dom, tk)
+    why = refusal(dom, tk, validate)
     if why is not None:
         return False, why
     try:
-        apply(ea, tk)
+        apply(ea, tk, validate)
     except (KeyError, ValueError) as e:   # the domain's own check said no
         return False, str(e.args[0] if e.args else e)[:500]
     return True, ""
@@ -304,7 +340,7 @@ def wrap(entries: list[tuple[str, bytes]]) -> bytes:
 
 _WRAPPED = msgspec.msgpack.Decoder(
     Annotated[list[tuple[Annotated[str, msgspec.Meta(max_length=W.KEY_LIMIT)],
-                         Annotated[bytes, msgspec.Meta(max_length=4096)]]], msgspec.Meta(max_length=10_000)])
+                         Annotated[bytes, msgspec.Meta(max_length=64 * 1024)]]], msgspec.Meta(max_length=10_000)])
 
 
 def unwrap(payload: bytes) -> list[tuple[str, bytes]]:

@@ -107,6 +107,10 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
         ea.start(0.0)
     cmds = [c for c in commands or () if c.unit in by_owner]
     dirs = sorted(directives, key=lambda tk: tk.sort_key())
+    validate = None
+    if dirs or any(isinstance(c.cmd, D.Taken) for c in cmds):
+        from .plans import validator
+        validate = validator(sc)
     if dirs:   # stable: commands first at equal times, directives in (at, by, n) order
         cmds = sorted(cmds + [Logged(ea.owner, tk.t, tk) for tk in dirs for ea in eas], key=lambda c: c.t)
 
@@ -116,7 +120,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
             ea = by_owner[c.unit]
             if isinstance(c.cmd, D.Taken):   # after the facts before it, before those at its time
                 ea.advance(c.t, strict=True)
-                D.take(ea, c.cmd)
+                D.take(ea, c.cmd, validate)
                 continue
             ea.advance(c.t)
             apply(ea, c.cmd, c.t)

@@ -193,3 +193,76 @@ def test_a_decision_reaches_the_missions_ea_and_a_bad_one_is_refused(sc):
     assert ea.domain.plan.state["A1-move"] == "aborted"
     with pytest.raises(ValueError, match="abort, continue or branch"):
         D.make("decide", req="x", n=1, at=1.0, alert="A/1", mission="A1-move", option="retreat")
+
+
+def a_plan(sc, end_a1_move: float = 1200.0) -> list[dict]:
+    """A's subtree's missions of the main plan, as plan.json lists them, with A1's move due sooner."""
+    doc = json.loads((sc.root / "plan.json").read_text())
+    out = [dict(m) for m in doc["plans"]["main"] if m["unit"] in ("A", "A1", "A2", "A3")]   # (R leaves A at 0)
+    for m in out:
+        if m["id"] == "A1-move":
+            m["end"] = {**m["end"], "t": end_a1_move}
+    return out
+
+
+def plan(by: str, n: int, at: float, missions, name: str = "A-plan", version: int = 2) -> D.Taken:
+    body = missions if isinstance(missions, bytes) else json.dumps(missions).encode()
+    return D.Taken(by, D.make("plan", req=f"p{n}", n=n, at=at, name=name, version=version, missions=body))
+
+
+def test_a_plan_version_is_validated_like_a_plan_file_and_taken_by_the_subtree(sc):
+    from saim_mesh.plans import validator
+    validate = validator(sc)
+    ea = _ea(sc, "A2", 1000.0)
+    bad = [*a_plan(sc), {"id": "X-1", "unit": "A2", "type": "move", "params": {"route": "NO-SUCH-ROUTE"}}]
+    ok, why = D.take(ea, plan("A", 1, 1000.0, bad), validate)
+    assert not ok and "(X-1)" in why and "\n" not in why
+    ok, why = D.take(ea, plan("A", 2, 1000.0, b"{not json"), validate)
+    assert not ok and "not JSON" in why
+    doc = json.loads((sc.root / "plan.json").read_text())
+    ok, why = D.take(ea, plan("A", 3, 1000.0, [m for m in doc["plans"]["main"] if m["unit"] == "B1"]), validate)
+    assert not ok and "outside A's subtree" in why
+    assert ea.domain.plan is not None and "A-plan.v2" not in ea.domain.plans   # the old one stays
+    assert D.take(ea, plan("B", 4, 1000.0, a_plan(sc)), validate) is None        # B's plans are not A2's
+    assert D.take(ea, plan("A", 5, 1000.0, a_plan(sc)), validate) == (True, "")
+    ea.advance(1002.0)
+    assert set(ea.domain.missions) == {m["id"] for m in a_plan(sc)}
+    assert ea.domain.missions["A1-move"].spec.end.t == 1200.0
+
+
+def test_live_a_plan_version_reaches_the_subtree_and_a_late_joiner_runs_it(tmp_path, sc):
+    units = ["A", "A1"]
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    router = Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep, "--root", root],
+                  env=clean_env(), log_dir=tmp_path)
+    procs = []
+    try:
+        router.wait_for("router ready", 60)
+        procs = [peer(tmp_path, u, ep, root) for u in units]
+        for p, u in zip(procs, units):
+            p.wait_for(f"ready {u}", 60)
+        with Commander(SC, "A", connect=[ep], root=root) as a:
+            got = a.publish_plan("A-plan", 2, a_plan(sc), at=1000.0, wait_s=0)
+            bad = a.publish_plan("A-plan", 3, [{"id": "X", "unit": "A1", "type": "no-such-class"}], at=1100.0,
+                                 wait_s=0)
+        assert got == {} and bad == {}   # answers come at the plans' event times
+        procs.append(peer(tmp_path, "A2", ep, root))   # joins late: gets the versions from A's and A1's EAs
+        procs[-1].wait_for("ready A2", 60)
+        procs.append(start_source(tmp_path, "cp.all", ep, root, "--tracks", "--speed", "max", "--mode", "client"))
+        for p, u in zip(procs, [*units, "A2"]):
+            p.wait_for("summary ", 180)
+    finally:
+        reap([*procs, router])
+    everyone = [*units, "A2"]
+    logged = {u: [c for c in cmdlog.read([tmp_path / f"{u}.cmdlog"]) if isinstance(c.cmd, D.Taken)] for u in everyone}
+    rows = {u: [json.loads(x) for x in open(tmp_path / f"{u}.cmdlog")] for u in everyone}
+    for u in everyone:
+        plans = [(r["cmd"]["version"], r["t"], r["ok"]) for r in rows[u] if r["kind"] == "dir.plan"]
+        assert plans == [(2, 1000.0, True), (3, 1100.0, False)], (u, rows[u])
+        refused = [r for r in rows[u] if r["kind"] == "dir.plan" and not r["ok"]][0]
+        assert "no-such-class" in refused["error"] and "\n" not in refused["error"]
+    dirs = {c.cmd.d.req: c.cmd for u in everyone for c in logged[u]}
+    eas = run(sc, everyone, directives=list(dirs.values()))
+    for ea in eas:
+        assert set(ea.domain.missions) == {m["id"] for m in a_plan(sc)}, ea.owner
+        assert plan_alerts(load(tmp_path / f"{ea.owner}.jsonl")) == plan_alerts(ea.alerts), ea.owner

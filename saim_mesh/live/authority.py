@@ -14,7 +14,7 @@ from .. import messages as M
 from .. import wire as W
 
 MAX_DIRECTIVES = 10_000   # taken per EA over a run (a flood beyond is refused and counted)
-MAX_BYTES = 4096          # one directive's payload, envelope included
+MAX_BYTES = 64 * 1024     # one directive's payload, envelope included (a plan version's missions: 48 kB)
 
 
 class DirectiveIntake:

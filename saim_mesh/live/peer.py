@@ -86,6 +86,8 @@ class LivePeer:
         self.cmd_gate.rejects = self.gate.rejects   # one count of what was refused
         self.gate.rejects.on_flood = self._flood     # ... per sender: a flood is said (threat model)
         self.dirs = DirectiveIntake(root, self.cmd_gate)   # orders down, confirmations up (issue 33)
+        from ..plans import validator
+        self.validate_plan = validator(sc)                   # plan versions checked as plan files are
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         self.armed = armed
@@ -503,7 +505,7 @@ class LivePeer:
     def _take_directive(self, tk: D.Taken, late: bool = False) -> None:
         if late:
             tk = D.at_least(tk, self.ea.now)
-        got = D.take(self.ea, tk)
+        got = D.take(self.ea, tk, self.validate_plan)
         if got is None:
             return   # not for this EA
         ok, why = got
