@@ -75,3 +75,30 @@ def test_a_console_that_cannot_publish_directives_says_so(small):
     c, _ = console(small, None)
     r = c.post("/api/order", json={"unit": "BN", "action": "abort-plan"})
     assert r.status_code == 400 and "over the live mesh" in r.json()["error"]
+
+
+def test_a_call_for_fire_the_console_never_heard_goes_to_the_ea_which_answers(small):
+    st = State(small, "BN")
+    sent, cmds = [], []
+
+    def run(unit, cmd):
+        cmds.append((unit, cmd.cff))
+        return {"req": cmd.req, "kind": "cff", "ok": False, "error": "unknown call for fire 'F9'", "t": 0.0}
+    c = TestClient(make_app(st, CommandActions(run, st, direct=publishing(sent))))
+    r = c.post("/api/cff", json={"unit": "A2", "cff": "F9", "action": "confirm"})
+    assert r.status_code == 400 and "unknown call for fire" in r.json()["error"]
+    assert sent == [] and cmds == [("A2", "F9")]
+
+
+def test_a_heard_call_for_fire_is_confirmed_as_a_directive(small):
+    from saim_mesh import messages as M
+    st = State(small, "BN")
+    st.clock(1200.0)
+    st.message(M.CallForFire(1190.0, "F1", "A2", 10.1, 50.2, 250.0))
+    sent: list = []
+    acts = CommandActions(lambda u, cmd: (_ for _ in ()).throw(AssertionError(cmd)), st, direct=publishing(sent))
+    c = TestClient(make_app(st, acts))
+    r = c.post("/api/cff", json={"unit": "A2", "cff": "F1", "action": "confirm"})
+    assert r.status_code == 200, r.text
+    assert sent == [("A2", "cff", {"cff": "F1", "requester": "A2", "lon": 10.1, "lat": 50.2, "radius_m": 250.0,
+                                   "at": 1210.0})]

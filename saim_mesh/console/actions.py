@@ -289,6 +289,10 @@ class CommandActions:
                 "ref": fields.get("mission") or fields.get("plan") or fields.get("action", "")}
 
     def cff(self, unit, cff, action):
+        m = self.state.cff_message(cff) if self.direct is not None and action == "confirm" and self.state else None
+        if m is not None:   # live: every EA hears the confirmation, each warns of its own units near the target
+            return self._directed(unit, "cff", cff=cff, requester=m.requester, lon=m.lon, lat=m.lat,
+                                  radius_m=m.radius_m, at=self.state.t + self.lead_s)
         return self._do(unit, "cff", cff=cff, action=action)
 
     def decide(self, unit, alert, option):

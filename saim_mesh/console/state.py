@@ -67,7 +67,7 @@ class State:
         self.counts: dict[str, dict[str, int]] = {}
         self.entity_pos: dict[str, tuple[float, float]] = {}
         self.tracks: dict[str, tuple[float, float, int, float]] = {}   # id -> lon, lat, strength, t
-        self.cffs: set[str] = set()
+        self.cffs: dict[str, object] = {}   # call for fire id -> its message (the newest 10,000)
         self.missions = Missions(sc, self.taskorg)
         self.overlay = overlay_geojson(sc)
         self._outbox: deque[tuple[str, Any]] = deque(maxlen=MAX_OUTBOX)
@@ -146,7 +146,9 @@ class State:
                 self.tracks[m.target] = (m.lon, m.lat, 1, m.t)
                 self._dirty.add("tracks")
             elif kind in ("cff", "cff-confirm"):
-                self.cffs.add(m.cff)
+                self.cffs[m.cff] = m
+                if len(self.cffs) > 10_000:
+                    del self.cffs[next(iter(self.cffs))]
             elif kind == "reorg":
                 self._resubordinate(m.unit, m.new_parent)
             elif self.missions.take(m):
@@ -240,6 +242,11 @@ class State:
     def known_cff(self, cff: str) -> bool:
         with self.lock:
             return cff in self.cffs
+
+    def cff_message(self, cff: str):
+        """The call for fire as this console heard it (None: not heard)."""
+        with self.lock:
+            return self.cffs.get(cff)
 
     def _positions(self) -> dict[str, list[float]]:
         """Each unit's centroid: the mean of the latest positions of every entity in its subtree."""
