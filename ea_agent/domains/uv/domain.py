@@ -299,6 +299,7 @@ class UvDomain:
             D.targets.target_visible(self, t, cands)
             D.targets.lost_target(self, t, cands)
             D.targets.target_gone(self, t, cands)
+            self.policies.step(t, cands)
             self._end_reported()
             self._photos(t)
             self._due(t)

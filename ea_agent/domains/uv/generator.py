@@ -2,8 +2,9 @@
 
 Three UGVs and two UAVs patrol, search and pursue two evaders over a 1.5 x 1.5 km
 area near Fort Irwin (UTM 11N). The layout (places, team, recipes, evader keyframes,
-scripted faults) is fixed here; `sim.py` runs it and `oracle.py` turns its true
-state into truth.json.
+scripted faults) is fixed here; `sim.py` runs each robot, obeying the tasks of its own
+EA (`loop.py` closes the loop in process; `saim_mesh/robots` one process per robot on the
+mesh), and `oracle.py` turns the team's true state into truth.json.
 
     python -m ea_agent.domains.uv.generator OUT [--seed N]
 """
@@ -22,7 +23,8 @@ import shapely
 
 from ea_agent.core.geo import Projection
 
-from .sim import Sim
+from .loop import ClosedLoop
+from .sim import Geo, RobotSim, Team
 from .world import Place
 
 EPSG = 32611
@@ -124,10 +126,27 @@ def world() -> dict[str, Place]:
     return {pid: Place(pid, kind, g, dict(props)) for pid, (kind, g, props) in PLACES.items()}
 
 
-def simulate(seed: int = 7) -> Sim:
-    """The true run; the policy's drop interval is the one the EAs model (configs/uv.toml)."""
-    from .oracle import thresholds
-    return Sim(world(), UNITS, MISSIONS, EVADERS, FAULTS, DURATION, seed, drop_s=thresholds()["drop_s"]).run()
+def robots(seed: int = 7, only: list[str] | None = None) -> dict[str, RobotSim]:
+    """The team's robot simulators (each its own random stream), optionally some of them."""
+    geo = Geo(EPSG, ORIGIN_EN)
+    ids = [u["id"] for u in UNITS if u["kind"] in ("ugv", "uav")]
+    return {u["id"]: RobotSim(u, ids.index(u["id"]), world(), MISSIONS, EVADERS, FAULTS, DURATION, geo, seed)
+            for u in UNITS if u["id"] in ids and (only is None or u["id"] in only)}
+
+
+def team(records: dict[str, dict]) -> Team:
+    """The true run of the team from its robots' records (what the oracle reads)."""
+    return Team(world(), UNITS, FAULTS, DURATION, records, EVADERS)
+
+
+def simulate(out: Path, seed: int = 7, eas: list[str] | None = None, unheard=()) -> tuple[ClosedLoop, Team]:
+    """The closed-loop run in process over the scenario folder's static files (the EAs
+    need them): the robots obey their EAs."""
+    from . import load, make_ea
+    sc = load(out, events=False)
+    owners = eas or list(sc.meta["default_eas"])
+    loop = ClosedLoop(robots(seed), [make_ea(sc, o) for o in owners], unheard=unheard).run()
+    return loop, team({r: s.record() for r, s in loop.robots.items()})
 
 
 def _to_lonlat(proj: Projection, xy: np.ndarray) -> np.ndarray:
@@ -143,48 +162,52 @@ def _features(proj: Projection) -> list[dict]:
     return out
 
 
-def _events_bytes(sim: Sim, proj: Projection) -> bytes:
-    evs = sorted(sim.events, key=lambda e: e["t"])   # stable: each step's order is kept
-    idx = [i for i, e in enumerate(evs) if "_xy" in e]
-    ll = _to_lonlat(proj, np.array([evs[i]["_xy"] for i in idx]))
+def events_bytes(events: list[dict]) -> bytes:
+    """events.jsonl.gz of the messages the robots sent, in the order the EAs took them."""
     buf = io.StringIO()
-    j = 0
-    for i, e in enumerate(evs):
-        d = dict(e)
-        if j < len(idx) and idx[j] == i:
-            del d["_xy"]
-            d["lon"], d["lat"] = round(float(ll[j, 0]), 7), round(float(ll[j, 1]), 7)
-            j += 1
-        buf.write(json.dumps(d, separators=(",", ":")) + "\n")
+    for e in events:
+        buf.write(json.dumps(e, separators=(",", ":")) + "\n")
     out = io.BytesIO()
     with gzip.GzipFile(fileobj=out, mode="wb", mtime=0, filename="") as gz:
         gz.write(buf.getvalue().encode())
     return out.getvalue()
 
 
-def write(out: Path, seed: int = 7) -> dict:
-    """Write the scenario folder; returns a summary (event counts, incidents in truth)."""
-    from .oracle import ground_truth
+def write_static(out: Path, seed: int = 7) -> dict:
+    """scenario.json, world.geojson and plan.json; returns the meta."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     proj = Projection(EPSG)
-    sim = simulate(seed)
-    robots = [u["id"] for u in UNITS if u["kind"] in ("ugv", "uav")]
+    robots_ = [u["id"] for u in UNITS if u["kind"] in ("ugv", "uav")]
     meta = {"name": NAME, "domain": "uv", "epsg": EPSG, "duration_s": DURATION, "seed": seed,
-            "default_eas": ["TEAM", *robots], "keyspace": {"cell_m": 250}, "targets": sorted(EVADERS)}
-    team = [{k: v for k, v in u.items() if k != "start"} for u in UNITS]
-    plan = {"team": team, "plans": {"main": MISSIONS}, "initial_plan": "main"}
+            "default_eas": ["TEAM", *robots_], "keyspace": {"cell_m": 250}, "targets": sorted(EVADERS)}
+    team_ = [{k: v for k, v in u.items() if k != "start"} for u in UNITS]
+    plan = {"team": team_, "plans": {"main": MISSIONS}, "initial_plan": "main"}
     (out / "scenario.json").write_text(json.dumps(meta, indent=1) + "\n")
     (out / "world.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": _features(proj)},
                                                   indent=1) + "\n")
     (out / "plan.json").write_text(json.dumps(plan, indent=1) + "\n")
-    (out / "events.jsonl.gz").write_bytes(_events_bytes(sim, proj))
-    truth = ground_truth(sim, owners=meta["default_eas"])
+    return meta
+
+
+def write_run(out: Path, events: list[dict], tm: Team, owners: list[str]) -> dict:
+    """events.jsonl.gz and truth.json of a closed-loop run (in process or on the mesh)."""
+    from .oracle import ground_truth
+    out = Path(out)
+    (out / "events.jsonl.gz").write_bytes(events_bytes(events))
+    truth = ground_truth(tm, owners=owners)
     truth["incidents_injected"] = INCIDENTS
     (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
-    return {"events": len(sim.events), "by_kind": dict(Counter(e["kind"] for e in sim.events)),
+    return {"events": len(events), "by_kind": dict(Counter(e["kind"] for e in events)),
             "incidents": len(truth["incidents"]), "situations": len(truth["situations"]),
             "by_type": dict(sorted(Counter(i["type"] for i in truth["incidents"]).items()))}
+
+
+def write(out: Path, seed: int = 7) -> dict:
+    """Write the scenario folder from the closed-loop run in process; returns a summary."""
+    meta = write_static(out, seed)
+    loop, tm = simulate(out, seed)
+    return write_run(out, loop.events, tm, meta["default_eas"])
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -91,8 +91,7 @@ class Patrol(Mission):
     PLACE_PARAMS = ("area", "sector")
     PLACE_KINDS = {"area": ("patrol-area", "sector"), "sector": ("sector", "patrol-area")}
 
-    def on_target_visible(self, ctx: "UvDomain", target: str, t: float) -> None:
-        ctx.commit_pursuit(self, target, self.params.get("sector") or self.params["area"], t)
+    # the commitment is the policies' (policies.step): a sighting inside the sector, no cooldown
 
 
 @mission
@@ -123,8 +122,7 @@ class Pursue(Mission):
     def area(self) -> str | None:
         return self.params.get("sector")
 
-    def on_lost_target(self, ctx: "UvDomain", target: str, t: float) -> None:
-        ctx.drop_pursuit(self, t)
+    # dropped by the policies (policies.step) when its robot has not seen the target for drop_s
 
 
 @mission

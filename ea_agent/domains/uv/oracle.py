@@ -210,15 +210,39 @@ class Truth:
                 if stop - g > ls - 1.0:
                     self.everyone("lost-target", [r, e], g, stop + 30)
             self.everyone("lost-target", [r, e], c1, c1 + 40)   # the EA may keep the pursuit a little longer
-        for ev in log:
+        for ev in log + self._gone_at_drop():
             if ev["what"] == "gone":
                 r, e, t = ev["robot"], ev["target"], ev["t"]
                 self.must("TEAM", "target-gone", [r, e, ev["sector"]], t - 5, t + 20, f"{e} leaves {ev['sector']}")
                 self.everyone("target-gone", [r, e, ev["sector"]], t - 10, t + 40)
             elif ev["what"] == "handoff":
                 r, q, e, t = ev["robot"], ev["to"], ev["target"], ev["t"]
-                self.must("TEAM", "handoff", [r, q, e], t - 1, ev["accept_t"] + 20, f"{r} hands {e} to {q}")
+                if ev.get("accept_t") is not None:   # a handoff is one the teammate took
+                    self.must("TEAM", "handoff", [r, q, e], t - 1, ev["accept_t"] + 20, f"{r} hands {e} to {q}")
                 self.everyone("handoff", [r, q, e], t - 1, t + 40)
+
+    def _gone_at_drop(self) -> list[dict]:
+        """The true exit of a target whose pursuit its EA dropped as gone before the pursuer
+        saw it truly outside (a sighting's noise at the sector's edge): the first time, from
+        5 s before the drop to 10 s after, the target is truly outside the sector. None in
+        that window: the EA's call is not backed by the truth (no incident)."""
+        out, log = [], self.sim.log
+        for n, c in enumerate(log):
+            if c["what"] != "commit":
+                continue
+            r, e, sec = c["robot"], c["target"], c["sector"]
+            end = next((d for d in log[n + 1:] if d["what"] == "drop" and d["robot"] == r and d["target"] == e), None)
+            if end is None or end.get("why") != "gone" or sec not in self.sim.world:
+                continue
+            if any(g["what"] == "gone" and g["robot"] == r and g["target"] == e and c["t"] <= g["t"] <= end["t"]
+                   for g in log):
+                continue
+            geom = self.sim.world[sec].geom
+            for i in range(self.idx(end["t"] - 5), self.idx(end["t"] + 10) + 1):
+                if not geom.contains(Point(self.sim.ev_pos[e][i])):
+                    out.append({"t": float(self.t[i]), "what": "gone", "robot": r, "target": e, "sector": sec})
+                    break
+        return out
 
     def collision(self) -> None:
         h, cm = self.thr["collision_horizon_s"], self.thr["collision_m"]

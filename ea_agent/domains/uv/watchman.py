@@ -82,6 +82,9 @@ class Watchman:
         self.reacquire_s = reacquire_s
         self.human = human
         self.seen: dict[tuple[str, str], float] = {}    # (observer, target) -> last sighting time
+        # (robot, target) -> (t, x, y, lon, lat) of the robot's own latest sighting: what the
+        # policies decide on, in every EA alike (the robot's own and the operator's)
+        self.own: dict[tuple[str, str], tuple[float, float, float, float, float]] = {}
         self.acquired: list[tuple[float, str, str, int]] = []   # (t, robot, target, n) since last detect
         self.n_acq: dict[tuple[str, str], int] = {}
         self.dirty: set[str] = set()
@@ -150,6 +153,9 @@ class Watchman:
             tg = self.targets[msg.target] = Target(msg.target)
         if msg.t >= tg.t:
             tg.t, tg.x, tg.y, tg.by, tg.sigma = msg.t, x, y, msg.robot, msg.sigma_m
+        mine = self.own.get((msg.robot, msg.target))
+        if mine is None or msg.t >= mine[0]:
+            self.own[(msg.robot, msg.target)] = (msg.t, x, y, msg.lon, msg.lat)
         obs = (("*" if self.human else msg.robot), msg.target)
         last = self.seen.get(obs, NEG)
         if msg.t - last >= self.reacquire_s:   # first sighting, or again after being lost

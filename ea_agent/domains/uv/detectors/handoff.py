@@ -1,7 +1,7 @@
 """Handoff (reporting-requirement): agent-to-agent task messages (paper 7.2).
 
-`delegate` A->B: B's own EA commits B to the task at once (its controller accepts),
-within B's patrol sector (the target entered it) else A's;
+`delegate` A->B: B's own EA commits B to the task at once when B is patrolling (its
+controller is told to accept: task `Accept`), within B's patrol sector else A's;
 `accept` B->A: A's EA drops A's pursuit and the operator's EA moves it from A to B.
 
 One handoff is one story (`story_key`): the handing robot's EA and the operator's
@@ -46,10 +46,12 @@ def story_key(dom: "UvDomain", frm: str, to: str, what: str, t: float, close: bo
 def on_agent(dom: "UvDomain", f: UvAgent, cands: list) -> None:
     if f.act == "delegate":
         dom.delegations[(f.sender, f.to, f.task)] = f
-        if f.to == dom.owner:   # we are asked: our controller takes the pursuit
+        if f.to == dom.owner:   # we are asked: our robot takes the pursuit if it is patrolling
             target = f.target or _target_of(dom, f.task)
-            if target:
-                dom.policies.take_over(f.to, target, dom.patrol_sector(f.to) or dom.sector_of(f.task, f.sender), f.t)
+            if target and dom.policies.accepts(f.to):
+                from ..tasks import Accept
+                dom.policies.take_over(f.to, target, dom.patrol_sector(f.to) or dom.sector_of(f.task, f.sender), f.t,
+                                       Accept, frm=f.sender, task=f.task)
             cands.append(_cand(dom, f, f.sender, f.to, target, "delegated to us"))
     elif f.act == "accept":
         d = dom.delegations.pop((f.to, f.sender, f.task), None)

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 def target_visible(dom: "UvDomain", t: float, cands: list) -> None:
     """Sightings that (re)acquire a target: report them and let the robot's active
-    tasks react (a patroller commits to pursue, a searcher is done)."""
+    tasks react (a searcher is done; pursuits are the policies', `policies.step`)."""
     acq, dom.watchman.acquired = dom.watchman.acquired, []
     for ta, rid, target, n in sorted(acq):
         if rid not in dom.mine:
@@ -53,7 +53,7 @@ def last_seen(dom: "UvDomain", m, target: str) -> float:
 
 def lost_target(dom: "UvDomain", t: float, cands: list) -> None:
     uv = dom.uv
-    lost_s, human_s, drop_s = float(uv["lost_s"]), float(uv["lost_human_s"]), float(uv["drop_s"])
+    lost_s, human_s = float(uv["lost_s"]), float(uv["lost_human_s"])
     for m, target in list(_pursuits(dom)):
         tg = dom.watchman.targets.get(target)
         last = last_seen(dom, m, target)
@@ -74,8 +74,6 @@ def lost_target(dom: "UvDomain", t: float, cands: list) -> None:
                                   {"mission": m.id, "target": target, "unseen_s": round(unseen, 1),
                                    "distance_m": None if far is None else round(far, 1),
                                    "deteriorating": deteriorating}))
-        if unseen >= drop_s:   # policy: give up the pursuit, resume the patrol
-            m.on_lost_target(dom, target, t)
 
 
 def target_gone(dom: "UvDomain", t: float, cands: list) -> None:
@@ -93,4 +91,3 @@ def target_gone(dom: "UvDomain", t: float, cands: list) -> None:
                               f"Target {target} left {dom.name(m.unit)}'s sector {sector} ({m_(d)} outside)",
                               ("target-gone", m.id), d, {"mission": m.id, "target": target, "sector": sector,
                                                          "places": [sector], "outside_m": round(d, 1)}))
-        dom.policies.target_gone(m, target, t, cands)
