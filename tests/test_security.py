@@ -214,9 +214,11 @@ def test_access_control_is_well_formed(small_sc, pki):
         ("observer", "put", f"{r}/alert/A2/x", False), ("console", "put", f"{r}/cmd/A2", True),
         ("console", "declare_subscriber", f"{r}/clock", False), ("mallory", "declare_subscriber", f"{r}/**", False),
         ("ea.C", "put", f"{r}/health/C", True), ("ea.C", "put", f"{r}/health/A2", False),
-        # the TAK gateway: PLI only to the replay's ingest key, never a position, order or command
+        # the TAK gateway: PLI only to the replay's ingest key, never a position or an order; of the
+        # commands only acknowledgements (an ATAK user's, as its mapped unit: the EA checks that unit)
         ("tak", "put", f"{r}/ingest/tak", True), ("tak", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2-1", False),
-        ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack/A2", False),
+        ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack/A2", True),
+        ("tak", "put", f"{r}/cmd/A2/silence/A2", False), ("tak", "put", f"{r}/dir/A2/order", False),
         ("tak", "put", f"{r}/alert/A2/x", False), ("tak", "declare_subscriber", f"{r}/clock", True),
         ("ea.A2", "put", f"{r}/ingest/tak", False),
         ("tak", "declare_subscriber", f"{r}/cmdlog/A2", True), ("tak", "put", f"{r}/cmdlog/A2", False), ("replay", "declare_subscriber", f"{r}/ingest/**", True),
@@ -235,7 +237,8 @@ def test_a_console_sends_only_as_its_own_unit():
     for cn, key, ok in [("console.A", f"{r}/cmd/R/ack/A", True), ("console.A", f"{r}/cmd/A2/set/A", True),
                         ("console.A", f"{r}/cmd/R/ack/BN", False), ("console.A", f"{r}/cmd/A2/ack", False),
                         ("console.BN", f"{r}/cmd/R/ack/BN", True), ("console.R", f"{r}/cmd/R/ack/A", False),
-                        ("ea.A", f"{r}/cmd/A2/ack/A", False), ("tak", f"{r}/cmd/A2/ack/A", False)]:
+                        ("ea.A", f"{r}/cmd/A2/ack/A", False), ("tak", f"{r}/cmd/A2/ack/A", True),
+                        ("tak", f"{r}/cmd/A2/set/A", False)]:   # an ATAK user acks as its mapped unit
         assert allowed(acl, cn, "ingress", "put", key) is ok, (cn, key)
 
 

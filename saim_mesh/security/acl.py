@@ -165,7 +165,9 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     # the TAK gateway: reads what a console reads, but no commands; its PLI go to the
     # replay's ingest key, never straight to the EAs
     subject("tak", [out, read_public, read_seen, read_cmdlog, query_store,
-                    rule("tak_put", ["put"], [ks.ingest("tak")]),
+                    # ... and acknowledgements from ATAK users, sent as their mapped unit's console
+                    # (each EA checks that unit commands it, as for a console: issue 33.6)
+                    rule("tak_put", ["put"], [ks.ingest("tak"), ks.cmd("*", "ack", "*")]),
                     # on the live mesh its PLI are its own source's stream
                     rule("tak_src", ["put", "declare_queryable", "reply", "liveliness_token"],
                          [ks.src("tak"), f"{r}/src/tak/@adv/**", ks.srcj("tak")])])

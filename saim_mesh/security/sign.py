@@ -149,6 +149,8 @@ def rules_for(identities: Iterable[str]) -> dict[str, list[str]]:
             out[name] = [f"{f}/**" for f in AUTHORITY_FAMILIES]
         elif name == "console":
             out[name] = [f"{COMMAND_FAMILY}/**"]
+        elif name == "tak":   # an ATAK user's acknowledgement, as the console of the unit its uid maps to
+            out[name] = [f"{COMMAND_FAMILY}/*/ack/*"]
         elif name.startswith("console.") and len(name) > 8:   # ... and U's directives (orders, confirmations)
             out[name] = [f"{COMMAND_FAMILY}/*/*/{name[8:]}", f"{DIRECTIVE_FAMILY}/{name[8:]}/*"]
         elif name.startswith("ea.") and len(name) > 3:   # its escalations cross routers to its superior
