@@ -278,8 +278,8 @@ def test_a_frame_the_full_order_refuses_is_offered_again_never_dropped(sc):
     peer.receive(frame("cp.a", 1, reps[1].t, reps[0:2]), "")
     peer.receive(frame("cp.a", 2, reps[3].t, reps[2:4]), "")   # 4 facts would wait: refused as full
     peer.receive(frame("cp.a", 3, reps[5].t, reps[4:6]), "")   # queues behind it
-    assert [f.seq for _, _, f in peer.retry["cp.a"]] == [2, 3] and peer.ea.n_in == 0
+    assert [f.seq for _, _, f in peer.hold.waiting["cp.a"]] == [2, 3] and peer.ea.n_in == 0
     peer.receive(frame("cp.b", 1, 1e5, []), "")                # cp.b's promise releases cp.a's first facts
     peer._retry()
     peer._retry()
-    assert not peer.retry["cp.a"] and peer.ea.n_in == 6 and peer.frames == 4
+    assert not peer.hold.waiting_for("cp.a") and peer.ea.n_in == 6 and peer.frames == 4

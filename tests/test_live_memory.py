@@ -52,7 +52,7 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
     peak = 0
     for _, f in a:                    # src.a runs far ahead: src.b has promised nothing yet
         p.receive(f, "")
-        peak = max(peak, p.stored)
+        peak = max(peak, p.hold.bytes)
     assert p.dropped > 0 and p.behind.get("src.a")
     assert peak <= p.max_held // 2 + max(len(f) for _, f in a)
     assert p.order.buffered() <= p.order.max_buffered
@@ -61,7 +61,7 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
         p._retry()
         p._resume()
     for _ in range(50):
-        if not p.behind.get("src.a") and not p.retry.get("src.a"):
+        if not p.behind.get("src.a") and not p.hold.waiting_for("src.a"):
             break
         p._retry()
         p._resume()

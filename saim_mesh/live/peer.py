@@ -43,6 +43,7 @@ from ..security.sign import signer_for
 from . import frames as F
 from .authority import DirectiveIntake
 from .depend import depends
+from .held import Held
 from .journal import InputJournal
 from .order import EventTimeOrder
 from .srcjournal import ask
@@ -115,11 +116,8 @@ class LivePeer:
         self.due_lat: list[float] = []        # ... and from the alert's own event time
         self.gaps = 0                         # frames that never came (beyond recovery)
         self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
-        self.held: dict[str, dict[int, tuple]] = {}   # source -> seq -> a frame that came early
-        self.gap_since: dict[str, float] = {}
+        self.hold = Held(HELD_FRAMES)        # frames outside the order: early, or waiting for room
         self.promised: dict[str, float] = {}          # source -> the furthest watermark its frames gave
-        self.retry: dict[str, list] = {}              # source -> frames the full order could not take yet
-        self.stored = 0                       # bytes of the frames held or waiting for room
         self.behind: dict[str, bool] = {}     # sources whose frames are dropped until fetched again
         self.dropped = 0                      # ... how many (all fetched again from the journal, or gaps)
         self.frames = 0
@@ -198,12 +196,11 @@ class LivePeer:
             self._catch_up(f.source, st[0], st[1], W.SEQ_LIMIT, take=True)
         if st is None or f.epoch > st[0]:   # first heard, or the source restarted: its seq starts at 1
             st = self.seq_of[f.source] = [f.epoch, 1]
-            self.held[f.source] = {}
+            self.hold.reset_early(f.source)
         if f.epoch < st[0] or f.seq < st[1]:
             return   # an old epoch's frame, or one taken already
-        held = self.held[f.source]
-        if self.behind.get(f.source) or self.stored + len(payload) > self.max_held // 2 and (
-                f.seq > st[1] or self.retry.get(f.source)):
+        if self.behind.get(f.source) or self.hold.bytes + len(payload) > self.max_held // 2 and (
+                f.seq > st[1] or self.hold.waiting_for(f.source)):
             if not self.behind.get(f.source):
                 self.log(f"source {f.source}: over {self.max_held >> 21} MB held: its frames from {st[1]} "
                          f"are fetched again from its journal when there is room", flush=True)
@@ -212,12 +209,9 @@ class LivePeer:
             self.dropped += 1
             return
         if f.seq > st[1]:
-            if not held:
+            if not self.hold.early_of(f.source):
                 self.log(f"source {f.source}: frame {f.seq} came before {st[1]}: waiting for it", flush=True)
-            if len(held) < HELD_FRAMES:
-                held[f.seq] = (payload, key, f)
-                self.stored += len(payload)
-                self.gap_since.setdefault(f.source, time.monotonic())
+            self.hold.hold_early(f.source, f.seq, (payload, key, f), time.monotonic())
             return
         self.take(payload, key, f=f)
         st[1] = f.seq + 1
@@ -226,21 +220,18 @@ class LivePeer:
     def _drain_held(self, source: str, force: bool = False) -> None:
         """Held frames now in sequence (or, `force`d after the wait, from the lowest held on:
         the missing ones are gone, counted as a gap)."""
-        st, held = self.seq_of[source], self.held[source]
-        if force and held and st[1] not in held:   # beyond recovery: the source's journal, if it keeps one
-            self._catch_up(source, st[0], st[1], min(held) - 1)
-        if force and held and st[1] not in held:
-            low = min(held)
+        st, early = self.seq_of[source], self.hold.early_of(source)
+        if force and early and st[1] not in early:   # beyond recovery: the source's journal, if it keeps one
+            self._catch_up(source, st[0], st[1], min(early) - 1)
+        if force and early and st[1] not in early:
+            low = min(early)
             self.gaps += low - st[1]
             self.log(f"source {source}: frames {st[1]}..{low - 1} never came: going on without them", flush=True)
             st[1] = low
-        while st[1] in held:
-            payload, key, f = held.pop(st[1])
-            self.stored -= len(payload)
+        while (item := self.hold.pop_early(source, st[1])) is not None:
+            payload, key, f = item
             self.take(payload, key, f=f)
             st[1] += 1
-        if not held:
-            self.gap_since.pop(source, None)
 
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
@@ -250,14 +241,11 @@ class LivePeer:
         sequence, while there is room (what no journal holds is a gap, said and counted)."""
         for src in [s for s, b in self.behind.items() if b]:
             st = self.seq_of[src]
-            while (self.stored < self.max_held // 4 and not self.retry.get(src)
+            while (self.hold.bytes < self.max_held // 4 and not self.hold.waiting_for(src)
                    and self.order.buffered() < self.order.max_buffered // 2):
-                got = ask(self.session, self.ks.srcj(src), st[0], st[1], st[1] + 499) if self.session else []
-                key = self.ks.src(src)
                 n = 0
-                for b in got:
-                    f = self._frame(b, key)
-                    if f is None or f.epoch != st[0] or f.seq != st[1]:
+                for b, key, f in self._journal_frames(src, st[0], st[1], st[1] + 499):
+                    if f.seq != st[1]:
                         continue
                     n += 1
                     self.fetched += 1
@@ -273,22 +261,27 @@ class LivePeer:
     def _catch_up(self, source: str, epoch: int, lo: int, hi: int, take: bool = False) -> None:
         """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>): held
         for `_drain_held`, or (`take`: an epoch that ended with a restart) taken now."""
-        if self.session is None or lo > hi:
-            return
-        key = self.ks.src(source)
         got = 0
-        for b in ask(self.session, self.ks.srcj(source), epoch, lo, hi):
-            f = self._frame(b, key)
-            if f is None or f.source != source or f.epoch != epoch or f.seq < lo:
-                continue
+        for b, key, f in self._journal_frames(source, epoch, lo, hi):
             got += 1
             if take:
                 self.take(b, key, f=f)
             else:
-                self.held[source].setdefault(f.seq, (b, key, f))
+                self.hold.hold_early(source, f.seq, (b, key, f), time.monotonic())
         if got:
             self.fetched += got
             self.log(f"source {source}: {got} frames of epoch {epoch} from its journal", flush=True)
+
+    def _journal_frames(self, source: str, epoch: int, lo: int, hi: int):
+        """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>), each
+        checked as a live one; nothing without a session or a journal."""
+        if self.session is None or lo > hi:
+            return
+        key = self.ks.src(source)
+        for b in ask(self.session, self.ks.srcj(source), epoch, lo, hi):
+            f = self._frame(b, key)
+            if f is not None and f.source == source and f.epoch == epoch and f.seq >= lo:
+                yield b, key, f
 
     def _frame(self, payload: bytes, key: str):
         try:
@@ -303,17 +296,17 @@ class LivePeer:
             return None   # a source this EA does not depend on
         return f
 
-    def take(self, payload: bytes, key: str, journal: bool = True, f=None) -> bool:
+    def take(self, payload: bytes, key: str, journal: bool = True, f=None, retrying: bool = False) -> bool:
         """One frame, in its source's sequence: checked, ordered, journalled; then everything
         the watermarks allow is applied. False when the order could not take it yet (kept
-        for `_retry`, and the source's later frames queue behind it)."""
+        waiting for `_retry`, and the source's later frames queue behind it; `retrying`:
+        it is the head of that queue, offered again)."""
         if f is None:
             f = self._frame(payload, key)
             if f is None:
                 return True
-        if self.retry.get(f.source) and journal:
-            self.retry[f.source].append((payload, key, f))
-            self.stored += len(payload)
+        if not retrying and journal and self.hold.waiting_for(f.source):
+            self.hold.wait(f.source, (payload, key, f))
             return False
         if f.source in self.order.lost and self.rebuilding is None:   # back: rebuild as if never lost
             if journal and self.journal is not None:
@@ -335,8 +328,8 @@ class LivePeer:
                     self.reports.setdefault(f.source, set()).add(u)
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
-            self.retry.setdefault(f.source, []).append((payload, key, f))
-            self.stored += len(payload)
+            if not retrying:
+                self.hold.wait(f.source, (payload, key, f))
             return False
         if why is not None:
             return True
@@ -372,8 +365,7 @@ class LivePeer:
         self.ea.start(0.0)
         self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
         self.dirs.reset()
-        self.retry = {}
-        self.stored = sum(len(x[0]) for q in self.held.values() for x in q.values())
+        waiting = self.hold.take_waiting()   # never journalled: offered again after the journal's frames
         returned = {source} | {r[1] for r in records if r[0] == "back"}
         try:
             for rec in records:
@@ -385,6 +377,9 @@ class LivePeer:
                     self.lose(rec[1], rec[3], journal=False)
         finally:
             self.rebuilding = None
+            for src, q in waiting.items():
+                for item in q:
+                    self.hold.wait(src, item)
 
     def journalled_directive(self, rec: list) -> None:
         """A directive as the input journal holds it (checked when it came): held again."""
@@ -403,19 +398,12 @@ class LivePeer:
 
     def _retry(self) -> None:
         """Offer the frames the order refused as full again, each source's in its order."""
-        for src in [s for s, q in self.retry.items() if q]:
-            q = self.retry[src]
-            while q:
-                payload, key, f = q[0]
-                self.retry[src] = []          # take() must not queue it behind itself
-                ok = self.take(payload, key, f=f)
-                if not ok:                    # still full: put it back at the head, keep the rest
-                    self.retry[src] = [q[0], *q[1:]]
-                    self.stored -= len(payload)   # counted again by take()
-                    break
-                q.pop(0)
-                self.stored -= len(payload)
-                self.retry[src] = q
+        for src in self.hold.sources_waiting():
+            while (item := self.hold.head(src)) is not None:
+                payload, key, f = item
+                if not self.take(payload, key, f=f, retrying=True):
+                    break                     # still full: it stays at the head
+                self.hold.done_head(src)
 
     def lose(self, source: str, why: str, journal: bool = True) -> None:
         """Declare a depended source lost: monitoring goes on without it (a logged decision)."""
@@ -610,11 +598,11 @@ class LivePeer:
                     if key is not None and now < next_check:
                         continue   # while frames flow, the checks below run every CHECK_S
                     next_check = now + CHECK_S
-                    if self.retry:
+                    if self.hold.waiting:
                         self._retry()
                     if self.behind:
                         self._resume()
-                    for src, since in list(self.gap_since.items()):
+                    for src, since in list(self.hold.gap_since.items()):
                         if now - since > GAP_WAIT_S:
                             self._drain_held(src, force=True)
                     for src in self.sources:   # silence: a decision, journalled
