@@ -6,8 +6,12 @@ Measured in one run (written to bench/results/uv.json):
 - messages/s of one robot's EA and of the operator's (TEAM) EA over a synthetic team of
   20 robots patrolling at 2 Hz, in process; baselines from the same run: the bare loop and
   msgpack decoding of the same stream;
-- detection delay in scenario time on scenarios/uv-team: first matching alert minus the
-  ground truth's onset, per incident (p50, p99, max);
+- the robot team in closed loop over the mesh (`closed_loop`, issue 33.5): one simulator
+  process per robot (`robot_processes`) obeying the task messages of its own EA (one
+  process per EA), `evaluate` on the run it records, and whether its reports and alerts
+  equal the closed loop in process;
+- detection delay in scenario time on that run (the same as scenarios/uv-team): first
+  matching alert minus the ground truth's onset, per incident (p50, p99, max);
 - the team of 20 on the mesh at real time (speed 1): 21 Zenoh peers (every robot and the
   operator) and the replay; each peer's wall latency from a clock tick to the alerts it
   raised in that tick (p50, p99).
@@ -110,11 +114,11 @@ def pct(xs: list[float]) -> dict:
             "max": round(float(a.max()), 3)}
 
 
-def detection_delays() -> dict:
+def detection_delays(folder: Path = ROOT / "scenarios" / "uv-team") -> dict:
     """Scenario seconds from each true incident's onset to the first alert matching it."""
     from ..evaluate import _matches
     from ..runner import run
-    sc = S.load(ROOT / "scenarios" / "uv-team")
+    sc = S.load(folder)
     truth = sc.truth()
     alerts = [a for ea in run(sc, truth["owners"]) for a in ea.alerts]
     delays, by_type = [], {}
@@ -126,6 +130,37 @@ def detection_delays() -> dict:
             by_type.setdefault(inc["type"], []).append(d)
     return {"incidents": len(truth["incidents"]), "detected": len(delays), "delay_s": pct(delays),
             "delay_s_by_type": {k: pct(v) for k, v in sorted(by_type.items())}}
+
+
+def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
+    """The robot team with one simulator process per robot obeying its EA over the mesh
+    (`saim_mesh.robots`): processes, wall time, `evaluate` on the run it records, whether
+    the mesh's reports and alerts equal the closed loop in process; and the detection
+    delays on that run."""
+    from ea_agent.domains.uv import generator as G
+
+    from ..evaluate import evaluate
+    from ..robots.team import run_team
+    out = Path(tempfile.mkdtemp(prefix="uvloop-"))
+    res = run_team(out, timeout=timeout, echo=lambda *a, **k: None)
+    loop, _ = G.simulate(out)
+    inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts] for ea in loop.eas}
+    ev = evaluate(S.load(out))
+    shipped = ROOT / "scenarios" / "uv-team" / "events.jsonl.gz"
+    return {"robot_processes": res["robot_processes"], "ea_processes": res["ea_processes"],
+            "wall_s": res["wall_s"], "scenario_s": res["scenario_s"],
+            "x_real_time": round(res["scenario_s"] / res["wall_s"], 1),
+            "tasks_published": sum(x["published"] for x in res["eas"].values()),
+            "tasks_carried_out": sum(x["tasks_taken"] for x in res["robots"].values()),
+            "tasks_refused": sum(x["refused"] for x in res["robots"].values()),
+            "pursuits": sum(x["commits"] for x in res["robots"].values()),
+            "alerts": sum(len(v) for v in res["alerts"].values()),
+            "alerts_equal_in_process": res["alerts"] == inproc,
+            "events_equal_in_process": (out / "events.jsonl.gz").read_bytes() == G.events_bytes(loop.events),
+            "events_equal_shipped_scenario": (out / "events.jsonl.gz").read_bytes() == shipped.read_bytes(),
+            "evaluate": {k: ev[k] for k in ("incidents", "recall", "alerts", "unwanted", "unwanted_share",
+                                              "unwanted_flash", "by_type")},
+            "alert_types": len(ev["by_type"])}, detection_delays(out)
 
 
 def mesh_latency(n: int, duration_s: float, timeout: float = 400.0) -> dict:
@@ -152,6 +187,8 @@ def main(argv=None) -> int:
     p.add_argument("--robots", type=int, default=20)
     p.add_argument("--mesh-s", type=float, default=120.0, help="scenario seconds of the real-time mesh run (0: skip)")
     p.add_argument("--out", default=str(ROOT / "bench" / "results" / "uv.json"))
+    p.add_argument("--no-closed-loop", dest="closed_loop", action="store_false",
+                   help="skip the robot team obeying its EAs over the mesh (one process per robot)")
     a = p.parse_args(argv)
     folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), a.robots)
     sc = S.load(folder)
@@ -176,9 +213,14 @@ def main(argv=None) -> int:
         "alerts": {"R01": robot_alerts, "TEAM": team_alerts},
         "baseline_loop_msgs_per_s": round(loop), "baseline_msgpack_decode_per_s": round(decode),
         "robot_ea_share_of_decode": round(robot_rate / decode, 3),
-        "detection_uv_team": detection_delays(),
         "python": platform.python_version(), "machine": platform.machine(),
     }
+    if a.closed_loop:   # the shipped scenario is this run (made in process); delays from the mesh's record
+        res["closed_loop"], res["detection_uv_team"] = closed_loop()
+        res["robot_processes"] = res["closed_loop"]["robot_processes"]
+        print(json.dumps(res["closed_loop"]), flush=True)
+    else:
+        res["detection_uv_team"] = detection_delays()
     print(json.dumps({k: res[k] for k in ("robot_ea_msgs_per_s", "robot_ea_x_paper_rate", "team_ea_msgs_per_s",
                                           "baseline_msgpack_decode_per_s")}), flush=True)
     if a.mesh_s > 0:

@@ -141,16 +141,23 @@ class Policies:
         dom = self.dom
         if dom.plan is None:
             return
-        fresh = t - dom.ea.epoch_s
         own = dom.watchman.own
+        if not own and not any(m.TYPE == "pursue" for m, _ in dom.target_missions.values()):
+            return   # no sighting yet and no pursuit: nothing to decide (the hot path of a quiet team)
+        fresh = t - dom.ea.epoch_s
         targets = sorted({k[1] for k in own})
-        for robot in dom.mine_sorted:
-            m = self.pursuing(robot)
+        active: dict[str, list] = {}   # one pass over the plan, not one per robot
+        for spec in dom.plan.active():
+            if spec.unit in dom.mine:
+                active.setdefault(spec.unit, []).append(dom.missions[spec.id])
+        for robot in sorted(active):
+            ms = active[robot]
+            m = next((x for x in ms if x.TYPE == "pursue"), None)
             if m is not None:
                 self._pursuit(m, t, fresh, cands)
                 continue
-            patrol = self._patrol(robot)
-            if patrol is None:
+            patrol = next((x for x in ms if x.TYPE == "patrol"), None)
+            if patrol is None or not targets:
                 continue
             sector = patrol.params.get("sector") or patrol.params.get("area")
             if sector not in dom.world:

@@ -61,7 +61,7 @@ def at_goal(dom: "UvDomain", t: float, cands: list) -> None:
 
     A robot's controller decides it arrived on its true position and reports
     `success` at once, usually just before the state that shows it inside the radius
-    (docs/uv-domain.md; sim.py `_policy`). So a goto whose success was heard this epoch
+    (docs/uv-domain.md; sim.py `RobotSim._recipe`). So a goto whose success was heard this epoch
     is judged on the latest state (allowing twice the reported GPS error), before the
     report ends it (`UvDomain.report_end`)."""
     dirty = dom.watchman.dirty
