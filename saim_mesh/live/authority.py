@@ -22,6 +22,7 @@ class DirectiveIntake:
         self.root, self.gate = root, gate
         self.pending: list[tuple[tuple, D.Taken]] = []
         self.seen: set[bytes] = set()
+        self.reqs: set[tuple[str, str]] = set()   # (by, req) taken: the same directive again is a repeat
         self.kept: list[tuple[str, bytes]] = []   # (key, payload as received): served to late joiners
 
     def check(self, key: str, payload: bytes) -> tuple[D.Taken, bytes] | None:
@@ -55,6 +56,9 @@ class DirectiveIntake:
             self.gate.rejects.add(e, key)
             return None
         self.seen.add(digest)
+        if (by, d.req) in self.reqs:
+            return None   # taken already (before a restart, from the journal)
+        self.reqs.add((by, d.req))
         self.kept.append((key, payload))
         return D.Taken(by, d), body
 

@@ -130,6 +130,9 @@ class LivePeer:
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
         self.rebuilds = 0
         self.history: list | None = None      # journal replay: the records taken so far (else the file)
+        self.restoring = False                # a restarted peer replaying its own input journal
+        self.catching_up = False              # ... then taking what its sources sent while it was down
+        self.restored = 0                     # input records the restart replayed
         self.t0 = time.monotonic()
         self.cpu0 = (time.thread_time(), time.process_time())
         self.timeline = Timeline(self.ea.epoch_s)   # for benchmarks: wall times of epochs and alerts
@@ -140,6 +143,10 @@ class LivePeer:
         quiet = "inhibited_by" in a.details
         if key in self.emitted or quiet and key in self.muted:
             return   # raised already (by the EA before a rebuild): never twice
+        if self.restoring and self.alog is not None and self.alog.already(a):
+            (self.muted if quiet else self.emitted).add(key)   # told before the restart: never twice
+            self.given.append(a)
+            return
         # an alert given inhibited (never shown) that a rebuilt EA raises uninhibited is shown now
         (self.muted if quiet else self.emitted).add(key)
         self.timeline.raised(a)
@@ -152,8 +159,8 @@ class LivePeer:
             self.alert_lat.append(now - math.ceil(a.t / ep - 1e-9) * ep)
             self.due_lat.append(now - a.t)
         due = self.late_from
-        if due is None and a.t <= self.caught_up_to and not a.details.get("wall_clock_driven"):
-            due = a.t   # a rebuilt EA raises what fell due while a source was lost: late
+        if due is None and (a.t <= self.caught_up_to or self.restoring) and not a.details.get("wall_clock_driven"):
+            due = a.t   # a rebuilt or restarted EA raises what fell due while a source was lost or it was down
         if due is not None:
             a = replace(a, details={**a.details, "late": True, "due_from": round(due, 3)})
             self.late += 1
@@ -164,6 +171,8 @@ class LivePeer:
             self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
 
     def _notice(self, n) -> None:
+        if self.restoring:
+            return   # re-notifications and escalations of the past are not sent again
         if self.nlog:
             self.nlog(n)
         if self.session is not None:   # signed in secure mode: an escalation crosses the router
@@ -191,6 +200,8 @@ class LivePeer:
         f = self._frame(payload, key)
         if f is None:
             return
+        if self.catching_up:   # what the EA raises up to the sources' edge when it came back is late
+            self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
         st = self.seq_of.get(f.source)
         if st is not None and f.epoch > st[0]:   # the source restarted: the rest of its last epoch first
             self._catch_up(f.source, st[0], st[1], W.SEQ_LIMIT, take=True)
@@ -236,7 +247,7 @@ class LivePeer:
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
 
-    def _resume(self) -> None:
+    def _refetch_behind(self) -> None:
         """Sources we fell behind on: their frames fetched again from their journals, in
         sequence, while there is room (what no journal holds is a gap, said and counted)."""
         for src in [s for s, b in self.behind.items() if b]:
@@ -381,10 +392,46 @@ class LivePeer:
                 for item in q:
                     self.hold.wait(src, item)
 
+    def restart(self) -> int:
+        """A restarted peer (its host or process died): its input journal is replayed
+        through the fresh EA first, so it stands where it stood; alerts its log holds were
+        told already and are not given again, one the kill cut off before its log line is
+        given now, marked late. Each source's sequence resumes after the last frame taken;
+        what the sources sent meanwhile comes from their caches and journals, and what it
+        raises up to their edge is marked late. Returns the records replayed."""
+        if self.journal is None or not self.journal.path.exists():
+            return 0
+        from .journal import records
+        recs = records(self.journal.path)
+        if not recs:
+            return 0
+        self.history, self.restoring = [], True
+        try:
+            for rec in recs:
+                if rec[0] == "frame":
+                    f = self._frame(rec[1], "")
+                    if f is not None:
+                        self.take(rec[1], "", journal=False, f=f)
+                        self.seq_of[f.source] = [f.epoch, f.seq + 1]
+                elif rec[0] == "lost":
+                    self.lose(rec[1], rec[3], journal=False)
+                elif rec[0] == "dir":
+                    self.journalled_directive(rec)
+                self.history.append(rec)
+        finally:
+            self.history, self.restoring = None, False
+        self.restored = len(recs)
+        self.catching_up = True
+        self.log(f"restart: {len(recs)} input records replayed, EA at {hms(max(self.ea.now, 0.0))}; "
+                 f"{len(self.given)} alerts stand", flush=True)
+        return len(recs)
+
     def journalled_directive(self, rec: list) -> None:
         """A directive as the input journal holds it (checked when it came): held again."""
         _, by, kind, body = rec
-        self._hold(D.Taken(by, D.decode(kind, body, 1 << 16)))
+        d = D.decode(kind, body, 1 << 17)
+        self.dirs.reqs.add((by, d.req))
+        self._hold(D.Taken(by, d))
 
     def _history(self) -> list:
         """The input records so far (the journal's, flushed as written, or those a journal
@@ -462,6 +509,9 @@ class LivePeer:
         if math.isfinite(r) and r >= self.ea.epoch_end:   # an epoch can close (else facts keep batching)
             self.ea.advance(r)
         self.timeline.released(r)
+        if self.catching_up and r >= self.caught_up_to > -math.inf:
+            self.catching_up = False
+            self.log(f"restart: caught up to {hms(r)}", flush=True)
         if self.order.late:
             late, self.order.late[:] = list(self.order.late), []
             self.late_from = min(m.t for _, m in late)
@@ -554,6 +604,7 @@ class LivePeer:
         signal.signal(signal.SIGTERM, stop)
         end_wall = time.monotonic() + deadline_s if deadline_s else math.inf
         try:
+            self.restart()
             with zenoh.open(self.conf) as s:
                 self.session = s
                 put = self.q.put
@@ -601,7 +652,7 @@ class LivePeer:
                     if self.hold.waiting:
                         self._retry()
                     if self.behind:
-                        self._resume()
+                        self._refetch_behind()
                     for src, since in list(self.hold.gap_since.items()):
                         if now - since > GAP_WAIT_S:
                             self._drain_held(src, force=True)
@@ -643,7 +694,7 @@ class LivePeer:
         return summary
 
     def summary(self) -> dict:
-        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "frames": self.frames, "misses": self.misses, "fetched": self.fetched, "dropped": self.dropped,
+        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.misses, "fetched": self.fetched, "dropped": self.dropped,
                 "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
