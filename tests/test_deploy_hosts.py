@@ -3,7 +3,8 @@ small scenario gives the battalion's command post and its three companies' a hos
 each on its own loopback address (127.X.Y.1-4: Linux answers on all of 127/8), routers
 at each linked to the battalion's; `certs --deploy` makes certificates naming those
 addresses; one `saim-mesh deploy FILE --host H` process per host, secure (mTLS + access
-control). Every EA's alerts equal the in-process run's. Waits on printed lines; every
+control), the battalion's host started last, once the companies' sources play. Every EA's
+alerts equal the in-process run's. Waits on printed lines; every
 child is reaped (and any left named) even when the test fails."""
 from __future__ import annotations
 
@@ -75,12 +76,13 @@ def test_four_hosts_on_loopback_each_under_its_own_supervisor_give_the_in_proces
     procs: dict[str, Proc] = {}
     left: dict[str, list[str]] = {}
     try:
-        for h in hosts:
+        for h in ["A", "B", "C", "BN"]:   # the companies first: their routers wait for the battalion's
             procs[h] = Proc(f"host-{h}", [*py(), "deploy", str(f), "--host", h, "--out-dir", str(tmp_path / h),
                                           "--quiet"], env=clean_env(), log_dir=tmp_path)
-        for h, spec in hosts.items():   # each router listens on its host's own address
-            line = procs[h].wait_for(f"host {h}: routers ", 120)
-            assert line == f"host {h}: routers r-{h} on tls/{spec['addresses'][0]}:7447", line
+            line = procs[h].wait_for(f"host {h}: routers ", 120)   # each listens on its host's own address
+            assert line == f"host {h}: routers r-{h} on tls/{hosts[h]['addresses'][0]}:7447", line
+            if h != "BN":   # and plays its source before the battalion's host is up: caught up later
+                procs[h].wait_for(f"host {h}: sources cp.{h} started", 120)
         for h, spec in hosts.items():   # the hosts keep running after (others may need their routers)
             n = len(spec["eas"])
             procs[h].wait_for(f"host {h}: {n} of {n} EA peers done", 600)
