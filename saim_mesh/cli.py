@@ -408,9 +408,9 @@ def cmd_certs(a) -> int:
         out = Path(a.out) if a.out else dep.pki
         made = certs.make(dep, sc, out)
         sans = certs.sans_of(dep)
-        print(f"{len(made)} identities in {out} (CA: {out / 'ca.pem'}); with the addresses of their host: "
-              + "; ".join(f"{h.name}: {' '.join((*h.addresses, *h.names)) or '-'}" for h in dep.hosts.values())
-              + f" ({sum(1 for n in sans if sans[n])} identities)")
+        print(f"{len(made)} identities in {out} (CA: {out / 'ca.pem'}); {sum(1 for n in sans if sans[n])} of them "
+              "also name their host's addresses: "
+              + "; ".join(f"{h.name} {' '.join((*h.addresses, *h.names)) or '-'}" for h in dep.hosts.values()))
         return 0
     sc = S.load(a.scenario, events=False)
     out = a.out or "out/pki"

@@ -224,3 +224,26 @@ def test_check_for_a_host_says_when_a_routers_port_is_taken(tmp_path, capsys):
         rc, lines = check(tmp_path, text, "--host", "A", capsys=capsys)
     assert rc == 2 and lines == [f"{tmp_path / 'deploy.toml'}: router 'r-A': port {port} on 127.0.0.1 is in use "
                                  "(is this host's mesh running already?)"], lines
+
+
+def test_a_host_without_a_router_attaches_to_its_command_posts_and_an_interface_gives_addresses(tmp_path, capsys):
+    text = BASE.replace('"A1", "A2", "A3", "R"', '"A1", "A3", "R"') + '''
+[[host]]
+name = "vehicle"
+interface = "lo"
+eas = ["A2"]
+'''
+    rc, lines = check(tmp_path, text, "--host", "vehicle", capsys=capsys)
+    assert rc == 0, lines
+    dep, sc = F.load(tmp_path / "deploy.toml")
+    assert dep.attach("vehicle", "A2", sc.taskorg) == "r-A"   # its company's router, on host A
+    pl = plan(dep, "vehicle")
+    assert pl.listen == {} and pl.endpoints["r-A"] == "tcp/198.18.0.2:7447"
+    moved = text.replace('host = "A"', 'host = "vehicle"')   # r-A on the vehicle, which has no address
+    rc, lines = check(tmp_path, moved, capsys=capsys)
+    assert rc == 2 and lines == [f"{tmp_path / 'deploy.toml'}: host 'A': A attaches to r-A on host vehicle, which "
+                                 "has no address"], lines
+    rc, lines = check(tmp_path, moved.replace('links = ["r-BN"]', 'links = []').replace(
+        'cp = "BN"\n', 'cp = "BN"\nlinks = ["r-A"]\n'), capsys=capsys)
+    assert rc == 2 and any("router 'r-BN': links to r-A on host vehicle, which has no address" in x for x in lines), \
+        lines
