@@ -129,6 +129,8 @@ BAD = [   # (what the file says, the one line expected)
     (BASE.replace('eas = ["BN", "M"]', 'eas = ["BN", "M"]\nattach = "r-Z"'), "attach: 'r-Z' is not a router"),
     (BASE.replace(f'"{SMALL}"', '"/nonexistent/scenario"'), "scenario /nonexistent/scenario: cannot load it"),
     ("secure = true\n", "scenario: missing"),
+    (BASE.replace('secure = false', 'secure = false\nlive = true'), "live = true needs start"),
+    (BASE.replace('secure = false', 'secure = false\nstart = "yesterday"'), "start: 'yesterday' is not an ISO 8601"),
 ]
 
 

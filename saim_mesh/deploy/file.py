@@ -388,6 +388,8 @@ def check(dep: Deployment, sc, host: str | None = None, where: str = "deployment
             e(f"{w}: attach: {h.attach!r} is not a router of this file ({', '.join(sorted(dep.routers))})")
         if dep.secure and not (h.addresses or h.names):
             e(f"{w}: secure mode needs its addresses (or DNS names) in the file: its certificates carry them")
+    if dep.live and dep.start is None and len(dep.hosts) > 1:
+        e("live = true needs start (event time 0 must be the same instant on every host)")
     taks = [h.name for h in dep.hosts.values() if h.tak is not None]
     if len(taks) > 1:
         e(f"a TAK gateway on {len(taks)} hosts ({', '.join(taks)}): the identity 'tak' is one gateway")
