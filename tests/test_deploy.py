@@ -249,3 +249,11 @@ eas = ["A2"]
         'cp = "BN"\n', 'cp = "BN"\nlinks = ["r-A"]\n'), capsys=capsys)
     assert rc == 2 and any("router 'r-BN': links to r-A on host vehicle, which has no address" in x for x in lines), \
         lines
+
+
+def test_starting_a_host_from_a_bad_file_says_each_problem_and_starts_nothing(tmp_path, capsys):
+    text = BASE.replace('"A1", "A2"', '"A1", "Z9"').replace('links = ["r-BN"]', 'links = ["r-XX"]')
+    rc = cli.main(["deploy", str(write(tmp_path, text)), "--host", "A", "--out-dir", str(tmp_path / "out")])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 3 and not (tmp_path / "out").exists(), err   # the two, and A's address
+    assert "Traceback" not in " ".join(err)
