@@ -65,6 +65,15 @@ def test_every_task_kind_is_decided_and_carried_out_at_its_time(loop):
     assert acc.frm == h.robot and acc.target == h.target and acc.at == h.at + T.LAG_S
 
 
+def test_every_task_is_due_after_the_promise_its_ea_gave_before_it(loop):
+    """An EA advanced to t has promised no task due at or before t + LAG_S - DT (its last
+    watermark): each task it publishes then is due exactly at t + LAG_S, the robot's next
+    step, and only robots' own EAs publish."""
+    assert loop.drained
+    for t, owner, x in loop.drained:
+        assert x.robot == owner and x.at == t + T.LAG_S, (t, owner, x)
+
+
 def test_a_robot_whose_ea_commands_do_not_reach_it_does_not_pursue(folder, loop):
     """UGV1's EA decides to pursue EV1 (as in the full loop), but its tasks are dropped:
     UGV1 keeps patrolling and never pursues; in the full loop it does."""

@@ -32,6 +32,7 @@ class ClosedLoop:
         self.events: list[dict] = []
         self.on_step = on_step
         self.tasks: list = []         # every task published, in order
+        self.drained: list[tuple[float, str, object]] = []   # (EA's time when published, owner, task)
 
     def step(self, i: int, t: float) -> list[dict]:
         evs: list[dict] = []
@@ -46,6 +47,7 @@ class ClosedLoop:
             ea.advance(t)
             got = ea.domain.policies.drain()
             self.tasks += got
+            self.drained += [(t, ea.owner, x) for x in got]
             if ea.owner in self.pending and ea.owner not in self.unheard:
                 self.pending[ea.owner] += got
         return evs
