@@ -80,3 +80,40 @@ def test_a_peer_killed_and_restarted_raises_each_alert_once_and_what_fell_due_la
     told_after = [a for a in logged[before:] if a["category"] != "system-problem"]
     assert told_after and late, "what fell due while the peer was down is raised after the restart, marked late"
     assert summary["fetched"] > 0 or summary["frames"] > 0
+
+
+def test_a_superior_says_when_a_subordinates_ea_dies_and_comes_back_and_not_when_it_ends(tmp_path):
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    router = Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep, "--root", root],
+                  env=clean_env(), log_dir=tmp_path)
+    procs = [router]
+
+    def start(unit: str, n: int) -> Proc:
+        p = Proc(f"peer-{unit}-{n}", [*py(), "peer", "--scenario", SC, "--unit", unit, "--connect", ep, "--mode",
+                                      "client", "--root", root, "--sources", "cp.all", "--out",
+                                      str(tmp_path / f"{unit}.jsonl")], env=clean_env(), log_dir=tmp_path)
+        procs.append(p)
+        p.wait_for(f"ready {unit}", 60)
+        return p
+    try:
+        router.wait_for("router ready", 60)
+        a = start("A", 1)
+        a1 = start("A1", 1)
+        procs.append(Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "60", "--state",
+                                     str(tmp_path / "state"), "--linger", "120", "--connect", ep, "--mode", "client",
+                                     "--root", root], env=clean_env(), log_dir=tmp_path))
+        end = time.monotonic() + 120
+        while lines(tmp_path / "A1.jsonl") < 1 and time.monotonic() < end:
+            time.sleep(0.05)
+        os.kill(a1.p.pid, signal.SIGKILL)
+        a1.p.wait(10)
+        left = a.wait_for("system A1: ", 60)
+        start("A1", 2)
+        summary = json.loads(a.wait_for("summary ", 240).split(" ", 1)[1])
+    finally:
+        reap(procs)
+    assert "left the mesh without a goodbye" in left, left
+    events = Counter(x["details"].get("event") for x in load(tmp_path / "A.jsonl")
+                     if x["category"] == "system-problem" and x["subjects"] == ["A1"])
+    assert events == Counter({"peer-lost": 1, "peer-back": 1}), events   # A1's clean end: no alarm
+    assert summary["lost"] == {}

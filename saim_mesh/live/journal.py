@@ -6,7 +6,8 @@ detected by wall clock is not reproducible, a decision written down is).
 
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
 as written: ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body]
-(a directive: saim_mesh/directives.py) or ["back", source]. A half-written last
+(a directive: saim_mesh/directives.py), ["peer", unit, up] (another EA left without a goodbye, or
+came back) or ["back", source]. A half-written last
 record (a kill) is ignored on reading."""
 from __future__ import annotations
 
@@ -38,6 +39,10 @@ class InputJournal:
     def directive(self, by: str, kind: str, body: bytes) -> None:
         """A directive taken (its body out of its envelope: checked when it came)."""
         self._write(["dir", by, kind, body])
+
+    def peer(self, unit: str, up: bool) -> None:
+        """Another EA left the mesh without a goodbye, or came back (`LivePeer._alive`)."""
+        self._write(["peer", unit, up])
 
     def back(self, source: str) -> None:
         """A lost source was heard again here: the EA was rebuilt (`LivePeer.back`)."""
@@ -71,6 +76,8 @@ def replay(peer, path: str | Path) -> list:
             peer.lose(rec[1], rec[3], journal=False)
         elif rec[0] == "dir":
             peer.journalled_directive(rec)
+        elif rec[0] == "peer":
+            peer.peer_change(rec[1], rec[2])
         peer.history.append(rec)
     peer.ea.finish(peer.end_t())
     return peer.given

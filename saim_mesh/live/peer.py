@@ -130,6 +130,9 @@ class LivePeer:
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
         self.rebuilds = 0
         self.history: list | None = None      # journal replay: the records taken so far (else the file)
+        self.tokens: dict[str, set[str]] = {}   # another EA's unit -> its liveliness tokens now
+        self.left: set[str] = set()           # ... gone without a goodbye (said)
+        self.clean: set[str] = set()          # ... said goodbye
         self.restoring = False                # a restarted peer replaying its own input journal
         self.catching_up = False              # ... then taking what its sources sent while it was down
         self.restored = 0                     # input records the restart replayed
@@ -181,10 +184,51 @@ class LivePeer:
             self.session.put(key, payload if self.signer is None else self.signer.sign(key, payload),
                              congestion_control=BLOCK)
 
-    def _system(self, subject: str, text: str, **details) -> None:
+    def _system(self, subject: str, text: str, priority: str = "immediate", **details) -> None:
         self.log(f"system {subject}: {text}", flush=True)
         self.ea.emit(M.Alert(round(max(self.ea.now, 0.0), 3), self.unit, "unknown-position", "system-problem",
-                             "immediate", (subject,), text, {"source": subject, "wall_clock_driven": True, **details}))
+                             priority, (subject,), text, {"source": subject, "wall_clock_driven": True, **details}))
+
+    # -- the other EAs: who is on the mesh (liveliness tokens; a clean leave says bye) ---------
+    def _alive(self, key: str, up: bool) -> None:
+        """A liveliness token of another EA came or went. Its superior, subordinates and
+        subtree are watched: when the last token of one goes without a bye (its process or
+        host died, or the link to it), one system problem; when it is back, one more. Each
+        change is a decision written to the input journal, so a replay says the same."""
+        unit, zid = (self.ks.last(key, 2) + ["", ""])[:2]
+        to = self.ea.domain.taskorg
+        if unit == self.unit or unit not in to.units or unit not in self._watched(to):
+            return
+        toks = self.tokens.setdefault(unit, set())
+        was = bool(toks)
+        (toks.add if up else toks.discard)(zid)
+        if bool(toks) == was:
+            return
+        if not toks and unit in self.clean:
+            return   # it finished and said so
+        if up and unit not in self.left:
+            return   # first seen: nothing to say
+        if self.journal is not None:
+            self.journal.peer(unit, bool(toks))
+        self.peer_change(unit, bool(toks))
+
+    def _watched(self, to) -> set[str]:
+        return set(to.subtree(self.unit)) | set(to.ancestors(self.unit)[:1])
+
+    def peer_change(self, unit: str, up: bool) -> None:
+        name = f"EA of {self.ea.domain.taskorg.name(unit)}"
+        if up:
+            self.left.discard(unit)
+            self._system(unit, f"{name} is back on the mesh", "routine", event="peer-back")
+        else:
+            self.left.add(unit)
+            self._system(unit, f"{name} left the mesh without a goodbye (its process, host or link is down): "
+                               f"its picture and confirmations no longer reach us", event="peer-lost")
+
+    def _bye(self, key: str, payload: bytes) -> None:
+        msg = self.gate.control(W.Bye, payload, key)
+        if msg is not None and self.ks.last(key) == [msg.unit]:
+            self.clean.add(msg.unit)
 
     def _flood(self, sender: str, n: int, kinds: list[str]) -> None:
         """A sender's refused messages passed a threshold: one system problem each time
@@ -417,6 +461,8 @@ class LivePeer:
                     self.lose(rec[1], rec[3], journal=False)
                 elif rec[0] == "dir":
                     self.journalled_directive(rec)
+                elif rec[0] == "peer":
+                    self.peer_change(rec[1], rec[2])
                 self.history.append(rec)
         finally:
             self.history, self.restoring = None, False
@@ -619,6 +665,13 @@ class LivePeer:
                 dirs = s.declare_subscriber(f"{self.ks.root}/dir/*/*",
                                             lambda smp: put(("dir", (str(smp.key_expr), smp.payload.to_bytes()))))
                 dirj = s.declare_queryable(f"{self.ks.root}/dirj/{self.unit}", lambda q: put(("dirq", q)))
+                token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
+                alive = s.liveliness().declare_subscriber(
+                    self.ks.alive("*", "*"), lambda smp: put(("alive", (str(smp.key_expr),
+                                                                        smp.kind == zenoh.SampleKind.PUT))),
+                    history=True)
+                byes = s.declare_subscriber(self.ks.bye("*"),
+                                            lambda smp: put(("bye", (str(smp.key_expr), smp.payload.to_bytes()))))
                 # a late joiner: the directives taken so far, from the other EAs' journals
                 s.get(f"{self.ks.root}/dirj/*", lambda r: put(("dirj", r.ok.payload.to_bytes())) if r.ok else None,
                       consolidation=zenoh.ConsolidationMode.NONE, timeout=10.0)
@@ -643,6 +696,10 @@ class LivePeer:
                         self._serve_directives(payload)
                     elif key == "dirj":
                         self._joined(payload)
+                    elif key == "alive":
+                        self._alive(*payload)
+                    elif key == "bye":
+                        self._bye(*payload)
                     elif key is not None:
                         self.receive(payload, key)
                     now = time.monotonic()
@@ -679,9 +736,9 @@ class LivePeer:
                         self.command(*payload)
                     elif key == "dirq":
                         self._serve_directives(payload)
-                cmds.undeclare()
-                dirs.undeclare()
-                dirj.undeclare()
+                s.put(self.ks.bye(self.unit), W.encode(W.make(W.Bye, unit=self.unit)), congestion_control=BLOCK)
+                for x in (cmds, dirs, dirj, alive, byes, token):
+                    x.undeclare()
                 for x in (*misses, *subs):
                     x.undeclare()
                 self.session = None
