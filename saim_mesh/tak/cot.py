@@ -43,7 +43,8 @@ class CotError(ValueError):
 @dataclass(frozen=True, slots=True)
 class CoTEvent:
     """A parsed, checked event. `detail` holds each direct child of <detail> by tag (the
-    first of a tag): its attributes, plus its text under '#text' when it has any."""
+    first of a tag): its attributes, plus its text under '#text' when it has any; and the
+    first grandchild of each tag under 'parent/child' (GeoChat's `__chat/chatgrp`)."""
     uid: str
     type: str
     how: str
@@ -188,6 +189,8 @@ def _details(det: ET.Element | None) -> tuple[dict, tuple, str | None, str | Non
             if el.text and el.text.strip():
                 d["#text"] = el.text
             out[el.tag] = d
+            for sub_ in el:   # one level down (bounded by the event's size)
+                out.setdefault(f"{el.tag}/{sub_.tag}", dict(sub_.attrib))
     callsign = out.get("contact", {}).get("callsign")
     remarks = out.get("remarks", {}).get("#text")
     return out, tuple(links), callsign, remarks

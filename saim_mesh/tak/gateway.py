@@ -5,6 +5,9 @@ Out: subscribes to the clock, alerts, friendly positions, tracks and reorganizat
 checked against its key), keeps the picture (`picture.Picture`) and sends CoT through
 `transports.Network`. In: CoT PLI heard on the listen URLs becomes a LocationReport
 (`pli.PliIn`) published on `<root>/ingest/tak`; the replay sequences it into the mesh.
+Acknowledgements from ATAK users (GeoChat `ack BN/12`, a `y-a-w` reply to an alert's CoT)
+go to the alert owner's EA as `ack` commands for the user's mapped unit (`acks.AckIn`,
+`acks.AckSender`); the EA's answer goes back to the user in GeoChat.
 
 No liveliness token, for the console's reason: the replay's pacer would wait for it."""
 from __future__ import annotations
@@ -22,6 +25,7 @@ from ea_agent import domains
 from .. import messages as M
 from .. import wire as W
 from ..reader import MeshReader
+from .acks import AckIn, AckSender, chat_event
 from .picture import Options, Picture
 from .pli import PliIn, load_uids
 from .transports import Network, TlsOptions, check_url
@@ -101,6 +105,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "out as the live source `tak` (EAs take them with `--sources ... tak`)")
     g.add_argument("--live", action="store_true", help="with --sources: event time is the wall clock from --start")
     g.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
+    g.add_argument("--no-acks", action="store_true",
+                   help="take no acknowledgements from TAK users (GeoChat 'ack BN/12', a y-a-w reply to an "
+                        "alert's CoT): by default they go to the alert's EA as the user's mapped unit")
+    g.add_argument("--ack-timeout", type=_positive, default=10.0, metavar="S",
+                   help="wall seconds to wait for an EA's answer to an acknowledgement from TAK")
     g.add_argument("--linger", type=float, default=10.0, metavar="S",
                    help="wall seconds to stay up after the scenario's end (PLI in, last events out)")
     t = p.add_argument_group("TLS to a TAK server (tls:// URLs)")
@@ -315,10 +324,48 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
         return 2
     if opts.listen_cot and uids is None:
         log("tak: WARNING: --listen-cot without --uids or --uid-rule: every PLI is an unknown uid", flush=True)
+    try:
+        from ..security.sign import signer_for
+        signer = signer_for(conf)   # secure mode: acknowledgements signed as `tak`
+    except Exception as e:
+        print(f"saim-mesh tak: {e}", file=sys.stderr, flush=True)
+        return 2
     feed_box: list[TakFeed] = []
+    gw_uid, gw_callsign = picture.uid("gateway", "cot"), f"SAIM {sc.name}"
+    ack_timeout = float(getattr(opts, "ack_timeout", 10.0))
+
+    def reply(conv, text: str) -> None:
+        net.send(chat_event(gw_uid, gw_callsign, conv, text, *picture.centre))
+
+    def send_ack(ack):
+        from .. import commands
+        cmd = commands.make("ack", alert=ack.alert, by=f"tak:{ack.uid}")
+        feed = feed_box[0] if feed_box else None
+        if feed is None or feed.session is None:
+            return commands.result(cmd, False, 0.0, "no answer from the EA: the gateway is not on the mesh")
+        return commands.send(feed.session, feed.ks, ack.owner, cmd, ack.by, ack_timeout, signer)
+
+    ack_in = ack_out = None
+    if not getattr(opts, "no_acks", False):
+        ack_in = AckIn(uids or load_uids(None, None), picture.prefix, lambda: picture.taskorg,
+                       lambda u: picture.alert_uids.get(u), log=log)
+        ack_out = AckSender(send_ack, reply, log=log)
 
     def on_data(data: bytes, src: str) -> None:
-        rep = pli.take(data, picture.t)
+        ev = pli.parse(data)
+        if ev is None:
+            return
+        if ack_in is not None and ack_in.wants(ev):
+            if not feed_box:
+                return
+            with feed_box[0].lock:   # the task organization and the alerts sent, as the feed has them now
+                acks, replies = ack_in.take(ev)
+            for r in replies:
+                reply(r.to, r.text)
+            for a in acks:
+                ack_out.submit(a)
+            return
+        rep = pli.take_event(ev, picture.t)
         if rep is not None and feed_box:
             feed_box[0].publish(rep)
 
@@ -355,16 +402,27 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
     except KeyboardInterrupt:
         pass
     finally:
+        if ack_out is not None:   # acknowledgements under way get their answer before the mesh goes
+            ack_out.drain(ack_timeout + 2.0)
         feed.close()
+        if ack_out is not None:
+            ack_out.close()
         net.close(flush_s=10.0)
     sent = sum(s.n.sent for s in net.senders)
     dropped = sum(s.n.dropped + s.n.failed for s in net.senders)
     made = sum(picture.counts.values())
     by_kind = " ".join(f"{k}={v}" for k, v in sorted(picture.counts.items()))
     cot_rejects = pli.rejected + net.oversized
+    acks = ""
+    if ack_in is not None:
+        def counts(d: dict) -> str:
+            return f" ({', '.join(f'{k} {v}' for k, v in sorted(d.items()))})" if d else ""
+        refused = dict(ack_in.refused, **({"busy": ack_out.busy} if ack_out.busy else {}))
+        acks = (f" acks={ack_in.asked}{counts(ack_out.outcomes)}"
+                f" ack_refused={sum(refused.values())}{counts(refused)}")
     log(f"tak done t={picture.t:.0f} events={made} ({by_kind}) sent={sent} dropped={dropped} "
         f"alerts={feed.alerts} pli={pli.accepted} rejects={feed.gate.rejects.total} cot_rejects={cot_rejects}"
-        + (f" ({', '.join(f'{k} {v}' for k, v in sorted(pli.rejects.items()))})" if pli.rejects else ""),
+        + (f" ({', '.join(f'{k} {v}' for k, v in sorted(pli.rejects.items()))})" if pli.rejects else "") + acks,
         flush=True)
     return 0
 

@@ -70,6 +70,7 @@ class Picture:
         self._units: dict | None = None        # unit centroids, until the next position or reorganization
         self.emergencies: OrderedDict[str, list[tuple]] = OrderedDict()   # alert id -> its emergencies on TAK
         self.urgent: OrderedDict[str, object] = OrderedDict()   # alert id -> the urgent alert (re-notifications)
+        self.alert_uids: OrderedDict[str, str] = OrderedDict()  # CoT uid -> alert id (what TAK users acknowledge)
         self.overlay = {f["id"]: f for f in overlay_geojson(sc)["features"]}
         self.places = {}
         for fid, f in self.overlay.items():
@@ -230,6 +231,11 @@ class Picture:
         ident = (aid if isinstance(aid, str) and aid else f"{a.owner}/x{self._n_alert}").replace("/", "-")
         typ, fence = self.alert_type(a)
         lon, lat = self.where(a)
+        if isinstance(aid, str) and aid:
+            self.alert_uids[self.uid("alert", ident)] = aid
+            self.alert_uids.move_to_end(self.uid("alert", ident))
+            if len(self.alert_uids) > MAX_EMERGENCIES:
+                self.alert_uids.popitem(last=False)
         tm = self.when(a.t)
         subj = " ".join(a.subjects[:6]) + (" ..." if len(a.subjects) > 6 else "")
         callsign = f"{a.priority.upper()} {a.type} {subj}".strip()[:80]

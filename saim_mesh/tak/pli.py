@@ -24,9 +24,12 @@ RULES = ("uid", "callsign")
 
 @dataclass
 class UidMap:
-    """uid -> entity id, by table first, then by rule."""
+    """uid -> entity id, by table first, then by rule; and uid -> the unit an ATAK user
+    acts for when acknowledging alerts (`units`, explicit; else the unit of the entity the
+    `uids` table names: a rule never gives command authority)."""
     uids: dict[str, str] = field(default_factory=dict)
     rule: str | None = None
+    units: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         self._re = None
@@ -41,28 +44,50 @@ class UidMap:
                 raise ValueError(f"uid rule {self.rule!r}: needs a group (named 'entity' or the first)")
 
     def entity(self, ev: C.CoTEvent) -> str | None:
-        e = self.uids.get(ev.uid)
+        return self.entity_of(ev.uid, ev.callsign)
+
+    def entity_of(self, uid: str, callsign: str | None = None) -> str | None:
+        e = self.uids.get(uid)
         if e is not None or self.rule is None:
             return e
         if self.rule == "uid":
-            return ev.uid
+            return uid
         if self.rule == "callsign":
-            return ev.callsign
-        m = self._re.fullmatch(ev.uid)
+            return callsign
+        m = self._re.fullmatch(uid)
         if m is None:
             return None
         return m.group("entity") if "entity" in self._re.groupindex else m.group(1)
 
-    def check(self, entities) -> None:
-        """Every mapped entity must exist (a typo in the file is an error at start)."""
+    def unit(self, uid: str, entity_unit: dict[str, str]) -> str | None:
+        """The unit the ATAK user `uid` acts for: the `units` table, else the unit of the
+        entity the `uids` table maps it to (never by rule), else None."""
+        u = self.units.get(uid)
+        if u is not None:
+            return u
+        e = self.uids.get(uid)
+        return entity_unit.get(e) if e is not None else None
+
+    def commander(self, uid: str) -> bool:
+        """A device that acts for a unit without being one of its monitored entities."""
+        return uid in self.units and uid not in self.uids
+
+    def check(self, entities, units=None) -> None:
+        """Every mapped entity (and unit) must exist (a typo in the file is an error at start)."""
         bad = sorted(e for e in self.uids.values() if e not in entities)
         if bad:
             raise ValueError(f"uid map names entities not in the task organization: {', '.join(bad[:10])}")
+        bad = sorted(u for u in self.units.values() if units is not None and u not in units)
+        if bad:
+            raise ValueError(f"uid map names units not in the task organization: {', '.join(bad[:10])}")
 
 
 def load_uids(path: str | Path | None, rule: str | None = None) -> UidMap:
-    """A UidMap from a TOML or JSON file (`uids` table; an optional `rule` key) and/or a rule."""
+    """A UidMap from a TOML or JSON file (`uids` table of uid = entity; an optional `units`
+    table of uid = unit, who may acknowledge alerts as that unit; an optional `rule` key)
+    and/or a rule."""
     uids: dict[str, str] = {}
+    units: dict[str, str] = {}
     if path is not None:
         p = Path(path)
         try:
@@ -75,11 +100,16 @@ def load_uids(path: str | Path | None, rule: str | None = None) -> UidMap:
                                                   for k, v in table.items()):
             raise ValueError(f"{p}: field 'uids': expected a table of uid = entity id strings")
         uids = dict(table)
+        ut = d.get("units", {})
+        if not isinstance(ut, dict) or not all(isinstance(k, str) and isinstance(v, str) and k and v
+                                               for k, v in ut.items()):
+            raise ValueError(f"{p}: field 'units': expected a table of uid = unit id strings")
+        units = dict(ut)
         file_rule = d.get("rule")
         if file_rule is not None and not isinstance(file_rule, str):
             raise ValueError(f"{p}: field 'rule': expected a string")
         rule = rule or file_rule
-    return UidMap(uids, rule)
+    return UidMap(uids, rule, units)
 
 
 class PliIn:
@@ -93,7 +123,7 @@ class PliIn:
                  skew_s: float = C.MAX_SKEW_S, clock=None):
         self.sc, self.uids, self.own, self.max_bytes, self.skew_s = sc, uids, own, max_bytes, skew_s
         self.entities = set(sc.taskorg.entity_unit)
-        uids.check(self.entities)
+        uids.check(self.entities, set(sc.taskorg.units))
         self.clock = clock or (lambda: datetime.now(timezone.utc))
         self.accepted = 0
         self.skipped: dict[str, int] = {}
@@ -108,15 +138,23 @@ class PliIn:
         self.rejects[reason] = self.rejects.get(reason, 0) + 1
         self.last_error = why[:200]
 
-    def take(self, data: bytes, t: float) -> LocationReport | None:
-        """One event received at scenario time `t` -> a LocationReport, or None (counted)."""
-        now = self.clock()
+    def parse(self, data: bytes) -> C.CoTEvent | None:
+        """One event from a TAK network, checked (`cot.parse`), or None (counted)."""
         try:
-            ev = C.parse(data, max_bytes=self.max_bytes, now=now, skew_s=self.skew_s)
+            return C.parse(data, max_bytes=self.max_bytes, now=self.clock(), skew_s=self.skew_s)
         except C.CotError as e:
             self._no("bytes" if e.field == "bytes" else "malformed" if e.field in ("xml", "protobuf", "detail")
                      else e.field, str(e))
             return None
+
+    def take(self, data: bytes, t: float) -> LocationReport | None:
+        """One event received at scenario time `t` -> a LocationReport, or None (counted)."""
+        ev = self.parse(data)
+        return None if ev is None else self.take_event(ev, t)
+
+    def take_event(self, ev: C.CoTEvent, t: float) -> LocationReport | None:
+        """A parsed event -> a LocationReport, or None (skipped or counted)."""
+        now = self.clock()
         if ev.uid.startswith(self.own):
             self.skipped["own"] = self.skipped.get("own", 0) + 1
             return None
@@ -127,6 +165,9 @@ class PliIn:
             self._no("stale", f"{ev.uid}: stale since {C.iso(ev.stale)}")
             return None
         entity = self.uids.entity(ev)
+        if entity is None and self.uids.commander(ev.uid):   # a commander's device, not a monitored entity
+            self.skipped["commander"] = self.skipped.get("commander", 0) + 1
+            return None
         if entity is None:
             self._no("unknown-uid", f"uid {ev.uid[:80]!r} is not mapped to an entity")
             return None
