@@ -21,7 +21,7 @@ pytestmark = pytest.mark.timeout(400)
 
 def test_the_team_on_the_mesh_equals_the_closed_loop_in_process(tmp_path):
     res = run_team(tmp_path, timeout=300, echo=lambda *a, **k: None)
-    assert res["robot_processes"] == 5 and res["ea_processes"] == 6
+    assert res["secure"] and res["robot_processes"] == 5 and res["ea_processes"] == 6
     assert all(s["steps"] == 1801 and s["refused"] == 0 for s in res["robots"].values()), res["robots"]
     # the robots' reports and the truth of their run: exactly scenarios/uv-team (made in process)
     assert (tmp_path / "events.jsonl.gz").read_bytes() == (UV / "events.jsonl.gz").read_bytes()
@@ -36,9 +36,10 @@ def test_the_team_on_the_mesh_equals_the_closed_loop_in_process(tmp_path):
 
 def test_a_robot_without_its_eas_commands_does_not_pursue(tmp_path):
     """UGV1's EA publishes no task, and every task it decided is published signed by
-    UGV2's EA instead: UGV1 refuses those, sees EV1 (from about 372 s), never pursues."""
+    UGV2's EA instead (plain TCP, no access control): UGV1 refuses those on their
+    signature, sees EV1 (from about 372 s), never pursues."""
     res = run_team(tmp_path, until=420.0, mute=("UGV1",), forge={"UGV1": "ea.UGV2"}, timeout=300,
-                   echo=lambda *a, **k: None)
+                   echo=lambda *a, **k: None, secure=False)
     ugv1 = res["robots"]["UGV1"]
     assert res["eas"]["UGV1"]["tasks"] >= 1 and res["eas"]["UGV1"]["published"] == 0   # decided, not sent
     assert ugv1["refused"] >= 1 and ugv1["commits"] == 0 and ugv1["tasks_taken"] == 0
@@ -47,3 +48,16 @@ def test_a_robot_without_its_eas_commands_does_not_pursue(tmp_path):
     assert any(e["kind"] == "uv-sighting" and e["target"] == "EV1" for e in rec["events"])   # it saw EV1
     assert not any(str(x).startswith("pursue:") for x in rec["task"])
     assert any(a["type"] == "target-visible" and "EV1" in a["subjects"] for a in res["alerts"]["UGV1"])
+
+
+def test_orders_for_a_robot_from_another_identity_do_not_cross_the_access_control(tmp_path):
+    """Secure mode: the same orders put by UGV2's EA over its own mTLS session on UGV1's
+    task key are dropped by the access control (ea.UGV2 may put only on task/UGV2): UGV1
+    never even sees them, and never pursues."""
+    res = run_team(tmp_path, until=420.0, mute=("UGV1",), forge={"UGV1": "ea.UGV2"}, timeout=300,
+                   echo=lambda *a, **k: None)
+    assert res["secure"] and res["eas"]["UGV1"]["forged"] >= 1
+    ugv1 = res["robots"]["UGV1"]
+    assert ugv1["refused"] == 0 and ugv1["commits"] == 0 and ugv1["tasks_taken"] == 0
+    assert any(a["type"] == "target-visible" and "EV1" in a["subjects"] for a in res["alerts"]["UGV1"])
+    assert res["robots"]["UGV3"]["commits"] >= 1   # the others obey their EAs as usual

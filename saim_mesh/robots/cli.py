@@ -16,6 +16,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--keys", help="folder of the signing keys and signers.json")
         p.add_argument("--until", type=float, default=None, help="stop at this event time (default: the scenario's end)")
         p.add_argument("--deadline", type=float, default=600.0, help="wall seconds before giving up")
+        p.add_argument("--pki", default=None, help="secure mode: certificates and keys (robots/secure.py)")
+        p.add_argument("--scenario", default=None, help="the scenario folder (its task organization)")
 
     t = sub.add_parser("team", help="run the robot team on the mesh (hub, one process per robot and per EA)")
     t.add_argument("out", type=Path)
@@ -25,13 +27,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="UNIT's tasks also published signed by IDENT (refused by the robot)")
     t.add_argument("--seed", type=int, default=7)
     t.add_argument("--timeout", type=float, default=300.0)
+    t.add_argument("--insecure", action="store_true", help="plain TCP, no access control (tasks stay signed)")
     r = sub.add_parser("robot", help="one robot's process")
     r.add_argument("--robot", required=True)
     r.add_argument("--seed", type=int, default=7)
     r.add_argument("--out", required=True, help="the robot's true run (JSON), written at the end")
     net(r)
     e = sub.add_parser("ea", help="one EA's process in the closed loop")
-    e.add_argument("--scenario", required=True)
     e.add_argument("--unit", required=True)
     e.add_argument("--robots", nargs="+", required=True)
     e.add_argument("--out", required=True, help="its alerts (JSON lines)")
@@ -40,11 +42,14 @@ def main(argv: list[str] | None = None) -> int:
     net(e)
     h = sub.add_parser("hub", help="the loop's router")
     h.add_argument("--listen", required=True)
+    h.add_argument("--pki", default=None)
+    h.add_argument("--scenario", default=None)
+    h.add_argument("--root", default=None)
     a = ap.parse_args(argv)
     if a.cmd == "team":
         from .team import run_team
         forge = dict(x.split("=", 1) for x in a.forge)
-        run_team(a.out, a.until, tuple(a.mute), forge, a.seed, a.timeout)
+        run_team(a.out, a.until, tuple(a.mute), forge, a.seed, a.timeout, secure=not a.insecure)
         return 0
     if a.cmd == "robot":
         from .robot import main as m
@@ -53,3 +58,16 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from .hub import main as m
     return m(a)
+
+
+def session_config(a, name: str, listen: list[str] | None = None):
+    """The process's Zenoh config: secure (mTLS, the loop's access control) with --pki."""
+    from ..zconf import config
+    if not a.pki:
+        return config(listen=listen, connect=[] if listen else [a.connect], mode="router" if listen else "client")
+    from .. import scenario as S
+    from . import secure
+    sc = S.load(a.scenario, events=False)
+    robots = sorted(u for u, x in sc.taskorg.units.items() if x.kind in ("ugv", "uav"))
+    return secure.config(a.pki, name, a.root, sc.taskorg, robots, connect=None if listen else [a.connect],
+                         listen=listen)

@@ -9,7 +9,9 @@ data kinds from a source's frame and has no outbox for an EA's decisions (a hook
 in docs/uv-domain.md). The order, the frames and the source code are the live mesh's.
 
 `mute`: publish the watermarks and no task (an EA whose commands are lost); `forge`:
-also publish each task it decided signed as another identity (the robot must refuse it)."""
+also publish each task it decided signed as another identity, over a session of that
+identity in secure mode (the access control drops it), else over ours (the robot refuses
+the signature)."""
 from __future__ import annotations
 
 import json
@@ -71,9 +73,22 @@ class Streams:
             self.frames += 1
 
 
+class _Same:
+    """The session itself, as a context that does not close it."""
+
+    def __init__(self, s):
+        self.s = s
+
+    def __enter__(self):
+        return self.s
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+
 def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[str], out: Path,
         keys: Path | None = None, until: float | None = None, mute: bool = False, forge: str | None = None,
-        deadline_s: float = 600.0, log=print, linger: bool = True) -> dict:
+        deadline_s: float = 600.0, log=print, linger: bool = True, forge_conf: zenoh.Config | None = None) -> dict:
     sc = S.load(scenario, events=False)
     end_t = sc.duration_s if until is None else min(until, sc.duration_s)
     alerts: list[dict] = []
@@ -91,22 +106,25 @@ def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[s
     decided: list = []
     q: queue.SimpleQueue = queue.SimpleQueue()
     stop_wall = time.monotonic() + deadline_s
-    with zenoh.open(conf) as s:
+    forged = 0
+    with zenoh.open(conf) as s, (zenoh.open(forge_conf) if forger is not None and forge_conf is not None
+                                 else _Same(s)) as fs:
         pub = zx.declare_advanced_publisher(
             s, tkey, congestion_control=BLOCK, cache=zx.CacheConfig(max_samples=CACHE),
             sample_miss_detection=zx.MissDetectionConfig(heartbeat=0.5), publisher_detection=True) \
             if commands else None
 
         def publish(tasks: list, wm: float, end: bool = False) -> None:
-            nonlocal seq
+            nonlocal seq, forged
             if pub is None:
                 return
             seq += 1
             f = T.TaskFrame(v=1, robot=unit, epoch=epoch, seq=seq, wm=wm, tasks=[] if mute else tasks, end=end)
             pub.put(wire.seal(sig, tkey, f))
-            if forger is not None and tasks:   # someone else signing orders for our robot
-                s.put(tkey, wire.seal(forger, tkey, T.TaskFrame(v=1, robot=unit, epoch=epoch, seq=seq, wm=wm,
-                                                                 tasks=tasks)), congestion_control=BLOCK)
+            if forger is not None and tasks:   # someone else ordering our robot: its own session in secure mode
+                fs.put(tkey, wire.seal(forger, tkey, T.TaskFrame(v=1, robot=unit, epoch=epoch, seq=seq, wm=wm,
+                                                                  tasks=tasks)), congestion_control=BLOCK)
+                forged += 1
 
         subs = [zx.declare_advanced_subscriber(
             s, wire.src_key(root, r), lambda smp: q.put((str(smp.key_expr), smp.payload.to_bytes())),
@@ -139,7 +157,7 @@ def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[s
         publish(tail, end_t + T.LAG_S, end=True)
         Path(out).write_text("".join(json.dumps(a) + "\n" for a in alerts))
         summary = {"unit": unit, "alerts": len(alerts), "tasks": len(decided), "published": 0 if mute else len(decided),
-                   "frames": streams.frames, "rejects": dict(gate.rejects.by_kind), "released": advanced}
+                   "forged": forged, "frames": streams.frames, "rejects": dict(gate.rejects.by_kind), "released": advanced}
         log("summary " + json.dumps(summary), flush=True)
         if linger:   # our last frame may still be recovered from our cache: the driver stops us
             signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
@@ -152,8 +170,10 @@ def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[s
 
 
 def main(a) -> int:
-    from ..zconf import config
-    conf = config(connect=[a.connect], mode="client")
-    run(Path(a.scenario), a.unit, conf, a.root, a.robots, Path(a.out), Path(a.keys) if a.keys else None, a.until,
-        a.mute, a.forge, a.deadline)
+    from .cli import session_config
+    conf = session_config(a, f"ea.{a.unit}")
+    forge_conf = session_config(a, a.forge) if a.forge and a.pki else None   # the forger's own identity
+    keys = a.keys or a.pki
+    run(Path(a.scenario), a.unit, conf, a.root, a.robots, Path(a.out), Path(keys) if keys else None, a.until,
+        a.mute, a.forge, a.deadline, forge_conf=forge_conf)
     return 0

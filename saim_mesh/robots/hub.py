@@ -8,8 +8,9 @@ import zenoh
 
 
 def main(a) -> int:
-    from ..zconf import config
-    conf = config(listen=[a.listen], connect=[], mode="router")
+    from .cli import session_config
+    from .secure import ROUTER
+    conf = session_config(a, f"router.{ROUTER}", listen=[a.listen])
     with zenoh.open(conf):
         print(f"hub ready {a.listen}", flush=True)
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})

@@ -122,7 +122,7 @@ def run(robot: str, conf: zenoh.Config, root: str, keys: Path, out: Path, seed: 
 
 
 def main(a) -> int:
-    from ..zconf import config
-    conf = config(connect=[a.connect], mode="client")
-    run(a.robot, conf, a.root, Path(a.keys), Path(a.out), a.seed, a.until, a.deadline)
+    from .cli import session_config
+    conf = session_config(a, f"robot.{a.robot}")
+    run(a.robot, conf, a.root, Path(a.keys or a.pki), Path(a.out), a.seed, a.until, a.deadline)
     return 0

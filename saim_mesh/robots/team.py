@@ -19,6 +19,7 @@ from ea_agent.domains.uv import generator as G
 
 from ..proc import Proc, leaf_env
 from ..zconf import free_port
+from . import secure as S
 from . import wire
 
 
@@ -27,32 +28,41 @@ def _py() -> list[str]:
 
 
 def run_team(out: Path, until: float | None = None, mute: tuple[str, ...] = (), forge: dict[str, str] | None = None,
-             seed: int = 7, timeout: float = 300.0, echo=print) -> dict:
+             seed: int = 7, timeout: float = 300.0, echo=print, secure: bool = True) -> dict:
     """Run the closed loop on the mesh into folder `out`; returns a summary. `mute`: EAs
     that publish no tasks; `forge`: unit -> an identity that also signs that EA's tasks
-    (the robot must refuse them). A full run (no `until`) also writes the scenario folder."""
+    (the robot must refuse them). A full run (no `until`) also writes the scenario folder.
+    `secure`: mutual TLS and the loop's access control (robots/secure.py), else plain TCP
+    (the tasks are signed either way)."""
     out = Path(out)
     meta = G.write_static(out, seed)
     units = list(meta["default_eas"])
     robots = sorted(u["id"] for u in G.UNITS if u["kind"] in ("ugv", "uav"))
-    keys = out / "keys"
-    wire.make_identities(keys, units, extra=sorted(set((forge or {}).values()) - {f"ea.{u}" for u in units}))
+    extra = sorted(set((forge or {}).values()) - {f"ea.{u}" for u in units})
+    if secure:
+        keys = out / "pki"
+        S.make(keys, units, robots, extra)
+    else:
+        keys = out / "keys"
+        wire.make_identities(keys, units, extra=extra)
     for d in ("alerts", "robots", "logs"):
         (out / d).mkdir(exist_ok=True)
-    ep = f"tcp/127.0.0.1:{free_port()}"
+    ep = f"{'tls' if secure else 'tcp'}/127.0.0.1:{free_port()}"
     root = f"robots/{uuid.uuid4().hex[:8]}"
-    common = ["--connect", ep, "--root", root, "--keys", str(keys), "--deadline", str(timeout)]
+    sec = ["--pki", str(keys), "--scenario", str(out)] if secure else []
+    common = ["--connect", ep, "--root", root, "--keys", str(keys), "--deadline", str(timeout),
+              *(sec or ["--scenario", str(out)])]
     common += ["--until", str(until)] if until is not None else []
     procs: list[Proc] = []
     t0 = time.monotonic()
     try:
-        hub = Proc("hub", [*_py(), "hub", "--listen", ep], env=leaf_env(), log_dir=out / "logs")
+        hub = Proc("hub", [*_py(), "hub", "--listen", ep, "--root", root, *sec], env=leaf_env(), log_dir=out / "logs")
         procs.append(hub)
         hub.wait_for("hub ready", 60)
         eas = {}
         for u in units:
             extra = (["--mute"] if u in mute else []) + (["--forge", forge[u]] if forge and u in forge else [])
-            eas[u] = Proc(f"ea.{u}", [*_py(), "ea", "--scenario", str(out), "--unit", u, "--robots", *robots,
+            eas[u] = Proc(f"ea.{u}", [*_py(), "ea", "--unit", u, "--robots", *robots,
                                       "--out", str(out / "alerts" / f"{u}.jsonl"), *common, *extra],
                           env=leaf_env(), log_dir=out / "logs")
             procs.append(eas[u])
@@ -74,7 +84,7 @@ def run_team(out: Path, until: float | None = None, mute: tuple[str, ...] = (), 
     records = {r: json.loads((out / "robots" / f"{r}.json").read_text()) for r in robots}
     events = [e for *_, e in sorted((e["t"], robots.index(r), j, e) for r in robots
                                      for j, e in enumerate(records[r]["events"]))]
-    res = {"robot_processes": len(bots), "ea_processes": len(eas), "wall_s": round(wall, 1),
+    res = {"robot_processes": len(bots), "ea_processes": len(eas), "wall_s": round(wall, 1), "secure": secure,
            "scenario_s": until if until is not None else G.DURATION, "robots": bot_sum, "eas": ea_sum,
            "alerts": {u: [json.loads(x) for x in (out / "alerts" / f"{u}.jsonl").read_text().splitlines()]
                       for u in units}}
