@@ -117,3 +117,40 @@ def test_a_superior_says_when_a_subordinates_ea_dies_and_comes_back_and_not_when
                      if x["category"] == "system-problem" and x["subjects"] == ["A1"])
     assert events == Counter({"peer-lost": 1, "peer-back": 1}), events   # A1's clean end: no alarm
     assert summary["lost"] == {}
+
+
+def test_a_source_killed_and_restarted_resumes_after_what_it_published(tmp_path):
+    """The source (a command post's share of the battle) dies with SIGKILL and starts again
+    on the same state folder: a new epoch that resumes after the messages the old one
+    published (none twice, none skipped), so the EA's alerts equal the in-process run's."""
+    sc = S.load(SMALL)
+    want = plan_alerts(next(ea for ea in run(sc, ["A"]) if ea.owner == "A").alerts)
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    router = Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep, "--root", root],
+                  env=clean_env(), log_dir=tmp_path)
+    procs = [router]
+
+    def source(n: int) -> Proc:
+        p = Proc(f"source-{n}", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "60", "--state",
+                                 str(tmp_path / "state"), "--linger", "120", "--connect", ep, "--mode", "client",
+                                 "--root", root], env=clean_env(), log_dir=tmp_path)
+        procs.append(p)
+        return p
+    try:
+        router.wait_for("router ready", 60)
+        a = peer(tmp_path, ep, root, 1)
+        procs.append(a)
+        a.wait_for("ready A", 60)
+        first = source(1)
+        end = time.monotonic() + 120
+        while lines(tmp_path / "A.jsonl") < 2 and time.monotonic() < end:
+            time.sleep(0.05)
+        os.kill(first.p.pid, signal.SIGKILL)
+        first.p.wait(10)
+        resumed = source(2).wait_for("source cp.all: resumed after the ", 60)
+        summary = json.loads(a.wait_for("summary ", 240).split(" ", 1)[1])
+    finally:
+        reap(procs)
+    assert "epoch 1 published" in resumed, resumed
+    assert plan_alerts(load(tmp_path / "A.jsonl")) == want
+    assert summary["lost"] == {} and summary["late_alerts"] == 0, summary

@@ -117,7 +117,14 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
     n = 0
     last_wm = src.wm
     next_say = 600.0
+    skip = getattr(src, "published_before", 0)
+    if skip:
+        log(f"source {src.name}: resumed after the {skip} messages epoch {src.resumed_epoch} published "
+            f"(watermark {src.wm})", flush=True)
     for m in msgs:
+        if skip:   # a restart: these went out before (receivers have them, or fetch them from the journal)
+            skip -= 1
+            continue
         if until is not None and m.t > until:
             break
         if m.t >= next_say:   # progress, for whoever watches the source's log

@@ -63,6 +63,12 @@ class LiveSource:
         self.sent = 0
         # the durable journal (with a state directory), served for catch-up beyond the cache
         self.journal = SourceJournal(state_dir, name, self.epoch) if state_dir is not None else None
+        # a restart (its journal holds earlier epochs) resumes after what it published then:
+        # `publish` skips that many messages of the same stream, and nothing older follows
+        self.published_before, self.resumed_epoch = 0, 0
+        if self.journal is not None:
+            self.published_before, wm, self.resumed_epoch = self.journal.before()
+            self.wm = max(self.wm, wm)
         self.queryable = None
         if self.journal is not None:
             jkey = ks.srcj(name)

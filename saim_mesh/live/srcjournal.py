@@ -115,6 +115,27 @@ class SourceJournal:
             self.errors += 1
             query.reply_err(str(e)[:200].encode())
 
+    def before(self) -> tuple[int, float, int]:
+        """What this source published in its earlier epochs (a restart resumes after it):
+        (data messages, the highest watermark promised, the last earlier epoch or 0)."""
+        from . import frames as F
+        n, wm, last = 0, -1.0, 0
+        for e in range(1, self.epoch):
+            offs = self._offsets(e)
+            if not offs:
+                continue
+            last = e
+            data = self.path(e).read_bytes()
+            for off in offs:
+                (size,) = _LEN.unpack_from(data, off)
+                try:
+                    f = F.decode(data[off + 4:off + 4 + size], 1 << 26)
+                except M.MessageError:
+                    continue   # a frame we cannot read was never one a receiver took either
+                n += len(f.msgs)
+                wm = max(wm, f.wm)
+        return n, wm, last
+
     def close(self) -> None:
         with self.lock:
             self.f.close()
