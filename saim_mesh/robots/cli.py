@@ -14,7 +14,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--connect", required=True, help="the router's endpoint (tcp/127.0.0.1:PORT)")
         p.add_argument("--root", required=True)
         p.add_argument("--keys", help="folder of the signing keys and signers.json")
-        p.add_argument("--until", type=float, default=None, help="stop at this event time (default: the scenario's end)")
+        p.add_argument("--until", type=float, default=None,
+                       help="stop at this event time (default: the scenario's end)")
         p.add_argument("--deadline", type=float, default=600.0, help="wall seconds before giving up")
         p.add_argument("--pki", default=None, help="secure mode: certificates and keys (robots/secure.py)")
         p.add_argument("--scenario", default=None, help="the scenario folder (its task organization)")

@@ -156,8 +156,8 @@ def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[s
         decided += tail
         publish(tail, end_t + T.LAG_S, end=True)
         Path(out).write_text("".join(json.dumps(a) + "\n" for a in alerts))
-        summary = {"unit": unit, "alerts": len(alerts), "tasks": len(decided), "published": 0 if mute else len(decided),
-                   "forged": forged, "frames": streams.frames, "rejects": dict(gate.rejects.by_kind), "released": advanced}
+        summary = {"unit": unit, "alerts": len(alerts), "tasks": len(decided),
+                   "published": 0 if mute else len(decided), "forged": forged, "frames": streams.frames, "rejects": dict(gate.rejects.by_kind), "released": advanced}
         log("summary " + json.dumps(summary), flush=True)
         if linger:   # our last frame may still be recovered from our cache: the driver stops us
             signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
