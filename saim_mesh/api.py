@@ -216,11 +216,13 @@ class Commander(_Session):
         sub = self.session.declare_subscriber(self.ks.cmdlog("*"),
                                               lambda smp: answers.put((str(smp.key_expr), smp.payload.to_bytes())))
         pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-        end = time.monotonic() + (self.timeout if wait_s is None else wait_s)
         got: dict[str, dict] = {}
         try:
-            C._wait_matching(pub, end)
+            if not C._wait_matching(pub, time.monotonic() + self.timeout):
+                raise TimeoutError(f"no EA of the mesh listening for {kind} directives within "
+                                   f"{self.timeout:.0f} s (nothing sent)")
             d = D.publish(self.session, self.ks.root, self.signer, self.unit, kind, pub=pub, **fields)
+            end = time.monotonic() + (self.timeout if wait_s is None else wait_s)   # for the answers
             want = set(expect)
             while (left := end - time.monotonic()) > 0 and not (want and want <= set(got)):
                 try:

@@ -728,7 +728,8 @@ def main(argv: list[str] | None = None) -> int:
                          "(udp://239.2.3.1:6969 for TAK clients on the LAN, tcp://HOST:8087 for a TAK server)")
     me.add_argument("--tak-in", nargs="+", metavar="URL", help="the gateway listens for TAK PLI here (e.g. "
                     "udp://239.2.3.1:6969, tcp://127.0.0.1:PORT)")
-    me.add_argument("--tak-uids", metavar="FILE", help="TAK uid -> entity map (configs/tak-uids.example.toml)")
+    me.add_argument("--tak-uids", metavar="FILE", help="TAK uid -> entity map, and [units]: uid -> unit for acknowledgements "
+                    "(configs/tak-uids.example.toml)")
     me.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
                     help="seconds the console stays up after the scenario's end")
     me.set_defaults(fn=cmd_mesh)
@@ -829,6 +830,8 @@ def main(argv: list[str] | None = None) -> int:
         c.add_argument("--timeout", type=_seconds, default=10.0, help="seconds to wait for the EA's answer")
         _zenoh_args(c)
         c.set_defaults(fn=cmd_command)
+    from . import cli_directives
+    cli_directives.add(sub, _zenoh_args, _seconds)   # order, plan: directives to a subtree (issue 33)
     co = sub.add_parser("console", help="the commander's console: a mesh peer serving a web page on 127.0.0.1")
     co.add_argument("scenario")
     co.add_argument("--unit", help="whose commander (default: the top unit); acts for the unit's subtree")

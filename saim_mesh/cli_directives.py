@@ -57,7 +57,12 @@ def _report(got: dict[str, dict], expect: list[str]) -> int:
 
 def cmd_order(a) -> int:
     with _commander(a) as c:
-        return _report(c.order(a.action, at=a.at, plan=a.plan, mission=a.mission, expect=a.expect), a.expect)
+        try:
+            got = c.order(a.action, at=a.at, plan=a.plan, mission=a.mission, expect=a.expect)
+        except TimeoutError as e:
+            print(f"order: {e}", file=sys.stderr)
+            return 2
+        return _report(got, a.expect)
 
 
 def cmd_plan(a) -> int:
@@ -69,4 +74,9 @@ def cmd_plan(a) -> int:
     if not isinstance(missions, list):
         raise ValueError(f"plan: --file {a.file}: expected a JSON list of missions")
     with _commander(a) as c:
-        return _report(c.publish_plan(a.name, a.version, missions, at=a.at, expect=a.expect), a.expect)
+        try:
+            got = c.publish_plan(a.name, a.version, missions, at=a.at, expect=a.expect)
+        except TimeoutError as e:
+            print(f"plan: {e}", file=sys.stderr)
+            return 2
+        return _report(got, a.expect)

@@ -105,8 +105,11 @@ def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tm
             procs.append(peer(tmp_path, u, ep, root))
         for p, u in zip(procs, units):
             p.wait_for(f"ready {u}", 60)
+        cli = Proc("order-cli", [*py(), "order", "--scenario", SC, "--unit", "BN", "--action", "abort-plan",
+                                 "--at", "1500", "--connect", ep, "--root", root, "--timeout", "2"],
+                   env=clean_env(), log_dir=tmp_path)   # the CLI, a thin layer over the API below
+        assert cli.p.wait(60) == 0, cli.tail()
         with Commander(SC, "BN", connect=[ep], root=root) as bn:
-            bn.order("abort-plan", at=1500.0, wait_s=0)
             bn.order("execute-plan", at=1600.0, plan="withdrawal", wait_s=0)
         with Commander(SC, "A1", connect=[ep], root=root) as a1:
             a1.confirm_up("A1-move", "start", at=200.0, wait_s=0)

@@ -51,3 +51,32 @@ def test_the_examples_publish_follow_and_acknowledge(tmp_path):
         for p in (follow, peer):
             if p is not None:
                 p.stop()
+
+
+def test_the_order_example_reaches_the_subtree_at_its_event_time(tmp_path):
+    """A's commander orders abort-plan at event time 600; A2's EA (A's subordinate) takes it
+    when its source's watermark passes 600 and answers; its command log says when."""
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    common = ["--scenario", str(SMALL), "--connect", ep, "--root", root]
+    peer = Proc("peer-A2", [*py(), "peer", "--scenario", str(SMALL), "--unit", "A2", "--listen", ep, "--root", root,
+                            "--sources", "reporter", "--out", str(tmp_path / "A2.jsonl"), "--linger", "60"],
+                env=clean_env(), log_dir=tmp_path)
+    order = None
+    try:
+        peer.wait_for("ready A2", 60)
+        order = Proc("order", [sys.executable, str(EX / "order_subtree.py"), *common, "--unit", "A", "--action",
+                               "abort-plan", "--at", "600", "--expect", "A2"], env=clean_env(), log_dir=tmp_path)
+        order.wait_for("ordered", 60)
+        pub = subprocess.run([sys.executable, str(EX / "publish_reports.py"), *common, "--name", "reporter"],
+                             capture_output=True, text=True, timeout=120, env=clean_env(), cwd=ROOT)
+        assert pub.returncode == 0, pub.stderr
+        answer = json.loads(order.wait_for('{"unit": "A2"', 90))
+        assert order.p.wait(60) == 0
+        assert answer["ok"] and answer["kind"] == "order" and answer["t"] == 600.0, answer
+        peer.wait_for("end ", 60)
+    finally:
+        for p in (order, peer):
+            if p is not None:
+                p.stop()
+    rows = [json.loads(x) for x in open(tmp_path / "A2.cmdlog")]
+    assert [(r["kind"], r["by"], r["t"], r["ok"]) for r in rows] == [("dir.order", "A", 600.0, True)]
