@@ -147,7 +147,7 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
     inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts] for ea in loop.eas}
     ev = evaluate(S.load(out))
     shipped = ROOT / "scenarios" / "uv-team" / "events.jsonl.gz"
-    return {"robot_processes": res["robot_processes"], "ea_processes": res["ea_processes"],
+    return {"robot_processes": res["robot_processes"], "ea_processes": res["ea_processes"], "secure": res["secure"],
             "wall_s": res["wall_s"], "scenario_s": res["scenario_s"],
             "x_real_time": round(res["scenario_s"] / res["wall_s"], 1),
             "tasks_published": sum(x["published"] for x in res["eas"].values()),
