@@ -349,11 +349,21 @@ def cmd_mesh(a) -> int:
 
     from .mesh import up
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
-    if a.live or a.sources_per_cp:   # the mesh with no centre: sources per command post, no replay
+    if a.replay and (a.live or a.sources_per_cp):
+        raise ValueError("mesh up: --replay is the older mesh; --live and --sources-per-cp are the mesh with no centre")
+    from ea_agent import domains
+    if not a.replay and not (a.live or a.sources_per_cp) and domains.of(S.load(a.scenario, events=False)).NAME == "uv":
+        print("mesh up: the robot team's mesh with no centre is `saim-mesh robots team OUT` (robots obeying their "
+              "EAs); running the older replay mesh for this scenario (as --replay)", flush=True)
+        a.replay = True
+    if not a.replay:   # the mesh with no centre: sources per command post, no replay
         from .live.up import up as live_up
-        for bad, flag in ((a.tak, "--tak"), (a.pki, "--pki (it makes its own test PKI)")):
+        for bad, flag in ((a.tak or a.tak_in or a.tak_uids, "--tak (run `saim-mesh tak --sources` beside it)"),
+                          (a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
+                          (a.window != 20.0, "--window (the sources pace themselves)"),
+                          (a.restarts != 10, "--restarts")):
             if bad:
-                raise ValueError(f"mesh up --live: {flag} is not built for the live mesh yet (issue 31)")
+                raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
                       live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
                       console=a.console, console_linger=a.console_linger)
@@ -467,7 +477,7 @@ def cmd_deploy(a) -> int:
     out = Path(a.out_dir or f"out/deploy/{a.host}")
     try:
         res = run_host(dep, sc, a.host, out, show=not a.quiet, timeout=a.timeout, until_done=a.exit_when_done,
-                       console_linger=a.console_linger, max_restarts=a.restarts)
+                       console_linger=a.console_linger, max_restarts=a.restarts, fresh=a.fresh or None)
     except (SecurityError, RuntimeError, TimeoutError) as e:   # a child that would not start: one line
         return _fail(e)
     except KeyboardInterrupt:
@@ -596,8 +606,14 @@ def _zenoh_args(p) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else list(argv)
+    if args[:1] == ["robots"]:   # the robot team that obeys its EAs has its own subcommands
+        from .robots.cli import main as robots_main
+        return robots_main(args[1:])
     p = _Parser(prog="saim-mesh", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
+    sub.add_parser("robots", help="robots that obey their EAs over the mesh: robots team OUT | robot | ea | hub "
+                                  "(saim-mesh robots -h)")
     r = sub.add_parser("run", help="run EAs in one process over a scenario")
     r.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     r.add_argument("--ea", nargs="+", metavar="UNIT", help="owners (default: BN, every company, one platoon)")
@@ -703,14 +719,18 @@ def main(argv: list[str] | None = None) -> int:
     fu.add_argument("--shuffle", type=int, default=None, help="publish each window's tracks in a seeded random order")
     _zenoh_args(fu)
     fu.set_defaults(fn=cmd_fusion)
-    me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit EA plus the replay")
+    me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit's EA, a source per command post, "
+                                     "no centre (--replay: the older mesh behind one replay process)")
     me.add_argument("action", choices=["up"])
     me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     me.add_argument("--live", action="store_true",
                     help="the mesh with no centre: a source per command post, EA peers on event time, no replay; "
                          "event time is the wall clock (use --sources-per-cp for a recorded battle at --speed)")
     me.add_argument("--sources-per-cp", action="store_true",
-                    help="as --live, but the sources play the recorded battle at --speed (max: as fast as they can)")
+                    help="the default: the sources play the recorded battle at --speed (max: as fast as they can)")
+    me.add_argument("--replay", action="store_true",
+                    help="the older mesh: one replay process is every EA's clock and sequencer (a global tick, "
+                         "its store for late joiners); kept to compare with and for --tak, --pki, --window")
     me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
     me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     me.add_argument("--out-dir", default="out/mesh")
@@ -776,6 +796,9 @@ def main(argv: list[str] | None = None) -> int:
                          "hosts may still need its routers and sources)")
     de.add_argument("--timeout", type=_seconds, default=None, metavar="S", help="stop after S seconds")
     de.add_argument("--quiet", action="store_true", help="do not print alerts as they come")
+    de.add_argument("--fresh", action="store_true",
+                    help="a clean start: delete the EAs' logs and journals and the sources' state an earlier run left "
+                         "in --out-dir (default: a restart keeps them when they are this deployment's)")
     de.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
     de.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
                     help="seconds a console stays up after the scenario's end")

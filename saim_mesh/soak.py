@@ -123,7 +123,7 @@ def main(argv=None) -> int:
     out = Path(a.out)
     root = f"soak/{os.getpid()}"
     t0 = time.monotonic()
-    mesh = Proc("mesh", [*py(), "mesh", "up", a.scenario, "--out-dir", str(out), "--speed", a.speed,
+    mesh = Proc("mesh", [*py(), "mesh", "up", a.scenario, "--replay", "--out-dir", str(out), "--speed", a.speed,
                          "--root", root], env=clean_env(), log_dir=out.parent)
     finished = lambda: mesh.exited() is not None
     attackers = Attackers(sc, out, root)

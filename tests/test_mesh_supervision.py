@@ -49,7 +49,7 @@ def test_kill_9_of_replay_fusion_node_and_peer_under_mesh_up(tmp_path, inproc_se
     killed with SIGKILL mid-run. Each is reported and restarted; A's alerts equal the
     fault-free run's, and so do A2's: what fell while it was down is raised late."""
     out = tmp_path / "mesh"
-    mesh = Proc("mesh", [*py(), "mesh", "up", str(SENSORS), "--units", "A", "A2", "--out-dir", str(out),
+    mesh = Proc("mesh", [*py(), "mesh", "up", str(SENSORS), "--replay", "--units", "A", "A2", "--out-dir", str(out),
                          "--speed", "250"], env=clean_env(), log_dir=tmp_path)
     logs = out / "logs"
     try:

@@ -115,7 +115,7 @@ def _summaries(out_dir: Path) -> dict[str, dict]:
 
 def _mesh_up(scenario: Path, out_dir: Path, speed: str, console: bool) -> Proc:
     extra = ["--console", "0", "--console-linger", "600"] if console else []
-    return Proc("mesh-up", [*py(), "mesh", "up", str(scenario), "--speed", speed, "--out-dir", str(out_dir), *extra],
+    return Proc("mesh-up", [*py(), "mesh", "up", str(scenario), "--replay", "--speed", speed, "--out-dir", str(out_dir), *extra],
                 env=clean_env(), log_dir=out_dir)
 
 
