@@ -494,7 +494,9 @@ def test_secure_forged_presence_and_bye_are_dropped(tmp_path, sc, pki, inproc):
     finally:
         reap(procs)
     assert not [x for x in before if x.startswith("presence ")], before
-    assert 1500 <= int(left.split("t=")[1])
+    # after the real kill (the replay was at 1500; A's own clock may lag it by its window), not
+    # at the fake leaving (near 300)
+    assert 1000 <= int(left.split("t=")[1]), left
     assert set(summary["rejects"]) == {"health", "bye"}, summary   # the markers only
     assert summary["bad_messages"] == sum(summary["rejects"].values()), summary
     notes = [x for x in load(tmp_path / "A.jsonl") if x["category"] == "system-problem"]
