@@ -37,10 +37,12 @@ class CommandLog:
         self.path = Path(path)
         self.f = open(self.path, "a", encoding="utf-8")
 
-    def write(self, unit: str, t: float, cmd: msgspec.Struct, res: W.CmdResult) -> None:
+    def write(self, unit: str, t: float, cmd: msgspec.Struct, res: W.CmdResult, after: bool = False) -> None:
         kind = next(k for k, c in W.COMMANDS.items() if c is type(cmd))
         line = {"unit": unit, "t": t, "kind": kind, "cmd": msgspec.to_builtins(cmd), "ok": res.ok,
                 "error": res.error}
+        if after:   # taken after every fact at t (a live peer): `run --commands` does the same
+            line["after"] = True
         self.f.write(json.dumps(line, sort_keys=True) + "\n")
         self.f.flush()
         os.fsync(self.f.fileno())
@@ -60,9 +62,13 @@ class CommandLog:
 
 @dataclass(frozen=True, slots=True)
 class Logged:
+    """`after`: the EA took it after every fact at `t` (a live peer, which advances as far
+    as its sources promised, facts at `t` included); else before the facts at `t` (a
+    replay-driven peer, after a tick that promises only what is before `t`)."""
     unit: str
     t: float
     cmd: msgspec.Struct
+    after: bool = False
 
 
 def read(paths: list[str | Path], units: set[str] | None = None) -> list[Logged]:
@@ -118,6 +124,9 @@ def read(paths: list[str | Path], units: set[str] | None = None) -> list[Logged]
             except msgspec.ValidationError as e:
                 raise ValueError(f"{where}: bad {kind} command: {e}") from None
             n += 1
-            out.append((float(t), n, Logged(unit, float(t), cmd)))
+            after = d.get("after", False)
+            if not isinstance(after, bool):
+                raise ValueError(f"{where}: 'after' must be true or false (got {after!r})")
+            out.append((float(t), n, Logged(unit, float(t), cmd, after)))
     out.sort(key=lambda x: (x[0], x[1]))
     return [x[2] for x in out]

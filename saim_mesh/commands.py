@@ -115,7 +115,7 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
 
 
 def receive(ea, unit: str, root: str, gate: W.Gate, key: str, payload: bytes, t: float,
-            clog=None) -> W.CmdResult | None:
+            clog=None, after: bool = False) -> W.CmdResult | None:
     """A command off the wire for `unit`'s EA, as every peer takes one: its key (to this
     unit, a known kind, a sender), the gate (size, type, signature in secure mode), the
     sender's authority in the task organization as the EA knows it now (reorganizations
@@ -138,7 +138,7 @@ def receive(ea, unit: str, root: str, gate: W.Gate, key: str, payload: bytes, t:
         return result(cmd, False, t, refused)
     res = apply(ea, cmd, t)
     if clog is not None:
-        clog.write(unit, t, cmd, res)
+        clog.write(unit, t, cmd, res, after)
     return res
 
 

@@ -114,15 +114,18 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
     if dirs:   # stable: commands first at equal times, directives in (at, by, n) order
         cmds = sorted(cmds + [Logged(ea.owner, tk.t, tk) for tk in dirs for ea in eas], key=lambda c: c.t)
 
-    def command_until(t: float) -> None:   # commands due before events at time >= their t
-        while cmds and cmds[0].t <= t:
+    def command_until(t: float, end: bool = False) -> None:
+        """Commands due before the events at time t: those of a time before t, and those of
+        t itself taken before its facts (a replay-driven peer's, directives); a live peer's
+        (`after`) come after the facts at their time, as it took them."""
+        while cmds and (cmds[0].t < t or cmds[0].t == t and (end or not cmds[0].after)):
             c = cmds.pop(0)
             ea = by_owner[c.unit]
             if isinstance(c.cmd, D.Taken):   # after the facts before it, before those at its time
                 ea.advance(c.t, strict=True)
                 D.take(ea, c.cmd, validate)
                 continue
-            ea.advance(c.t)
+            ea.advance(c.t, strict=not c.after)
             apply(ea, c.cmd, c.t)
     fusion = Fusion.of(sc)
     evs = sc.events
@@ -153,7 +156,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
         for tr in fusion.flush(sc.duration_s):
             for ea in eas:
                 ea.submit(tr)
-    command_until(sc.duration_s)
+    command_until(sc.duration_s, end=True)
     for ea in eas:
         ea.finish(sc.duration_s)
     if progress:

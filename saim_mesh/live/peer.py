@@ -622,7 +622,9 @@ class LivePeer:
     def command(self, key: str, payload: bytes) -> None:
         """A commander's command (docs/console.md 1), taken as every peer takes one
         (`commands.receive`) at the EA's time, answered on cmdlog/<unit>."""
-        res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.clog)
+        # taken after every fact at the EA's time (it advanced as far as its sources promised)
+        res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.clog,
+                        after=True)
         if res is None:
             return
         if self.session is not None:
