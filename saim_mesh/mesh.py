@@ -61,7 +61,12 @@ def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: i
 
 
 class Supervisor:
-    """Restart what dies, with backoff; remember what happened for the summary."""
+    """Restart what dies, with backoff; remember what happened for the summary.
+
+    The supervisor is part of its host: each child it starts (`Proc`, and the EA peers
+    the zygote forks) gets SIGTERM from the kernel when the supervisor dies, even by
+    kill -9 (`proc.die_with_parent`), so nothing runs on headless; started again on the
+    same output folder, a `deploy --host` resumes from the journals (deploy/launch.py)."""
 
     def __init__(self, echo, max_restarts: int = 10, backoff_s: float = 0.5, pids_path: Path | None = None):
         self.procs: dict[str, Proc] = {}

@@ -1,8 +1,16 @@
 """A child process whose output goes to a log file (always drained, whatever it
-writes), and whose lines we scan for what it says: `ready`, `summary`, ..."""
+writes), and whose lines we scan for what it says: `ready`, `summary`, ...
+
+A child is part of whoever started it: on Linux it is sent SIGTERM when its parent dies
+(`prctl(PR_SET_PDEATHSIG)`, set in the child before it becomes the command), so a
+supervisor killed outright (kill -9) leaves nothing running headless; each child stops
+as the supervisor would have stopped it. The kernel ties this to the *thread* that
+started the child: start and restart children from one long-lived thread (the
+supervisor's loop)."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -39,7 +47,7 @@ class Proc:
             self.p = self.spawner(self.args, self.log_path, self.env)
             return
         self.p = subprocess.Popen(self.args, stdout=self._log, stderr=subprocess.STDOUT, env=self.env,
-                                  stdin=subprocess.DEVNULL)
+                                  stdin=subprocess.DEVNULL, preexec_fn=die_with_parent_hook())
 
     def poll_lines(self) -> list[str]:
         with open(self.log_path, "rb") as f:
@@ -95,6 +103,42 @@ class Proc:
 
     def exited(self) -> int | None:
         return self.p.poll()
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def _prctl():
+    """libc's prctl (Linux), or None."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+def die_with_parent(parent: int, sig: int = signal.SIGTERM, prctl=None) -> None:
+    """In a child, before it becomes its command: `sig` when `parent` (the process that
+    forked it) dies; if it died already (before this call), exit now. Nothing on other
+    systems (there, whoever stops the supervisor reaps its children)."""
+    prctl = prctl or _prctl()
+    if prctl is None:
+        return
+    prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
+    if os.getppid() != parent:   # orphaned between the fork and the prctl: the signal would never come
+        os._exit(128 + int(sig))
+
+
+def die_with_parent_hook(sig: int = signal.SIGTERM):
+    """A `preexec_fn` for subprocess.Popen doing `die_with_parent` (prctl resolved here,
+    before the fork: the child only makes the call), or None where there is no prctl."""
+    prctl = _prctl()
+    if prctl is None:
+        return None
+    parent = os.getpid()
+    return lambda: die_with_parent(parent, sig, prctl)
 
 
 def clean_env(base: dict | None = None) -> dict:

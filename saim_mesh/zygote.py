@@ -26,7 +26,7 @@ import threading
 import time
 from pathlib import Path
 
-from .proc import clean_env
+from .proc import clean_env, die_with_parent
 
 PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "msgspec", "msgpack",
            "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer", "saim_mesh.live.peer",
@@ -43,7 +43,7 @@ def _child(req: dict) -> None:
         os.setpgid(0, 0)   # its own group: a signal to it is not a signal to its siblings
         for s in (signal.SIGTERM, signal.SIGINT, signal.SIGCHLD):
             signal.signal(s, signal.SIG_DFL)
-        _die_with_parent()   # the zygote gone (its launcher killed): no orphan peers
+        die_with_parent(_ZYGOTE_PID)   # the zygote gone (its launcher killed): no orphan peers
         fd = os.open(req["log"], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
@@ -74,14 +74,15 @@ def _child(req: dict) -> None:
             os._exit(code)
 
 
-def _die_with_parent() -> None:
-    """SIGTERM when our parent dies (Linux prctl PR_SET_PDEATHSIG): a launcher killed
-    outright takes the zygote with it, and the zygote its children."""
-    try:
-        import ctypes
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)   # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):   # not Linux: orphans are reaped by whoever stops the mesh
-        pass
+_ZYGOTE_PID = 0   # set in `serve`: the parent every forked child checks it still has
+
+
+def _die_with_launcher() -> None:
+    """SIGTERM when the launcher dies (Linux prctl PR_SET_PDEATHSIG; the launcher's pid
+    comes in SAIM_ZYGOTE_PARENT): a launcher (a host's supervisor) killed outright takes
+    the zygote with it, and the zygote its children (`die_with_parent` in `_child`)."""
+    launcher = int(os.environ.get("SAIM_ZYGOTE_PARENT") or os.getppid())
+    die_with_parent(launcher)
 
 
 def warm_up(scenario: Path = WARM_SCENARIO) -> str | None:
@@ -103,8 +104,12 @@ def warm_up(scenario: Path = WARM_SCENARIO) -> str | None:
 
 
 def serve() -> None:
-    """The zygote's loop: fork on request, report every child's pid and exit status."""
-    _die_with_parent()
+    """The zygote's loop: fork on request, report every child's pid and exit status.
+    It ends when its launcher is gone (stdin closed, or SIGTERM when it died), and its
+    children with it: a host's processes never run on without their supervisor."""
+    global _ZYGOTE_PID
+    _ZYGOTE_PID = os.getpid()
+    _die_with_launcher()
     for m in PRELOAD:
         importlib.import_module(m)
     problem = warm_up()
@@ -121,7 +126,7 @@ def serve() -> None:
         r, _, _ = select.select([0], [], [], 0.05)
         if r:
             data = os.read(0, 65536)
-            if not data:   # the launcher is gone: so are we (children live on)
+            if not data:   # the launcher is gone: so are we (each child gets SIGTERM as we exit)
                 return
             buf += data
             while b"\n" in buf:
@@ -202,6 +207,7 @@ class Zygote:
     def __init__(self, env: dict | None = None):
         env = clean_env(env or None)   # glibc reads MALLOC_ARENA_MAX at start: here, for every child
         env.setdefault("OPENBLAS_NUM_THREADS", "1")   # no thread pool to fork under
+        env["SAIM_ZYGOTE_PARENT"] = str(os.getpid())   # it dies with us (PR_SET_PDEATHSIG, checked)
         self.p = subprocess.Popen([sys.executable, "-m", "saim_mesh.zygote"], stdin=subprocess.PIPE,
                                   stdout=subprocess.PIPE, env=env)
         if self.p.stdout.readline().strip() != b"ready":

@@ -7,10 +7,23 @@ output goes to its own log. `mesh up --sources-per-cp` is this with one host on
 
 The host's run ends when each of its EA peers said its summary (`until_done`), at
 `timeout`, or when stopped (SIGTERM / Ctrl-C); a host whose routers others still need
-keeps running after its EAs are done unless told otherwise."""
+keeps running after its EAs are done unless told otherwise.
+
+A host that comes back (its machine or its supervisor died: every child dies with the
+supervisor, `proc.die_with_parent`) keeps its state when started again on the same
+output folder (`fresh=None`, `deploy --host` without `--fresh`): `host.json` there says
+which deployment the folder belongs to (scenario, key root, host, its EAs and sources,
+live or paced at which speed). When it matches, the EAs' alert logs, input journals,
+notices and command logs and the sources' state folder (`sources/`: epochs and frame
+journals) stay; each EA replays its input journal and each source resumes after what it
+published, on the same clock (event time 0 at the same instant as before). Otherwise
+(`fresh=True`, `mesh up`, a folder of another deployment or of none) they are deleted
+first: a clean start."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -63,17 +76,25 @@ def plan(dep: Deployment, host: str) -> Plan:
                                                        if r.host == host})
 
 
+STATE = "host.json"   # in the host's output folder: whose state it holds (`restart_state`)
+EA_FILES = (".jsonl", ".input", ".notify.jsonl", ".cmdlog")   # an EA's alert log, input journal, notices, commands
+
+
 def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show: bool = True,
              timeout: float | None = 1800.0, until_done: bool = True, on_started=None, start: float | None = None,
              paced_start: float | None = None, link: dict | None = None, console_linger: float = 30.0,
-             max_restarts: int = 10, fresh: bool = True) -> dict:
+             max_restarts: int = 10, fresh: bool | None = True) -> dict:
     """Start `host`'s processes and supervise them (see the module's docstring).
 
-    `start` (live): the wall time of event time 0 (default: the file's, else 20 s from
-    now). `paced_start`: with a speed, event time 0 for every source (default: the file's
-    start, else 5 s after this host's EAs are ready). `on_started(sup, t0)`: called once
+    `start` (live): the wall time of event time 0 (default: the file's, else the one
+    this host ran on before (a restart), else 20 s from now). `paced_start`: with a speed,
+    event time 0 for every source (default: the file's start, else a restart's earlier
+    one, else 5 s after this host's EAs are ready). `on_started(sup, t0)`: called once
     the host's sources run. `link`: emulate each router link between local routers
-    (delay_ms, loss; processes link-<lower>-<upper>: SIGUSR1 cuts, SIGUSR2 heals)."""
+    (delay_ms, loss; processes link-<lower>-<upper>: SIGUSR1 cuts, SIGUSR2 heals).
+    `fresh`: True deletes what an earlier run left in `out_dir` (EA logs and journals,
+    the sources' state); None keeps it when it belongs to this deployment (a restart:
+    `restart_state`), else deletes it."""
     from ..live.up import show_alerts, table
     from ..net import routed
     from ..net import topology as T
@@ -103,7 +124,27 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
             start = _instant(dep.start)
         elif not live and paced_start is None:
             paced_start = _instant(dep.start)
+    ident = {"scenario": sc.name, "root": root, "host": host, "eas": units, "sources": list(h.sources),
+             "live": live, "speed": dep.speed}   # the same deployment: the same streams on the same clock
+    prior, why = restart_state(out_dir, ident, fresh)
+    if prior is None:
+        cleared = clear_state(out_dir, units)
+        if cleared or fresh is None:
+            echo(f"host {host}: a clean start ({why}" + (f"; deleted {cleared} files of an earlier run"
+                                                          if cleared else "") + ")", flush=True)
+    else:
+        if live and start is None:
+            start = prior.get("start")
+        if not live and paced_start is None and dep.speed != "max":
+            paced_start = prior.get("paced_start")
+        echo(f"host {host}: restart: keeping the state in {out_dir} ({why}); its EAs replay their input "
+             f"journals, its sources resume after what they published" + (", on the same clock" if
+                                                                          (start if live else paced_start) else "")
+             + " (--fresh: a clean start)", flush=True)
+    runs = (prior or {}).get("runs", []) + [{"wall": round(time.time(), 3), "pid": os.getpid(),
+                                             "restart": prior is not None}]
     start = start if start is not None else time.time() + 20.0
+    _write_state(out_dir, ident, start if live else None, paced_start, runs)
     live_args = ["--live", "--start", _iso(start)] if live else []
     until_args = ["--until", str(dep.until)] if dep.until is not None else []
     where = lambda unit: ["--connect", pl.endpoints[dep.attach(host, unit, to)], "--mode", "client",  # noqa: E731
@@ -142,9 +183,6 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
                                  "--root", root], env=clean_env(), log_dir=logs)).wait_for("tak ready", 60)
         armed = ["--armed"] if h.consoles else []   # a console watches: urgent alerts repeat until acked
         for u in units:
-            if fresh:
-                for f in (f"{u}.jsonl", f"{u}.input", f"{u}.notify.jsonl", f"{u}.cmdlog"):
-                    (out_dir / f).unlink(missing_ok=True)
             sup.add(Proc(u, [*py(), "peer", "--scenario", dep.scenario, "--unit", u, *where(u), "--root", root,
                              "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args, *armed],
                          env=leaf_env(), log_dir=logs,
@@ -161,6 +199,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
             echo(p.wait_for("console http", 60).split(" ", 1)[1] + f"  <- {c.unit}'s commander's console", flush=True)
         if not live and dep.speed != "max" and paced_start is None:   # one clock: event time 0 at this instant
             paced_start = time.time() + 5.0
+            _write_state(out_dir, ident, None, paced_start, runs)   # a restart keeps it
         pace_args = ["--start", _iso(paced_start)] if paced_start is not None and not live else []
         share = _share_args(sc)
         for name in h.sources:
@@ -212,6 +251,56 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     if stopped is not None:
         raise stopped
     return result
+
+
+def restart_state(out_dir: Path, ident: dict, fresh: bool | None) -> tuple[dict | None, str]:
+    """(what `host.json` in `out_dir` holds, why) when the host restarts on that state;
+    (None, why) when it starts clean: `fresh`, no earlier run there, or one of another
+    deployment (its scenario, key root, host name, EAs, sources, live or speed differ)."""
+    path = out_dir / STATE
+    if fresh:
+        return None, "asked for"
+    try:
+        prior = json.loads(path.read_text())
+    except FileNotFoundError:
+        return None, f"no earlier run in {out_dir}"
+    except (OSError, ValueError) as e:
+        return None, f"{path} unreadable ({type(e).__name__}: {e})"
+    was = prior.get("deployment") if isinstance(prior, dict) else None
+    if was != ident:
+        diff = sorted(k for k in ident if not isinstance(was, dict) or was.get(k) != ident[k])
+        return None, f"{out_dir} holds another deployment's state (its {', '.join(diff) or 'format'} differ)"
+    n = len(prior.get("runs", []))
+    return prior, f"run {n + 1} of this host on it"
+
+
+def clear_state(out_dir: Path, units) -> int:
+    """Delete what a run leaves for a restart: `units`' logs and journals, the sources'
+    state folder, `host.json` (and those of the units it names). Returns the files deleted."""
+    n = 0
+    try:
+        was = json.loads((out_dir / STATE).read_text()).get("deployment", {}).get("eas", [])
+    except (OSError, ValueError, AttributeError):
+        was = []
+    for u in dict.fromkeys([*units, *(x for x in was if isinstance(x, str))]):
+        for ext in EA_FILES:
+            f = out_dir / f"{u}{ext}"
+            if f.exists():
+                f.unlink()
+                n += 1
+    src = out_dir / "sources"
+    if src.exists():
+        n += sum(1 for x in src.rglob("*") if x.is_file())
+        shutil.rmtree(src)
+    (out_dir / STATE).unlink(missing_ok=True)
+    return n
+
+
+def _write_state(out_dir: Path, ident: dict, start: float | None, paced_start: float | None, runs: list) -> None:
+    tmp = out_dir / (STATE + ".tmp")
+    tmp.write_text(json.dumps({"deployment": ident, "start": start, "paced_start": paced_start, "runs": runs},
+                              indent=1))
+    os.replace(tmp, out_dir / STATE)   # a kill leaves the old one or the new one
 
 
 def _share_args(sc) -> dict[str, list[str]]:
