@@ -59,12 +59,12 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
     for _, f in b:                    # src.b catches up; the loop's checks fetch src.a again
         p.receive(f, "")
         p._retry()
-        p._resume()
+        p._refetch_behind()
     for _ in range(50):
         if not p.behind.get("src.a") and not p.hold.waiting_for("src.a"):
             break
         p._retry()
-        p._resume()
+        p._refetch_behind()
     p.ea.finish(p.end_t())
     assert asked and p.fetched >= p.dropped and p.gaps == 0
     assert keyed(p.given) == keyed(ref.given) and len(keyed(ref.given)) >= 5

@@ -135,6 +135,7 @@ class LivePeer:
         self.clean: set[str] = set()          # ... said goodbye
         self.restoring = False                # a restarted peer replaying its own input journal
         self.catching_up = False              # ... then taking what its sources sent while it was down
+        self.heard_again: set[str] = set()    # ... the sources heard since it came back (their edge known)
         self.restored = 0                     # input records the restart replayed
         self.t0 = time.monotonic()
         self.cpu0 = (time.thread_time(), time.process_time())
@@ -246,6 +247,7 @@ class LivePeer:
             return
         if self.catching_up:   # what the EA raises up to the sources' edge when it came back is late
             self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
+            self.heard_again.add(f.source)
         st = self.seq_of.get(f.source)
         if st is not None and f.epoch > st[0]:   # the source restarted: the rest of its last epoch first
             self._catch_up(f.source, st[0], st[1], W.SEQ_LIMIT, take=True)
@@ -555,7 +557,7 @@ class LivePeer:
         if math.isfinite(r) and r >= self.ea.epoch_end:   # an epoch can close (else facts keep batching)
             self.ea.advance(r)
         self.timeline.released(r)
-        if self.catching_up and r >= self.caught_up_to > -math.inf:
+        if self.catching_up and r >= self.caught_up_to > -math.inf and self._edge_known():
             self.catching_up = False
             self.log(f"restart: caught up to {hms(r)}", flush=True)
         if self.order.late:
@@ -567,6 +569,13 @@ class LivePeer:
                 self.ea.advance(max(self.ea.now, r if math.isfinite(r) else self.ea.now) + self.ea.epoch_s)
             finally:
                 self.late_from = None
+
+    def _edge_known(self) -> bool:
+        """A restarted peer knows the sources' edge once every source it depends on was
+        heard since (or ended, or is lost) and no frame waits in its queue: a source that
+        restarted with it (the same host) or whose cache is still arriving would move it."""
+        return self.q.empty() and all(s in self.heard_again or s in self.ended or s in self.order.lost
+                                      for s in self.sources)
 
     def directive(self, key: str, payload: bytes) -> None:
         """A directive off the wire (or a late joiner's answer): checked, journalled, held
