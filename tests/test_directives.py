@@ -36,6 +36,13 @@ def sc():
     return S.load(SMALL)
 
 
+def hub(tmp) -> tuple[str, str, Proc]:
+    """(endpoint, key root, the router process): the test's mesh, the EAs its clients."""
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    return ep, root, Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep,
+                                     "--root", root], env=clean_env(), log_dir=tmp)
+
+
 def peer(tmp, unit: str, ep: str, root: str) -> Proc:
     """A live EA peer as a client of the test's router, depending on the one source."""
     return Proc(f"peer-{unit}", [*py(), "peer", "--scenario", SC, "--unit", unit, "--connect", ep, "--mode", "client",
@@ -95,9 +102,7 @@ def test_bad_directives_are_refused_with_one_line():
 
 def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tmp_path, sc):
     units = ["BN", "A", "A1", "C"]
-    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
-    router = Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep, "--root", root],
-                  env=clean_env(), log_dir=tmp_path)
+    ep, root, router = hub(tmp_path)
     procs = []
     try:
         router.wait_for("router ready", 60)
@@ -235,9 +240,7 @@ def test_a_plan_version_is_validated_like_a_plan_file_and_taken_by_the_subtree(s
 
 def test_live_a_plan_version_reaches_the_subtree_and_a_late_joiner_runs_it(tmp_path, sc):
     units = ["A", "A1"]
-    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
-    router = Proc("router", [*py(), "router", "--scenario", SC, "--name", "hub", "--listen", ep, "--root", root],
-                  env=clean_env(), log_dir=tmp_path)
+    ep, root, router = hub(tmp_path)
     procs = []
     try:
         router.wait_for("router ready", 60)

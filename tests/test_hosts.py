@@ -18,25 +18,10 @@ from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.runner import run
 
 from .conftest import SMALL
+from .test_deploy_hosts import in_process, plan_alerts
 
 pytestmark = pytest.mark.timeout(900)
 WHY = netns.unavailable()
-
-
-def plan_alerts(path) -> list[tuple]:
-    out = []
-    for line in open(path):
-        if line.strip():
-            d = json.loads(line)
-            if d["category"] != "system-problem":
-                out.append((d["t"], d["type"], tuple(d["subjects"]), d["message"], d["priority"],
-                            d["details"].get("id")))
-    return out
-
-
-def in_process(alerts) -> list[tuple]:
-    return [(a.t, a.type, tuple(a.subjects), a.message, a.priority, a.to_json_dict()["details"].get("id"))
-            for a in alerts if a.category != "system-problem"]
 
 
 def cli(tmp_path, name: str, *args: str) -> Proc:
