@@ -65,6 +65,13 @@ def test_a_peer_killed_and_restarted_raises_each_alert_once_and_what_fell_due_la
         os.kill(first.p.pid, signal.SIGKILL)   # the host dies: no goodbye, no flush beyond what was written
         first.p.wait(10)
         before = lines(tmp_path / "A.jsonl")
+        # stay down until an alert falls due: the source's clock passes the next one the EA owes
+        told = plan_alerts(load(tmp_path / "A.jsonl"))
+        owed = [w for w in want if w not in told]
+        assert owed, "the EA told everything before it was killed: kill it earlier"
+        due = 600 * (int(owed[0][0]) // 600 + 1)   # the source says its clock every 600 s of event time
+        if due < sc.duration_s:
+            src.wait_for(f"source cp.all t={due} ", 120)
         again = peer(tmp_path, ep, root, 2)
         procs.append(again)
         restart = again.wait_for("restart: ", 60)
