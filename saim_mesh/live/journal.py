@@ -70,14 +70,7 @@ def replay(peer, path: str | Path) -> list:
     return rebuilds the EA from the records before it, as it did live."""
     peer.history = []
     for rec in records(path):
-        if rec[0] == "frame":
-            peer.take(rec[1], "", journal=False)
-        elif rec[0] == "lost":
-            peer.lose(rec[1], rec[3], journal=False)
-        elif rec[0] == "dir":
-            peer.journalled_directive(rec)
-        elif rec[0] == "peer":
-            peer.peer_change(rec[1], rec[2])
+        peer.replay_record(rec)
         peer.history.append(rec)
     peer.ea.finish(peer.end_t())
     return peer.given

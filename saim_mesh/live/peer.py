@@ -454,17 +454,7 @@ class LivePeer:
         self.history, self.restoring = [], True
         try:
             for rec in recs:
-                if rec[0] == "frame":
-                    f = self._frame(rec[1], "")
-                    if f is not None:
-                        self.take(rec[1], "", journal=False, f=f)
-                        self.seq_of[f.source] = [f.epoch, f.seq + 1]
-                elif rec[0] == "lost":
-                    self.lose(rec[1], rec[3], journal=False)
-                elif rec[0] == "dir":
-                    self.journalled_directive(rec)
-                elif rec[0] == "peer":
-                    self.peer_change(rec[1], rec[2])
+                self.replay_record(rec)
                 self.history.append(rec)
         finally:
             self.history, self.restoring = None, False
@@ -473,6 +463,21 @@ class LivePeer:
         self.log(f"restart: {len(recs)} input records replayed, EA at {hms(max(self.ea.now, 0.0))}; "
                  f"{len(self.given)} alerts stand", flush=True)
         return len(recs)
+
+    def replay_record(self, rec: list) -> None:
+        """One input-journal record taken again, as the decision it records was taken live
+        (a restart, or `journal.replay`); each source's sequence resumes after its frames."""
+        if rec[0] == "frame":
+            f = self._frame(rec[1], "")
+            if f is not None:
+                self.take(rec[1], "", journal=False, f=f)
+                self.seq_of[f.source] = [f.epoch, f.seq + 1]
+        elif rec[0] == "lost":
+            self.lose(rec[1], rec[3], journal=False)
+        elif rec[0] == "dir":
+            self.journalled_directive(rec)
+        elif rec[0] == "peer":
+            self.peer_change(rec[1], rec[2])
 
     def journalled_directive(self, rec: list) -> None:
         """A directive as the input journal holds it (checked when it came): held again."""
