@@ -9,7 +9,10 @@ issuer on `<root>/dir/<by>/<kind>` (`by`: the unit whose console or EA issues it
   subtree as the task organization stands in that EA (reorganizations included);
 * `confirm` (a mission of `by` started or ended: confirmed at `by`'s console or inferred
   by its EA): for `by`'s EA and its superiors' EAs, the paper's "confirmation from a
-  subordinate EA".
+  subordinate EA". An EA infers its own unit's start when the unit crosses its line of
+  departure (where the plan says so) and publishes it signed as `ea.<by>`, effective
+  `CONFIRM_LEAD_S` later on an epoch's end; a superior that saw the crossing itself
+  already knows (taken, no change), one that did not starts the mission then.
 
 Why an effective time instead of "when it arrives": arrival differs from EA to EA; the
 issuer states when the directive takes effect (a few seconds of event time ahead of the
@@ -35,6 +38,10 @@ from . import messages as M
 from . import wire as W
 
 KINDS = ("order", "confirm", "decide", "cff", "reorganize", "plan")
+# event seconds from a start an EA inferred to when its confirmation takes effect up the
+# chain: as a console's order lead (console/actions.ORDER_LEAD_S), time to reach the
+# superiors before their EAs pass it
+CONFIRM_LEAD_S = 10.0
 Name = W.Name
 Req = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
 
@@ -297,6 +304,9 @@ def apply(ea, tk: Taken, validate=None) -> None:
                 pass   # not repeating: nothing to stop
         return
     m = ea.domain.missions[d.mission]
+    state = ea.domain.plan.state.get(d.mission) if ea.domain.plan is not None else None
+    if state == "done" or d.phase == "start" and state == "active":
+        return   # this EA knew it already (it saw the unit cross its line of departure too)
     ea.submit(M.MissionConfirm(t, d.mission, m.unit, d.phase, "local" if tk.by == ea.owner else "message"))
 
 

@@ -91,6 +91,8 @@ class LivePeer:
         self.validate_plan = validator(sc)                   # plan versions checked as plan files are
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
+        self.ea.domain.inferred.append(self._confirm_up)
+        self.confirmed_up: set[tuple[str, str]] = set()   # (mission, phase) published up the chain
         self.armed = armed
         if armed:
             self.ea.arm()
@@ -184,6 +186,25 @@ class LivePeer:
             payload = W.encode(W.notice_of(n))
             self.session.put(key, payload if self.signer is None else self.signer.sign(key, payload),
                              congestion_control=BLOCK)
+
+    def _confirm_up(self, c) -> None:
+        """Its EA inferred that one of its own unit's missions started (the unit crossed its
+        line of departure): published up the chain once, as a confirmation signed by this
+        EA, effective `CONFIRM_LEAD_S` later on an epoch's end (superiors that saw the
+        crossing too have it by then). Not while a restart replays what was published before."""
+        if c.unit != self.unit or (c.mission, c.phase) in self.confirmed_up:
+            return
+        self.confirmed_up.add((c.mission, c.phase))
+        if self.restoring or self.session is None:
+            return
+        at = math.ceil((c.t + D.CONFIRM_LEAD_S) / self.ea.epoch_s) * self.ea.epoch_s
+        try:
+            d = D.publish(self.session, self.ks.root, self.signer, self.unit, "confirm", at=at, mission=c.mission,
+                          phase=c.phase)
+        except (ValueError, zenoh.ZError) as e:   # never kills the peer: said, and the EA goes on
+            self.log(f"confirmation of {c.mission} {c.phase} not published: {e}", flush=True)
+            return
+        self.log(f"confirmed up: {c.mission} {c.phase} at {at:.1f} (seen at {c.t:.1f}) req={d.req}", flush=True)
 
     def _system(self, subject: str, text: str, priority: str = "immediate", **details) -> None:
         self.log(f"system {subject}: {text}", flush=True)
@@ -417,6 +438,7 @@ class LivePeer:
         self.rebuilding = source
         self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
         self.ea.notice_sinks.append(self._notice)
+        self.ea.domain.inferred.append(self._confirm_up)
         if self.armed:
             self.ea.arm()
         self.ea.start(0.0)
@@ -738,6 +760,7 @@ class LivePeer:
                                       f"never heard in {quiet:.0f} s")
                     if self.live_start is not None:
                         self._apply()
+                self._drain()   # what came with the sources' last frames is taken, not dropped
                 self.ea.finish(self.end_t())
                 self.log("end " + json.dumps({k: v for k, v in self.summary().items()
                                               if k not in ("timeline", "alert_latencies_ms", "due_latencies_ms")},
@@ -765,6 +788,23 @@ class LivePeer:
         summary = self.summary()
         self.log("summary " + json.dumps(summary, sort_keys=True), flush=True)
         return summary
+
+    def _drain(self) -> None:
+        """Commands and directives already queued when the sources ended (a fast replay ends
+        before what an EA published on the way reaches its peers): taken now, late if past."""
+        while True:
+            try:
+                key, payload = self.q.get_nowait()
+            except queue.Empty:
+                return
+            if key == "cmd":
+                self.command(*payload)
+            elif key == "dir":
+                self.directive(*payload)
+            elif key == "dirj":
+                self._joined(payload)
+            elif key == "dirq":
+                self._serve_directives(payload)
 
     def summary(self) -> dict:
         return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.misses, "fetched": self.fetched, "dropped": self.dropped,

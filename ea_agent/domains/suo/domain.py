@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import heapq
 import math
-from typing import TypeVar
+from typing import Callable, TypeVar
 
 import numpy as np
 
@@ -58,6 +58,9 @@ class SuoDomain:
         self.watchman = Watchman(self.pic, cfg)
         self.watch = self.watchman.watch   # the watchman is the domain's filter, called directly
         self.scan_s = float(cfg["manager"]["unknown_scan_s"])
+        # told of each confirmation this EA infers itself (crossing a line of departure): a
+        # peer publishes its own unit's up the chain of command (saim_mesh/directives.py)
+        self.inferred: list[Callable[[MissionConfirm], None]] = []
         self.next_scan = self.scan_s
         self.plan: PlanState | None = None
         self.missions: dict[str, Mission] = {}
@@ -345,7 +348,10 @@ class SuoDomain:
         """The unit crossed its line of departure: for the EA its mission has started (a local
         confirmation), unless a confirmation said so already."""
         if self.plan is not None and self.plan.state.get(m.id) == "ready":
-            self.on_confirm(MissionConfirm(t, m.id, m.unit, "start", "local"))
+            c = MissionConfirm(t, m.id, m.unit, "start", "local")
+            self.on_confirm(c)
+            for tell in self.inferred:
+                tell(c)
 
     def post_fire_support(self, m: Mission, supported: str, line: str | None, target: str) -> None:
         self.support.post(m, supported, line, target)
