@@ -310,13 +310,16 @@ def apply(ea, tk: Taken, validate=None) -> None:
     ea.submit(M.MissionConfirm(t, d.mission, m.unit, d.phase, "local" if tk.by == ea.owner else "message"))
 
 
-def result(tk: Taken, ok: bool, t: float, error: str = "", late: bool = False) -> W.CmdResult:
+def result(tk: Taken, ok: bool, t: float, error: str = "", late: bool = False, due: float | None = None
+           ) -> W.CmdResult:
+    """The EA's answer; `due`: the `at` it named, when taken `late` at `t`."""
     kind = KIND_OF[type(tk.d)]
     d = tk.d
     ref = (d.mission if isinstance(d, (ConfirmDirective, DecideDirective)) else d.cff if isinstance(d, CffDirective)
            else d.unit if isinstance(d, ReorganizeDirective) else d.plan if isinstance(d, PlanDirective)
            else (d.mission or d.plan or d.action))
-    err = error or (f"taken late: due at {tk.d.at:.0f} s, the EA was past it" if late else "")
+    due = tk.d.at if due is None else due
+    err = error or (f"taken late: due at {due:.0f} s, the EA was past it" if late else "")
     return W.make(W.CmdResult, req=tk.d.req, kind=kind, ok=ok, error=err[:1000],
                   t=max(0.0, min(float(t), W.T_LIMIT)), ref=str(ref)[:128])
 

@@ -623,6 +623,7 @@ class LivePeer:
             self._apply()
 
     def _take_directive(self, tk: D.Taken, late: bool = False) -> None:
+        due = tk.d.at
         if late:
             tk = D.at_least(tk, self.ea.now)
         got = D.take(self.ea, tk, self.validate_plan)
@@ -631,7 +632,7 @@ class LivePeer:
         ok, why = got
         if not ok:
             self.gate.rejects.add(M.MessageError("directive", "(authority)", why), D.key(self.ks.root, tk.by, "?"))
-        res = D.result(tk, ok, tk.t, why, late)
+        res = D.result(tk, ok, tk.t, why, late, due)
         if self.clog is not None:
             self.clog.directive(self.unit, tk, res)
         if self.session is not None:
