@@ -440,7 +440,8 @@ def test_each_mission_is_asked_on_its_own(tmp_path):
 # ======================================================================= 6. the CLI
 def _parsed(monkeypatch, argv):
     seen = []
-    monkeypatch.setattr(cli, "cmd_command", lambda a: seen.append(cli._command_fields(a)) or 0)
+    from saim_mesh.cli import commands
+    monkeypatch.setattr(commands, "cmd_command", lambda a: seen.append(commands._command_fields(a)) or 0)
     assert cli.main(argv) == 0
     return seen
 
@@ -460,7 +461,8 @@ def test_the_cli_requires_alert_and_option(monkeypatch, capsys, missing):
     argv = ["decide", "--scenario", "X", "--unit", "A", "--alert", "A/3", "--option", "abort"]
     i = argv.index(missing)
     del argv[i:i + 2]
-    monkeypatch.setattr(cli, "cmd_command", lambda a: pytest.fail("ran without " + missing))
+    from saim_mesh.cli import commands
+    monkeypatch.setattr(commands, "cmd_command", lambda a: pytest.fail("ran without " + missing))
     with pytest.raises(SystemExit) as e:
         cli.main(argv)
     assert e.value.code == 2 and missing in capsys.readouterr().err

@@ -403,11 +403,8 @@ def test_network_listens_for_pli_and_survives_bad_input():
 
 # -- the gateway on the mesh -------------------------------------------------------------
 def _gateway_cmd() -> list[str]:
-    """`saim-mesh tak` once the CLI has it; until then the package's own entry point."""
-    import saim_mesh.cli as cli
-    if hasattr(cli, "cmd_tak"):
-        return [sys.executable, "-m", "saim_mesh", "tak"]
-    return [sys.executable, "-m", "saim_mesh.tak"]
+    """`saim-mesh tak`."""
+    return [sys.executable, "-m", "saim_mesh", "tak"]
 
 
 @pytest.mark.timeout(300)

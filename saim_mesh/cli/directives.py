@@ -38,7 +38,7 @@ def _common(p, seconds) -> None:
 
 
 def _commander(a):
-    from .api import Commander
+    from ..api import Commander
     if a.listen or a.zenoh_config or a.multicast:
         raise ValueError("order/plan: give --connect ENDPOINT (a router or peer of the mesh); "
                          "--listen, --zenoh-config and --multicast are not used here")

@@ -1,0 +1,108 @@
+"""What every command group's arguments share: times, speeds, Zenoh options, one-line failures."""
+from __future__ import annotations
+
+import argparse
+import time
+import math
+import os
+import sys
+from pathlib import Path
+
+
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_SCENARIO = ROOT / "scenarios" / "battalion"
+
+
+def _speed(v: str) -> float | None:
+    if v == "max":
+        return None
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed takes a factor or 'max', not {v!r}") from None
+    if not math.isfinite(f) or f <= 0:
+        raise argparse.ArgumentTypeError("--speed factor must be a finite number > 0")
+    return f
+
+
+def _seconds(v: str) -> float:
+    """A finite, non-negative number of seconds (or metres)."""
+    try:
+        f = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {v!r}") from None
+    if not math.isfinite(f) or f < 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, not {v!r}")
+    return f
+
+
+def _progress(frac: float) -> None:
+    if sys.stderr.isatty():
+        n = int(frac * 40)
+        sys.stderr.write(f"\r[{'#' * n}{'.' * (40 - n)}] {frac * 100:5.1f}%")
+        if frac >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _fail(what) -> int:
+    """One line on stderr and exit code 2 (SAIM_MESH_DEBUG=1 re-raises for the traceback)."""
+    if os.environ.get("SAIM_MESH_DEBUG"):
+        raise
+    print("saim-mesh: " + " ".join(str(what).split()), file=sys.stderr)
+    return 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line (`--help` still shows the usage)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def _zmode(a) -> dict:
+    """--mode and the routers of --topology (a resolved topology written by `mesh up`)."""
+    routers: list[str] = []
+    if getattr(a, "topology", None):
+        from ..net.topology import routers_of_resolved
+        routers = routers_of_resolved(a.topology)
+    return {"mode": getattr(a, "mode", None), "routers": routers}
+
+
+def _zenoh_args(p) -> None:
+    p.add_argument("--listen", nargs="*", metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--connect", nargs="*", metavar="ENDPOINT")
+    p.add_argument("--zenoh-config", metavar="JSON5", help="default configs/zenoh-peer.json5")
+    p.add_argument("--multicast", action="store_true",
+                   help="discover peers by UDP multicast scouting (a LAN) instead of configured endpoints only")
+    p.add_argument("--root", help="key-expression root (default saim/<scenario name>)")
+    p.add_argument("--mode", choices=["peer", "client"], default=None,
+                   help="Zenoh mode: client when attached to a router (mesh up --topology), peer otherwise")
+    p.add_argument("--topology", metavar="JSON", help="the resolved topology `mesh up --topology` wrote "
+                   "(its routers' identities are accepted as relays)")
+    p.add_argument("--pki", metavar="DIR", help="secure mode: mutual TLS with this folder's certificates "
+                   "(saim-mesh certs) and the mesh's access-control rules; endpoints are then tls/...")
+
+
+def _lines(lines: list[str], out=None) -> int:
+    """Each problem on its own line (stderr by default), exit code 2."""
+    for x in lines:
+        print(x, file=out or sys.stderr)
+    return 2
+
+
+def _start_of(a) -> float | None:
+    """--live: the wall time of event time 0 (--start ISO8601, default now)."""
+    if not getattr(a, "live", False):
+        return None
+    return _instant(a.start) if a.start else time.time()
+
+
+def _instant(text: str) -> float:
+    from datetime import datetime, timezone
+    try:
+        d = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"--start {text!r}: expected an ISO 8601 time, e.g. 2026-11-27T09:00:00Z") from None
+    return (d if d.tzinfo else d.replace(tzinfo=timezone.utc)).timestamp()

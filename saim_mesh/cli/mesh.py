@@ -1,0 +1,319 @@
+"""`saim-mesh mesh up | source | peer | fusion | router | topology | replay | tak | link`: the
+mesh's processes, one command each."""
+from __future__ import annotations
+
+import time
+import sys
+from pathlib import Path
+
+from .. import scenario as S
+from .args import _speed, _seconds, _zmode, _zenoh_args, _start_of, _instant, DEFAULT_SCENARIO
+
+
+def cmd_replay(a) -> int:
+    from ..replay import main_replay
+    from ..zconf import config
+    sc = S.load(a.scenario)
+    root = a.root or f"saim/{sc.name}"
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "replay", sc, root, **_zmode(a))
+    sources, topo = None, None
+    if a.topology:   # one client session per router: each unit's reports enter at its own command post
+        from ..net.topology import read_resolved
+        topo, eps = read_resolved(a.topology)
+        sources = {n: config(None, [ep], a.zenoh_config, False, a.pki, "replay", sc, root, mode="client",
+                             routers=sorted(eps)) for n, ep in eps.items()}
+    return main_replay(sc, conf, root, a.speed, a.wait_peers or [], a.linger, a.until, a.window, a.state,
+                       sources, topo)
+
+
+def cmd_source(a) -> int:
+    """Publish one source's stream: a command post's share of a recorded scenario, or reports
+    from a file or standard input (docs/architecture.md, the live mesh)."""
+    import zenoh
+
+    from dissemination.keyspace import KeySpace
+
+    from ..live import play
+    from ..live.source import LiveSource
+    from ..zconf import config
+    sc = S.load(a.scenario, events=a.file is None)
+    for u in [*(a.units or ()), *(a.but or ())]:
+        if u not in sc.taskorg.units:
+            raise KeyError(f"--units/--but {u}: unknown unit {u!r}: not in the task organization of {sc.name}")
+    root = a.root or f"saim/{sc.name}"
+    start = _start_of(a)
+    paced = None   # --speed with --start: event time 0 at that instant (sources paced together)
+    if a.start and not a.live:
+        if not a.speed:
+            raise ValueError("--start without --live paces the stream: give --speed FACTOR too")
+        paced = _instant(a.start)
+    if a.file is None:
+        msgs = play.share(sc, a.units, a.tracks, a.but or ())
+    else:
+        f = sys.stdin if a.file == "-" else open(a.file, encoding="utf-8")
+        msgs = play.read_lines(f, a.format, a.entity, start)
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"source.{a.name}", sc, root, **_zmode(a))
+    with zenoh.open(conf) as s:
+        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache)
+        print(f"ready source {a.name} epoch={src.epoch}", flush=True)
+        n = play.publish(src, msgs, a.speed, start, until=a.until, paced_from=paced)
+        src.close(end=not a.keep_open)
+        print(f"end source {a.name} messages={n} frames={src.seq}", flush=True)
+        if a.linger:
+            time.sleep(a.linger)   # the publisher's cache serves late joiners and recoveries meanwhile
+        src.stop()
+    return 0
+
+
+def cmd_peer(a) -> int:
+    from ..peer import main_peer
+    from ..zconf import config
+    sc = S.load(a.scenario, events=False)
+    if a.unit not in sc.taskorg.units:
+        raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
+    root = a.root or f"saim/{sc.name}"
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc, root, **_zmode(a))
+    if a.sources:   # the live mesh: event time from the sources' own watermarks, no replay
+        from ..live.peer import main_live_peer
+        return main_live_peer(sc, a.unit, conf, root, a.sources, a.out, a.config, a.deadline, _start_of(a), a.armed,
+                              a.linger)
+    misplaced = None
+    if a.topology:   # attached to another command post's router: it works, but its reports cross a radio link
+        from ..net.topology import read_resolved
+        topo, eps = read_resolved(a.topology)
+        own = topo.router_of(a.unit, sc.taskorg)
+        if eps[own] not in (a.connect or []):
+            where = next((n for n, ep in eps.items() if ep in (a.connect or [])), "no router of the topology")
+            misplaced = (f"EA of {sc.taskorg.units[a.unit].name} is attached to {where}, not to its command post's "
+                         f"router {own}: its traffic crosses radio links it should not")
+    return main_peer(sc, a.unit, conf, root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed, misplaced)
+
+
+def cmd_fusion(a) -> int:
+    from ..fusion.peer import main_fusion
+    from ..zconf import config
+    sc = S.load(a.scenario, events=False)
+    if a.group not in sc.meta.get("fusion", {}).get("groups", {}):
+        raise KeyError(f"unknown fusion group {a.group!r}: not in {sc.name}'s scenario.json")
+    root = a.root or f"saim/{sc.name}"
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"fusion.{a.group}", sc, root,
+                  **_zmode(a))
+    return main_fusion(sc, a.group, conf, root, a.shuffle)
+
+
+def cmd_router(a) -> int:
+    from ..net.router import main_router
+    from ..zconf import config
+    sc = S.load(a.scenario, events=False)
+    root = a.root or f"saim/{sc.name}"
+    routers = _zmode(a)["routers"] or [a.name]
+    if a.name not in routers:
+        raise KeyError(f"router {a.name!r} is not in the topology {a.topology} ({', '.join(routers)})")
+    conf = config(a.listen, a.connect, a.zenoh_config, False, a.pki, f"router.{a.name}", sc, root, mode="router",
+                  routers=routers)
+    return main_router(a.name, conf, root)
+
+
+def cmd_topology(a) -> int:
+    from ..net import topology as T
+    sc = S.load(a.scenario, events=False)
+    topo = T.load(a.file, sc.taskorg) if a.file else T.derive(sc.taskorg)
+    if a.out:
+        T.write(topo, a.out)
+    units = __import__("saim_mesh.mesh", fromlist=["mesh_units"]).mesh_units(sc)
+    for n, r in sorted(topo.routers.items()):
+        leaves = [u for u in units if topo.router_of(u, sc.taskorg) == n]
+        print(f"{n:>10}  cp {r.cp:<6} links {','.join(r.links) or '-':<10} {len(leaves):>3} EA peers: "
+              f"{' '.join(leaves)}")
+    return 0
+
+
+def cmd_mesh(a) -> int:
+    import signal
+
+    from ..mesh import up
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
+    if a.replay and (a.live or a.sources_per_cp):
+        raise ValueError("mesh up: --replay is the older mesh; --live and --sources-per-cp are the mesh with no centre")
+    from ea_agent import domains
+    if not a.replay and not (a.live or a.sources_per_cp) and domains.of(S.load(a.scenario, events=False)).NAME == "uv":
+        print("mesh up: the robot team's mesh with no centre is `saim-mesh robots team OUT` (robots obeying their "
+              "EAs); running the older replay mesh for this scenario (as --replay)", flush=True)
+        a.replay = True
+    if not a.replay:   # the mesh with no centre: sources per command post, no replay
+        from ..live.up import up as live_up
+        for bad, flag in ((a.tak or a.tak_in or a.tak_uids, "--tak (run `saim-mesh tak --sources` beside it)"),
+                          (a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
+                          (a.window != 20.0, "--window (the sources pace themselves)"),
+                          (a.restarts != 10, "--restarts")):
+            if bad:
+                raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
+        res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
+                      live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
+                      console=a.console, console_linger=a.console_linger)
+        return 0 if len(res["peers"]) == len(a.units or res["peers"]) else 1
+    res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
+             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
+             console=a.console, console_linger=a.console_linger, tak=_tak_args(a),
+             topology=a.topology, link=_link_args(a))
+    return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
+
+
+def _link_args(a) -> dict | None:
+    """`mesh up --topology ... --link-delay-ms D --link-loss P`: every router link emulated."""
+    if a.topology is None or a.link_delay_ms is None and a.link_loss is None:
+        return None
+    if not 0.0 <= (a.link_loss or 0.0) < 1.0:
+        raise ValueError(f"--link-loss {a.link_loss}: expected a share in [0, 1)")
+    return {"delay_ms": a.link_delay_ms or 0.0, "loss": a.link_loss or 0.0}
+
+
+def _tak_args(a) -> list[str] | None:
+    """`mesh up --tak URL... [--tak-in URL...] [--tak-uids FILE]`: the gateway's own options."""
+    if not a.tak:
+        return None
+    out = [x for u in a.tak for x in ("--cot-url", u)] + [x for u in a.tak_in or () for x in ("--listen-cot", u)]
+    return out + (["--uids", a.tak_uids] if a.tak_uids else [])
+
+
+def cmd_tak(a) -> int:
+    from ..tak.gateway import main_tak
+    from ..zconf import config
+    sc = S.load(a.scenario, events=False)
+    root = a.root or f"saim/{sc.name}"
+    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root, **_zmode(a))
+    if a.live and not a.sources:
+        raise ValueError("tak --live: give --sources too (the live mesh; the replay mesh has its own clock)")
+    a.live_start = _start_of(a)
+    return main_tak(sc, conf, root, a)
+
+
+def add(sub) -> None:
+    """Register the mesh's process commands on `sub`."""
+    rp = sub.add_parser("replay", help="publish a scenario's events into the mesh (stands in for SAIM)")
+    rp.add_argument("scenario")
+    rp.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    rp.add_argument("--wait-peers", nargs="*", metavar="UNIT",
+                    help="start when these peers are present (name a unit twice to wait for two of its peers)")
+    rp.add_argument("--linger", type=_seconds, default=30.0, help="seconds to keep serving the store at the end")
+    rp.add_argument("--window", type=_seconds, default=20.0, metavar="S",
+                    help="at max speed, stay at most S of scenario time ahead of the slowest peer (0: no pacing)")
+    rp.add_argument("--until", type=_seconds, default=None, help="stop at this scenario time")
+    rp.add_argument("--state", metavar="FILE", help="progress file: a restarted replay resumes from it")
+    _zenoh_args(rp)
+    rp.set_defaults(fn=cmd_replay)
+    pe = sub.add_parser("peer", help="run one unit's EA as a Zenoh peer")
+    pe.add_argument("--scenario", required=True)
+    pe.add_argument("--unit", required=True)
+    pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
+    pe.add_argument("--config", metavar="TOML")
+    pe.add_argument("--armed", action="store_true",
+                    help="a console watches: unacknowledged flash and immediate alerts are re-notified and "
+                         "escalated to the superior ([notify])")
+    pe.add_argument("--radius", type=_seconds, default=None,
+                    help="geographic interest radius around our units (m); default: [dissemination] in the config")
+    pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",
+                    help="exit (code 3) after S seconds of wall time without a clock tick from the source")
+    pe.add_argument("--sources", nargs="+", metavar="NAME",
+                    help="the live mesh: no replay; advance on the event time these sources' watermarks promise")
+    pe.add_argument("--live", action="store_true", help="with --sources: event time is the wall clock from --start")
+    pe.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
+    pe.add_argument("--linger", type=_seconds, default=0.0,
+                    help="with --sources: seconds to keep answering commands after every source ended")
+    _zenoh_args(pe)
+    pe.set_defaults(fn=cmd_peer)
+    so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the live mesh")
+    so.add_argument("scenario")
+    so.add_argument("--name", required=True, help="the source's name (e.g. the command post: cp.A)")
+    so.add_argument("--units", nargs="+", metavar="UNIT",
+                    help="publish the scenario's events of these units' subtrees (default: every unit)")
+    so.add_argument("--but", nargs="+", metavar="UNIT", help="leave out these units' subtrees (another source's)")
+    so.add_argument("--tracks", action="store_true", help="also the scenario's hostile tracks")
+    so.add_argument("--file", metavar="PATH|-", help="publish reports from this file (- : standard input)")
+    so.add_argument("--format", choices=["jsonl", "nmea", "gpx"], default="jsonl")
+    so.add_argument("--entity", help="nmea, gpx: whose reports these are")
+    so.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    so.add_argument("--live", action="store_true", help="event time is the wall clock from --start")
+    so.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now); "
+                    "with --speed: event time 0 is at that instant (sources paced together)")
+    so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start) and its "
+                    "durable journal of frames, served for catch-up beyond the publisher's cache")
+    so.add_argument("--cache", type=int, default=None, metavar="N",
+                    help="frames the publisher keeps in memory for recovery and late joiners (default 100000)")
+    so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
+    so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
+    so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")
+    _zenoh_args(so)
+    so.set_defaults(fn=cmd_source)
+    fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")
+    fu.add_argument("--scenario", required=True)
+    fu.add_argument("--group", required=True)
+    fu.add_argument("--shuffle", type=int, default=None, help="publish each window's tracks in a seeded random order")
+    _zenoh_args(fu)
+    fu.set_defaults(fn=cmd_fusion)
+    me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit's EA, a source per command post, "
+                                     "no centre (--replay: the older mesh behind one replay process)")
+    me.add_argument("action", choices=["up"])
+    me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    me.add_argument("--live", action="store_true",
+                    help="the mesh with no centre: a source per command post, EA peers on event time, no replay; "
+                         "event time is the wall clock (use --sources-per-cp for a recorded battle at --speed)")
+    me.add_argument("--sources-per-cp", action="store_true",
+                    help="the default: the sources play the recorded battle at --speed (max: as fast as they can)")
+    me.add_argument("--replay", action="store_true",
+                    help="the older mesh: one replay process is every EA's clock and sequencer (a global tick, "
+                         "its store for late joiners); kept to compare with and for --tak, --pki, --window")
+    me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
+    me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
+    me.add_argument("--out-dir", default="out/mesh")
+    me.add_argument("--window", type=_seconds, default=20.0, metavar="S",
+                    help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
+    me.add_argument("--insecure", action="store_true",
+                    help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
+    me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
+    me.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
+    me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
+    me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
+                    help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
+    me.add_argument("--tak", nargs="+", metavar="URL",
+                    help="also start the Cursor-on-Target gateway sending to these URLs "
+                         "(udp://239.2.3.1:6969 for TAK clients on the LAN, tcp://HOST:8087 for a TAK server)")
+    me.add_argument("--tak-in", nargs="+", metavar="URL", help="the gateway listens for TAK PLI here (e.g. "
+                    "udp://239.2.3.1:6969, tcp://127.0.0.1:PORT)")
+    me.add_argument("--tak-uids", metavar="FILE", help="TAK uid -> entity map, and [units]: uid -> unit for acknowledgements "
+                    "(configs/tak-uids.example.toml)")
+    me.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
+                    help="seconds the console stays up after the scenario's end")
+    me.set_defaults(fn=cmd_mesh)
+    me.add_argument("--topology", nargs="?", const="derive", default=None, metavar="TOML",
+                    help="routers at command posts (a topology file; without FILE: one router per battalion "
+                    "command post and one at the top, from the task organization); leaves attach as clients")
+    me.add_argument("--link-delay-ms", type=_seconds, default=None, metavar="MS",
+                    help="with --topology: one-way delay of every emulated router link")
+    me.add_argument("--link-loss", type=float, default=None, metavar="P",
+                    help="with --topology: share of segments lost (then retransmitted) on every router link")
+
+    ro = sub.add_parser("router", help="a Zenoh router (router mode) for one command post")
+    ro.add_argument("--scenario", required=True)
+    ro.add_argument("--name", required=True, help="the router's name in the topology")
+    _zenoh_args(ro)
+    ro.set_defaults(fn=cmd_router)
+
+    tp = sub.add_parser("topology", help="show (or write) a scenario's router topology")
+    tp.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    tp.add_argument("--file", metavar="TOML", help="check and show this topology instead of the derived one")
+    tp.add_argument("--out", metavar="TOML", help="write the topology as TOML")
+    tp.set_defaults(fn=cmd_topology)
+
+    from ..tak.gateway import add_arguments as tak_arguments
+    tk = sub.add_parser("tak", help="the Cursor-on-Target gateway: the mesh's picture and alerts to TAK, "
+                                    "TAK PLI in as location reports (docs/tak.md)")
+    tk.add_argument("scenario")
+    tak_arguments(tk)
+    _zenoh_args(tk)
+    tk.set_defaults(fn=cmd_tak)
+    from ..net.linkemu import add_arguments as link_arguments, cmd_link
+    li = sub.add_parser("link", help="an emulated radio link: a TCP proxy on loopback with delay, loss, "
+                                     "cut (SIGUSR1) and heal (SIGUSR2)")
+    link_arguments(li)
+    li.set_defaults(fn=cmd_link)
