@@ -16,16 +16,13 @@ monitoring goes on with the others. When it comes back its facts are taken on a 
 and what they raise is marked late."""
 from __future__ import annotations
 
-import json
 import math
 import queue
-import signal
 import sys
 import time
 from dataclasses import replace
 
 import zenoh
-import zenoh.ext as zx
 
 from dissemination.keyspace import KeySpace
 from ea_agent.core.alert import hms
@@ -46,9 +43,9 @@ from .depend import depends
 from .held import Held
 from .journal import InputJournal
 from .order import EventTimeOrder
+from .presence import PeerPresence
 from .srcjournal import ask
 from .timeline import Timeline
-from .source import CACHE
 
 BLOCK = zenoh.CongestionControl.BLOCK
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
@@ -132,9 +129,7 @@ class LivePeer:
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
         self.rebuilds = 0
         self.history: list | None = None      # journal replay: the records taken so far (else the file)
-        self.tokens: dict[str, set[str]] = {}   # another EA's unit -> its liveliness tokens now
-        self.left: set[str] = set()           # ... gone without a goodbye (said)
-        self.clean: set[str] = set()          # ... said goodbye
+        self.presence = PeerPresence(unit, self.ks, self.gate)   # the other EAs it watches
         self.restoring = False                # a restarted peer replaying its own input journal
         self.catching_up = False              # ... then taking what its sources sent while it was down
         self.heard_again: set[str] = set()    # ... the sources heard since it came back (their edge known)
@@ -213,44 +208,23 @@ class LivePeer:
 
     # -- the other EAs: who is on the mesh (liveliness tokens; a clean leave says bye) ---------
     def _alive(self, key: str, up: bool) -> None:
-        """A liveliness token of another EA came or went. Its superior, subordinates and
-        subtree are watched: when the last token of one goes without a bye (its process or
-        host died, or the link to it), one system problem; when it is back, one more. Each
-        change is a decision written to the input journal, so a replay says the same."""
-        unit, zid = (self.ks.last(key, 2) + ["", ""])[:2]
-        to = self.ea.domain.taskorg
-        if unit == self.unit or unit not in to.units or unit not in self._watched(to):
+        """A liveliness token of another EA came or went (`PeerPresence.token`): a change
+        worth saying is a decision written to the input journal, so a replay says the same."""
+        ch = self.presence.token(key, up, self.ea.domain.taskorg)
+        if ch is None:
             return
-        toks = self.tokens.setdefault(unit, set())
-        was = bool(toks)
-        (toks.add if up else toks.discard)(zid)
-        if bool(toks) == was:
-            return
-        if not toks and unit in self.clean:
-            return   # it finished and said so
-        if up and unit not in self.left:
-            return   # first seen: nothing to say
         if self.journal is not None:
-            self.journal.peer(unit, bool(toks))
-        self.peer_change(unit, bool(toks))
-
-    def _watched(self, to) -> set[str]:
-        return set(to.subtree(self.unit)) | set(to.ancestors(self.unit)[:1])
+            self.journal.peer(*ch)
+        self.peer_change(*ch)
 
     def peer_change(self, unit: str, up: bool) -> None:
         name = f"EA of {self.ea.domain.taskorg.name(unit)}"
+        self.presence.said(unit, up)
         if up:
-            self.left.discard(unit)
             self._system(unit, f"{name} is back on the mesh", "routine", event="peer-back")
         else:
-            self.left.add(unit)
             self._system(unit, f"{name} left the mesh without a goodbye (its process, host or link is down): "
                                f"its picture and confirmations no longer reach us", event="peer-lost")
-
-    def _bye(self, key: str, payload: bytes) -> None:
-        msg = self.gate.control(W.Bye, payload, key)
-        if msg is not None and self.ks.last(key) == [msg.unit]:
-            self.clean.add(msg.unit)
 
     def _flood(self, sender: str, n: int, kinds: list[str]) -> None:
         """A sender's refused messages passed a threshold: one system problem each time
@@ -684,128 +658,9 @@ class LivePeer:
 
     # -- loop ------------------------------------------------------------------------------
     def run(self, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
-        def stop(*_):
-            raise SystemExit(0)
-        signal.signal(signal.SIGTERM, stop)
-        end_wall = time.monotonic() + deadline_s if deadline_s else math.inf
-        try:
-            self.restart()
-            with zenoh.open(self.conf) as s:
-                self.session = s
-                put = self.q.put
-                # one advanced subscriber per source depended on: nothing else crosses a link to us
-                subs = [zx.declare_advanced_subscriber(
-                    s, self.ks.src(name), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
-                    history=zx.HistoryConfig(detect_late_publishers=True, max_samples=CACHE),
-                    recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True) for name in self.sources]
-                misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
-                cmds = s.declare_subscriber(self.ks.cmd(self.unit, "*", "*"),
-                                            lambda smp: put(("cmd", (str(smp.key_expr), smp.payload.to_bytes()))))
-                dirs = s.declare_subscriber(f"{self.ks.root}/dir/*/*",
-                                            lambda smp: put(("dir", (str(smp.key_expr), smp.payload.to_bytes()))))
-                dirj = s.declare_queryable(f"{self.ks.root}/dirj/{self.unit}", lambda q: put(("dirq", q)))
-                token = s.liveliness().declare_token(self.ks.alive(self.unit, str(s.info.zid())))
-                alive = s.liveliness().declare_subscriber(
-                    self.ks.alive("*", "*"), lambda smp: put(("alive", (str(smp.key_expr),
-                                                                        smp.kind == zenoh.SampleKind.PUT))),
-                    history=True)
-                byes = s.declare_subscriber(self.ks.bye("*"),
-                                            lambda smp: put(("bye", (str(smp.key_expr), smp.payload.to_bytes()))))
-                # a late joiner: the directives taken so far, from the other EAs' journals
-                s.get(f"{self.ks.root}/dirj/*", lambda r: put(("dirj", r.ok.payload.to_bytes())) if r.ok else None,
-                      consolidation=zenoh.ConsolidationMode.NONE, timeout=10.0)
-                self.log(f"ready {self.unit} sources={','.join(self.sources)}"
-                         + (f" (not depending on {','.join(sorted(set(self.named) - set(self.sources)))})"
-                            if len(self.sources) < len(self.named) else ""), flush=True)
-                started = time.monotonic()
-                next_check = 0.0
-                while not self.done() and time.monotonic() < end_wall:
-                    try:
-                        key, payload = self.q.get(timeout=0.5)
-                    except queue.Empty:
-                        key = None
-                    if key == "miss":
-                        self.misses += payload
-                        self.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
-                    elif key == "cmd":
-                        self.command(*payload)
-                    elif key == "dir":
-                        self.directive(*payload)
-                    elif key == "dirq":
-                        self._serve_directives(payload)
-                    elif key == "dirj":
-                        self._joined(payload)
-                    elif key == "alive":
-                        self._alive(*payload)
-                    elif key == "bye":
-                        self._bye(*payload)
-                    elif key is not None:
-                        self.receive(payload, key)
-                    now = time.monotonic()
-                    if key is not None and now < next_check:
-                        continue   # while frames flow, the checks below run every CHECK_S
-                    next_check = now + CHECK_S
-                    if self.hold.waiting:
-                        self._retry()
-                    if self.behind:
-                        self._refetch_behind()
-                    for src, since in list(self.hold.gap_since.items()):
-                        if now - since > GAP_WAIT_S:
-                            self._drain_held(src, force=True)
-                    for src in self.sources:   # silence: a decision, journalled
-                        last = self.heard.get(src)
-                        quiet, limit = (now - started, self.join_s) if last is None else (now - last, self.silence_s)
-                        ahead = self.promised.get(src, -math.inf) > self.order.released   # holds nothing back
-                        if src not in self.ended and src not in self.order.lost and quiet > limit and not ahead:
-                            self.lose(src, f"silent for {quiet:.0f} s" if last is not None else
-                                      f"never heard in {quiet:.0f} s")
-                    if self.live_start is not None:
-                        self._apply()
-                self._drain()   # what came with the sources' last frames is taken, not dropped
-                self.ea.finish(self.end_t())
-                self.log("end " + json.dumps({k: v for k, v in self.summary().items()
-                                              if k not in ("timeline", "alert_latencies_ms", "due_latencies_ms")},
-                                             sort_keys=True), flush=True)
-                linger_end = time.monotonic() + linger_s   # still answering commands (a late ack)
-                while (left := linger_end - time.monotonic()) > 0:
-                    try:
-                        key, payload = self.q.get(timeout=left)
-                    except queue.Empty:
-                        break
-                    if key == "cmd":
-                        self.command(*payload)
-                    elif key == "dirq":
-                        self._serve_directives(payload)
-                s.put(self.ks.bye(self.unit), W.encode(W.make(W.Bye, unit=self.unit)), congestion_control=BLOCK)
-                for x in (cmds, dirs, dirj, alive, byes, token):
-                    x.undeclare()
-                for x in (*misses, *subs):
-                    x.undeclare()
-                self.session = None
-        finally:
-            for x in (self.alog, self.nlog, self.journal, self.clog):
-                if x is not None:
-                    x.close()
-        summary = self.summary()
-        self.log("summary " + json.dumps(summary, sort_keys=True), flush=True)
-        return summary
-
-    def _drain(self) -> None:
-        """Commands and directives already queued when the sources ended (a fast replay ends
-        before what an EA published on the way reaches its peers): taken now, late if past."""
-        while True:
-            try:
-                key, payload = self.q.get_nowait()
-            except queue.Empty:
-                return
-            if key == "cmd":
-                self.command(*payload)
-            elif key == "dir":
-                self.directive(*payload)
-            elif key == "dirj":
-                self._joined(payload)
-            elif key == "dirq":
-                self._serve_directives(payload)
+        """On the mesh until the sources end (`serve.serve`)."""
+        from .serve import serve
+        return serve(self, deadline_s, linger_s)
 
     def summary(self) -> dict:
         return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.misses, "fetched": self.fetched, "dropped": self.dropped,

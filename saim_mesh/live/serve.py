@@ -1,0 +1,148 @@
+"""The live peer on the mesh: its Zenoh session and declarations (an advanced subscriber
+per source it depends on, commands, directives, the other EAs' liveliness and goodbyes), and
+the one loop that takes whatever came, in arrival order, on one thread. The logic is the
+peer's (`LivePeer`); this is only its wiring, so a journal replays through the same peer
+without any of it."""
+from __future__ import annotations
+
+import json
+import math
+import queue
+import signal
+import time
+
+import zenoh
+import zenoh.ext as zx
+
+from .. import wire as W
+from .peer import BLOCK, CHECK_S, GAP_WAIT_S
+from .source import CACHE
+
+
+def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
+    """Run `peer` on the mesh until its sources end (or `deadline_s` of wall time): its
+    subscriptions, its liveliness token, its queryable of directives, and the loop that takes
+    what comes one item at a time on this thread; its summary."""
+    def stop(*_):
+        raise SystemExit(0)
+    signal.signal(signal.SIGTERM, stop)
+    end_wall = time.monotonic() + deadline_s if deadline_s else math.inf
+    try:
+        peer.restart()
+        with zenoh.open(peer.conf) as s:
+            peer.session = s
+            put = peer.q.put
+            # one advanced subscriber per source depended on: nothing else crosses a link to us
+            subs = [zx.declare_advanced_subscriber(
+                s, peer.ks.src(name), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
+                history=zx.HistoryConfig(detect_late_publishers=True, max_samples=CACHE),
+                recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True) for name in peer.sources]
+            misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
+            cmds = s.declare_subscriber(peer.ks.cmd(peer.unit, "*", "*"),
+                                        lambda smp: put(("cmd", (str(smp.key_expr), smp.payload.to_bytes()))))
+            dirs = s.declare_subscriber(f"{peer.ks.root}/dir/*/*",
+                                        lambda smp: put(("dir", (str(smp.key_expr), smp.payload.to_bytes()))))
+            dirj = s.declare_queryable(f"{peer.ks.root}/dirj/{peer.unit}", lambda q: put(("dirq", q)))
+            token = s.liveliness().declare_token(peer.ks.alive(peer.unit, str(s.info.zid())))
+            alive = s.liveliness().declare_subscriber(
+                peer.ks.alive("*", "*"), lambda smp: put(("alive", (str(smp.key_expr),
+                                                                    smp.kind == zenoh.SampleKind.PUT))),
+                history=True)
+            byes = s.declare_subscriber(peer.ks.bye("*"),
+                                        lambda smp: put(("bye", (str(smp.key_expr), smp.payload.to_bytes()))))
+            # a late joiner: the directives taken so far, from the other EAs' journals
+            s.get(f"{peer.ks.root}/dirj/*", lambda r: put(("dirj", r.ok.payload.to_bytes())) if r.ok else None,
+                  consolidation=zenoh.ConsolidationMode.NONE, timeout=10.0)
+            peer.log(f"ready {peer.unit} sources={','.join(peer.sources)}"
+                     + (f" (not depending on {','.join(sorted(set(peer.named) - set(peer.sources)))})"
+                        if len(peer.sources) < len(peer.named) else ""), flush=True)
+            started = time.monotonic()
+            next_check = 0.0
+            while not peer.done() and time.monotonic() < end_wall:
+                try:
+                    key, payload = peer.q.get(timeout=0.5)
+                except queue.Empty:
+                    key = None
+                if key == "miss":
+                    peer.misses += payload
+                    peer.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
+                elif key == "cmd":
+                    peer.command(*payload)
+                elif key == "dir":
+                    peer.directive(*payload)
+                elif key == "dirq":
+                    peer._serve_directives(payload)
+                elif key == "dirj":
+                    peer._joined(payload)
+                elif key == "alive":
+                    peer._alive(*payload)
+                elif key == "bye":
+                    peer.presence.bye(*payload)
+                elif key is not None:
+                    peer.receive(payload, key)
+                now = time.monotonic()
+                if key is not None and now < next_check:
+                    continue   # while frames flow, the checks below run every CHECK_S
+                next_check = now + CHECK_S
+                if peer.hold.waiting:
+                    peer._retry()
+                if peer.behind:
+                    peer._refetch_behind()
+                for src, since in list(peer.hold.gap_since.items()):
+                    if now - since > GAP_WAIT_S:
+                        peer._drain_held(src, force=True)
+                for src in peer.sources:   # silence: a decision, journalled
+                    last = peer.heard.get(src)
+                    quiet, limit = (now - started, peer.join_s) if last is None else (now - last, peer.silence_s)
+                    ahead = peer.promised.get(src, -math.inf) > peer.order.released   # holds nothing back
+                    if src not in peer.ended and src not in peer.order.lost and quiet > limit and not ahead:
+                        peer.lose(src, f"silent for {quiet:.0f} s" if last is not None else
+                                  f"never heard in {quiet:.0f} s")
+                if peer.live_start is not None:
+                    peer._apply()
+            _drain(peer)   # what came with the sources' last frames is taken, not dropped
+            peer.ea.finish(peer.end_t())
+            peer.log("end " + json.dumps({k: v for k, v in peer.summary().items()
+                                          if k not in ("timeline", "alert_latencies_ms", "due_latencies_ms")},
+                                         sort_keys=True), flush=True)
+            linger_end = time.monotonic() + linger_s   # still answering commands (a late ack)
+            while (left := linger_end - time.monotonic()) > 0:
+                try:
+                    key, payload = peer.q.get(timeout=left)
+                except queue.Empty:
+                    break
+                if key == "cmd":
+                    peer.command(*payload)
+                elif key == "dirq":
+                    peer._serve_directives(payload)
+            s.put(peer.ks.bye(peer.unit), W.encode(W.make(W.Bye, unit=peer.unit)), congestion_control=BLOCK)
+            for x in (cmds, dirs, dirj, alive, byes, token):
+                x.undeclare()
+            for x in (*misses, *subs):
+                x.undeclare()
+            peer.session = None
+    finally:
+        for x in (peer.alog, peer.nlog, peer.journal, peer.clog):
+            if x is not None:
+                x.close()
+    summary = peer.summary()
+    peer.log("summary " + json.dumps(summary, sort_keys=True), flush=True)
+    return summary
+
+
+def _drain(peer) -> None:
+    """Commands and directives already queued when the sources ended (a fast replay ends
+    before what an EA published on the way reaches its peers): taken now, late if past."""
+    while True:
+        try:
+            key, payload = peer.q.get_nowait()
+        except queue.Empty:
+            return
+        if key == "cmd":
+            peer.command(*payload)
+        elif key == "dir":
+            peer.directive(*payload)
+        elif key == "dirj":
+            peer._joined(payload)
+        elif key == "dirq":
+            peer._serve_directives(payload)
