@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from saim_mesh.bench import hosts as bench_hosts
+from benchmarks import hosts as bench_hosts
 from saim_mesh.net import netns
 
 from .conftest import SMALL

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from saim_mesh.bench import intake as bench_intake
+from benchmarks import intake as bench_intake
 from saim_mesh import scenario as S
 
 SMALL = Path(__file__).resolve().parents[1] / "scenarios" / "small"

@@ -6,7 +6,7 @@ import json
 from collections import Counter
 
 from saim_mesh import messages as M
-from saim_mesh.bench.mesh import (alerts_diff, in_process_same_input, logged_alerts, merge_live, peer_inputs,
+from benchmarks.mesh import (alerts_diff, in_process_same_input, logged_alerts, merge_live, peer_inputs,
                                   source_streams)
 from saim_mesh.live.depend import cp_shares
 from saim_mesh.runner import config_for, make_ea

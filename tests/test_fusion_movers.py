@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from saim_mesh.bench import fusion as B
+from benchmarks import fusion as B
 from saim_mesh.fusion.datasets import DATASETS
 from saim_mesh.fusion.tracker import KalmanTracker, Track
 

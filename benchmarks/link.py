@@ -14,8 +14,8 @@ import threading
 import time
 from pathlib import Path
 
-from ..proc import Proc, clean_env, py
-from .. import results
+from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh import results
 
 OUT = Path(__file__).resolve().parents[2] / "bench" / "results" / "link.json"
 

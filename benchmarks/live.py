@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from ..stats import percentiles
+from saim_mesh.stats import percentiles
 
 
 def main(argv=None) -> int:
@@ -32,12 +32,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out-dir", default="out/bench-live")
     ap.add_argument("--out", default="bench/results/live.json")
     a = ap.parse_args(argv)
-    from .. import scenario as S
-    from ..live.journal import replay
-    from ..live.peer import LivePeer
-    from ..live.up import cp_sources, up
-    from ..runner import config_for
-    from ..zconf import config
+    from saim_mesh import scenario as S
+    from saim_mesh.live.journal import replay
+    from saim_mesh.live.peer import LivePeer
+    from saim_mesh.live.up import cp_sources, up
+    from saim_mesh.runner import config_for
+    from saim_mesh.zconf import config
     sc = S.load(a.scenario)
     until = a.minutes * 60.0
     start = time.time() + 25.0

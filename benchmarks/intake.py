@@ -16,10 +16,10 @@ import sys
 import time
 from pathlib import Path
 
-from .. import scenario as S
+from saim_mesh import scenario as S
 from .ea import feed
-from ..offline import run, stream
-from ..runner import config_for, make_ea
+from saim_mesh.offline import run, stream
+from saim_mesh.runner import config_for, make_ea
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -46,7 +46,7 @@ def _iso(t: float) -> str:
 
 
 def _cli(args: list[str], what: str, timeout: float = 600) -> str:
-    from ..proc import clean_env, py
+    from saim_mesh.proc import clean_env, py
     r = subprocess.run([*py(), *args], capture_output=True, text=True, env=clean_env(), timeout=timeout, cwd=ROOT)
     if r.returncode != 0:
         raise RuntimeError(f"{what}: exit {r.returncode}: {(r.stderr or r.stdout).strip()[-2000:]}")
@@ -56,7 +56,7 @@ def _cli(args: list[str], what: str, timeout: float = 600) -> str:
 def deployment(scenario: str, out: Path, pki: Path) -> dict:
     """`deploy init` (no consoles) + `certs --deploy`; the file's hosts as parsed."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    from ..net import netns
+    from saim_mesh.net import netns
     _cli(["deploy", "init", scenario, "--out", str(out), "--addresses", netns.SUBNET, "--no-consoles",
           "--pki", str(pki)], "deploy init")
     _cli(["certs", "--deploy", str(out)], "certs --deploy")
@@ -76,7 +76,7 @@ def with_pace(base: Path, out: Path, speed: float, start: float, until: float | 
 
 def iface_bytes(hs, host: str) -> dict:
     """The host's eth0 counters: tx = up (host -> bridge), rx = down."""
-    from ..net import netns
+    from saim_mesh.net import netns
     d = json.loads(netns.sh(["ip", "-n", hs[host].netns, "-s", "-j", "link", "show", netns.IFACE], "link stats"))
     s = d[0]["stats64"]
     return {"up_bytes": s["tx"]["bytes"], "down_bytes": s["rx"]["bytes"], "up_packets": s["tx"]["packets"],
@@ -110,8 +110,8 @@ def run_hosts(base: Path, hosts: dict, run_dir: Path, speed: float, until: float
               kill: tuple[str, float, float] | None = None, grace: float = 180.0, log=print) -> dict:
     """One run over fresh namespaced hosts; returns what was measured (and writes each host's
     summary.json under run_dir/hosts/<H>/)."""
-    from ..net import netns
-    from ..proc import Proc, clean_env, py
+    from saim_mesh.net import netns
+    from saim_mesh.proc import Proc, clean_env, py
     run_dir.mkdir(parents=True, exist_ok=True)
     hdir = run_dir / "hosts"
     shutil.rmtree(hdir, ignore_errors=True)
@@ -265,8 +265,8 @@ def merge(run_dir: Path, hosts: dict, start: float, killed: str | None = None, k
 
 def in_process(scenario: str, units: list[str], until: float | None) -> dict[str, list]:
     """Every unit's alerts in process, sorted as bench/partition.py keys them (up to `until`)."""
-    from .. import scenario as S
-    from ..runner import run
+    from saim_mesh import scenario as S
+    from saim_mesh.runner import run
     sc = S.load(scenario)
     if until is not None:   # the peers go on to the scenario's end on no more facts: so does this run
         sc.events = [e for e in sc.events if e.t <= until]
@@ -360,9 +360,9 @@ def main(argv=None) -> int:
     ap.add_argument("--equal-from", metavar="JSON", help="with --analyze-only: the in-process comparison of an "
                     "earlier analysis of the same fault-free run (when the EA's code changed since the runs)")
     a = ap.parse_args(argv)
-    from .. import scenario as S
-    from ..net import netns
-    from ..ondemand import ensure
+    from saim_mesh import scenario as S
+    from saim_mesh.net import netns
+    from saim_mesh.ondemand import ensure
     if why := netns.unavailable():
         print(f"bench_hosts: skipped: no namespaced hosts here: {why}")
         return 3
@@ -486,7 +486,7 @@ def main(argv=None) -> int:
                             "times_real_time": r["times_real_time"], "hosts_not_done": r.get("not_done", [])}
     silence = None
     with contextlib.suppress(Exception):
-        from ..runner import config_for
+        from saim_mesh.runner import config_for
         sc_full = S.load(scenario, events=False)
         silence = float(config_for(sc_full, sc_full.taskorg.root)["mesh"]["source_silence_s"])
     out["targets"] = {"times_real_time": 1.0, "alerts_equal_in_process": True, "hosts": 5,

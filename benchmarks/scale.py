@@ -27,18 +27,18 @@ from pathlib import Path
 
 import zenoh
 
-from ..net import routed
-from ..net import topology as T
-from ..mesh import Supervisor, mesh_units, start_replay, up
-from ..proc import Proc, clean_env
-from ..procstat import Sampler
+from saim_mesh.net import routed
+from saim_mesh.net import topology as T
+from saim_mesh.mesh import Supervisor, mesh_units, start_replay, up
+from saim_mesh.proc import Proc, clean_env
+from saim_mesh.procstat import Sampler
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _inproc(args: tuple[str, list[str]]) -> dict[str, list[str]]:
-    from .. import scenario as S
-    from ..runner import run
+    from saim_mesh import scenario as S
+    from saim_mesh.runner import run
     scenario, units = args
     return {ea.owner: [json.dumps(a.to_json_dict(), sort_keys=True) for a in ea.alerts]
             for ea in run(S.load(scenario), units)}
@@ -69,7 +69,7 @@ def plan_lines(path: Path) -> list[str]:
 
 def role_tap(connect: str, root: str, conf_args: list[str]) -> None:
     """Subscribe to everything behind one router and count it per key family until SIGTERM."""
-    from ..zconf import config
+    from saim_mesh.zconf import config
     conf = config(None, [connect], mode="client")
     counts: Counter = Counter()
     nbytes: Counter = Counter()
@@ -93,7 +93,7 @@ def role_tap(connect: str, root: str, conf_args: list[str]) -> None:
 def flood(scenario: str, out: Path, link: dict) -> dict:
     """Routers, links and the replay (no EA peers) with a subscriber to everything behind
     each router: what a flood would put on each link, in the same run as the real thing."""
-    from .. import scenario as S
+    from saim_mesh import scenario as S
     sc = S.load(scenario, events=False)
     out.mkdir(parents=True, exist_ok=True)
     (out / "logs").mkdir(exist_ok=True)
@@ -102,7 +102,7 @@ def flood(scenario: str, out: Path, link: dict) -> dict:
     sup = Supervisor(lambda *a, **k: None, 0, pids_path=out / "pids.json")
     try:
         eps, link_files, resolved = routed.start(scenario, topo, out, root, sup, None, link)
-        taps = {n: sup.add(Proc(f"tap-{n}", [sys.executable, "-m", "saim_mesh.bench.scale", "--role", "tap",
+        taps = {n: sup.add(Proc(f"tap-{n}", [sys.executable, "-m", "benchmarks.scale", "--role", "tap",
                                              "--connect", ep, "--root", root], env=clean_env(),
                                 log_dir=out / "logs")) for n, ep in eps.items()}
         for p in taps.values():
@@ -204,8 +204,8 @@ def main(argv=None) -> int:
     if a.role == "tap":
         role_tap(a.connect, a.root, [])
         return 0
-    from .. import scenario as S
-    from ..ondemand import ensure
+    from saim_mesh import scenario as S
+    from saim_mesh.ondemand import ensure
     scenario = a.scenario or str(ensure("brigade", ROOT / "out" / "scenarios"))
     tmp = Path(a.tmp)
     sc = S.load(scenario, events=False)
@@ -230,7 +230,7 @@ def main(argv=None) -> int:
     for f in trace.glob("*"):
         f.unlink()
     os.environ["SAIM_TRACE"] = str(trace)   # peers and the replay say what they took from the wire
-    from .. import zygote
+    from saim_mesh import zygote
     zyg = lambda: {"zygote": zygote._shared.p.pid} if zygote._shared is not None and zygote._shared.alive() else {}  # noqa
     with Sampler(res_path / "pids.json", extra=zyg) as smp:
         res = up(scenario, None, res_path, "max", topology="derive", link=link, insecure=a.insecure,
@@ -278,8 +278,8 @@ def live_phase(scenario: str, tmp: Path, link: dict, insecure: bool, units: list
     """The brigade as the mesh with no centre: a source per command post at max speed, a
     router per battalion command post, every EA depending only on what its interest needs;
     wall time, peak PSS per EA peer, bytes per router link, alerts against in-process."""
-    from .. import zygote
-    from ..live.up import up as live_up
+    from saim_mesh import zygote
+    from saim_mesh.live.up import up as live_up
     zyg = lambda: {"zygote": zygote._shared.p.pid} if zygote._shared is not None and zygote._shared.alive() else {}  # noqa
     tmp.mkdir(parents=True, exist_ok=True)
     with Sampler(tmp / "pids.json", extra=zyg) as smp:
@@ -288,7 +288,7 @@ def live_phase(scenario: str, tmp: Path, link: dict, insecure: bool, units: list
     procs = smp.report()
     peers = res["peers"]
     sc_s = json.loads((tmp / "summary.json").read_text()).get("wall_s", res["wall_s"])
-    from .. import scenario as S
+    from saim_mesh import scenario as S
     dur = S.load(scenario, events=False).duration_s
     pss = [procs.get(u, {}).get("pss_mb") for u in peers]
     pss = [x for x in pss if x]

@@ -29,7 +29,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from ..stats import percentiles
+from saim_mesh.stats import percentiles
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -53,7 +53,7 @@ def _alerts(path: Path) -> list[dict]:
 
 def run(scenario: str, out_dir: Path, speed: float, link_name: str | None, cut_from: float, cut_s: float,
         timeout: float) -> tuple[dict, dict]:
-    from ..live.up import up
+    from saim_mesh.live.up import up
     cut: dict = {}
 
     def on_started(sup, paced_start) -> None:
@@ -91,11 +91,11 @@ def main(argv=None) -> int:
                     help="no runs: the figures from the runs already in --out-dir (cut at its scheduled instant)")
     ap.add_argument("--out", default="bench/results/partition.json")
     a = ap.parse_args(argv)
-    from .. import scenario as S
-    from ..net import topology as T
-    from ..live.up import cp_sources
-    from ..ondemand import ensure
-    from ..runner import config_for, run as run_in_process
+    from saim_mesh import scenario as S
+    from saim_mesh.net import topology as T
+    from saim_mesh.live.up import cp_sources
+    from saim_mesh.ondemand import ensure
+    from saim_mesh.runner import config_for, run as run_in_process
     scenario = a.scenario or str(ensure("brigade-small", ROOT / "out" / "scenarios"))
     sc = S.load(scenario)
     topo = T.derive(sc.taskorg)

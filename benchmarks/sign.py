@@ -17,10 +17,10 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from dissemination.keyspace import KeySpace
 
-from .. import messages as M
-from .. import wire as W
-from ..security import sign as G
-from .. import results
+from saim_mesh import messages as M
+from saim_mesh import wire as W
+from saim_mesh.security import sign as G
+from saim_mesh import results
 
 ROOT = Path(__file__).resolve().parents[2]
 

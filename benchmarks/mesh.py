@@ -30,17 +30,17 @@ from dissemination.exact import exact
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 
-from .. import batch as B
-from .. import messages as M
-from .. import scenario as S
-from .. import wire as W
-from .. import zygote
+from saim_mesh import batch as B
+from saim_mesh import messages as M
+from saim_mesh import scenario as S
+from saim_mesh import wire as W
+from saim_mesh import zygote
 from .ea import feed
-from ..procstat import Sampler
-from ..mesh import Proc, start_peer, up
-from ..proc import leaf_env
-from ..runner import config_for, make_ea, run
-from ..zconf import config, free_port
+from saim_mesh.procstat import Sampler
+from saim_mesh.mesh import Proc, start_peer, up
+from saim_mesh.proc import leaf_env
+from saim_mesh.runner import config_for, make_ea, run
+from saim_mesh.zconf import config, free_port
 
 RAW_ROOT = "bench/raw"
 
@@ -121,12 +121,12 @@ def role_sub(endpoint: str, subs_path: str) -> None:
 
 def raw_baseline(scenario: str, n: int, subs_path: Path) -> dict:
     ep = f"tcp/127.0.0.1:{free_port()}"
-    pub = subprocess.Popen([sys.executable, "-m", "saim_mesh.bench.mesh", "--role", "pub", "--endpoint", ep,
+    pub = subprocess.Popen([sys.executable, "-m", "benchmarks.mesh", "--role", "pub", "--endpoint", ep,
                             "--n", str(n), "--scenario", scenario], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                            text=True)
     try:
         assert pub.stdout.readline().startswith("ready")
-        sub = Proc("sub", [sys.executable, "-m", "saim_mesh.bench.mesh", "--role", "sub", "--endpoint", ep,
+        sub = Proc("sub", [sys.executable, "-m", "benchmarks.mesh", "--role", "sub", "--endpoint", ep,
                            "--subs", str(subs_path)])
         try:
             sub.wait_for("ready", 30)
@@ -204,8 +204,8 @@ def alerts_diff(got: list[tuple], want: list[tuple]) -> dict | None:
 def source_streams(sc) -> dict[str, list]:
     """What each command post's source publishes of the scenario (`play.share`), less what
     its own watermark refuses (`play.publish` skips a message not after it)."""
-    from ..live.depend import cp_shares
-    from ..live.play import EPOCH_S, share
+    from saim_mesh.live.depend import cp_shares
+    from saim_mesh.live.play import EPOCH_S, share
     import math
     out = {}
     for name, sh in cp_shares(sc).items():
@@ -222,7 +222,7 @@ def source_streams(sc) -> dict[str, list]:
 def peer_inputs(sc, ea, streams: dict[str, list]) -> list:
     """The messages a live peer's EA is given: those of the sources it depends on, in the
     order's (t, source, seq, index) order (`live.order.EventTimeOrder`)."""
-    from ..live.depend import depends
+    from saim_mesh.live.depend import depends
     deps = depends(sc, ea, sorted(streams))
     keyed = [(m.t, name, i, m) for name in deps for i, m in enumerate(streams[name])]
     keyed.sort(key=lambda x: x[:3])
@@ -252,8 +252,8 @@ def journal_replay(sc, units: list[str], out_dir: Path, root: str, sources: list
     """Each peer's input journal replayed through a fresh `LivePeer` with no session (frame
     and message decoding, the gate, the order, the EA; no Zenoh, no queue, no files):
     main-thread CPU seconds and messages its EA took."""
-    from ..live.journal import replay
-    from ..live.peer import LivePeer
+    from saim_mesh.live.journal import replay
+    from saim_mesh.live.peer import LivePeer
     out = {}
     for u in units:
         peer = LivePeer(sc, u, config(["tcp/127.0.0.1:0"], None), root, sources, log=lambda *a, **k: None)
@@ -265,7 +265,7 @@ def journal_replay(sc, units: list[str], out_dir: Path, root: str, sources: list
 
 def live_scenario(scenario: str, out_dir: Path) -> dict:
     """One scenario through the live mesh, against the in-process runs in the same process."""
-    from ..live.up import up as live_up
+    from saim_mesh.live.up import up as live_up
     sc = S.load(scenario)
     name = Path(scenario).name
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -32,8 +32,8 @@ import numpy as np
 from ea_agent.core.geo import Projection
 from ea_agent.domains.uv import load_uv_config, make_ea
 
-from .. import messages as M
-from .. import scenario as S
+from saim_mesh import messages as M
+from saim_mesh import scenario as S
 
 ROOT = Path(__file__).resolve().parents[2]
 EPSG, LON0, LAT0 = 32611, -116.60, 35.26
@@ -116,8 +116,8 @@ def pct(xs: list[float]) -> dict:
 
 def detection_delays(folder: Path = ROOT / "scenarios" / "uv-team") -> dict:
     """Scenario seconds from each true incident's onset to the first alert matching it."""
-    from ..evaluate import _matches
-    from ..runner import run
+    from saim_mesh.evaluate import _matches
+    from saim_mesh.runner import run
     sc = S.load(folder)
     truth = sc.truth()
     alerts = [a for ea in run(sc, truth["owners"]) for a in ea.alerts]
@@ -139,8 +139,8 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
     delays on that run."""
     from ea_agent.domains.uv import generator as G
 
-    from ..evaluate import evaluate
-    from ..robots.team import run_team
+    from saim_mesh.evaluate import evaluate
+    from saim_mesh.robots.team import run_team
     out = Path(tempfile.mkdtemp(prefix="uvloop-"))
     res = run_team(out, timeout=timeout, echo=lambda *a, **k: None)
     loop, _ = G.simulate(out)
@@ -166,7 +166,7 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
 def mesh_latency(n: int, duration_s: float, timeout: float = 400.0) -> dict:
     """The team on the mesh at real time: every robot's and the operator's peer, over a
     scenario as long as the run (peers reject an end of time before the scenario's)."""
-    from ..mesh import up
+    from saim_mesh.mesh import up
     folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), n, duration_s)
     sc = S.load(folder, events=False)
     out = Path(tempfile.mkdtemp(prefix="uvbench-"))

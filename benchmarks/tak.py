@@ -17,11 +17,11 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .. import messages as M
-from .. import scenario as S
-from ..tak import cot as C
-from ..tak.picture import Options, Picture
-from .. import results
+from saim_mesh import messages as M
+from saim_mesh import scenario as S
+from saim_mesh.tak import cot as C
+from saim_mesh.tak.picture import Options, Picture
+from saim_mesh import results
 
 ROOT = Path(__file__).resolve().parents[2]
 EPOCH = datetime(2026, 5, 1, 6, 0, 0, tzinfo=timezone.utc)

@@ -17,8 +17,8 @@ from pathlib import Path
 from ea_agent.core.config import load_config
 from ea_agent.domains.suo import make_ea
 
-from .. import messages as M
-from .. import scenario as S
+from saim_mesh import messages as M
+from saim_mesh import scenario as S
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import scenario as S
-from ..fusion.datasets import DATASETS, DataSet
-from ..fusion.tracker import KalmanTracker
+from saim_mesh import scenario as S
+from saim_mesh.fusion.datasets import DATASETS, DataSet
+from saim_mesh.fusion.tracker import KalmanTracker
 
 ROOT = Path(__file__).resolve().parents[2]
 SS_Q = {"ground": 0.5, "air": 40.0}          # Stone Soup's process noise by the data set's class
@@ -61,8 +61,8 @@ def run_kalman(ds: DataSet, window_s: float = 5.0) -> tuple[list[tuple], float]:
 
 def run_window(ds: DataSet) -> tuple[list[tuple], float]:
     """The averager (node.py) needs lon/lat: an identity-like projection stands in."""
-    from ..fusion.node import FusionNode
-    from ..messages import SensorHit
+    from saim_mesh.fusion.node import FusionNode
+    from saim_mesh.messages import SensorHit
 
     class Flat:   # metres as 'degrees': the averager only projects and unprojects
         def to_xy(self, lon, lat):
@@ -184,14 +184,14 @@ def battalion(path: Path) -> tuple[DataSet, dict]:
     """The battalion-with-sensors hits as a data set in metres, its truths the hostile
     groups' true centres (the simulator's), each group one object."""
     from ea_agent.domains.suo.generator import ORIGIN_LONLAT, build_sim
-    from ..messages import SensorHit
+    from saim_mesh.messages import SensorHit
     sc = S.load(path)
     g = sc.meta["generator"]
     sim = build_sim(g["small"], g["seed"])
     ox, oy = sc.projection.to_xy(*ORIGIN_LONLAT)
     hs = [e for e in sc.events if type(e) is SensorHit]
     x, y = sc.projection.to_xy(np.array([h.lon for h in hs]), np.array([h.lat for h in hs]))
-    from ..fusion.datasets import Hit
+    from saim_mesh.fusion.datasets import Hit
     hits = [Hit(h.t, h.sensor, float(a) - ox, float(b) - oy, None) for h, a, b in zip(hs, x, y)]
     truths = {k: (lambda t, h=h: h.pos(t)) for k, h in sim.hostiles.items()}
     sigma = {s["id"]: float(s["sigma_m"]) for s in sc.meta["fusion"]["sensors"]}
