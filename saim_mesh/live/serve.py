@@ -66,19 +66,11 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 if key == "miss":
                     peer.misses += payload
                     peer.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
-                elif key == "cmd":
-                    peer.command(*payload)
-                elif key == "dir":
-                    peer.directive(*payload)
-                elif key == "dirq":
-                    peer._serve_directives(payload)
-                elif key == "dirj":
-                    peer._joined(payload)
                 elif key == "alive":
                     peer._alive(*payload)
                 elif key == "bye":
                     peer.presence.bye(*payload)
-                elif key is not None:
+                elif key is not None and not _authority(peer, key, payload):
                     peer.receive(payload, key)
                 now = time.monotonic()
                 if key is not None and now < next_check:
@@ -138,11 +130,20 @@ def _drain(peer) -> None:
             key, payload = peer.q.get_nowait()
         except queue.Empty:
             return
-        if key == "cmd":
-            peer.command(*payload)
-        elif key == "dir":
-            peer.directive(*payload)
-        elif key == "dirj":
-            peer._joined(payload)
-        elif key == "dirq":
-            peer._serve_directives(payload)
+        _authority(peer, key, payload)
+
+
+def _authority(peer, key: str, payload) -> bool:
+    """A commander's command or a directive (or a late joiner's question or answer about
+    them) taken; False for anything else."""
+    if key == "cmd":
+        peer.command(*payload)
+    elif key == "dir":
+        peer.directive(*payload)
+    elif key == "dirj":
+        peer._joined(payload)
+    elif key == "dirq":
+        peer._serve_directives(payload)
+    else:
+        return False
+    return True
