@@ -99,7 +99,8 @@ def test_a_decision_is_taken_from_the_alert_that_asks_for_it(console):
         d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", asks[0])   # in a scrolled pane
         buttons = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#details .decision button.decide"))
         options = [b.get_attribute("data-option") for b in buttons]
-        assert options[0] == "execute:BN-branch-ABF" and set(options) == {"abort", "execute:BN-branch-ABF", "continue"}
+        branch = "execute:BN-branch-disrupt"
+        assert options[0] == branch and set(options) == {"abort", branch, "continue"}
         assert "recommended" in buttons[0].get_attribute("class")
         go_on = next(b for b in buttons if b.get_attribute("data-option") == "continue")
         d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", go_on)

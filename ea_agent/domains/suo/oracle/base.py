@@ -147,7 +147,10 @@ class TruthBase:
                                      for x, y, r in ((*self.sim.sensor_xy(sid, t), r) for sid, r in self.sim.sensors))
 
     def owners_of(self, unit: str, t: float) -> list[str]:
-        return [o for o in self.owners if unit in self.subtree(o, t)]
+        """The EAs whose units include `unit` (while a triggered contingency's task is judged:
+        only the contingency's owner, the one EA that holds and executes it)."""
+        only = getattr(self, "only", None)
+        return [o for o in self.owners if unit in self.subtree(o, t) and (only is None or o == only)]
 
     # -- recording ----------------------------------------------------------------------
 

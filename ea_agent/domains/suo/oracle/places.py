@@ -176,9 +176,9 @@ class Places:
                 geo = geometry_params(m["type"])
                 for key in ("engagement_area", "area"):
                     a = m["params"].get(key)
-                    if a and key in geo and not (m["type"] in PENETRATION and PENETRATION[m["type"]] == key):
+                    if a and key in geo and key not in PENETRATION.get(m["type"], ()):
                         watch.append((a, "monitored", mid))
-                held = m["params"].get(PENETRATION.get(m["type"], ""))
+                held = next((m["params"][k] for k in PENETRATION.get(m["type"], ()) if m["params"].get(k)), None)
                 if held:
                     watch.append((held, "penetration", mid))
             for area, typ, mid in watch:
