@@ -58,6 +58,8 @@ class Assumptions(Detector):
             m, sup, halt_s, watched, hist, assumed = w
             if assumed is not None or state.get(mid) != "active" or not dom.in_plan(m):
                 continue
+            if not (sup in ch.units or ch.rescan):
+                continue   # looked at when the supported unit reports, or on the scan (the same epochs in every peer)
             if watched is not None and state.get(watched) == "aborted":
                 self._assume(w, watched, t, "its mission aborted", cands)
                 continue
@@ -65,7 +67,7 @@ class Assumptions(Detector):
             if now != watched:   # its next mission (or none): a halt is measured from its start
                 w[3], watched = now, now
                 hist.clear()
-            if watched is None or not (sup in ch.units or ch.rescan):
+            if watched is None:
                 continue
             goal = goal_of(dom.missions[watched])
             pos = dom.unit_pos.get(sup)

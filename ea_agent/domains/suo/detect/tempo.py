@@ -28,9 +28,15 @@ class Tempo(Detector):
 
     def post(self, m: Mission, avenue: str, by: float, tempo_mps: float) -> None:
         self.watch[m.id] = [m, avenue, by, tempo_mps, {}, False]
+        self.dom.areas.reindex()   # its avenue is watched for tracks (what this EA hears of them)
 
     def end_mission(self, mid: str) -> None:
-        self.watch.pop(mid, None)
+        if self.watch.pop(mid, None) is not None:
+            self.dom.areas.reindex()
+
+    def areas(self) -> set[str]:
+        """The avenues watched for the enemy's tempo."""
+        return {w[1] for w in self.watch.values()}
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
