@@ -17,7 +17,7 @@ from ea_agent.domains.suo.messages import LocationReport
 from ea_agent.domains.suo.missions import REGISTRY, Occupy
 from saim_mesh import cli
 
-from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, box, end, line, ll, mission, near, play, start, track,
+from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, box, end, feed, line, ll, mission, near, play, start, track,
                         track_path)
 
 FORCE = Force(name="mission-classes")
@@ -279,6 +279,27 @@ def test_the_assumed_mission_is_monitored_as_the_followers_own(tmp_path):
 def test_a_follower_whose_supported_unit_keeps_moving_assumes_nothing(tmp_path):
     ea = _assuming(tmp_path, "follow-and-assume", _keeps_going)
     assert not of(ea, "contingency")
+
+
+def test_a_supported_unit_standing_at_its_goal_has_arrived_not_halted(tmp_path):
+    ea = _assuming(tmp_path, "follow-and-assume", lambda t: (min(6000.0, 20.0 * max(0.0, t - 100.0)), 0.0))
+    assert not of(ea, "contingency")
+
+
+def test_a_follower_assumes_the_mission_of_a_unit_committed_elsewhere(tmp_path):
+    """The supported unit's mission aborted (its commander's decision): assumed at once."""
+    ms = [mission("A1-move", "A1", "move", destination="DEST-FAR"),
+          mission("A2-follow", "A2", "follow-and-assume", supported="A1", destination="DEST-BEHIND")]
+    sc = scenario(tmp_path, [DEST_FAR, DEST_BEHIND], ms)
+    msgs = (path("A1", 10, 600, _keeps_going) + path("A2", 10, 600, lambda t: (_keeps_going(t)[0] - 500.0, 0.0))
+            + [start(100, "A1-move", "A1"), start(100, "A2-follow", "A2")])
+    ea = feed(sc, msgs, 300)
+    ea.domain._abort("A1-move")
+    ea = feed(sc, msgs, 600, ea=ea, since=300)
+    ea.finish(600)
+    c = of(ea, "contingency", "assume")
+    assert len(c) == 1 and 300 < c[0].t <= 300 + REPORT_S + 2 * EPOCH, [(a.t, a.message) for a in ea.alerts]
+    assert c[0].details["why"] == "its mission aborted" and c[0].details["assumed"] == "A1-move"
 
 
 def test_follow_and_support_never_assumes(tmp_path):
