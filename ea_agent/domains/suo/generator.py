@@ -402,7 +402,9 @@ def overlay_features() -> list[dict]:
     for name, y in (("SP-B1", 0), ("CP-B1", 3500), ("RP-B1", 7000)):   # B1's march table
         add(name, "checkpoint", "Point", [LANE_X["B1"], y], "B", radius_m=250)
     add("CP-C", "checkpoint", "Point", [10650, 11000], "C", radius_m=300)
-    add("PL-B1-BLOCK", "phase-line", "LineString", [[4000, 12000], [8000, 12000]], "B")   # a blocking line
+    # a line B1 may block instead of its position: in front of BP-B1, across its lane west of the
+    # avenue down x = 6000 (groups that halt just short of a line would be projected to cross it)
+    add("PL-B1-BLOCK", "phase-line", "LineString", [[4000, 11450], [5000, 11450]], "B")
     return F
 
 

@@ -111,5 +111,12 @@ def _draw_tasks(sim: Sim, rng: np.random.Generator) -> None:
         d.append({"kind": "halt", "unit": "A2", "t": at, "hold_s": hold, "y": y})
     sim.block_line = bool(rng.random() < 0.5)
     sim.area_recon = bool(rng.random() < 0.5)
+    if sim.block_line:   # a small group infiltrating south through B1's lane, across its blocking line
+        x, appear, speed = 4500.0 + u(-300, 300), u(3500, 4300), float(rng.uniform(2.5, 4.0))
+        arrive = appear + round(4000.0 / speed)
+        sim.hostiles["H20"] = Hostile("H20", [appear, arrive], [x, x], [13500.0, 9500.0], int(rng.integers(2, 5)),
+                                      appear)
+        d.append({"kind": "hostile", "id": "H20", "from": [x, 13500.0], "to": [x, 9500.0], "appear": appear,
+                  "arrive": arrive, "strength": sim.hostiles["H20"].strength, "crosses": "PL-B1-BLOCK"})
     d.append({"kind": "tasks", "B1_blocks": "PL-B1-BLOCK" if sim.block_line else "BP-B1",
               "R_recon": "area-reconnaissance" if sim.area_recon else "zone-reconnaissance"})

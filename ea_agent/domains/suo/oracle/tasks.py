@@ -24,9 +24,9 @@ class Tasks:
         escape, end state, the engagement area in weapons range, the distance band."""
         for mid, m in self.missions.items():
             typ, p = m["type"], m["params"]
-            self.only = None
+            self.only, self.soft = None, False
             if typ in CONTINGENT and mid in self.task_started:   # a triggered task is judged as its own type
-                self.only = p["owner"]                           # by the EA that holds it
+                self.only, self.soft = p["owner"], mid in self.task_soft   # by the EA that holds it
                 typ, p = p["task"], p.get("task_params", {})
                 m = {**m, "type": typ, "params": p}
             if typ == "support-by-fire" and p.get("supported"):
@@ -69,7 +69,7 @@ class Tasks:
                 self._line(mid, m, p["line"], float(p["until"]), s, e, hold=True)
             if typ == "breach" and p.get("obstacle"):
                 self._line(mid, m, p["obstacle"], float(p["by"]), s, e, hold=False, toward=p["objective"])
-        self.only = None
+        self.only, self.soft = None, False
 
     def _held(self, mid, m, position, s, e) -> None:
         """A position its mission must hold: some friendly element (anyone's) in it while it runs;
