@@ -390,6 +390,9 @@ class SuoDomain:
     def post_assume(self, m: Mission, supported: str, halt_s: float) -> None:
         self.assume.post(m, supported, halt_s)
 
+    def start_recon(self, m: Mission) -> None:
+        self.recon.start(m)
+
     def check_recon(self, m: Mission, t: float) -> None:
         self.recon.check_final(m, t)
 

@@ -71,12 +71,20 @@ class ReconProgress(Detector):
         self.watch[m.id] = w = _Recon(m, area, cells, np.zeros(len(cells), dtype=bool), by, progress)
         self._look(w)   # what it sees from where it starts
 
-    def _orient(self, w: _Recon) -> None:
-        """A zone's depth runs from where its unit is (when first known while the mission runs)
-        towards the zone's centre: bands `recon_cell_m` deep across that direction."""
+    def start(self, m: Mission) -> None:
+        """The mission started: a zone is oriented from where its unit is now (the picture as of
+        the confirmation, the same in every peer)."""
+        w = self.watch.get(m.id)
+        if w is not None:
+            self._orient(w, self.dom.pic.centroid(m.unit))
+
+    def _orient(self, w: _Recon, pos: tuple[float, float] | None = None) -> None:
+        """A zone's depth runs from where its unit is at its start (or, unknown then, when first
+        known while the mission runs) towards the zone's centre: bands `recon_cell_m` deep across
+        that direction."""
         if w.progress != "depth" or w.bands is not None:
             return
-        pos = self.dom.unit_pos.get(w.m.unit)
+        pos = pos or self.dom.unit_pos.get(w.m.unit)
         if pos is None:
             return
         c = self.dom.overlay[w.area].area.centroid

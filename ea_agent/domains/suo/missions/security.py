@@ -84,6 +84,10 @@ class ReconnaissanceMission(SecurityMission):
         super().location_constraints(ctx)
         ctx.post_recon(self, self.params["area"], self.by(), self.PROGRESS)
 
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        ctx.start_recon(self)
+
     def check_final_location(self, ctx, t):
         super().check_final_location(ctx, t)
         ctx.check_recon(self, t)
