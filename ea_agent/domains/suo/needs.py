@@ -36,13 +36,15 @@ def needs(dom, radius_m: float) -> Needs:
             circles.append((p[0], p[1], radius_m))
     places, followed = planned(dom)
     boxes = tuple(dom.overlay[a].area.bounds for a in sorted(dom.watched_areas()))
-    boxes += tuple(dom.overlay[a].area.buffer(LINGER_M).bounds for a in sorted(places))
+    # the hostile tracks there (only the tracks: own and friendly reports there are not what these checks read)
+    ahead = tuple(dom.overlay[a].area.buffer(LINGER_M).bounds for a in sorted(places))
     paths = {to.path(dom.owner)} | {to.path(u) for u in followed if u in to.units and u not in dom.own_units}
     return Needs(TEMPLATES, by={"path": frozenset(paths),
                                 "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
                                 "requester": frozenset({dom.owner}),
                                 "unit": frozenset(units)},
-                 circles=tuple(circles), boxes=boxes, whole=("org",))
+                 circles=tuple(circles), boxes=boxes, whole=("org",),
+                 only=((SensorTrack.KEY, ahead),) if ahead else ())
 
 
 class _Posts:
