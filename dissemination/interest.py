@@ -37,13 +37,16 @@ class Interest:
         fl = math.floor
         spans = tuple((fl((x - r) / size), fl((x + r) / size), fl((y - r) / size), fl((y + r) / size))
                       for x, y, r in needs.circles)
-        boxes = tuple((fl(b[0] / size), fl(b[1] / size), fl(b[2] / size), fl(b[3] / size)) for b in needs.boxes)
-        return (needs.templates, tuple(sorted(needs.by.items())), needs.whole, spans, boxes)
+        cells = lambda bs: tuple((fl(b[0] / size), fl(b[1] / size), fl(b[2] / size), fl(b[3] / size))   # noqa: E731
+                                 for b in bs)
+        only = tuple((text, cells(bs)) for text, bs in needs.only)
+        return (needs.templates, tuple(sorted(needs.by.items())), needs.whole, spans, cells(needs.boxes), only)
 
     def of(self, needs) -> set[str]:
         r = self.ks.root
         out = {self.ks.clock()} | {f"{r}/{fam}/**" for fam in needs.whole}
         places = self._places(needs)
+        only = dict(needs.only)
         for text in needs.templates:
             tpl = self._tpl.get(text) or self._tpl.setdefault(text, Template(text))
             if tpl.family in needs.whole:
@@ -52,17 +55,18 @@ class Interest:
                 if name in tpl.names:
                     out.update(f"{r}/{tpl.expr({name: v})}" for v in values)
             if "place" in tpl.names:
-                out.update(f"{r}/{tpl.expr({'place': pl})}" for pl in places)
+                pls = places if text not in only else self._places(needs, only[text])
+                out.update(f"{r}/{tpl.expr({'place': pl})}" for pl in pls)
         return out
 
-    def _places(self, needs) -> list[str]:
+    def _places(self, needs, extra: tuple = ()) -> list[str]:
         """Place chunks ('<block>/<cell>' or '<block>/*') covering the needed circles and
-        boxes: cell by cell, or a whole block where most of it is needed."""
+        boxes (and `extra` boxes): cell by cell, or a whole block where most of it is needed."""
         size = self.ks.cell_m
         cells: set[str] = set()
         for x, y, rad in needs.circles:
             cells |= cells_within(x, y, rad, size)
-        for b in needs.boxes:
+        for b in (*needs.boxes, *extra):
             cells |= cells_of_bounds(b, size)
         blocks: dict[str, list[str]] = defaultdict(list)
         for c in cells:

@@ -238,7 +238,21 @@ class Peer(Intake, TickWait):
         """Fetch what was published on `keys` after the last message we took, from the
         situation store (duplicates are dropped by seq later) and the fusion nodes
         (their tracks carry no seq: only those after `tracks_after` are taken)."""
-        for g in self.fusion_groups:   # fused tracks are not in the replay's log: ask their nodes
+        self._fused(keys, tracks_after)
+        _, entries = self._query_store(self.last_seq, keys)
+        t_hi = self.clock_t + self.max_ahead
+        for seq, p in entries:
+            if seq > self.last_seq and seq not in self.pending and (m := self.gate.data(p, "store")) is not None:
+                if m.t > t_hi:   # still too far ahead: fetched again when due (never held unbounded)
+                    self._defer(m.t)
+                    continue
+                self.pending[seq] = p
+                buf.append((seq, m))
+
+    def _fused(self, keys: list[str] | None, tracks_after: float = -1.0) -> None:
+        """Hold the fused tracks the fusion nodes published on `keys` (None: all) after
+        `tracks_after`, each until its time: fused tracks are not in the replay's log."""
+        for g in self.fusion_groups:
             req = W.encode(W.make(W.FusionQuery, keys=keys))
             for r in self.session.get(self.ks.fusion_store(g), payload=req, timeout=10.0):
                 if r.ok is None:
@@ -250,15 +264,6 @@ class Peer(Intake, TickWait):
                             self._defer(m.t)
                         else:
                             self._hold(m)
-        _, entries = self._query_store(self.last_seq, keys)
-        t_hi = self.clock_t + self.max_ahead
-        for seq, p in entries:
-            if seq > self.last_seq and seq not in self.pending and (m := self.gate.data(p, "store")) is not None:
-                if m.t > t_hi:   # still too far ahead: fetched again when due (never held unbounded)
-                    self._defer(m.t)
-                    continue
-                self.pending[seq] = p
-                buf.append((seq, m))
 
     def _plan_signature(self) -> tuple:
         """Changes when a reorganization, a mission transition or a threshold set by the
@@ -544,8 +549,15 @@ class Peer(Intake, TickWait):
         self.joined_t = t
         self.replaying = True
         try:
+            # the fusion nodes' tracks so far go in with the store's past, each where the
+            # in-process run takes it (`_feed`), silently too: a track already in a place
+            # we watch was told before we joined, not news at our first tick
+            self.clock_t = t
+            self._fused(None)
             self._feed(sorted(((seq, m) for seq, p in entries if (m := self.gate.data(p, "store")) is not None),
                               key=lambda x: x[0]))
+            while self.direct and self.direct[0][0] <= t:
+                self.ea.submit(heapq.heappop(self.direct)[2])
             self.ea.advance(t, strict=True)
         finally:
             self.replaying = False

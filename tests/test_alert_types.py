@@ -50,17 +50,20 @@ def test_out_of_position(small_run):
         first = actual[0]
         assert 920 <= first.t <= 960 and first.priority == "immediate" and not first.details.get("repeat")
         assert first.details["distance_m"] >= first.details["threshold_m"]
-    # the strays (A2 at ~930 s, C3 at ~680 s) and the companies they pull off their corridors, and
-    # B1 whose squad B1S4 detours to the link-up point during its attack: nobody else
+    # the strays (A2 at ~930 s, C3 at ~680 s) and the companies they pull off their corridors,
+    # B1 whose squad B1S4 detours to the link-up point during its attack, and A2 not on OBJ-A by
+    # 3300, the time its seize names (it gets there at about 3450): nobody else
     told = {(a.subjects, a.details["check"]) for a in alerts_of(small_run, "BN", "out-of-position")}
     assert told == {(("A2",), "route"), (("A",), "corridor"), (("C3",), "route"), (("C",), "corridor"),
-                    (("B1",), "corridor")}
+                    (("B1",), "corridor"), (("A2",), "by")}
+    by = [a for a in alerts_of(small_run, "BN", "out-of-position") if a.details["check"] == "by"]
+    assert [(a.t, a.details["mission"], a.details["control_measure"]) for a in by] == [(3300.0, "A2-attack", "OBJ-A")]
     assert {a.subjects for a in alerts_of(small_run, "B", "out-of-position")} == {("B1",)}
     assert {a.subjects for a in alerts_of(small_run, "C", "out-of-position")} == {("C3",), ("C",)}
 
 
 def test_out_of_position_repeats_progressively_at_lower_priority(small_run):
-    oop = alerts_of(small_run, "A2", "out-of-position")
+    oop = [a for a in alerts_of(small_run, "A2", "out-of-position") if a.details["check"] == "route"]   # the stray
     dist = [a.details["distance_m"] for a in oop]
     assert len(oop) >= 2 and all(b >= 2 * a for a, b in zip(dist, dist[1:]))
     assert all(a.details["repeat"] and a.priority == "priority" for a in oop[1:])
@@ -95,8 +98,8 @@ def test_schedule(small_run):
 
 def test_contingency(small_run):
     bn = alerts_of(small_run, "BN", "contingency")
-    assert [a.details["mission"] for a in bn] == ["BN-branch-ABF"] and 3490 <= bn[0].t <= 3530
-    assert [a.details["mission"] for a in alerts_of(small_run, "A", "contingency")] == ["A-sequel-occupy"]
+    assert [a.details["mission"] for a in bn] == ["BN-branch-disrupt"] and 3490 <= bn[0].t <= 3530
+    assert [a.details["mission"] for a in alerts_of(small_run, "A", "contingency")] == ["A-sequel-suppress"]
     for owner in ("B", "C", "A2"):
         assert not alerts_of(small_run, owner, "contingency")
 
@@ -118,8 +121,14 @@ def test_avenue_of_approach(small_run):
 
 def test_hostile_expected(small_run):
     for owner in ("BN", "B"):
-        a = alerts_of(small_run, owner, "hostile-expected")
+        a = [x for x in alerts_of(small_run, owner, "hostile-expected") if x.details.get("check") != "tempo"]
         assert [(x.t, x.details["mission"]) for x in a] == [(4800.0, "B2-defend")]
+    # what a disrupt expects of the enemy: H3 still coming down AA-DIAMOND at 3 m/s after 3900,
+    # when M (the BN's branch, triggered at DP2) was to have broken its tempo; BN holds the branch
+    tempo = [x for x in alerts_of(small_run, "BN", "hostile-expected") if x.details.get("check") == "tempo"]
+    assert [(x.details["mission"], x.details["tracks"], x.subjects[0]) for x in tempo] == \
+        [("BN-branch-disrupt", ["H3"], "M")] and 3900 <= tempo[0].t <= 3915
+    assert not [x for x in alerts_of(small_run, "B", "hostile-expected") if x.details.get("check") == "tempo"]
     # H4 did come into A2's engagement area: no alert there
     assert not alerts_of(small_run, "A", "hostile-expected") and not alerts_of(small_run, "A2", "hostile-expected")
 

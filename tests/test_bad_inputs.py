@@ -195,9 +195,9 @@ CASES = [
      ["overlay.geojson: feature 2 (PL-BLUE-A)", "field 'width_m'", "expected a number"]),
     # nothing a user writes is silently ignored: parameters a mission class does not declare,
     # trigger keys its kind does not read, overlay properties the loader reads elsewhere or misspelt
-    ("block-unknown-param", plan(lambda p: mission(p, "B1-defend")["params"].update(line="PL-BLUE-B")),
-     ["plan.json: plans.main[11] (B1-defend)", "field 'params.line'", "unknown parameter of block",
-      "block knows engagement_area, expect_hostile_by, position, voi"]),
+    ("block-unknown-param", plan(lambda p: mission(p, "B1-defend")["params"].update(rear_line="PL-BLUE-B")),
+     ["plan.json: plans.main[11] (B1-defend)", "field 'params.rear_line'", "unknown parameter of block",
+      "block knows area, engagement_area, expect_hostile_by, line, position, voi"]),
     ("move-param-typo", plan(lambda p: mission(p, "A1-move")["params"].update(routee=mission(p, "A1-move")
                                                                                ["params"].pop("route"))),
      ["(A1-move)", "field 'params.routee'", "unknown parameter of move", "did you mean 'route'?",
@@ -205,13 +205,13 @@ CASES = [
     ("required-param-typo", plan(lambda p: mission(p, "A1-attack")["params"].update(
         objectiv=mission(p, "A1-attack")["params"].pop("objective"))),
      ["(A1-attack)", "field 'params.objectiv'", "unknown parameter of attack", "did you mean 'objective'?"]),
-    ("task-params-unknown", plan(lambda p: mission(p, "BN-branch-ABF")["params"]["task_params"].update(
+    ("task-params-unknown", plan(lambda p: mission(p, "BN-branch-disrupt")["params"]["task_params"].update(
         engagement="EA-A")),
-     ["(BN-branch-ABF)", "field 'params.task_params.engagement'", "unknown parameter of attack-by-fire",
+     ["(BN-branch-disrupt)", "field 'params.task_params.engagement'", "unknown parameter of disrupt",
       "did you mean 'engagement_area'?"]),
-    ("trigger-key-of-other-kind", plan(lambda p: mission(p, "A-sequel-occupy")["params"]["trigger"].update(
+    ("trigger-key-of-other-kind", plan(lambda p: mission(p, "A-sequel-suppress")["params"]["trigger"].update(
         min_strength=2)),
-     ["(A-sequel-occupy) params.trigger", "field 'min_strength'", "not read by a unit-at trigger",
+     ["(A-sequel-suppress) params.trigger", "field 'min_strength'", "not read by a unit-at trigger",
       "kind, unit, area, within_m, rule"]),
     ("overlay-radius-on-polygon", overlay(lambda fc: fc["features"][3]["properties"].update(radius_m=300)),
      ["overlay.geojson: feature 3 (OBJ-A)", "field 'radius_m'", "not read for an objective Polygon",
@@ -316,7 +316,7 @@ def test_every_declared_param_is_known():
         assert set(cls.required()) <= set(cls.all_params()), typ
         assert {*cls.GEOMETRY_PARAMS, *cls.UNIT_PARAMS} <= set(cls.all_params()), typ
         assert cls.unknown_params({p: None for p in cls.all_params()}) == [], typ
-    assert REGISTRY["block"].unknown_params({"position": "BP", "line": "PL"}) == ["line"]
+    assert REGISTRY["block"].unknown_params({"position": "BP", "rear_line": "PL"}) == ["rear_line"]
 
 
 def test_key_chunk_helper():

@@ -254,7 +254,7 @@ def test_bad_mission_orders_are_counted_errors_and_do_not_count_as_orders(tmp_pa
 GUARD_1 = box("GUARD-1", "area", -400, -600, 400, 200)
 PL_REAR = line("PL-REAR", "phase-line", (-1500, 150), (1500, 150))
 PENETRATION_CASES = [
-    ("block", {"position": "BP-HOME"}, "BP-HOME"),
+    ("block", {"position": "BP-HOME", "area": "BP-HOME"}, "BP-HOME"),
     ("retain", {"position": "BP-HOME"}, "BP-HOME"),
     ("guard", {"position": "BP-HOME", "area": "GUARD-1"}, "GUARD-1"),
     ("defend", {"position": "BP-HOME", "rear_line": "PL-REAR"}, "PL-REAR"),
@@ -300,7 +300,7 @@ def test_a_hostile_approaching_a_held_area_steadily_is_projected_before_it_enter
 
 
 def test_a_projected_penetration_and_the_penetration_it_foretold_are_one_story(tmp_path):
-    msgs, sc = _holder(tmp_path, "block", {"position": "BP-HOME"})
+    msgs, sc = _holder(tmp_path, "block", {"position": "BP-HOME", "area": "BP-HOME"})
     msgs += track_path("H1", 150, 520, lambda t: (0.0, EDGE_Y + 1500 - 5.0 * (t - 150)))
     ea = play(sc, msgs, 520)
     story = of(ea, "projected-penetration") + of(ea, "penetration")
@@ -386,7 +386,7 @@ def _ended(tmp_path, typ, hostile_xy):
     return play(sc, msgs, 400)
 
 
-@pytest.mark.parametrize("typ", ["seize", "clear", "secure", "destroy"])
+@pytest.mark.parametrize("typ", ["clear", "destroy"])
 def test_ending_with_a_hostile_still_on_the_objective_is_an_end_state_alert(tmp_path, typ):
     ea = _ended(tmp_path, typ, (1700, 200))
     es = of(ea, "end-state")
@@ -398,13 +398,13 @@ def test_ending_with_a_hostile_still_on_the_objective_is_an_end_state_alert(tmp_
     assert not [x for x in of(ea, "out-of-position") if x.details.get("check") == "objective"]   # it did arrive
 
 
-@pytest.mark.parametrize("typ", ["seize", "clear", "secure", "destroy"])
+@pytest.mark.parametrize("typ", ["clear", "destroy"])
 def test_ending_with_the_objective_empty_is_silent(tmp_path, typ):
     ea = _ended(tmp_path, typ, (3000, 200))
     assert not of(ea, "end-state")
 
 
-@pytest.mark.parametrize("typ", ["attack", "isolate"])
+@pytest.mark.parametrize("typ", ["attack", "isolate", "seize", "secure"])
 def test_missions_without_an_end_state_are_not_judged_on_hostiles_left(tmp_path, typ):
     ea = _ended(tmp_path, typ, (1700, 200))
     assert not of(ea, "end-state")
@@ -600,11 +600,12 @@ def test_missions_lists_checks_for_every_mission_class(capsys):
     for n, lines in blocks.items():
         checks = [x for x in lines if x.startswith("checks: ")]
         assert checks and all(len(x) > len("checks: ") + 10 for x in checks), n
-    for n in ("seize", "clear", "secure", "destroy"):
+    for n in ("clear", "destroy"):
         assert says(n, r"\(end-state\)"), n
+    assert not says("seize", "end-state") and not says("secure", "end-state") and says("secure", "penetration")
     for n in ("isolate", "fix", "destroy", "contain"):
         assert says(n, r"\(escape\)"), n
-    for n in ("block", "retain", "guard", "defend"):
+    for n in ("block", "retain", "guard", "defend", "secure"):
         assert says(n, "penetration"), n
     for n in ("follow-and-support", "follow-and-assume"):
         assert says(n, r"\(band\)"), n

@@ -99,7 +99,8 @@ def test_a_decision_is_taken_from_the_alert_that_asks_for_it(console):
         d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", asks[0])   # in a scrolled pane
         buttons = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#details .decision button.decide"))
         options = [b.get_attribute("data-option") for b in buttons]
-        assert options[0] == "execute:BN-branch-ABF" and set(options) == {"abort", "execute:BN-branch-ABF", "continue"}
+        branch = "execute:BN-branch-disrupt"
+        assert options[0] == branch and set(options) == {"abort", branch, "continue"}
         assert "recommended" in buttons[0].get_attribute("class")
         go_on = next(b for b in buttons if b.get_attribute("data-option") == "continue")
         d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", go_on)
@@ -234,7 +235,7 @@ def test_a_pane_counts_stories_and_folds_a_storys_alerts(stepped):
     from selenium.webdriver.common.by import By
     stepped.to(1300.0)
     want = expected_stories(stepped.ea["BN"])
-    assert want["immediate"]["BN/3"] == 2   # BN/3 (C off its corridor, immediate), then BN/5 (its update)
+    assert want["immediate"]["BN/4"] == 2   # BN/4 (C off its corridor, immediate), then BN/7 (its update)
     with chromium() as d:
         d.get(stepped.url)
         for p in PANES:
@@ -242,15 +243,15 @@ def test_a_pane_counts_stories_and_folds_a_storys_alerts(stepped):
             wait(d, lambda d: text(d, f"count-{p}") == str(n) and len(shown(d, p)) == n)
             got = {e.get_attribute("data-story"): int(e.get_attribute("data-count")) for e in shown(d, p)}
             assert got == dict(want[p]), (p, got)
-        row = d.find_element(By.CSS_SELECTOR, '#pane-immediate li.story[data-story="BN/3"]')
+        row = d.find_element(By.CSS_SELECTOR, '#pane-immediate li.story[data-story="BN/4"]')
         assert row.find_element(By.CSS_SELECTOR, ".story-count").text.strip().endswith("2")
         assert (row.get_attribute("data-id"), row.get_attribute("data-type"), row.get_attribute("data-owner"),
-                row.get_attribute("data-priority")) == ("BN/5", "out-of-position", "BN", "immediate")
+                row.get_attribute("data-priority")) == ("BN/7", "out-of-position", "BN", "immediate")
         assert float(row.get_attribute("data-t")) == 814.0
         d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", row)
         folded = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#details ol.story-alerts li"))
-        assert [li.get_attribute("data-id") for li in folded] == ["BN/5", "BN/3"]
-        assert "BN/5" in text(d, "details")
+        assert [li.get_attribute("data-id") for li in folded] == ["BN/7", "BN/4"]
+        assert "BN/7" in text(d, "details")
         assert js_errors(d) == []
 
 
@@ -262,7 +263,7 @@ def test_a_silence_empties_a_pane_and_its_alerts_go_quiet(stepped):
     stepped.to(1000.0)
     oop = 'li.story[data-type="out-of-position"][data-owner="BN"]'
     stories = {a.details["story"] for a in stepped.ea["BN"].alerts if a.type == "out-of-position"}
-    assert stories == {"BN/2", "BN/3", "BN/7", "BN/9"}
+    assert stories == {"BN/3", "BN/4", "BN/9", "BN/11"}
     with chromium() as d:
         d.get(stepped.url)
         wait(d, lambda d: {e.get_attribute("data-story") for e in d.find_elements(By.CSS_SELECTOR, f"#pane-immediate {oop}")}
@@ -277,20 +278,20 @@ def test_a_silence_empties_a_pane_and_its_alerts_go_quiet(stepped):
         wait(d, lambda d: int(text(d, "count-immediate")) == before - 4, what="pane count")
         d.find_element(By.ID, "quiet-toggle").click()
         quiet = lambda d: {e.get_attribute("data-id") for e in d.find_elements(By.CSS_SELECTOR, "#pane-quiet li.alert")}   # noqa: E731
-        wait(d, lambda d: d.find_element(By.ID, "pane-quiet").is_displayed() and {"BN/8", "BN/5", "BN/7", "BN/9"} <= quiet(d),
+        wait(d, lambda d: d.find_element(By.ID, "pane-quiet").is_displayed() and {"BN/10", "BN/7", "BN/9", "BN/11"} <= quiet(d),
              what="the silenced stories in the quiet view")
-        stepped.to(1150.0)   # BN/11 (story BN/7) and BN/13 (story BN/9) are raised under the silence
-        wait(d, lambda d: {"BN/11", "BN/13"} <= quiet(d))
+        stepped.to(1150.0)   # BN/13 (story BN/9) and BN/15 (story BN/11) are raised under the silence
+        wait(d, lambda d: {"BN/13", "BN/15"} <= quiet(d))
         logged = {a.details["id"]: a for a in stepped.ea["BN"].alerts}
-        assert logged["BN/11"].details["silenced"] == sid and logged["BN/13"].details["silenced"] == sid
+        assert logged["BN/13"].details["silenced"] == sid and logged["BN/15"].details["silenced"] == sid
         assert not d.find_elements(By.CSS_SELECTOR, f"#alerts .alert-list {oop}")
-        assert not d.find_elements(By.CSS_SELECTOR, '#pane-priority li[data-id="BN/11"], #pane-priority li[data-id="BN/13"]')
-        why = d.find_element(By.CSS_SELECTOR, '#pane-quiet li.alert[data-id="BN/11"]').text
+        assert not d.find_elements(By.CSS_SELECTOR, '#pane-priority li[data-id="BN/13"], #pane-priority li[data-id="BN/15"]')
+        why = d.find_element(By.CSS_SELECTOR, '#pane-quiet li.alert[data-id="BN/13"]').text
         assert f"silenced by {sid}" in why, why
         silences(d)[0].find_element(By.CSS_SELECTOR, "button.lift").click()
         wait(d, lambda d: len(silences(d)) == 0)
         wait(d, lambda d: len(d.find_elements(By.CSS_SELECTOR, f"#pane-immediate {oop}")) == 4, what="shown again")
-        assert {"BN/11", "BN/13"} <= quiet(d)   # what the EA marked stays quiet
+        assert {"BN/13", "BN/15"} <= quiet(d)   # what the EA marked stays quiet
         assert js_errors(d) == []
 
 
@@ -312,17 +313,17 @@ def test_an_inhibition_rule_from_the_page_quiets_its_targets(stepped):
         rules = lambda d: d.find_elements(By.CSS_SELECTOR, "#inhibits li.inhibit")   # noqa: E731
         wait(d, lambda d: [r.get_attribute("data-id") for r in rules(d)] == ["contact-mutes-distance"])
         assert "contact-mutes-distance" in stepped.ea["BN"].notify.inhibitor.rules
-        stepped.to(2600.0)   # contacts BN/27 (R, H2) and BN/30 (M, H9); distances BN/32, BN/34, BN/36 about them
+        stepped.to(2600.0)   # contacts BN/29 (R, H2) and BN/32 (M, H9); distances BN/34, BN/36, BN/38 about them
         d.find_element(By.ID, "quiet-toggle").click()
         quiet = lambda d: {e.get_attribute("data-id") for e in d.find_elements(By.CSS_SELECTOR, "#pane-quiet li.alert")}   # noqa: E731
-        wait(d, lambda d: {"BN/32", "BN/34", "BN/36"} <= quiet(d))
-        wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, '#pane-flash li.story[data-story="BN/27"]'))
+        wait(d, lambda d: {"BN/34", "BN/36", "BN/38"} <= quiet(d))
+        wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, '#pane-flash li.story[data-story="BN/29"]'))
         assert not d.find_elements(By.CSS_SELECTOR, '#alerts .alert-list li.story[data-type="distance"]')
         logged = {a.details["id"]: a for a in stepped.ea["BN"].alerts}
-        assert logged["BN/32"].details["inhibited_by"] == {"rule": "contact-mutes-distance", "source": "BN/27"}
-        assert logged["BN/34"].details["inhibited_by"]["source"] == "BN/30"
+        assert logged["BN/34"].details["inhibited_by"] == {"rule": "contact-mutes-distance", "source": "BN/29"}
+        assert logged["BN/36"].details["inhibited_by"]["source"] == "BN/32"
         assert "inhibited by rule contact-mutes-distance" in \
-            d.find_element(By.CSS_SELECTOR, '#pane-quiet li.alert[data-id="BN/32"]').text
+            d.find_element(By.CSS_SELECTOR, '#pane-quiet li.alert[data-id="BN/34"]').text
         rules(d)[0].find_element(By.CSS_SELECTOR, "button.lift").click()
         wait(d, lambda d: not rules(d))
         assert stepped.ea["BN"].notify.inhibitor.rules == {}
@@ -331,27 +332,27 @@ def test_an_inhibition_rule_from_the_page_quiets_its_targets(stepped):
 
 
 def test_a_renotified_story_blinks_at_the_top_until_acknowledged(stepped):
-    """Nobody acknowledged BN/2 (out-of-position, immediate, at 666): at 966 its EA tells
+    """Nobody acknowledged BN/3 (out-of-position, immediate, at 666): at 966 its EA tells
     the commander again; the story's row goes to the top of its pane and blinks; the ack
     from the page stops the EA's re-notifications and the blinking."""
     from selenium.webdriver.common.by import By
     stepped.to(985.0)
-    assert [(n.kind, n.alert, n.count) for n in stepped.ea["BN"].notices] == [("renotify", "BN/2", 1)]
-    row = '#pane-immediate li.story[data-story="BN/2"]'
+    assert [(n.kind, n.alert, n.count) for n in stepped.ea["BN"].notices] == [("renotify", "BN/3", 1)]
+    row = '#pane-immediate li.story[data-story="BN/3"]'
     with chromium() as d:
         d.get(stepped.url)
         wait(d, lambda d: "renotified" in (attr(d, row, "class") or "") and attr(d, row, "data-renotified") == "1")
-        assert shown(d, "immediate")[0].get_attribute("data-story") == "BN/2"   # on top, though older than BN/3, BN/7
+        assert shown(d, "immediate")[0].get_attribute("data-story") == "BN/3"   # on top, though older than BN/4, BN/9
         blink = d.execute_script("return getComputedStyle(document.querySelector(arguments[0])).animationName", row)
         assert blink == "renotify"
         d.execute_script("arguments[0].click()", d.find_element(By.CSS_SELECTOR, row))
-        wait(d, lambda d: "BN/8" in text(d, "details"))
+        wait(d, lambda d: "BN/10" in text(d, "details"))
         d.find_element(By.ID, "ack-btn").click()
-        wait(d, lambda d: "renotified" not in (attr(d, row, "class") or "") and "BN/2" in stepped.ea["BN"].notify.acked)
-        assert "BN/2" not in stepped.ea["BN"].notify.chains
+        wait(d, lambda d: "renotified" not in (attr(d, row, "class") or "") and "BN/3" in stepped.ea["BN"].notify.acked)
+        assert "BN/3" not in stepped.ea["BN"].notify.chains
         assert ": ok" in text(d, "status"), text(d, "status")
         stepped.to(1400.0)   # its next re-notification was due at 1266: none comes
-        assert [n for n in stepped.ea["BN"].notices if n.alert == "BN/2"] == [stepped.ea["BN"].notices[0]]
+        assert [n for n in stepped.ea["BN"].notices if n.alert == "BN/3"] == [stepped.ea["BN"].notices[0]]
         assert "renotified" not in (attr(d, row, "class") or "")
         d.refresh()   # a page opened after the ack: told again once, answered, not blinking
         wait(d, lambda d: attr(d, row, "data-renotified") == "1", what="the story after a reload")
@@ -360,14 +361,15 @@ def test_a_renotified_story_blinks_at_the_top_until_acknowledged(stepped):
 
 
 def test_an_escalation_reaches_the_superiors_page(stepped):
-    """A/1 (A2 out of position, immediate, at 942) unacknowledged at A for escalate_s (300 s):
+    """A/2 (A2 out of position, immediate, at 942; A/1 is R's zone reconnaissance behind, at 456)
+    unacknowledged at A for escalate_s (300 s):
     A's EA escalates it to BN; BN's page lists "unacknowledged at A: ..." and shows the
     original alert on a click, and BN's commander acknowledges it on A's EA."""
     from selenium.webdriver.common.by import By
     stepped.to(1280.0)
-    [up] = [n for n in stepped.ea["A"].notices if n.kind == "escalate" and n.alert == "A/1"]
+    [up] = [n for n in stepped.ea["A"].notices if n.kind == "escalate" and n.alert == "A/2"]
     assert up.to == "BN" and up.owner == "A" and up.t == 942.0 + 300.0
-    esc = '#escalations li.escalation[data-alert="A/1"][data-owner="A"]'
+    esc = '#escalations li.escalation[data-alert="A/2"][data-owner="A"]'
     with chromium() as d:
         d.get(stepped.url)
         assert Select(d.find_element(By.ID, "unit-select")).first_selected_option.get_attribute("value") == "BN"
@@ -376,12 +378,12 @@ def test_an_escalation_reaches_the_superiors_page(stepped):
         assert d.find_elements(By.CSS_SELECTOR, '#escalations li.escalation[data-alert="A2/1"][data-owner="A2"]')   # to A
         assert not d.find_elements(By.CSS_SELECTOR, '#pane-immediate li[data-owner="A"]')   # BN's panes: BN's stories
         li.find_element(By.CSS_SELECTOR, "button.show").click()
-        wait(d, lambda d: attr(d, "#ack-btn", "data-alert") == "A/1")
+        wait(d, lambda d: attr(d, "#ack-btn", "data-alert") == "A/2")
         assert up.message in text(d, "details")
         d.find_element(By.ID, "ack-btn").click()
         wait(d, lambda d: "acked" in (attr(d, esc, "class") or ""))
         assert text(d, "status").startswith("ack A: ok"), text(d, "status")
-        assert "A/1" in stepped.ea["A"].notify.acked and "A/1" not in stepped.ea["A"].notify.chains
+        assert "A/2" in stepped.ea["A"].notify.acked and "A/2" not in stepped.ea["A"].notify.chains
         assert js_errors(d) == []
 
 

@@ -105,7 +105,7 @@ def test_echelons_share_threat_alerts_and_keep_their_own_plans(mesh_run):
     of_c = [key(a) for a in alerts["BN"] if a["type"] == "proximity" and a["details"].get("parent") == "C"]
     assert of_c and of_c == by("C", "proximity")   # BN's about C CO's units are C's own
     missions = lambda name: {a["details"]["mission"] for a in alerts[name] if a["type"] == "contingency"}
-    assert missions("BN") == {"BN-branch-ABF"} and missions("A") == {"A-sequel-occupy"} and not missions("C")
+    assert missions("BN") == {"BN-branch-disrupt"} and missions("A") == {"A-sequel-suppress"} and not missions("C")
     places = lambda name: {a["details"]["place"] for a in alerts[name] if a["type"] == "ave-of-approach"}
     assert places("BN") == {"AA-DIAMOND"} and places("C") == {"AA-RUBY"} and not places("A")
     assert summaries["A2a"]["subscriptions"] < summaries["BN"]["subscriptions"]   # nobody takes everything

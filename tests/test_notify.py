@@ -20,7 +20,8 @@ OWNER = "A2"
 def run_a2(small, actions=(), armed=True, until=None, config=None):
     """A2's EA over the small scenario; `actions` are (t, fn(ea)) done when scenario time
     reaches t (before the first event at or after t). Projections are off: these tests
-    follow A2's out-of-position alerts as the paper's EA raises them (the projection of
+    follow A2's out-of-position alerts as the paper's EA raises them, those of its move (its seize
+    not on OBJ-A by its time at 3300 is another story; the projection of
     the same story is tested in test_alert_types)."""
     cfg = config_for(small, OWNER)
     cfg["voi"]["projection_horizon_s"] = 0.0
@@ -66,11 +67,14 @@ def test_ids_are_unique_and_deterministic(small):
 
 def test_stories_fold_a_storys_updates(small):
     ea = run_a2(small, armed=False)
-    oop = of(ea, "out-of-position")
+    oop = of(ea, "out-of-position", mission="A2-move")
     # the same unit out of position three times within the VOA expiry: one story
-    assert [a.details["story"] for a in oop] == [oop[0].details["id"]] * len(oop)
+    assert len(oop) == 3 and [a.details["story"] for a in oop] == [oop[0].details["id"]] * len(oop)
     others = [a for a in ea.alerts if (a.type, a.subjects) != (oop[0].type, oop[0].subjects)]
     assert all(a.details["story"] != oop[0].details["id"] for a in others)
+    # its seize not on the objective by its time, long after: another mission, its own story
+    (late,) = of(ea, "out-of-position", mission="A2-attack")
+    assert (late.t, late.details["check"]) == (3300.0, "by") and late.details["story"] == late.details["id"]
 
 
 def test_unacknowledged_urgent_alert_is_renotified_never_reraised(small):
@@ -145,7 +149,7 @@ def test_escalation_reaches_the_superiors_ea_in_process(small):
 def test_silence_marks_matching_alerts_and_expires(small):
     ea = run_a2(small, [(0.0, lambda e: e.silence("s1", types=["out-of-position"], until_t=1100.0,
                                                   comment="known"))])
-    oop = of(ea, "out-of-position")
+    oop = of(ea, "out-of-position", mission="A2-move")
     assert [(a.t, a.details.get("silenced")) for a in oop] == [(942.0, "s1"), (1062.0, "s1"), (1216.0, None)]
     assert not notices(ea, alert=oop[0].details["id"])   # silenced: never re-notified or escalated
     assert [n.alert for n in notices(ea, "renotify")][:2] == ["A2/3", "A2/3"]   # a flash fratricide: not silenced
@@ -157,7 +161,7 @@ def test_silence_marks_matching_alerts_and_expires(small):
     assert not [a for a in ea2.alerts if "silenced" in a.details]
     ea3 = run_a2(small, [(0.0, lambda e: e.silence("s3", types=["out-of-position"], until_t=5000.0)),
                          (1000.0, lambda e: e.unsilence("s3"))])
-    assert [a.details.get("silenced") for a in of(ea3, "out-of-position")] == ["s3", None, None]
+    assert [a.details.get("silenced") for a in of(ea3, "out-of-position", mission="A2-move")] == ["s3", None, None]
 
 
 def test_a_silence_set_after_an_alert_stops_its_renotifications(small):
@@ -174,7 +178,7 @@ RULE = {"id": "oop-after-oop", "source": {"types": ["out-of-position"]}, "target
 
 def test_an_inhibition_rule_from_the_config_marks_and_quiets(small):
     ea = run_a2(small, config=lambda cfg: cfg.update(inhibit=[RULE]))
-    oop = of(ea, "out-of-position")
+    oop = of(ea, "out-of-position", mission="A2-move")
     # 942 is the first (nothing active); 1062 falls within 150 s of it: inhibited by it; 1216 is 154 s after 1062
     assert [a.details.get("inhibited_by") for a in oop] == [None, {"rule": "oop-after-oop", "source": "A2/1"}, None]
     assert ea.stats["inhibited"] == 1 and not notices(ea, alert=oop[1].details["id"])
@@ -185,7 +189,7 @@ def test_an_inhibition_rule_at_run_time_and_lifted(small):
     cmd = C.make("inhibit", id="r", source=W.MatcherSpec(types=["out-of-position"]),
                  target=W.MatcherSpec(types=["out-of-position"]), equal=["subjects"], for_s=150.0)
     ea = run_a2(small, [(0.0, lambda e: C.apply(e, cmd))])
-    assert [bool(a.details.get("inhibited_by")) for a in of(ea, "out-of-position")] == [False, True, False]
+    assert [bool(a.details.get("inhibited_by")) for a in of(ea, "out-of-position", mission="A2-move")] == [False, True, False]
     ea2 = run_a2(small, [(0.0, lambda e: C.apply(e, cmd)),
                          (1000.0, lambda e: C.apply(e, C.make("uninhibit", id="r")))])
     assert not [a for a in ea2.alerts if "inhibited_by" in a.details]
@@ -238,7 +242,7 @@ def test_unknown_notify_keys_are_refused(tmp_path):
 def test_set_threshold_applies_from_the_next_epoch_and_is_logged(small, caplog):
     caplog.set_level(logging.INFO, logger="ea_agent.core.notify")
     base = run_a2(small, armed=False)
-    assert len(of(base, "out-of-position")) == 3
+    assert len(of(base, "out-of-position", mission="A2-move")) == 3
     ea = run_a2(small, [(1000.0, lambda e: e.set_param("voi.out_of_position_m", 1e6))], armed=False)
     (ch,) = ea.changes
     assert ch["key"] == "voi.out_of_position_m" and ch["old"] == 150.0 and ch["new"] == 1e6

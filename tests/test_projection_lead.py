@@ -215,7 +215,7 @@ EDGE_Y = 200.0
 
 def _hostile(tmp_path, speed: float, from_m: float, cfg_overrides: dict | None = None):
     """A1 blocks BP-HOME; H1 heads south at `speed` from `from_m` north of its edge at t=150."""
-    sc = FORCE.scenario(tmp_path, FEATURES, [mission("A1-block", "A1", "block", position="BP-HOME")])
+    sc = FORCE.scenario(tmp_path, FEATURES, [mission("A1-block", "A1", "block", position="BP-HOME", area="BP-HOME")])
     t_in = 150 + from_m / speed
     msgs = (FORCE.stays("A1", 0, -100, 10, 700) + FORCE.stays("A2", 3000, -3000, 10, 700) + [start(100, "A1-block", "A1")]
             + track_path("H1", 150, 700, lambda t: (0.0, EDGE_Y + from_m - speed * (t - 150))))

@@ -270,7 +270,7 @@ def test_the_sender_answers_every_outcome_and_never_dies():
 
 
 # -- the live mesh -----------------------------------------------------------------------
-SPEED = 40        # scenario seconds per wall second: BN/2's first re-notification (t=966) is 7.5 s after it
+SPEED = 40        # scenario seconds per wall second: BN/3's first re-notification (t=966) is 7.5 s after it
 UNTIL = 1500      # past the second re-notification of BN's immediate alerts of t=666-694 (every 300 s, twice)
 
 
@@ -358,14 +358,14 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
             procs.append(start_peer(sc_path, u, ep, root, tmp_path / f"{u}.jsonl", pki=pki, log_dir=tmp_path,
                                     extra=["--armed"]))
 
-        # 1. BN's commander acknowledges BN/2 in All Chat Rooms; the answer comes back in GeoChat
-        alert_uid("BN/2")
-        send(BN_USER, geochat(BN_USER, "BRAVO6", "ack BN/2"))
-        said = answer("ACK BN/2")
-        assert said.startswith("ACK BN/2: taken by the EA of BN at H+") and "(BRAVO6 as BN)" in said, said
-        # 2. ... and BN/6 with a y-a-w reply to its CoT
-        send(BN_USER, wilco(alert_uid("BN/6"), BN_USER, "BRAVO6"))
-        assert answer("ACK BN/6").startswith("ACK BN/6: taken by the EA of BN"), rx.got[-1]
+        # 1. BN's commander acknowledges BN/3 in All Chat Rooms; the answer comes back in GeoChat
+        alert_uid("BN/3")
+        send(BN_USER, geochat(BN_USER, "BRAVO6", "ack BN/3"))
+        said = answer("ACK BN/3")
+        assert said.startswith("ACK BN/3: taken by the EA of BN at H+") and "(BRAVO6 as BN)" in said, said
+        # 2. ... and BN/8 with a y-a-w reply to its CoT
+        send(BN_USER, wilco(alert_uid("BN/8"), BN_USER, "BRAVO6"))
+        assert answer("ACK BN/8").startswith("ACK BN/8: taken by the EA of BN"), rx.got[-1]
         # 3. C's commander acknowledging A's alert: refused at the gateway, counted, answered
         alert_uid("A/2")
         send(C_USER, geochat(C_USER, "CHARLIE6", "ack A/2"))
@@ -375,9 +375,9 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
         assert answer("ACK BN/999").startswith("ACK BN/999 refused by the EA of BN: ack: unknown alert")
         send(BN_USER, b"<event><junk/></event>")   # bad input: counted, never fatal
 
-        # the mesh runs to UNTIL: BN's EA re-notifies BN/3 (left alone) twice, BN/2 and BN/6 no more.
-        # Its notices are logged in time order: once BN/3's second (t=1294) is there, BN/2's
-        # (t=966, 1266) and BN/6's first (t=1216) would be too.
+        # the mesh runs to UNTIL: BN's EA re-notifies BN/4 (left alone) twice, BN/3 and BN/8 no more.
+        # Its notices are logged in time order: once BN/4's second (t=1294) is there, BN/3's
+        # (t=966, 1266) and BN/8's first (t=1216) would be too.
         replay.wait_for("end ", 120)
 
         def renotified() -> dict[str, list[float]]:
@@ -386,23 +386,23 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
                 if n["kind"] == "renotify":
                     out.setdefault(n["alert"], []).append(n["t"])
             return out
-        _bounded(lambda: len(renotified().get("BN/3", [])) >= 2, 60, "BN/3 re-notified twice by BN's EA")
+        _bounded(lambda: len(renotified().get("BN/4", [])) >= 2, 60, "BN/4 re-notified twice by BN's EA")
         log = _cmdlog(tmp_path / "BN.cmdlog")
         taken = {c["cmd"]["alert"]: c for c in log if c["kind"] == "ack"}
-        assert taken["BN/2"]["ok"] and taken["BN/2"]["cmd"]["by"] == f"tak:{BN_USER}"
-        assert taken["BN/6"]["ok"] and not taken["BN/999"]["ok"]
+        assert taken["BN/3"]["ok"] and taken["BN/3"]["cmd"]["by"] == f"tak:{BN_USER}"
+        assert taken["BN/8"]["ok"] and not taken["BN/999"]["ok"]
         assert not any(c["cmd"].get("alert") == "A/2" for c in _cmdlog(tmp_path / "A.cmdlog"))   # never sent
         told = renotified()
-        assert told["BN/3"] == [994.0, 1294.0], told   # armed: one left unacknowledged is told again
-        for aid in ("BN/2", "BN/6"):
+        assert told["BN/4"] == [994.0, 1294.0], told   # armed: one left unacknowledged is told again
+        for aid in ("BN/3", "BN/8"):
             after = [t for t in told.get(aid, []) if t > taken[aid]["t"]]
             assert after == [], f"{aid} re-notified after its ack at t={taken[aid]['t']}: {after}"
-        assert len(told.get("BN/2", [])) < 2 and told.get("BN/6", []) == []   # their schedules were cut short
+        assert len(told.get("BN/3", [])) < 2 and told.get("BN/8", []) == []   # their schedules were cut short
 
         def on_tak(aid):   # how many times the alert's CoT went out (re-notified: the same uid again)
             return sum(1 for _, d in rx.got for ev in [cot(d, "alert")] if ev and ev.detail["__saim"]["id"] == aid)
-        assert rx.wait(lambda g: on_tak("BN/3") >= 3, 30), on_tak("BN/3")
-        assert on_tak("BN/2") == on_tak("BN/6") == 1
+        assert rx.wait(lambda g: on_tak("BN/4") >= 3, 30), on_tak("BN/4")
+        assert on_tak("BN/3") == on_tak("BN/8") == 1
         gw.stop(30)   # SIGTERM: it says what it did
         done = gw.wait_for("tak done", 30)
     finally:

@@ -13,7 +13,7 @@ class Needs:
     command paths of subtrees we follow, "unit": units whose mission messages we need,
     "issuer": units whose orders we obey, ...): a template is subscribed once per value
     of each placeholder it has. `circles` (x, y, r) and `boxes` (x0, y0, x1, y1), in
-    projected metres, select by `{place}`. `whole` names families taken entirely.
+    projected metres, select by `{place}`; `only` adds boxes for some templates alone. `whole` names families taken entirely.
 
     A domain may also say, per message, what must be up to date before the EA applies
     it: `domain.needs_before(msg) -> Needs | None` (a call for fire is judged on every
@@ -25,3 +25,6 @@ class Needs:
     circles: tuple[tuple[float, float, float], ...] = ()
     boxes: tuple[tuple[float, float, float, float], ...] = ()
     whole: tuple[str, ...] = ()
+    # boxes selecting by `{place}` for some templates only, ((template, (box, ...)), ...):
+    # the hostile tracks in places a plan will watch, not every report made there
+    only: tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...] = ()

@@ -60,7 +60,7 @@ def followed(dom) -> tuple[set[str], bool]:
         owner = path.rsplit("/", 1)[-1]
         if owner in to.units:
             units |= set(to.subtree(owner))
-    return units, bool(n.circles or n.boxes)
+    return units, bool(n.circles or n.boxes or any(bs for _, bs in n.only))
 
 
 def depends(sc, ea, sources: list[str], shares: dict[str, Share] | None = None) -> list[str]:

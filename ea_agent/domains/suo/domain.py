@@ -19,9 +19,9 @@ from ea_agent.core.geo import Projection
 from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 
 from . import render
-from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Bands, Changes, Checkpoints, Contingencies,
+from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Assumptions, Bands, Changes, Checkpoints, Contingencies,
                      Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
-                     Presence, ReconProgress, ScheduleMonitors, Standoffs, ThreatsAhead)
+                     Presence, ReconProgress, ScheduleMonitors, Standoffs, Tempo, ThreatsAhead)
 from .detect.ahead import branches_for
 from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
@@ -90,6 +90,8 @@ class SuoDomain:
         self.support = self._part(FireSupport)
         self.presence = self._part(Presence)
         self.recon = self._part(ReconProgress)
+        self.tempo = self._part(Tempo)
+        self.assume = self._part(Assumptions)
         self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
@@ -365,8 +367,31 @@ class SuoDomain:
     def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
         self.checkpoints.post(m, table)
 
-    def post_recon(self, m: Mission, area: str, by: float | None) -> None:
-        self.recon.post(m, area, by)
+    def post_recon(self, m: Mission, area: str, by: float | None, progress: str = "coverage") -> None:
+        self.recon.post(m, area, by, progress)
+
+    def post_deadline(self, m: Mission, when: float, geom_id: str, rule: str) -> None:
+        """Its unit at `geom_id` (by `rule`) by `when`, judged then if the mission still runs
+        (a seizure's time: its end is judged by Check-Final-Location)."""
+        def due(tf, mon, how):
+            if self.plan is not None and self.plan.state.get(m.id) == "active" and self.missions.get(m.id) is m \
+                    and self.in_plan(m):
+                self.unit_pos[m.unit] = self.pic.centroid(m.unit)
+                self.location.check(m, geom_id, rule, tf, "by")
+            return None
+        self.timers.not_later_than(("deadline", m.id, geom_id), when, due, tag=m.id)
+
+    def post_suppression(self, m: Mission, target: str, t0: float, t1: float) -> None:
+        self.support.post_window(m, target, t0, t1)
+
+    def post_tempo(self, m: Mission, avenue: str, by: float, tempo_mps: float) -> None:
+        self.tempo.post(m, avenue, by, tempo_mps)
+
+    def post_assume(self, m: Mission, supported: str, halt_s: float) -> None:
+        self.assume.post(m, supported, halt_s)
+
+    def start_recon(self, m: Mission) -> None:
+        self.recon.start(m)
 
     def check_recon(self, m: Mission, t: float) -> None:
         self.recon.check_final(m, t)

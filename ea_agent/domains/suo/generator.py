@@ -31,7 +31,7 @@ SQUAD_DY = (30.0, 0.0, -30.0, -60.0)
 MOVE_PLT = {"A1": "move", "A2": "move", "A3": "move", "B1": "tactical-road-march", "B2": "move", "B3": "move",
             "C1": "movement-to-contact", "C2": "move", "C3": "follow-and-support"}
 ATTACK_PLT = {"A1": "attack", "A2": "seize", "A3": "follow-and-assume", "B1": "attack", "B2": "clear",
-              "B3": "breach", "C1": "attack", "C2": "destroy", "C3": "isolate"}
+              "B3": "breach", "C1": "secure", "C2": "destroy", "C3": "isolate"}
 DEFEND_PLT = {"A1": "defend", "A2": "defend", "A3": "retain", "B1": "block", "B2": "defend", "B3": "occupy",
               "C1": "overwatch", "C2": "defend", "C3": "contain"}
 
@@ -43,8 +43,15 @@ INCIDENTS = [
     {"label": "C1 starts its attack 150 s early", "t": 2250, "types": ["schedule"]},
     {"label": "A1 squad 3 radios out 1500-1800", "t": 1620, "types": ["unknown-position"]},
     {"label": "A3 misses the link-up with B1 at CP-LINK", "t": 3030, "types": ["coordination"]},
-    {"label": "H3 at DP2 triggers the BN attack-by-fire branch", "t": 3500, "types": ["contingency", "ave-of-approach"]},
-    {"label": "A1 on OBJ-A triggers A CO's sequel", "t": 3600, "types": ["contingency"]},
+    {"label": "H3 at DP2 triggers the BN branch: M disrupts AA-DIAMOND from BP-M2", "t": 3500,
+     "types": ["contingency", "ave-of-approach"]},
+    {"label": "H3 still advancing down AA-DIAMOND at 3 m/s after 3900 (M's disrupt)", "t": 3900,
+     "types": ["hostile-expected"]},
+    {"label": "A1 on OBJ-A triggers A CO's sequel: A1 suppresses EA-A from OBJ-A", "t": 3600, "types": ["contingency"]},
+    {"label": "EA-A beyond A1's weapons range from OBJ-A when its fires are due (3700-4000, its suppress)",
+     "t": 3700, "types": ["fire-support"]},
+    {"label": "A2 not on OBJ-A by 3300 (its seize)", "t": 3300, "types": ["out-of-position"]},
+    {"label": "H6 on OBJ-C while C1 secures it", "t": 2100, "types": ["penetration"]},
     {"label": "H2 through NAI-1 and the recon screen; contact with R", "t": 1567, "types": ["monitored", "contact", "distance"]},
     {"label": "B2 defends EA-B: the expected enemy never comes", "t": 4800, "types": ["hostile-expected"]},
     {"label": "H4 attacks A CO, reinforced by H4B", "t": 4990, "types": ["contact", "strength", "distance", "monitored"]},
@@ -116,6 +123,8 @@ class Sim:
     mission_orders: list = field(default_factory=list)
     withdraw: dict[str, tuple[float, float]] = field(default_factory=dict)  # platoon -> (leaves, arrives)
     sensors: list[tuple[str, float]] = field(default_factory=list)      # (id, range m) when hostiles are sensed
+    block_line: bool = False   # B1 blocks PL-B1-BLOCK (a line) instead of its battle position (an area)
+    area_recon: bool = False   # R reconnoitres ZONE-R as an area (coverage) instead of a zone (depth)
 
     # -- friendly movement ---------------------------------------------------------
     def platoon_y_path(self, p: str):
@@ -263,7 +272,7 @@ def build_sim(small: bool = False, seed: int = 7, incidents: str = "scripted", m
         ts, ys = sim.platoon_y_path(p)
         move_start = ts[1]
         move_end = ts[ys.index(7000)]
-        atk_start = ts[len(ys) - 2] if p != "C3" else move_end
+        atk_start = ts[3] if p != "C3" else move_end
         atk_end = ts[-1]
         c += [(move_start, f"{p}-move", p, "start"), (move_end, f"{p}-move", p, "end"),
               (atk_start, f"{p}-attack", p, "start"), (atk_end, f"{p}-attack", p, "end"),
@@ -393,6 +402,9 @@ def overlay_features() -> list[dict]:
     for name, y in (("SP-B1", 0), ("CP-B1", 3500), ("RP-B1", 7000)):   # B1's march table
         add(name, "checkpoint", "Point", [LANE_X["B1"], y], "B", radius_m=250)
     add("CP-C", "checkpoint", "Point", [10650, 11000], "C", radius_m=300)
+    # a line B1 may block instead of its position: in front of BP-B1, across its lane west of the
+    # avenue down x = 6000 (groups that halt just short of a line would be projected to cross it)
+    add("PL-B1-BLOCK", "phase-line", "LineString", [[4000, 11450], [5000, 11450]], "B")
     return F
 
 
@@ -429,6 +441,8 @@ def plan_doc(sim: Sim) -> dict:
                else {"objective": f"OBJ-{co}", "line_of_departure": f"PL-BLUE-{co}"})
         if p == "B3":   # through the obstacle belt in its lane, planned faster than it can go
             atk.update(obstacle="OBS-B3", by=2900)
+        if p == "A2":   # OBJ-A wanted in hand by 3300: A2 gets there at about 3450
+            atk.update(by=3300)
         start = ("START-NET", 2400) if p == "C1" else ("START-NLT", 2400)
         m(f"{p}-attack", p, ATTACK_PLT[p], start, ("END-NLT", 3660), after=[f"{p}-move"], **atk)
         dfd = {"position": f"BP-{p}"}
@@ -436,6 +450,8 @@ def plan_doc(sim: Sim) -> dict:
             dfd.update(engagement_area="EA-A", expect_hostile_by=4800)
         if p == "B2":
             dfd.update(engagement_area="EA-B", expect_hostile_by=4800)
+        if DEFEND_PLT[p] == "block":   # what it blocks: the battle position itself, or the line north of it
+            dfd.update({"line": f"PL-{p}-BLOCK"} if sim.block_line else {"area": f"BP-{p}"})
         m(f"{p}-defend", p, DEFEND_PLT[p], ("START-NLT", 3760), None, after=[f"{p}-attack"], **dfd)
     for co in COMPANIES:
         m(f"{co}-mtc", co, "movement-to-contact", ("START-NLT", 300), ("END-NLT", 2460), destination=f"PL-BLUE-{co}")
@@ -444,7 +460,8 @@ def plan_doc(sim: Sim) -> dict:
         m(f"{co}-defend", co, "defend", ("START-NLT", 3760), None, after=[f"{co}-attack"], position=f"OBJ-{co}")
     # R is also to reconnoitre the ground south of its screen by 1800; it never leaves the
     # screen line, so it sees a third of it (before R-screen: that is R's mission for threats)
-    m("R-zone", "R", "zone-reconnaissance", ("START-AT", 0), ("END-NLT", 1800), position="SCREEN-R", area="ZONE-R")
+    m("R-zone", "R", "area-reconnaissance" if sim.area_recon else "zone-reconnaissance", ("START-AT", 0),
+      ("END-NLT", 1800), position="SCREEN-R", area="ZONE-R")
     m("R-screen", "R", "screen", ("START-AT", 0), None, position="SCREEN-R", area="NAI-SCREEN")
     m("M-occupy", "M", "occupy", ("START-AT", 0), ("END-AT", 2200), position="BP-M1")
     m("M-march", "M", "tactical-road-march", ("ON-ORDER", None), ("END-NLT", 2900), after=["M-occupy"],
@@ -455,10 +472,14 @@ def plan_doc(sim: Sim) -> dict:
     m("BN-reorg-R", "BN", "reorganize", ("START-AT", sim.reorg_t), None, subject="R", new_parent="BN")
     m("A3-linkup", "A3", "link-up", None, None, partner="B1", point="CP-LINK", at=3000)
     m("C2-passage", "C2", "passage-of-lines", None, None, partner="C3", point="CP-C", at=4000, lane="LANE-C")
-    m("BN-branch-ABF", "M", "branch", None, None, owner="BN", task="attack-by-fire",
-      trigger={"kind": "hostile-in-area", "area": "DP2", "min_strength": 1}, task_params={"position": "BP-M2"})
-    m("A-sequel-occupy", "A1", "sequel", None, None, owner="A", task="occupy",
-      trigger={"kind": "unit-at", "unit": "A1", "area": "OBJ-A", "within_m": 0.0}, task_params={"position": "OBJ-A"})
+    # hostiles at DP2: M is to break their tempo down AA-DIAMOND by 3900 (H3 keeps coming until 4333)
+    m("BN-branch-disrupt", "M", "branch", None, None, owner="BN", task="disrupt",
+      trigger={"kind": "hostile-in-area", "area": "DP2", "min_strength": 1},
+      task_params={"position": "BP-M2", "avenue": "AA-DIAMOND", "by": 3900})
+    # A1 on OBJ-A: it is to suppress EA-A from there 3700-4000 (1.5 km away: beyond its range)
+    m("A-sequel-suppress", "A1", "sequel", None, None, owner="A", task="suppress",
+      trigger={"kind": "unit-at", "unit": "A1", "area": "OBJ-A", "within_m": 0.0},
+      task_params={"position": "OBJ-A", "target": "EA-A", "window": [3700, 4000]})
     alt = [{"id": f"{p}-withdraw", "unit": p, "type": "withdraw", "start": {"type": "ASAP"},
             "params": {"destination": f"BP-{p}-BLUE"}} for p in LANE_X]
     alt[list(LANE_X).index("C1")].update(type="delay", params={"destination": "BP-C1-BLUE", "line": "PL-AMBER",

@@ -7,9 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from ea_agent.core.needs import Needs
+from ea_agent.core.plan import MissionSpec
 
+from .detect.areas import LINGER_M
 from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
-from .missions import ContingentMission
+from .missions import REGISTRY, ContingentMission
 
 ENVELOPE_MARGIN_M = 1000.0   # a unit's spread around its centroid, and a track's move between re-registrations
 TEMPLATES = tuple(c.KEY for c in (LocationReport, SensorTrack, MissionConfirm, Order, CallForFire, Reorganization))
@@ -32,12 +34,110 @@ def needs(dom, radius_m: float) -> Needs:
         p = dom.unit_pos.get(u)
         if p is not None and to.units[u].entities:
             circles.append((p[0], p[1], radius_m))
+    places, followed = planned(dom)
     boxes = tuple(dom.overlay[a].area.bounds for a in sorted(dom.watched_areas()))
-    return Needs(TEMPLATES, by={"path": frozenset({to.path(dom.owner)}),
+    # the hostile tracks there (only the tracks: own and friendly reports there are not what these checks read)
+    ahead = tuple(dom.overlay[a].area.buffer(LINGER_M).bounds for a in sorted(places))
+    paths = {to.path(dom.owner)} | {to.path(u) for u in followed if u in to.units and u not in dom.own_units}
+    return Needs(TEMPLATES, by={"path": frozenset(paths),
                                 "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
                                 "requester": frozenset({dom.owner}),
                                 "unit": frozenset(units)},
-                 circles=tuple(circles), boxes=boxes, whole=("org",))
+                 circles=tuple(circles), boxes=boxes, whole=("org",),
+                 only=((SensorTrack.KEY, ahead),) if ahead else ())
+
+
+class _Posts:
+    """Stands in for the domain while a mission posts its place constraints, and records
+    only what its checks will read beyond our own units: the places watched for hostiles
+    (penetration, monitored and escape areas, a disrupt's avenue) and the units whose
+    positions are followed (a follow-and-assume's supported unit). Anything else it
+    posts is ignored; anything it reads is the domain's."""
+
+    def __init__(self, dom):
+        self.dom = dom
+        self.places: set[str] = set()
+        self.units: set[str] = set()
+        self._assumed: set[str] = set()   # supported units whose missions were recorded
+
+    def __getattr__(self, name):
+        if name.startswith("post_"):
+            return _ignore
+        return getattr(self.dom, name)
+
+    def post_penetration(self, m, area) -> None:
+        self.places.add(area)
+
+    def post_red_monitor(self, m, area, expected, expect_by=None) -> None:
+        self.places.add(area)
+
+    def post_escape(self, m, area) -> None:
+        self.places.add(area)
+
+    def post_tempo(self, m, avenue, by, tempo_mps) -> None:
+        self.places.add(avenue)
+
+    def post_assume(self, m, supported, halt_s) -> None:
+        """Its supported unit's positions (is it halted?), and the places any mission of that
+        unit it may take over will watch."""
+        self.units.add(supported)
+        if supported in self._assumed:
+            return
+        self._assumed.add(supported)
+        for other in self.dom.missions.values():
+            if other.unit == supported and not isinstance(other, ContingentMission):
+                other.location_constraints(self)
+
+    def mission(self, m) -> None:
+        m.location_constraints(self)
+
+    def contingency(self, c: ContingentMission) -> None:
+        """Its trigger's area, and what its task will watch once it runs (built as
+        `Contingencies.execute` builds it)."""
+        tr = c.params["trigger"]
+        if tr["kind"] == "hostile-in-area":
+            self.places.add(tr["area"])
+        task_cls = REGISTRY[c.params["task"]]
+        task = task_cls(MissionSpec(c.id, c.unit, task_cls.TYPE, c.spec.start, c.spec.end, (),
+                                    dict(c.params.get("task_params", {}))))
+        if self.dom.in_plan(task):
+            task.location_constraints(self)
+
+
+def _ignore(*_a, **_k) -> None:
+    return None
+
+
+def planned(dom) -> tuple[frozenset[str], frozenset[str]]:
+    """What the checks of our plan's missions will read once they run, beyond our units'
+    surroundings: (places watched for hostiles, units whose positions are followed), for
+    every mission of ours not done or aborted and every contingency of ours not yet
+    fired. Heard from the plan's start, not from when a mission becomes ready: a check
+    that starts then judges what the in-process EA, which hears everything, already
+    knows (a hostile already in a secured objective, a track's progress along an
+    avenue, where the supported unit has stood). Cached until the plan's state or the
+    task organization changes."""
+    plan = dom.plan
+    if plan is None:
+        return frozenset(), frozenset()
+    st = plan.state
+    key = (id(plan), getattr(st, "version", None), dom.taskorg.version, len(dom.missions))
+    memo = getattr(dom, "_planned_memo", None)
+    if memo is not None and memo[0] == key and key[1] is not None:
+        return memo[1]
+    rec = _Posts(dom)
+    for mid, m in dom.missions.items():
+        s = st.get(mid)
+        if s in ("done", "aborted"):
+            continue
+        if isinstance(m, ContingentMission):
+            if m.params.get("owner") == dom.owner:
+                rec.contingency(m)
+        elif dom.in_plan(m):
+            rec.mission(m)
+    out = frozenset(a for a in rec.places if a in dom.overlay), frozenset(rec.units)
+    dom._planned_memo = (key, out)
+    return out
 
 
 def needs_before(dom, msg) -> Needs | None:

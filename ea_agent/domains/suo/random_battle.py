@@ -93,3 +93,30 @@ def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
         d.append({"kind": "call-for-fire", **{k_: v for k_, v in c.items() if k_ != "kind"},
                   "confirmed": sim.cffs[-1]["kind"] == "cff-confirm"})
     sim.cffs.sort(key=lambda c: (c["t"], c["cff"]))
+    _draw_tasks(sim, np.random.default_rng([sim.seed, 13]))
+
+
+def _draw_tasks(sim: Sim, rng: np.random.Generator) -> None:
+    """What the mission classes of issue 34 need in some battles, from a stream of its own (the
+    draws above stay what they were): A2 halting in its attack (A3, following to assume, takes
+    its seizure over), B1 blocking a line instead of its position, R reconnoitring its ground
+    as an area (coverage) instead of a zone (depth front to rear)."""
+    d = sim.drawn
+    u = lambda a, b: float(round(rng.uniform(a, b)))   # noqa: E731
+    if rng.random() < 0.35:   # it stands for 260-330 s, then makes up the time to its objective
+        ts, ys = sim.platoon_y_path("A2")
+        at, hold = ts[3] + u(150, 400), u(260, 330)
+        y = float(np.interp(at, ts, ys))
+        sim.paths["A2"] = (ts[:4] + [at, at + hold, ts[4]], ys[:4] + [y, y, ys[4]])
+        d.append({"kind": "halt", "unit": "A2", "t": at, "hold_s": hold, "y": y})
+    sim.block_line = bool(rng.random() < 0.5)
+    sim.area_recon = bool(rng.random() < 0.5)
+    if sim.block_line:   # a small group infiltrating south through B1's lane, across its blocking line
+        x, appear, speed = 4500.0 + u(-300, 300), u(3500, 4300), float(rng.uniform(2.5, 4.0))
+        arrive = appear + round(4000.0 / speed)
+        sim.hostiles["H20"] = Hostile("H20", [appear, arrive], [x, x], [13500.0, 9500.0], int(rng.integers(2, 5)),
+                                      appear)
+        d.append({"kind": "hostile", "id": "H20", "from": [x, 13500.0], "to": [x, 9500.0], "appear": appear,
+                  "arrive": arrive, "strength": sim.hostiles["H20"].strength, "crosses": "PL-B1-BLOCK"})
+    d.append({"kind": "tasks", "B1_blocks": "PL-B1-BLOCK" if sim.block_line else "BP-B1",
+              "R_recon": "area-reconnaissance" if sim.area_recon else "zone-reconnaissance"})

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from .ahead import ThreatsAhead
 from .areas import Areas
+from .assume import Assumptions
 from .bands import Bands
 from .base import BASE, Changes, Detector
 from .checkpoints import Checkpoints
@@ -29,6 +30,7 @@ from .recon import ReconProgress
 from .schedule import ScheduleMonitors
 from .standoff import Standoffs
 from .support import FireSupport
+from .tempo import Tempo
 from .threats import ThreatEnvelopes
 from .unknown import UnknownPositions
 
@@ -37,14 +39,14 @@ DETECTORS: tuple[type[Detector], ...] = (
     Contingencies, Areas, ThreatEnvelopes, Projections,
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
     Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs,
-    FireSupport, Presence, ReconProgress,
+    FireSupport, Presence, ReconProgress, Tempo, Assumptions,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
 PROJECTED = tuple(k for k, c in CATEGORY.items() if c == "constraint-violation-projected")   # beyond the paper
 ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fig. 4, projections, check families
 
-__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Bands", "CallsForFire",
+__all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Assumptions", "Bands", "CallsForFire",
            "Checkpoints", "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide",
            "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ReconProgress", "ScheduleMonitors", "Standoffs",
-           "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
+           "Tempo", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]

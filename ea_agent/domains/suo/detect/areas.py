@@ -57,7 +57,7 @@ class Areas(Detector):
     def reindex(self) -> None:
         """The watched areas changed: rebuild the spatial index over all of them."""
         ids = (set(self.global_areas) | set(self.red_monitors) | self.dom.contingency.trigger_areas()
-               | self.dom.escape.areas())
+               | self.dom.escape.areas() | self.dom.tempo.areas())
         self.index = AreaIndex({a: self.dom.overlay[a].area for a in sorted(ids)})
         self.near_index = AreaIndex({a: self.dom.overlay[a].area.buffer(LINGER_M) for a in sorted(ids)})
         self._stale = True   # tracks already in a newly watched area are found at the next epoch

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 import shapely
 
-from ea_agent.core.alert import Candidate
+from ea_agent.core.alert import Candidate, hms
 from ea_agent.core.geo import bearing_name
 
 from ..missions import Mission
@@ -246,6 +246,8 @@ class LocationMonitors(Detector):
             return None
         place = self.corridor_to[geom_id][1] if what == "corridor" else geom_id
         ref = f"should be in the corridor to {place}" if what == "corridor" else f"should be at {geom_id}"
+        if what == "by":   # a time the plan names (a seizure's): judged then
+            ref += f" by {hms(t)}"
         if pos is not None:
             if near is None:
                 near = shapely.shortest_line(shapely.Point(pos), geom).coords[-1]

@@ -2,9 +2,13 @@
 elements have come within sight of, against the share of the mission's time gone.
 A route reconnaissance reports progress by its checkpoints; a zone or area has no
 order to its points, so what is seen is counted on a grid of cells (`recon_cell_m`),
-a cell seen once an element reported within `recon_sight_m` of its centre."""
+a cell seen once an element reported within `recon_sight_m` of its centre. An area
+reconnaissance's progress is the share of its cells seen (coverage, in any order); a zone
+reconnaissance's is the depth passed front to rear: the bands of cells across the zone,
+from the side its unit starts on, seen (each to `recon_complete`) without a gap before them."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +30,21 @@ class _Recon:
     cells: np.ndarray        # (n, 2) centres of the grid cells inside the area
     seen: np.ndarray         # (n,) bool: an element came within sight of it
     by: float | None         # when all of it must be seen (None: judged at the end only)
+    progress: str = "coverage"   # coverage | depth
+    bands: np.ndarray | None = None   # depth: each cell's band index, front (0) to rear (None until oriented)
     next_check: float = 0.0
+
+    def share(self, complete: float) -> float:
+        """How far along it is: cells seen, or bands passed front to rear without a gap."""
+        if self.progress == "coverage":
+            return float(self.seen.mean())
+        if self.bands is None:
+            return 0.0
+        n = int(self.bands.max()) + 1
+        seen = np.bincount(self.bands, weights=self.seen, minlength=n)
+        total = np.bincount(self.bands, minlength=n)
+        ok = seen >= complete * total
+        return float(np.argmin(ok)) / n if not ok.all() else 1.0
 
 
 def grid_cells(area, step: float) -> np.ndarray:
@@ -47,11 +65,34 @@ class ReconProgress(Detector):
     def reset(self) -> None:
         self.watch: dict[str, _Recon] = {}
 
-    def post(self, m: Mission, area: str, by: float | None) -> None:
+    def post(self, m: Mission, area: str, by: float | None, progress: str = "coverage") -> None:
         dom = self.dom
         cells = grid_cells(dom.overlay[area].area, dom.voi(m, "recon_cell_m"))
-        self.watch[m.id] = w = _Recon(m, area, cells, np.zeros(len(cells), dtype=bool), by)
+        self.watch[m.id] = w = _Recon(m, area, cells, np.zeros(len(cells), dtype=bool), by, progress)
         self._look(w)   # what it sees from where it starts
+
+    def start(self, m: Mission) -> None:
+        """The mission started: a zone is oriented from where its unit is now (the picture as of
+        the confirmation, the same in every peer)."""
+        w = self.watch.get(m.id)
+        if w is not None:
+            self._orient(w, self.dom.pic.centroid(m.unit))
+
+    def _orient(self, w: _Recon, pos: tuple[float, float] | None = None) -> None:
+        """A zone's depth runs from where its unit is at its start (or, unknown then, when first
+        known while the mission runs) towards the zone's centre: bands `recon_cell_m` deep across
+        that direction."""
+        if w.progress != "depth" or w.bands is not None:
+            return
+        pos = pos or self.dom.unit_pos.get(w.m.unit)
+        if pos is None:
+            return
+        c = self.dom.overlay[w.area].area.centroid
+        dx, dy = c.x - pos[0], c.y - pos[1]
+        n = math.hypot(dx, dy)
+        ux, uy = (dx / n, dy / n) if n > 1.0 else (0.0, -1.0)   # on its centre: north to south
+        depth = w.cells[:, 0] * ux + w.cells[:, 1] * uy
+        w.bands = np.floor((depth - depth.min()) / self.dom.voi(w.m, "recon_cell_m") + 1e-9).astype(int)
 
     def end_mission(self, mid: str) -> None:
         self.watch.pop(mid, None)
@@ -75,6 +116,7 @@ class ReconProgress(Detector):
             if dom.plan.state.get(mid) != "active" or not dom.in_plan(w.m):
                 continue
             due = ch.rescan and t >= w.next_check and w.by is not None
+            self._orient(w)
             if w.m.unit in ch.units or due:   # a unit that does not move sees what it saw
                 self._look(w)
             if not due:
@@ -84,7 +126,7 @@ class ReconProgress(Detector):
             if w.by <= t0:
                 continue
             expected = min(1.0, (t - t0) / (w.by - t0))
-            got = float(w.seen.mean())
+            got = w.share(dom.voi(w.m, "recon_complete"))
             if expected - got > dom.voi(w.m, "recon_lag"):
                 cands.append(self._cand(w, t, "behind", got, expected))
 
@@ -93,20 +135,23 @@ class ReconProgress(Detector):
         w = self.watch.get(m.id)
         if w is None:
             return
+        self._orient(w)
         self._look(w)
-        got = float(w.seen.mean())
+        got = w.share(self.dom.voi(m, "recon_complete"))
         if got < self.dom.voi(m, "recon_complete"):
             self.dom.ea.post(self._cand(w, t, "incomplete", got, 1.0))
 
     def _cand(self, w: _Recon, t: float, how: str, got: float, expected: float) -> Candidate:
         dom, m = self.dom, w.m
+        what = "seen" if w.progress == "coverage" else "of its depth passed"
         if how == "behind":
-            text = (f"{dom.name(m.unit)} behind in its {m.TYPE} of {w.area}: {got:.0%} seen, "
+            text = (f"{dom.name(m.unit)} behind in its {m.TYPE} of {w.area}: {got:.0%} {what}, "
                     f"{expected:.0%} due (all by {hms(w.by)})")
         else:
-            text = f"{dom.name(m.unit)} ended its {m.TYPE} of {w.area} with {got:.0%} of it seen"
+            text = f"{dom.name(m.unit)} ended its {m.TYPE} of {w.area} with {got:.0%} {what}"
         return Candidate(t, "recon-progress", m.compute_priority("recon-progress"), (m.unit,), text,
                          key=("recon-progress", m.id, how), measure=max(expected - got, 1e-6),
-                         details={"mission": m.id, "check": how, "area": w.area, "seen": round(got, 3),
+                         details={"mission": m.id, "check": how, "area": w.area, "progress": w.progress,
+                                  "seen": round(got, 3),
                                   "expected": round(expected, 3),
                                   "behind_by": round(expected - got, 3), "cells": len(w.cells), "places": [w.area]})

@@ -2,6 +2,7 @@
 registry of leaf classes, the default priorities and the small helpers the families share."""
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, ClassVar
 
 from ea_agent.core.mission import Mission as CoreMission, Registry
@@ -98,3 +99,26 @@ def _band_problem(params: dict) -> tuple[str, str] | None:
 
 
 _STANDOFF = "no hostile within its standoff distance (standoff)"
+
+
+def _time_problem(params: dict, key: str) -> tuple[str, str] | None:
+    """What is wrong with an optional scenario-time parameter `key`, if anything."""
+    v = params.get(key)
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+        return key, "expected a scenario time >= 0"
+    return None
+
+
+def _window_problem(params: dict, key: str) -> tuple[str, str] | None:
+    """What is wrong with a [from, until] window of scenario times `key`, if anything."""
+    w = params.get(key)
+    if w is None:
+        return None
+    if (not isinstance(w, list) or len(w) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                           and math.isfinite(x) for x in w)):
+        return key, "expected [from, until] in scenario seconds"
+    if not 0 <= w[0] < w[1]:
+        return key, f"from {w[0]} not before until {w[1]} (or negative)"
+    return None

@@ -27,6 +27,7 @@ class ContingentMission(Mission):
     }
     REQUIRED = ("trigger", "task", "owner")
     UNIT_PARAMS = ("owner",)
+    ALTERNATIVE: ClassVar[bool] = False   # offered to the commander in place of the course of action running
     CHECKS = ("its trigger (contingency); once triggered, its task as a monitored mission from then",)
 
     def contingency_satisfied(self, ctx):
@@ -38,13 +39,17 @@ class ContingentMission(Mission):
 
 @mission
 class Branch(ContingentMission):
-    """An alternative course of action: also offered when a moving unit meets hostiles ahead."""
+    """An alternative course of action (FM 3-0): besides its trigger, offered to the commander in
+    place of a move when its unit meets hostiles ahead."""
     TYPE = "branch"
+    ALTERNATIVE = True
+    CHECKS = ContingentMission.CHECKS + ("offered in place of its unit's move when hostiles are ahead (threat-ahead)",)
 
 
 @mission
 class Sequel(ContingentMission):
-    """What follows once its trigger holds (never offered as an alternative to a move)."""
+    """What follows the current operation once its trigger holds (FM 3-0): never offered in
+    place of the course of action running."""
     TYPE = "sequel"
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 from .base import Mission, _STANDOFF, _band_problem, _checks, mission
 
@@ -111,8 +112,26 @@ class FollowAndSupport(FollowMission):
 
 @mission
 class FollowAndAssume(FollowMission):
-    """Ready to take over the supported unit's mission: the same band, kept tighter by plans."""
+    """Ready to take over the supported unit's mission (FM 3-90): when that unit halts short of
+    its goal for `halt_s`, or its mission is aborted (committed elsewhere), the EA says so and
+    from then monitors that mission as the follower's own (contingency)."""
     TYPE = "follow-and-assume"
+    PARAMS = {"halt_s": "optional: the supported unit standing this long short of its goal has halted (default 180)"}
+    HALT_S: ClassVar[float] = 180.0
+    CHECKS = FollowMission.CHECKS + (
+        "the supported unit halted or its mission aborted: its mission assumed and monitored as the follower's "
+        "(contingency)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        v = params.get("halt_s")
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+            return "halt_s", "expected a time > 0 in seconds"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_assume(self, self.params["supported"], float(self.params.get("halt_s", self.HALT_S)))
 
 
 @mission

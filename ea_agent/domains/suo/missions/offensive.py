@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _checks, mission
+from .base import Mission, _checks, _time_problem, mission
 
 
 class OffensiveMission(Mission):
@@ -61,26 +61,41 @@ class HastyAttack(OffensiveMission):
 
 @mission
 class Seize(OffensiveMission):
-    """Take possession: no hostile left on the objective at the end (end-state)."""
+    """Take possession (FM 3-90): its own elements on the objective at the end, and by its
+    optional `by` (the time the plan needs the objective in hand) if that comes first. No
+    judgement of hostiles left there: that is clear's."""
     TYPE = "seize"
-    END_STATE = True
-    CHECKS = OffensiveMission.CHECKS + ("no hostile on the objective at the end (end-state)",)
+    PARAMS = {"by": "optional scenario time by which all its elements are on the objective (default: its end)"}
+    CHECKS = OffensiveMission.CHECKS + ("all its elements on the objective by its `by` time (out-of-position)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _time_problem(params, "by") or super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("by") is not None:
+            ctx.post_deadline(self, float(self.params["by"]), self.params["objective"], self.FINAL_RULE)
 
 
 @mission
 class Secure(OffensiveMission):
-    """Take and protect: no hostile on the objective at the end (end-state)."""
+    """Protect the objective from the enemy while the mission runs (FM 3-90): a hostile in it at
+    any time is a penetration (projected before it enters); no end-state clearance is asked."""
     TYPE = "secure"
-    END_STATE = True
-    CHECKS = Seize.CHECKS
+    CHECKS = OffensiveMission.CHECKS + ("no hostile in the objective while it runs (penetration, projected before)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_penetration(self, self.params["objective"])
 
 
 @mission
 class Clear(OffensiveMission):
-    """Remove all resistance: no hostile on the objective at the end (end-state)."""
+    """Remove all resistance: no hostile left on the objective at the end (end-state)."""
     TYPE = "clear"
     END_STATE = True
-    CHECKS = Seize.CHECKS
+    CHECKS = OffensiveMission.CHECKS + ("no hostile on the objective at the end (end-state)",)
 
 
 @mission
@@ -90,7 +105,7 @@ class Destroy(OffensiveMission):
     FINAL_RULE = "centroid"
     END_STATE = True
     ESCAPE = True
-    CHECKS = Seize.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
+    CHECKS = Clear.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
 
 
 @mission

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _band_problem, _checks, mission
+from .base import Mission, _band_problem, _checks, _window_problem, mission
 
 
 class PositionMission(Mission):
@@ -77,11 +77,35 @@ class Retain(PositionMission):
 
 @mission
 class Block(PositionMission):
-    """Deny the enemy the position: a hostile in it is a penetration."""
+    """Deny the enemy an area or an avenue (FM 3-90): it names exactly one of `area` (no
+    hostile enters it) or `line` (no hostile crosses it); either is a penetration, projected
+    before it happens."""
     TYPE = "block"
+    PARAMS = {"area": "overlay area no hostile may enter (give this or line)",
+              "line": "overlay line no hostile may cross (give this or area)"}
+    GEOMETRY_PARAMS = ("position", "engagement_area", "area", "line")
     PRIORITY = {"hostile-expected": "immediate"}
-    PENETRATION = True
-    CHECKS = Retain.CHECKS
+    CHECKS = PositionMission.CHECKS + (
+        "names exactly one of area or line (checked on load): no hostile enters its area or crosses its line "
+        "(penetration, projected before)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        area, line = params.get("area"), params.get("line")
+        if (area is None) == (line is None):
+            return ("area" if area is None else "line",
+                    "a block names what it blocks: exactly one of area (a place) or line (an avenue)"
+                    + (", not both" if area is not None else ""))
+        if area is not None and area in overlay and overlay[area].geom.geom_type == "LineString":
+            return "area", f"{area!r} is a line: give it as line, not area"
+        return super().check_params(params, overlay)
+
+    def blocked(self) -> str:
+        return self.params.get("area") or self.params["line"]
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_penetration(self, self.blocked())
 
 
 @mission
@@ -144,8 +168,23 @@ class Overwatch(PositionMission):
 
 @mission
 class Suppress(PositionMission):
-    """Judged as the position family (its fires are not modelled)."""
+    """Fires on a target for a time (FM 3-90): through its `window` the target must be within
+    the unit's weapons range of where it is, or its fires cannot reach it (fire-support)."""
     TYPE = "suppress"
+    PARAMS = {"target": "overlay area its fires land on",
+              "window": "[from, until]: the scenario times its fires are due on the target"}
+    REQUIRED = ("position", "target", "window")
+    GEOMETRY_PARAMS = ("position", "engagement_area", "target")
+    CHECKS = PositionMission.CHECKS + ("the target within its weapons range through its fire window (fire-support)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _window_problem(params, "window") or super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        w0, w1 = self.params["window"]
+        ctx.post_suppression(self, self.params["target"], float(w0), float(w1))
 
 
 @mission
@@ -162,5 +201,27 @@ class Contain(PositionMission):
 
 @mission
 class Disrupt(PositionMission):
-    """Judged as the position family (its fires are not modelled)."""
+    """Break the enemy's formation and tempo on an avenue (FM 3-90): from `by`, a hostile on the
+    `avenue` still advancing along it faster than `tempo_mps` is a tempo not broken (hostile-expected)."""
     TYPE = "disrupt"
+    PARAMS = {"avenue": "overlay avenue of approach (a line, drawn the way the enemy comes)",
+              "by": "scenario time by which its tempo on the avenue must be broken",
+              "tempo_mps": "optional advance along the avenue that still counts as unbroken (default 1.0 m/s)"}
+    REQUIRED = ("position", "avenue", "by")
+    GEOMETRY_PARAMS = ("position", "engagement_area", "avenue")
+    LINE_PARAMS = Mission.LINE_PARAMS + ("avenue",)
+    TEMPO_MPS: ClassVar[float] = 1.0
+    CHECKS = PositionMission.CHECKS + (
+        "from its time, no hostile on its avenue still advancing along it faster than its tempo (hostile-expected)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        v = params.get("tempo_mps")
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+            return "tempo_mps", "expected a speed > 0 in m/s"
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_tempo(self, self.params["avenue"], float(self.params["by"]),
+                       float(self.params.get("tempo_mps", self.TEMPO_MPS)))

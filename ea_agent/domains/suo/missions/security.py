@@ -61,13 +61,11 @@ class Observe(SecurityMission):
 
 
 class ReconnaissanceMission(SecurityMission):
-    """Reconnaissance of a zone or an area: its elements must come within sight of all of
-    it, at a pace that finishes by `by` (or the mission's END-NLT/END-AT time); hostiles
-    found in it are what it looks for, and are reported at once as in the security family."""
-    PARAMS = {"by": "optional scenario time by which all of the area must be seen (default: its end time)"}
-    CHECKS = SecurityMission.CHECKS + (
-        "progress: the share of the area seen against the share of its time gone, and most of it seen "
-        "at its end (recon-progress)",)
+    """Reconnaissance of a zone or an area, finished by `by` (or the mission's END-NLT/END-AT
+    time); hostiles found in it are what it looks for, and are reported at once as in the
+    security family. How its progress is measured is its class's (PROGRESS)."""
+    PARAMS = {"by": "optional scenario time by which all of it must be seen (default: its end time)"}
+    PROGRESS: ClassVar[str] = "coverage"   # coverage (area) | depth (zone)
 
     def by(self) -> float | None:
         if self.params.get("by") is not None:
@@ -84,7 +82,11 @@ class ReconnaissanceMission(SecurityMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
-        ctx.post_recon(self, self.params["area"], self.by())
+        ctx.post_recon(self, self.params["area"], self.by(), self.PROGRESS)
+
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        ctx.start_recon(self)
 
     def check_final_location(self, ctx, t):
         super().check_final_location(ctx, t)
@@ -93,12 +95,20 @@ class ReconnaissanceMission(SecurityMission):
 
 @mission
 class AreaReconnaissance(ReconnaissanceMission):
-    """A named area: the unit's elements see all of it."""
+    """A named area, in any order (FM 3-90): its elements come within sight of all of it."""
     TYPE = "area-reconnaissance"
+    CHECKS = SecurityMission.CHECKS + (
+        "coverage: the share of the area seen against the share of its time gone, and most of it seen at "
+        "its end (recon-progress)",)
 
 
 @mission
 class ZoneReconnaissance(ReconnaissanceMission):
-    """Everything between its boundaries: as an area reconnaissance, over a whole zone
-    (usually larger, so its progress is what the commander watches)."""
+    """Everything between its boundaries, front to rear (FM 3-90): its progress is the depth of
+    the zone passed (every band across it seen, from the side the unit starts on), against the
+    share of its time gone; a gap left behind holds the depth there."""
     TYPE = "zone-reconnaissance"
+    PROGRESS = "depth"
+    CHECKS = SecurityMission.CHECKS + (
+        "progress front to rear: the depth of the zone passed (each band across it seen) against the share "
+        "of its time gone, and most of its depth passed at its end (recon-progress)",)

@@ -31,6 +31,7 @@ class Truth(Places, Threats, Tasks, TruthBase):
 def ground_truth(sim, feats: list[dict], plan: dict, owners: list[str]) -> dict:
     tr = Truth(sim, feats, plan, owners)
     tr.contingency()
+    tr.assume()   # a follower that takes over a halted unit's mission: judged as its own from then
     for step in (tr.out_of_position, tr.fratricide, tr.unknown_position, tr.schedule, tr.coordination,
                  tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families, tr.presence):
         step()

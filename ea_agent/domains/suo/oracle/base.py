@@ -12,6 +12,8 @@ from .spec import (AUTO_START, CONFIRM_S, LIFE, REACH_M, REORGANIZATION, SPEC, T
 class TruthBase:
     """The truth's state: the plan in force, the task organization and the true positions over
     time, what sensors could see, and how incidents and situations are recorded."""
+    soft = False               # while set, an incident is recorded as a situation: it may be told, or not
+    only: str | None = None    # while set, only this owner's EA is told (a contingency's holder)
 
     def __init__(self, sim, feats: list[dict], plan: dict, owners: list[str]):
         self.sim, self.owners = sim, owners
@@ -63,6 +65,8 @@ class TruthBase:
         self.situations: list[dict] = []
         self.task_started: dict[str, float] = {}   # triggered contingency -> when its task may have started
         self.task_due: dict[str, float] = {}       # ... and by when it must have
+        self.task_soft: set[str] = set()           # ... those that may have fired, or not: their task's incidents
+                                                    # are only situations (`soft`)
         self.corridor_start: dict[str, np.ndarray] = {}   # route-less mission -> where its corridor starts
 
     # -- task organization over time ----------------------------------------------------
@@ -147,7 +151,9 @@ class TruthBase:
                                      for x, y, r in ((*self.sim.sensor_xy(sid, t), r) for sid, r in self.sim.sensors))
 
     def owners_of(self, unit: str, t: float) -> list[str]:
-        return [o for o in self.owners if unit in self.subtree(o, t)]
+        """The EAs whose units include `unit` (while a triggered contingency's task is judged:
+        only the contingency's owner, the one EA that holds and executes it)."""
+        return [o for o in self.owners if unit in self.subtree(o, t) and (self.only is None or o == self.only)]
 
     # -- recording ----------------------------------------------------------------------
 
@@ -156,6 +162,9 @@ class TruthBase:
         the window an alert about it is accepted in; `life`: it threatens lives (the paper's
         flash: first contact with the enemy, fratricide, fire called near friendlies);
         `about`: the subjects an alert must name to be about it (default: any of them)."""
+        if self.soft:   # judged on a task that may not be running at all
+            self.may(owner, accept + [typ], subjects, t0, t1, about=about)
+            return
         self.incidents.append({"owner": owner, "type": typ, "accept": sorted(set(accept) | {typ}),
                                "subjects": sorted(set(subjects)), "t0": round(t0, 1), "t1": round(t1, 1),
                                "at": round(t0 if at is None else at, 1), "life": typ in LIFE, "label": label,

@@ -48,7 +48,9 @@ class Places:
         for mid, m in self.missions.items():
             typ = m["type"]
             p = m["params"]
-            if typ in CONTINGENT and mid in self.task_started:   # a triggered task: its own type from then
+            self.only, self.soft = None, False
+            if typ in CONTINGENT and mid in self.task_started:   # a triggered task: its own type from then,
+                self.only, self.soft = p["owner"], mid in self.task_soft   # for the EA that holds it
                 typ, p = m["params"]["task"], m["params"].get("task_params", {})
                 self.started.setdefault(mid, self.task_started[mid])
             rule = "any" if typ in ANY_RULE else "centroid"
@@ -105,6 +107,7 @@ class Places:
                         self.must(o, "out-of-position", [], [m["unit"]], e - 1, e + 5, f"{mid} not at {dest}", at=e)
                     else:
                         self.may(o, ["out-of-position"], [m["unit"]], e - 1, e + 5)
+        self.only, self.soft = None, False
 
     def coordination(self) -> None:
         for mid, m in self.missions.items():
@@ -160,8 +163,10 @@ class Places:
                     self.triggered_areas[owner].add(tr["area"])
                     break
             else:
-                if t_near is not None:   # it came near, never well inside: it may have fired
-                    self.may(owner, ["contingency"], [m["unit"]], t_near - 15, self.ticks[-1])
+                if t_near is not None:   # it came near, never well inside: it may have fired, and its
+                    self.may(owner, ["contingency"], [m["unit"]], t_near - 15, self.ticks[-1])   # task run
+                    self.task_started[mid], self.task_due[mid] = t_near, t_near
+                    self.task_soft.add(mid)
 
     def areas(self) -> None:
         """monitored / ave-of-approach / hostile-expected from true hostile positions."""
@@ -176,9 +181,9 @@ class Places:
                 geo = geometry_params(m["type"])
                 for key in ("engagement_area", "area"):
                     a = m["params"].get(key)
-                    if a and key in geo and not (m["type"] in PENETRATION and PENETRATION[m["type"]] == key):
+                    if a and key in geo and key not in PENETRATION.get(m["type"], ()):
                         watch.append((a, "monitored", mid))
-                held = m["params"].get(PENETRATION.get(m["type"], ""))
+                held = next((m["params"][k] for k in PENETRATION.get(m["type"], ()) if m["params"].get(k)), None)
                 if held:
                     watch.append((held, "penetration", mid))
             for area, typ, mid in watch:

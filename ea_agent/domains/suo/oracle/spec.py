@@ -43,12 +43,23 @@ CONTINGENT = {"branch", "sequel"}
 REORGANIZATION = {"reorganize"}
 AUTO_START = REORGANIZATION   # the EA executes it itself at its start time
 LIFE = {"contact", "fratricide", "call-for-fire"}   # life-threatening: the paper's flash alerts
-# What doctrine (FM 3-90) says each task forbids the enemy: to enter the held area (block, retain,
-# guard; a defence's rear line), to leave it (fix, isolate, destroy: the objective; contain: the
-# engagement area), to be left on the objective at the end (seize, clear, secure, destroy).
-PENETRATION = {"block": "position", "retain": "position", "guard": "area", "defend": "rear_line"}
+# What doctrine (FM 3-90) says each task forbids the enemy: to enter the held place (retain, guard,
+# secure: the objective while it runs; a defence's rear line; a block: the area or line it names,
+# whichever the plan gives), to leave it (fix, isolate, destroy: the objective; contain: the
+# engagement area), to be left on the objective at the end (clear, destroy). Seize asks only that
+# its own elements be on the objective (by its `by`, and at its end).
+PENETRATION = {"block": ("area", "line"), "retain": ("position",), "guard": ("area",), "defend": ("rear_line",),
+               "secure": ("objective",)}
 ESCAPE = {"fix": "objective", "isolate": "objective", "destroy": "objective", "contain": "engagement_area"}
-END_STATE = {"seize", "clear", "secure", "destroy"}
+END_STATE = {"clear", "destroy"}
+SUPPRESS = {"suppress"}   # fires on `target` through `window`: the target within weapons range
+DISRUPT = {"disrupt"}     # from `by`, no group on `avenue` still advancing along it faster than `tempo_mps`
+TEMPO_MPS = 1.0           # a disrupt's default tempo
+TEMPO_TREND_S = 60.0      # a group's advance along the avenue is measured over this long
+ZONE = {"zone-reconnaissance"}   # progress is the depth passed front to rear (area: the share seen)
+ASSUME = {"follow-and-assume"}   # takes over the supported unit's mission when it halts
+HALT_S = 180.0            # a follow-and-assume's default: the supported unit standing this long has halted
+HALT_M = 50.0             # ... standing: its centroid within this of one place
 FOLLOW = {"follow-and-support", "follow-and-assume"}
 STANDOFF = {"screen", "bypass", "withdraw", "delay"}   # not to become decisively engaged   # stay within a distance band of the supported unit
 FOLLOW_MAX_M = 3000.0   # the band's far edge unless the plan says (band_m)

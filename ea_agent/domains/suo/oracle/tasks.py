@@ -8,8 +8,8 @@ import shapely
 from shapely.geometry import LineString, Point
 
 from .spec import (
-    CONTINGENT, END_STATE, EPISODE_S, ESCAPE, FOLLOW, FOLLOW_MAX_M, FRIENDLY_ERR_M,
-    LINE_MARGIN_M, MATERIAL, OBJECTIVE, RECON, ROUTE, STANDOFF,
+    ASSUME, CONTINGENT, DISRUPT, END_STATE, EPISODE_S, ESCAPE, FOLLOW, FOLLOW_MAX_M, FRIENDLY_ERR_M, HALT_M, HALT_S,
+    LINE_MARGIN_M, MATERIAL, OBJECTIVE, RECON, ROUTE, STANDOFF, SUPPRESS, TEMPO_MPS, TEMPO_TREND_S, ZONE,
     TICK, TOLERANCE_M, _bands, _runs, geometry_params,
 )
 
@@ -24,7 +24,9 @@ class Tasks:
         escape, end state, the engagement area in weapons range, the distance band."""
         for mid, m in self.missions.items():
             typ, p = m["type"], m["params"]
+            self.only, self.soft = None, False
             if typ in CONTINGENT and mid in self.task_started:   # a triggered task is judged as its own type
+                self.only, self.soft = p["owner"], mid in self.task_soft   # by the EA that holds it
                 typ, p = p["task"], p.get("task_params", {})
                 m = {**m, "type": typ, "params": p}
             if typ == "support-by-fire" and p.get("supported"):
@@ -43,8 +45,15 @@ class Tasks:
                 self._coverage(mid, m, p["position"], p["engagement_area"], s)
             if geometry_params(typ) == ("position", "engagement_area") or typ == "observe":
                 self._held(mid, m, p["position"], s, e)
-            if typ in FOLLOW:
-                self._band(mid, m, p["supported"], p.get("band_m") or (0.0, FOLLOW_MAX_M), s, e)
+            if typ in FOLLOW:   # until it assumes the supported unit's mission: it no longer follows then
+                self._band(mid, m, p["supported"], p.get("band_m") or (0.0, FOLLOW_MAX_M), s,
+                           min(e, self.assumed.get(mid, math.inf)))
+            if typ in SUPPRESS:
+                self._suppress(mid, m, p, s, e)
+            if typ in DISRUPT:
+                self._tempo(mid, m, p, s, e)
+            if typ == "seize" and p.get("by") is not None:
+                self._seize_by(mid, m, p, float(p["by"]), s, e)
             if typ == "overwatch" and p.get("supported"):   # within its fires unless the plan says
                 self._band(mid, m, p["supported"], p.get("band_m") or (0.0, self.thr(m, "weapons_range_m")), s, e)
             line = self._line_of(mid, m)
@@ -60,6 +69,7 @@ class Tasks:
                 self._line(mid, m, p["line"], float(p["until"]), s, e, hold=True)
             if typ == "breach" and p.get("obstacle"):
                 self._line(mid, m, p["obstacle"], float(p["by"]), s, e, hold=False, toward=p["objective"])
+        self.only, self.soft = None, False
 
     def _held(self, mid, m, position, s, e) -> None:
         """A position its mission must hold: some friendly element (anyone's) in it while it runs;
@@ -236,6 +246,22 @@ class Tasks:
                  if area.contains(Point(x, y))] or [area.representative_point().coords[0]]
         cells = np.array(cells)
         seen = np.zeros(len(cells), dtype=bool)
+        bands = None
+        if m["type"] in ZONE:   # depth from where the unit starts towards the zone's centre, front to rear
+            c0 = self.member_points(m["unit"], min(int(math.ceil(s / TICK - 1e-9)), len(self.ticks) - 1)).mean(axis=0)
+            ctr = area.centroid
+            dx, dy = ctr.x - c0[0], ctr.y - c0[1]
+            n = math.hypot(dx, dy)
+            ux, uy = (dx / n, dy / n) if n > 1.0 else (0.0, -1.0)
+            depth = cells[:, 0] * ux + cells[:, 1] * uy
+            bands = np.floor((depth - depth.min()) / step + 1e-9).astype(int)
+
+        def share() -> float:
+            if bands is None:
+                return float(seen.mean())
+            nb = int(bands.max()) + 1
+            ok = np.bincount(bands, weights=seen, minlength=nb) >= complete * np.bincount(bands, minlength=nb)
+            return 1.0 if ok.all() else float(np.argmin(ok)) / nb
         end = m.get("end") or {}
         by = p.get("by")
         if by is None and end.get("type") in ("END-NLT", "END-AT"):
@@ -248,7 +274,7 @@ class Tasks:
             d = np.hypot(cells[:, None, 0] - pts[None, :, 0], cells[:, None, 1] - pts[None, :, 1]).min(axis=1)
             seen |= d <= sight
             if by is not None and by > s:
-                lag = min(1.0, (t - s) / (by - s)) - seen.mean()
+                lag = min(1.0, (t - s) / (by - s)) - share()
                 if lag > lag_max - 0.02:
                     near.append(t)
                 if lag > lag_max + 0.02 and behind is None:
@@ -263,9 +289,9 @@ class Tasks:
                 self.may(o, ["recon-progress"], [unit], near[0] - self.slack, e + self.slack)
         if mid in self.ended and self.ended[mid] < self.valid[mid][1]:
             for o in self.owners_of(unit, e):
-                if seen.mean() < complete - 0.02:
+                if share() < complete - 0.02:
                     self.must(o, "recon-progress", [], [unit], e - 1, e + self.slack + 5, f"{mid} incomplete", at=e)
-                elif seen.mean() < complete + 0.02:
+                elif share() < complete + 0.02:
                     self.may(o, ["recon-progress"], [unit], e - 1, e + self.slack + 5)
 
     def _line_of(self, mid, m):
@@ -383,3 +409,137 @@ class Tasks:
                 if peak > 1.5 * thr and b - a >= 30:
                     self.must(o, "band", [], [m["unit"], other], a - self.slack, a + 60, f"{mid} out of band", at=a)
                 self.may(o, ["band"], [m["unit"], other], a - self.slack, b + self.slack)
+
+    def assume(self) -> None:
+        """Follow and assume: the follower takes over the supported unit's mission once that unit
+        has stood (its true centroid within HALT_M of one place) for the mission's `halt_s` short
+        of its goal while its own mission runs and the follow mission does. It must be told, and
+        from then the supported mission is judged as the follower's own (a mission of the
+        follower's added to the plan, started then, ended with the follow mission). Standing
+        within twice HALT_M may be told too (reports jitter and lag)."""
+        self.assumed: dict[str, float] = {}
+        for mid, m in list(self.missions.items()):
+            if m["type"] not in ASSUME or mid not in self.started:
+                continue
+            p = m["params"]
+            sup, halt = p["supported"], float(p.get("halt_s", HALT_S))
+            v0, v1 = self.valid[mid]
+            s, e = max(self.started[mid], v0), min(self.ended.get(mid, math.inf), v1)
+            sure = maybe = None
+            for sid, sm in self.missions.items():
+                goal = sm["params"].get("destination") or sm["params"].get("objective")
+                if sm["unit"] != sup or not goal or sid not in self.started:
+                    continue
+                a = max(self.started[sid], self.valid[sid][0], s)
+                b = min(self.ended.get(sid, math.inf), self.valid[sid][1], e)
+                ks = [k for k, t in enumerate(self.ticks) if a <= t < b]
+                if not ks:
+                    continue
+                c = np.array([self.member_points(sup, k).mean(axis=0) for k in ks])
+                # the EA sees the halt in reports up to `slack` old: standing for halt_s may be
+                # told, standing that long after its reports caught up must be
+                n, n_sure = int(round(halt / TICK)), int(round((halt + self.slack) / TICK))
+                thr = self.thr(m, "out_of_position_m")
+                for i in range(n, len(ks)):
+                    t = self.ticks[ks[i]]
+                    if self.area[goal].distance(Point(c[i])) <= thr + FRIENDLY_ERR_M:
+                        continue
+                    if float(np.hypot(*(c[i - n:i + 1] - c[i]).T).max()) <= 2 * HALT_M:
+                        maybe = t if maybe is None else maybe
+                    if i >= n_sure and float(np.hypot(*(c[i - n_sure:i + 1] - c[i]).T).max()) <= HALT_M / MATERIAL:
+                        sure = (t, sid)
+                        break
+                if sure or maybe is not None:
+                    break
+            for o in self.owners_of(m["unit"], maybe) if maybe is not None else ():
+                self.may(o, ["contingency"], [m["unit"], sup], maybe - self.slack, e + self.slack)
+            if sure is None:
+                continue
+            t, sid = sure
+            for o in self.owners_of(m["unit"], t):
+                self.must(o, "contingency", [], [m["unit"], sup], maybe - self.slack, t + self.slack + 30,
+                          f"{m['unit']} assumes {sid} ({sup} halted)", at=t)
+            cid = f"{mid}>{sid}"
+            src = self.missions[sid]
+            self.missions[cid] = {"id": cid, "unit": m["unit"], "type": src["type"], "params": dict(src["params"])}
+            self.valid[cid] = self.valid[mid]
+            self.started[cid] = t
+            if mid in self.ended:
+                self.ended[cid] = self.ended[mid]
+            self.assumed[mid] = t
+
+    def _suppress(self, mid, m, p, s, e) -> None:
+        """Suppression: through its window, while it runs, the target within the unit's weapons
+        range of its centroid; within FRIENDLY_ERR_M of the range either answer is fair."""
+        w0, w1 = (float(x) for x in p["window"])
+        a, b = max(s, w0), min(e, w1)
+        if a > b:
+            return
+        rng = self._range(m["unit"], self.parent_at(a))
+        target = self.area[p["target"]]
+        maybe = sure = None
+        for k, t in enumerate(self.ticks):
+            if not a <= t <= b:
+                continue
+            d = target.distance(Point(self.member_points(m["unit"], k).mean(axis=0)))
+            if maybe is None and d > rng - FRIENDLY_ERR_M:
+                maybe = t
+            if d > rng + FRIENDLY_ERR_M:
+                sure = t
+                break
+        if maybe is None:
+            return
+        for o in self.owners_of(m["unit"], maybe):
+            if sure is not None:
+                self.must(o, "fire-support", [], [m["unit"]], maybe - self.slack - 1, sure + self.slack + 35,
+                          f"{m['unit']} cannot reach {p['target']} ({mid})", at=sure)
+            self.may(o, ["fire-support"], [m["unit"]], maybe - self.slack - 1, b + self.slack + 35)
+
+    def _tempo(self, mid, m, p, s, e) -> None:
+        """Disruption: from `by`, while it runs, a group on the avenue advancing along it (as
+        drawn) faster than the tempo over TEMPO_TREND_S. Sure: well inside the avenue and at
+        least twice the tempo (and 1 m/s above it); maybe: near it and above half the tempo."""
+        by, tempo = float(p["by"]), float(p.get("tempo_mps", TEMPO_MPS))
+        line = self.geom[p["avenue"]]
+        near_g, deep_g = _bands(self.area[p["avenue"]])
+        first, sure = {}, None
+        for t in self.ticks:
+            if not max(s, by) <= t < e:
+                continue
+            now, then = self.hostiles_at(t), self.hostiles_at(t - TEMPO_TREND_S)
+            for h, (x, y, _st) in now.items():
+                if h not in then:
+                    continue
+                x0, y0, _ = then[h]
+                v = (line.project(Point(x, y)) - line.project(Point(x0, y0))) / TEMPO_TREND_S
+                if v > tempo / 2 and near_g.contains(Point(x, y)) and near_g.contains(Point(x0, y0)):
+                    first.setdefault(h, t)
+                    if sure is None and v >= max(2 * tempo, tempo + 1.0) and deep_g.contains(Point(x, y)) \
+                            and deep_g.contains(Point(x0, y0)):
+                        sure = (t, h)
+        if not first:
+            return
+        unit, av = m["unit"], p["avenue"]
+        for h, t in first.items():
+            for o in self.owners_of(unit, t):
+                self.may(o, ["hostile-expected"], [unit, h, av], t - 15, e + 45, about=[av])
+        if sure is not None:
+            t, h = sure
+            for o in self.owners_of(unit, t):
+                self.must(o, "hostile-expected", [], [unit, h, av], min(first.values()) - 15, t + 60 + self.slack,
+                          f"{h} still advancing on {av} after {by:.0f} ({mid})", at=t, about=[av])
+
+    def _seize_by(self, mid, m, p, by, s, e) -> None:
+        """A seizure's time: all its elements on the objective by `by` while it runs (its end is
+        judged as every mission's); within a MATERIAL step of the threshold either answer is fair."""
+        if not s <= by < e or not self.valid[mid][0] <= by < self.valid[mid][1]:
+            return
+        thr = self.thr(m, "out_of_position_m")
+        d = self.judged(self.area[p["objective"]], m["unit"], int(round(by / TICK)), "all")
+        for o in self.owners_of(m["unit"], by) if d > thr / MATERIAL else ():
+            if d > thr * MATERIAL:
+                self.must(o, "out-of-position", [], [m["unit"]], by - 1, by + 5, f"{mid} not on {p['objective']} "
+                          f"by {by:.0f}", at=by)
+            else:
+                self.may(o, ["out-of-position"], [m["unit"]], by - 1, by + 5)
+
