@@ -111,6 +111,14 @@ def _time_problem(params: dict, key: str) -> tuple[str, str] | None:
     return None
 
 
+def _positive_problem(params: dict, key: str, expected: str) -> tuple[str, str] | None:
+    """What is wrong with an optional parameter `key` that must be a number > 0, if anything."""
+    v = params.get(key)
+    if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+        return key, expected
+    return None
+
+
 def _window_problem(params: dict, key: str) -> tuple[str, str] | None:
     """What is wrong with a [from, until] window of scenario times `key`, if anything."""
     w = params.get(key)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-from .base import Mission, _STANDOFF, _band_problem, _checks, mission
+from .base import Mission, _positive_problem, _STANDOFF, _band_problem, _checks, mission
 
 
 class MovementMission(Mission):
@@ -124,10 +124,7 @@ class FollowAndAssume(FollowMission):
 
     @classmethod
     def check_params(cls, params, overlay):
-        v = params.get("halt_s")
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
-            return "halt_s", "expected a time > 0 in seconds"
-        return super().check_params(params, overlay)
+        return _positive_problem(params, "halt_s", "expected a time > 0 in seconds") or super().check_params(params, overlay)
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)

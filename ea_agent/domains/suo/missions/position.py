@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _band_problem, _checks, _window_problem, mission
+from .base import Mission, _positive_problem, _band_problem, _checks, _window_problem, mission
 
 
 class PositionMission(Mission):
@@ -216,10 +216,7 @@ class Disrupt(PositionMission):
 
     @classmethod
     def check_params(cls, params, overlay):
-        v = params.get("tempo_mps")
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
-            return "tempo_mps", "expected a speed > 0 in m/s"
-        return super().check_params(params, overlay)
+        return _positive_problem(params, "tempo_mps", "expected a speed > 0 in m/s") or super().check_params(params, overlay)
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
