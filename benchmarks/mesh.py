@@ -44,7 +44,7 @@ from saim_mesh.zconf import config, free_port
 
 RAW_ROOT = "bench/raw"
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 BLOCK = zenoh.CongestionControl.BLOCK
 
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 from saim_mesh.stats import percentiles
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _key(a: dict) -> tuple:

@@ -22,7 +22,7 @@ from saim_mesh import wire as W
 from saim_mesh.security import sign as G
 from saim_mesh import results
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def per_message_us(fn, n: int, rounds: int) -> float:

@@ -23,7 +23,7 @@ from saim_mesh.tak import cot as C
 from saim_mesh.tak.picture import Options, Picture
 from saim_mesh import results
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 EPOCH = datetime(2026, 5, 1, 6, 0, 0, tzinfo=timezone.utc)
 TICK_S = 2.0
 

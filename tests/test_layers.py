@@ -76,3 +76,17 @@ def test_no_runtime_module_imports_a_benchmark():
     assert offenders("dissemination", ["benchmarks"]) == [] and offenders("ea_agent", ["benchmarks"]) == []
     assert not (ROOT / "saim_mesh" / "bench").exists()
     assert not [p.name for p in (ROOT / "saim_mesh").rglob("bench*.py")]
+
+
+def test_benchmarks_find_the_repository():
+    """Each benchmark resolves the repository root it reads scenarios from and writes
+    bench/results/ under from its own path: after the move out of saim_mesh/bench that
+    is one level up, not two (two levels wrote results beside the clone)."""
+    import importlib
+    for p in sorted((ROOT / "benchmarks").glob("*.py")):
+        text = p.read_text()
+        if "Path(__file__).resolve().parents[" not in text:
+            continue
+        mod = importlib.import_module(f"benchmarks.{p.stem}")
+        root = getattr(mod, "ROOT", None) or mod.OUT.parents[2]
+        assert (root / "pyproject.toml").is_file() and (root / "benchmarks").is_dir(), (p.name, root)
