@@ -137,7 +137,7 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
             last_wm = _idle(src, clock, m.t, epoch_s, last_wm)
         w = math.ceil(m.t / epoch_s) * epoch_s - epoch_s   # the last boundary strictly before m.t
         if w > last_wm:
-            src.watermark(w, linger=clock is None)   # as fast as possible: fuller frames
+            src.watermark(w)
             last_wm = w
         try:
             src.put(m)
