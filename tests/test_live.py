@@ -283,3 +283,26 @@ def test_a_frame_the_full_order_refuses_is_offered_again_never_dropped(sc):
     peer._retry()
     peer._retry()
     assert not peer.hold.waiting_for("cp.a") and peer.ea.n_in == 6 and peer.frames == 4
+
+
+def test_a_source_back_after_every_other_ended_does_not_kill_the_peer(sc, tmp_path):
+    """A lost source heard again once every other source ended (the order released up to
+    +inf) is taken back with one line, not an OverflowError out of the alert's text (a
+    brigade peer died so in bench_scale)."""
+    from saim_mesh import messages as M
+    from saim_mesh.live import frames as F
+    peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), "t/back", ["cp.a", "cp.b"],
+                    out_path=str(tmp_path / "A2.jsonl"), log=lambda *a, **k: None)
+    peer.ea.start(0.0)
+    rep = next(e for e in sc.events if type(e) is M.LocationReport)
+
+    def frame(src, seq, wm, ms, end=False):
+        return F.encode(F.Frame(v=1, source=src, epoch=1, seq=seq, wm=wm, msgs=[M.encode(m) for m in ms], end=end))
+    peer.receive(frame("cp.a", 1, 2.0, []), "")
+    peer.lose("cp.a", "silent for 10 s")
+    peer.receive(frame("cp.b", 1, 4.0, [], end=True), "")
+    assert peer.order.released == float("inf")
+    peer.receive(frame("cp.a", 2, rep.t, [rep]), "")
+    back = [a for a in peer.given if a.details.get("event") == "source-back"]
+    assert len(back) == 1 and "since the end" in back[0].message, [a.message for a in peer.given]
+    assert peer.rebuilds == 1

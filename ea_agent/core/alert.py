@@ -1,6 +1,7 @@
 """Alert candidates (before VOA), priorities and the Fig. 1 alert ontology."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Hashable
 
@@ -17,7 +18,11 @@ CATEGORIES = (
 
 
 def hms(t: float) -> str:
-    """Scenario time as H+hh:mm:ss, the way alerts and messages show it."""
+    """Scenario time as H+hh:mm:ss, the way alerts and messages show it. Total: an
+    order's bound is +inf once every source ended and -inf before any spoke, and a text
+    that names one must not kill the process that writes it."""
+    if not math.isfinite(t):
+        return "the end" if t > 0 else "the start" if t < 0 else "an unknown time"
     t = int(round(t))
     return f"H+{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}"
 
