@@ -21,7 +21,8 @@ SUO's families:
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
   <root>/rtr/<router>/<zid>                    a router's liveliness token (a link or router lost)
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
-  <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing)
+  <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing);
+                                               live: <peer> is a source it depends on (its pace)
   <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
   <root>/cmd/<unit>/<kind>/<by>                a command to a unit's EA from the console of unit <by>
   <root>/cmdlog/<unit>                         the EA's answer to every command (CmdResult)

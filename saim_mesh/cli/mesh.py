@@ -55,10 +55,17 @@ def cmd_source(a) -> int:
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"source.{a.name}", sc, root, **_zmode(a))
     with zenoh.open(conf) as s:
         src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache)
+        pace = None
+        if not a.speed and not a.live:   # as fast as possible: no further ahead than its EAs allow
+            from ..live.pace import SourcePace
+            pace = SourcePace(s, src.ks, a.name)
         print(f"ready source {a.name} epoch={src.epoch}", flush=True)
-        n = play.publish(src, msgs, a.speed, start, until=a.until, paced_from=paced)
+        n = play.publish(src, msgs, a.speed, start, until=a.until, paced_from=paced, pace=pace)
         src.close(end=not a.keep_open)
-        print(f"end source {a.name} messages={n} frames={src.seq}", flush=True)
+        waited = f" waited={pace.waits}x/{pace.waited_s:.1f}s for its EAs" if pace is not None else ""
+        print(f"end source {a.name} messages={n} frames={src.seq}{waited}", flush=True)
+        if pace is not None:
+            pace.close()
         if a.linger:
             time.sleep(a.linger)   # the publisher's cache serves late joiners and recoveries meanwhile
         src.stop()

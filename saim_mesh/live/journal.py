@@ -5,7 +5,7 @@ says what the EA decided and when in its input (../shared/notes/live-mesh.md: id
 detected by wall clock is not reproducible, a decision written down is).
 
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
-as written: ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body]
+as written (frames: before the next thing the peer tells anyone, see `frame`): ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body]
 (a directive: saim_mesh/directives.py), ["peer", unit, up] (another EA left without a goodbye, or
 came back) or ["back", source]. A half-written last
 record (a kill) is ignored on reading."""
@@ -25,13 +25,21 @@ class InputJournal:
         self.path = Path(path)
         self.f = open(self.path, "ab")
 
-    def _write(self, rec: list) -> None:
+    def _write(self, rec: list, flush: bool = True) -> None:
         b = _ENC.encode(rec)
         self.f.write(_LEN.pack(len(b)) + b)
-        self.f.flush()
+        if flush:
+            self.f.flush()
 
     def frame(self, payload: bytes) -> None:
-        self._write(["frame", payload])
+        """A frame taken: buffered (a write per frame cost more than its decoding), and on
+        disk at the next `flush`, which the peer calls before anything leaves it (an
+        alert, a notice, a confirmation) and every few tens of milliseconds: a kill loses
+        at most frames that changed nothing outside, and a restart fetches them again."""
+        self._write(["frame", payload], flush=False)
+
+    def flush(self) -> None:
+        self.f.flush()
 
     def lost(self, source: str, released: float, why: str) -> None:
         self._write(["lost", source, released, why])

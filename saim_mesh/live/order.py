@@ -120,14 +120,20 @@ class EventTimeOrder(Generic[T]):
             self.unknown += 1
             return "unknown source"
         times = [float(x.t) for x in items]
-        if math.isnan(wm) or any(math.isnan(t) for t in times):
+        released = self._released
+        fresh = 0
+        for t in times:   # one pass: a NaN (it compares false both ways) and what is not late
+            if t > released:
+                fresh += 1
+            elif not t <= released:
+                return "bad time"
+        if wm != wm:
             return "bad time"
         if st.epoch is not None:
             if epoch < st.epoch:
                 return "old epoch"
             if epoch == st.epoch and seq <= st.seq:
                 return "duplicate"
-        fresh = sum(t > self._released for t in times)
         if fresh and len(self._heap) + fresh > self.max_buffered and not self._holds(source, st):
             return "full"
 
@@ -135,11 +141,16 @@ class EventTimeOrder(Generic[T]):
         if st.epoch == epoch:
             self.gaps[source] += seq - st.seq - 1
         st.epoch, st.seq = epoch, seq
-        for i, (t, x) in enumerate(zip(times, items)):
-            if t <= self._released:
-                self.late.append((source, x))
-            else:
-                heapq.heappush(self._heap, (t, source, epoch, seq, i, x))
+        heap, push = self._heap, heapq.heappush
+        if fresh == len(times):   # the usual frame: nothing late
+            for i, (t, x) in enumerate(zip(times, items)):
+                push(heap, (t, source, epoch, seq, i, x))
+        else:
+            for i, (t, x) in enumerate(zip(times, items)):
+                if t <= released:
+                    self.late.append((source, x))
+                else:
+                    push(heap, (t, source, epoch, seq, i, x))
         st.wm = max(st.wm, float(wm))
         if end:
             st.ended, st.wm = True, INF

@@ -52,8 +52,9 @@ GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missi
 CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, silences) while frames flow
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report, its heap entry: 315 B measured)
-DATA = (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
-        M.Reorganization)
+DATA = frozenset((M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
+                  M.Reorganization))
+LOCATION = M.LocationReport
 
 
 class LivePeer:
@@ -166,6 +167,8 @@ class LivePeer:
             a = replace(a, details={**a.details, "late": True, "due_from": round(due, 3)})
             self.late += 1
         self.given.append(a)
+        if self.journal is not None:   # its inputs on disk before the alert: a restart never raises it twice
+            self.journal.flush()
         if self.alog:
             self.alog.write(a)
         if self.session is not None:
@@ -174,6 +177,8 @@ class LivePeer:
     def _notice(self, n) -> None:
         if self.restoring:
             return   # re-notifications and escalations of the past are not sent again
+        if self.journal is not None:
+            self.journal.flush()
         if self.nlog:
             self.nlog(n)
         if self.session is not None:   # signed in secure mode: an escalation crosses the router
@@ -192,6 +197,8 @@ class LivePeer:
         self.confirmed_up.add((c.mission, c.phase))
         if self.restoring or self.session is None:
             return
+        if self.journal is not None:
+            self.journal.flush()
         at = math.ceil((c.t + D.CONFIRM_LEAD_S) / self.ea.epoch_s) * self.ea.epoch_s
         try:
             d = D.publish(self.session, self.ks.root, self.signer, self.unit, "confirm", at=at, mission=c.mission,
@@ -364,20 +371,20 @@ class LivePeer:
             if journal and self.journal is not None:
                 self.journal.back(f.source)
             self.back(f.source)
-        items = []
-        for b in f.msgs:
-            m = self.gate.data(b, key or f"src/{f.source}")
-            if m is None:
-                continue
-            if type(m) not in DATA:
-                self.gate.rejects.add(M.MessageError(m.KIND, "(kind)", f"a {m.KIND} message in a source's frame"),
-                                      key)
-                continue
-            items.append(m)
-            if type(m) is M.LocationReport:
-                u = self.sc.taskorg.entity_unit.get(m.entity)
-                if u is not None:
-                    self.reports.setdefault(f.source, set()).add(u)
+        items = self.gate.data_many(f.msgs, key or f"src/{f.source}")
+        if any(type(m) not in DATA for m in items):
+            for m in items:
+                if type(m) not in DATA:
+                    self.gate.rejects.add(M.MessageError(m.KIND, "(kind)", f"a {m.KIND} message in a source's "
+                                                                           "frame"), key)
+            items = [m for m in items if type(m) in DATA]
+        reported = self.reports.get(f.source)
+        if reported is None:
+            reported = self.reports[f.source] = set()
+        unit_of = self.sc.taskorg.entity_unit.get
+        for m in items:
+            if type(m) is LOCATION and (u := unit_of(m.entity)) is not None:
+                reported.add(u)
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             if not retrying:

@@ -103,11 +103,14 @@ def read_lines(f: IO[str], fmt: str, entity: str | None, start: float | None) ->
 
 
 def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = None, live_start: float | None = None,
-            epoch_s: float = EPOCH_S, log=print, until: float | None = None, paced_from: float | None = None) -> int:
+            epoch_s: float = EPOCH_S, log=print, until: float | None = None, paced_from: float | None = None,
+            pace=None) -> int:
     """Publish `msgs` (in event-time order) with a watermark at every epoch boundary they
     pass; at `speed` x real time, as fast as possible (None), or live (wait until each
     message's event time on the wall clock, and keep watermarks going while idle).
-    `paced_from`: with a speed, the wall time of event time 0 (several sources in step)."""
+    `paced_from`: with a speed, the wall time of event time 0 (several sources in step).
+    `pace` (a `pace.SourcePace`, as fast as possible only): never further ahead of the
+    slowest EA depending on this source than it allows."""
     t0 = time.monotonic() if paced_from is None else time.monotonic() - (time.time() - paced_from)
     clock = None   # event time now, and how to sleep until an event time
     if live_start is not None:
@@ -136,8 +139,10 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
         if clock is not None:   # live or paced: promise each epoch as its clock passes it
             last_wm = _idle(src, clock, m.t, epoch_s, last_wm)
         w = math.ceil(m.t / epoch_s) * epoch_s - epoch_s   # the last boundary strictly before m.t
+        if clock is None and pace is not None:   # what is held goes out before it waits
+            pace.wait(m.t, lambda: src.watermark(max(w, last_wm)))
         if w > last_wm:
-            src.watermark(w)
+            src.watermark(w, linger=clock is None)   # as fast as possible: fuller frames
             last_wm = w
         try:
             src.put(m)

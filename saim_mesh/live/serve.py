@@ -15,6 +15,7 @@ import zenoh
 import zenoh.ext as zx
 
 from .. import wire as W
+from .pace import EaProgress
 from .peer import BLOCK, CHECK_S, GAP_WAIT_S
 from .source import CACHE
 
@@ -58,6 +59,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                         if len(peer.sources) < len(peer.named) else ""), flush=True)
             started = time.monotonic()
             next_check = 0.0
+            progress = EaProgress(peer.ks, peer.unit)
             while not peer.done() and time.monotonic() < end_wall:
                 try:
                     key, payload = peer.q.get(timeout=0.5)
@@ -76,6 +78,8 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 if key is not None and now < next_check:
                     continue   # while frames flow, the checks below run every CHECK_S
                 next_check = now + CHECK_S
+                if peer.journal is not None:
+                    peer.journal.flush()
                 if peer.hold.waiting:
                     peer._retry()
                 if peer.behind:
@@ -92,6 +96,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                                   f"never heard in {quiet:.0f} s")
                 if peer.live_start is not None:
                     peer._apply()
+                progress.send(s, peer.order.released, peer.sources)   # how far it got: its sources' pace
             _drain(peer)   # what came with the sources' last frames is taken, not dropped
             peer.ea.finish(peer.end_t())
             peer.log("end " + json.dumps({k: v for k, v in peer.summary().items()

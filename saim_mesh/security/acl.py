@@ -146,7 +146,8 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
     for n in source_names(units, taskorg):
         mine = [ks.src(n), f"{r}/src/{n}/@adv/**", ks.srcj(n)]
-        subject(f"source.{n}", [out, rule(f"source.{n}.read", READ, [f"{r}/src/**", adv]),
+        # ... and the acks of the EAs that depend on it (live/pace.py: a max-speed source's pace)
+        subject(f"source.{n}", [out, rule(f"source.{n}.read", READ, [f"{r}/src/**", adv, ks.ack("*", n)]),
                                 rule(f"source.{n}.put", ["put", "declare_queryable", "reply", "liveliness_token"],
                                      mine),
                                 rule(f"source.{n}.query", ["query"], [adv])])
