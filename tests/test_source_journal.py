@@ -12,7 +12,7 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.live import play
-from saim_mesh.live.srcjournal import JournalQuery, SourceJournal
+from saim_mesh.live.srcjournal import NONE_HELD, Asker, JournalQuery, SourceJournal
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
@@ -79,3 +79,72 @@ def test_a_late_joiner_beyond_the_cache_catches_up_from_the_journal(tmp_path):
         {k: summary[k] for k in ("fetched", "gaps", "lost", "frames")}
     want = plan_alerts(in_process(sc, "A2", {"cp.all": list(play.share(sc, None, True))}))
     assert len(want) >= 5 and plan_alerts(load(tmp_path / "A2.jsonl")) == want
+
+
+class Reply:
+    def __init__(self, ok: bytes | None = None, err: bytes | None = None):
+        wrap = (lambda b: None if b is None else type("S", (), {"payload": type("P", (), {"to_bytes": lambda _s: b})()})())
+        self.ok, self.err = wrap(ok), wrap(err)
+
+
+class LossySession:
+    """A journal behind a congested link: the `drop`-th replies (counted over the whole
+    session) never arrive, as DROP replies at a full router queue; each ask is recorded."""
+
+    def __init__(self, journal: SourceJournal | None, drop=lambda n: False):
+        self.journal, self.drop, self.sent, self.asks = journal, drop, 0, []
+
+    def get(self, key, payload, timeout, consolidation):
+        if self.journal is None:
+            return []
+        q = FakeQuery(payload)
+        self.asks.append(msgspec.msgpack.decode(payload, type=JournalQuery))
+        self.journal.serve(q, key)
+        out = []
+        for b in q.replies:
+            self.sent += 1
+            if not self.drop(self.sent):
+                out.append(Reply(ok=b))
+        return out + ([Reply(err=q.error)] if q.error else [])
+
+
+def frames_journal(tmp_path, n: int = 60, size: int = 1000) -> SourceJournal:
+    j = SourceJournal(tmp_path, "cp.x", 1)
+    for seq in range(1, n + 1):
+        j.append(seq, seq.to_bytes(4, "big") + b"x" * size)
+    return j
+
+
+def seq_of(b: bytes) -> int:
+    return int.from_bytes(b[:4], "big")
+
+
+def test_an_asker_gets_every_frame_in_sequence_through_a_lossy_link(tmp_path):
+    """Yielding replies dropped at a congested router leave holes: the asker keeps what
+    came in sequence, asks again from the first one missing, and asks for less."""
+    j = frames_journal(tmp_path)
+    s = LossySession(j, drop=lambda n: n % 7 == 3)
+    a = Asker(chunk=16_000)
+    got = a.ask(s, "k", 1, 5, 60, seq_of, budget_s=30)
+    assert [seq_of(b) for b in got] == list(range(5, 61)) and a.why == "done"
+    assert len(s.asks) > 4 and min(q.max_bytes for q in s.asks) < 16_000   # smaller asks after the holes
+    assert all(q.lo >= p.lo for p, q in zip(s.asks, s.asks[1:]))            # never from the start again
+
+
+def test_an_asker_stops_when_the_journal_holds_no_more_or_nobody_answers(tmp_path):
+    j = frames_journal(tmp_path, n=10)
+    s = LossySession(j)
+    a = Asker()
+    assert [seq_of(b) for b in a.ask(s, "k", 1, 8, 50, seq_of)] == [8, 9, 10] and a.why == "none held"
+    assert len(s.asks) == 2   # the frames, then "none held": no third ask
+    gone = LossySession(None)
+    assert a.ask(gone, "k", 1, 1, 5, seq_of) == [] and a.why == "no answer" and gone.asks == []
+
+
+def test_the_journal_answers_at_most_the_bytes_asked_but_always_one_frame(tmp_path):
+    j = frames_journal(tmp_path, n=10, size=1000)
+    assert [seq_of(b) for b in j.frames(1, 1, 10, max_bytes=2500)] == [1, 2]
+    assert [seq_of(b) for b in j.frames(1, 3, 10, max_bytes=10)] == [3]
+    q = FakeQuery(msgspec.msgpack.encode(JournalQuery(epoch=1, lo=11, hi=20)))
+    j.serve(q, "k")
+    assert q.replies == [] and q.error == NONE_HELD

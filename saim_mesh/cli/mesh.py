@@ -54,7 +54,7 @@ def cmd_source(a) -> int:
         msgs = play.read_lines(f, a.format, a.entity, start)
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"source.{a.name}", sc, root, **_zmode(a))
     with zenoh.open(conf) as s:
-        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache)
+        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache, yielding=a.yield_catch_up)
         pace = None
         if not a.speed and not a.live:   # as fast as possible: no further ahead than its EAs allow
             from ..live.pace import SourcePace
@@ -248,6 +248,9 @@ def add(sub) -> None:
     so.add_argument("--cache", type=int, default=None, metavar="N",
                     help="frames the publisher keeps in memory for recovery and late joiners (default 100000)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
+    so.add_argument("--yield-catch-up", action="store_true",
+                    help="recoveries and journal catch-ups yield to live traffic (DROP, lower priority): "
+                         "across slow radio links, where a router stalled on them closes its links")
     so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
     so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")
     _zenoh_args(so)

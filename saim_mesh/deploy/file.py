@@ -20,7 +20,7 @@ from pathlib import Path
 DEFAULT_PORT = 7447           # Zenoh's own default
 NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 DNS_RE = re.compile(r"^[A-Za-z0-9]([A-Za-z0-9.-]*[A-Za-z0-9])?$")
-TOP_KEYS = {"scenario", "root", "secure", "pki", "speed", "live", "start", "until", "source_linger", "host",
+TOP_KEYS = {"scenario", "root", "secure", "pki", "speed", "live", "start", "until", "source_linger", "catch_up", "host",
             "router"}
 HOST_KEYS = {"name", "addresses", "names", "interface", "attach", "eas", "sources", "fusion", "consoles", "tak"}
 ROUTER_KEYS = {"name", "host", "cp", "port", "links"}
@@ -91,6 +91,12 @@ class Deployment:
     source_linger: float = 30.0
     path: Path | None = None            # the file it came from
     attach_map: dict[str, str] = field(default_factory=dict)   # unit -> router (a topology file's [attach])
+    catch_up: str | None = None         # "yield" | "block"; default: yield when there is more than one host
+
+    def yielding(self) -> bool:
+        """Sources' recoveries and catch-ups yield to live traffic (live/source.py): across
+        radio links between hosts, where a router stalled on them closes its links."""
+        return self.catch_up == "yield" or self.catch_up is None and len(self.hosts) > 1
 
     # -- who runs where ---------------------------------------------------------------
     def host_of(self, what: str, kind: str = "eas") -> str | None:
@@ -258,6 +264,10 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
             e(f"start: {start!r} is not an ISO 8601 time (e.g. 2026-11-27T09:00:00Z)")
     until = _number(doc.get("until"), e, "until")
     linger = _number(doc.get("source_linger"), e, "source_linger")
+    catch_up = _str(doc.get("catch_up"), e, "catch_up")
+    if catch_up is not None and catch_up not in ("yield", "block"):
+        e(f"catch_up: {catch_up!r} is not 'yield' or 'block'")
+        catch_up = None
     hosts: dict[str, Host] = {}
     raw_hosts = doc.get("host", [])
     if not isinstance(raw_hosts, list) or not all(isinstance(h, dict) for h in raw_hosts):
@@ -344,7 +354,7 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
     sc_path = Path(scen) if Path(scen).is_absolute() else (base / scen)
     dep = Deployment(str(sc_path.resolve()) if path else scen, hosts, routers, root, _bool(doc.get("secure"), e,
                      "secure", True), (base / pki).resolve() if pki else (base / "pki").resolve(), speed, live,
-                     start, until, 30.0 if linger is None else linger, path)
+                     start, until, 30.0 if linger is None else linger, path, catch_up=catch_up)
     return dep, e.lines
 
 

@@ -206,6 +206,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
             sup.add(Proc(name, [*py(), "source", dep.scenario, "--name", name, *share[name],
                                 *where(name.removeprefix("cp.")), "--root", root, "--speed", dep.speed,
                                 "--state", str(out_dir / "sources"), "--linger", f"{dep.source_linger:g}",
+                                *(["--yield-catch-up"] if dep.yielding() else []),
                                 *live_args, *pace_args, *until_args], env=clean_env(), log_dir=logs))
         if h.sources:
             echo(f"host {host}: sources {', '.join(h.sources)} started", flush=True)

@@ -44,11 +44,12 @@ from .held import Held
 from .journal import InputJournal
 from .order import EventTimeOrder
 from .presence import PeerPresence
-from .srcjournal import ask
+from .srcjournal import Asker
 from .timeline import Timeline
 
 BLOCK = zenoh.CongestionControl.BLOCK
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
+PATIENCE = 40         # asks of a journal that gave nothing over a congested link before the rest is a gap
 CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, silences) while frames flow
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report, its heap entry: 315 B measured)
@@ -122,6 +123,8 @@ class LivePeer:
         self.dropped = 0                      # ... how many (all fetched again from the journal, or gaps)
         self.frames = 0
         self.fetched = 0                      # frames caught up from sources' journals
+        self.askers: dict[str, Asker] = {}    # ... each source's, sized to what its link gives
+        self.patience: dict[str, int] = {}    # ... asks that brought nothing over a congested link
         self.late = 0
         self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given and shown
         self.muted: set[tuple] = set()        # ... given inhibited
@@ -281,7 +284,15 @@ class LivePeer:
         the missing ones are gone, counted as a gap)."""
         st, early = self.seq_of[source], self.hold.early_of(source)
         if force and early and st[1] not in early:   # beyond recovery: the source's journal, if it keeps one
-            self._catch_up(source, st[0], st[1], min(early) - 1)
+            got = self._catch_up(source, st[0], st[1], min(early) - 1)
+            why = self.askers[source].why if source in self.askers else ""
+            if not got and why == "congested" and self.patience.get(source, 0) < PATIENCE:
+                # the journal is there but its replies yield to live traffic on a slow link: the
+                # frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`
+                self.patience[source] = self.patience.get(source, 0) + 1
+                self.hold.gap_since[source] = time.monotonic()
+                return
+            self.patience.pop(source, None)
         if force and early and st[1] not in early:
             low = min(early)
             self.gaps += low - st[1]
@@ -317,9 +328,10 @@ class LivePeer:
                     self.log(f"source {src}: caught up from its journal to {st[1] - 1}", flush=True)
                     break
 
-    def _catch_up(self, source: str, epoch: int, lo: int, hi: int, take: bool = False) -> None:
+    def _catch_up(self, source: str, epoch: int, lo: int, hi: int, take: bool = False) -> int:
         """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>): held
-        for `_drain_held`, or (`take`: an epoch that ended with a restart) taken now."""
+        for `_drain_held`, or (`take`: an epoch that ended with a restart) taken now. How
+        many came."""
         got = 0
         for b, key, f in self._journal_frames(source, epoch, lo, hi):
             got += 1
@@ -330,6 +342,7 @@ class LivePeer:
         if got:
             self.fetched += got
             self.log(f"source {source}: {got} frames of epoch {epoch} from its journal", flush=True)
+        return got
 
     def _journal_frames(self, source: str, epoch: int, lo: int, hi: int):
         """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>), each
@@ -337,7 +350,16 @@ class LivePeer:
         if self.session is None or lo > hi:
             return
         key = self.ks.src(source)
-        for b in ask(self.session, self.ks.srcj(source), epoch, lo, hi):
+
+        def seq_of(b: bytes) -> int | None:
+            try:
+                return F.decode(b, self.max_bytes).seq
+            except M.MessageError:
+                return None   # counted below, where it is read for good
+        asker = self.askers.get(source)
+        if asker is None:
+            asker = self.askers[source] = Asker()
+        for b in asker.ask(self.session, self.ks.srcj(source), epoch, lo, hi, seq_of):
             f = self._frame(b, key)
             if f is not None and f.source == source and f.epoch == epoch and f.seq >= lo:
                 yield b, key, f

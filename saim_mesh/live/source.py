@@ -20,7 +20,7 @@ from dissemination.keyspace import KeySpace
 
 from .. import messages as M
 from . import frames as F
-from .srcjournal import SourceJournal
+from .srcjournal import YIELDING, SourceJournal
 
 BLOCK = zenoh.CongestionControl.BLOCK
 CACHE = 100_000        # frames kept for recovery and late joiners (a frame is one flush)
@@ -49,7 +49,10 @@ class LiveSource:
     """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
 
     def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
-                 cache: int | None = CACHE, frame_bytes: int = FRAME_BYTES):
+                 cache: int | None = CACHE, frame_bytes: int = FRAME_BYTES, yielding: bool = False):
+        """`yielding` (across slow radio links): what it sends again for recoveries and
+        catch-ups (its cache's and its journal's replies) yields to live traffic: DROP at a
+        lower priority, so no router stalls on it and closes its links; the EAs ask again."""
         cache = CACHE if cache is None else cache
         if cache < 1:
             raise ValueError(f"source {name}: --cache {cache}: at least 1 frame")
@@ -64,7 +67,8 @@ class LiveSource:
         self.last_sent = 0.0
         self.sent = 0
         # the durable journal (with a state directory), served for catch-up beyond the cache
-        self.journal = SourceJournal(state_dir, name, self.epoch) if state_dir is not None else None
+        qos = YIELDING if yielding else None
+        self.journal = SourceJournal(state_dir, name, self.epoch, qos) if state_dir is not None else None
         # a restart (its journal holds earlier epochs) resumes after what it published then:
         # `publish` skips that many messages of the same stream, and nothing older follows
         self.published_before, self.resumed_epoch = 0, 0
@@ -76,7 +80,8 @@ class LiveSource:
             jkey = ks.srcj(name)
             self.queryable = session.declare_queryable(jkey, lambda q: self.journal.serve(q, jkey))
         self.pub = zx.declare_advanced_publisher(
-            session, ks.src(name), congestion_control=BLOCK, cache=zx.CacheConfig(max_samples=cache),
+            session, ks.src(name), congestion_control=BLOCK,
+            cache=zx.CacheConfig(max_samples=cache, replies_config=zx.RepliesConfig(**qos) if qos else None),
             sample_miss_detection=zx.MissDetectionConfig(heartbeat=0.5), publisher_detection=True)
 
     def put(self, msg: M.Message) -> None:

@@ -4,16 +4,22 @@ catch-up beyond the advanced publisher's in-memory cache (a late joiner after a 
 run, an EA that missed more than the cache holds, frames of an epoch before the source
 restarted: the cache dies with the process, the file does not).
 
-A query is a `JournalQuery` (epoch, first and last seq wanted); the answer is one reply
-per frame held, in order, at most `MAX_FRAMES` and `MAX_BYTES` per query (ask again from
-where it stopped). A query that cannot be read is answered with an error, and the source
+A query is a `JournalQuery` (epoch, first and last seq wanted, at most how many bytes);
+the answer is one reply per frame held, in order, at most `MAX_FRAMES` and the bytes asked
+for per query (ask again from where it stopped). Over a slow radio link the replies can
+yield to live traffic (`reply_qos`: DROP at a lower priority, so a router never stalls on
+them and closes its links); the asker (`ask`) then takes what came in sequence, asks again
+from the first one missing, and sizes its asks to what came back in time (AIMD). A query that cannot be read is answered with an error, and the source
 lives on. Files: `<dir>/<name>.<epoch>.frames`, records length-prefixed (4 bytes,
 big-endian); a half-written last record (a kill) is ignored on reading."""
 from __future__ import annotations
 
 import struct
 import threading
+import time
 from pathlib import Path
+
+from typing import Annotated
 
 import msgspec
 import zenoh
@@ -24,21 +30,28 @@ from .. import wire as W
 _LEN = struct.Struct(">I")
 MAX_FRAMES = 2_000
 MAX_BYTES = 16 * 2**20
+FIRST_ASK_BYTES = 256 * 1024   # an asker's first chunk; halved when it does not come in time
+MIN_ASK_BYTES = 4 * 1024
+NONE_HELD = b"none held"
+YIELDING = {"congestion_control": zenoh.CongestionControl.DROP, "priority": zenoh.Priority.DATA_LOW}
 
 
 class JournalQuery(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
-    """Frames `lo`..`hi` (inclusive) of `epoch` of the queried source."""
+    """Frames `lo`..`hi` (inclusive) of `epoch` of the queried source, at most `max_bytes`
+    of them (at least the first)."""
     epoch: W.Seq
     lo: W.Seq
     hi: W.Seq
+    max_bytes: Annotated[int, msgspec.Meta(ge=1, le=MAX_BYTES)] = MAX_BYTES
 
 
 class SourceJournal:
     """Append-only frames of one source, indexed by (epoch, seq); thread-safe: the source
     appends, the queryable's callback reads."""
 
-    def __init__(self, state_dir: str | Path, name: str, epoch: int):
+    def __init__(self, state_dir: str | Path, name: str, epoch: int, reply_qos: dict | None = None):
         self.dir, self.name, self.epoch = Path(state_dir), name, epoch
+        self.reply_qos = reply_qos or {}   # YIELDING across radio links
         self.dir.mkdir(parents=True, exist_ok=True)
         self.lock = threading.Lock()
         self.f = open(self.path(epoch), "ab")
@@ -78,8 +91,9 @@ class SourceJournal:
         self.index[epoch] = offs
         return offs
 
-    def frames(self, epoch: int, lo: int, hi: int) -> list[bytes]:
-        """Frames lo..hi of `epoch` held here (fewer at the bounds or past what is held)."""
+    def frames(self, epoch: int, lo: int, hi: int, max_bytes: int = MAX_BYTES) -> list[bytes]:
+        """Frames lo..hi of `epoch` held here (fewer at the bounds, past what is held or past
+        `max_bytes`, but always the first one held)."""
         with self.lock:
             offs = self._offsets(epoch)
             lo, hi = max(lo, 1), min(hi, len(offs), lo + MAX_FRAMES - 1)
@@ -92,7 +106,7 @@ class SourceJournal:
                     r.seek(offs[seq - 1])
                     (n,) = _LEN.unpack(r.read(4))
                     b = r.read(n)
-                    if len(b) != n or size + n > MAX_BYTES:
+                    if len(b) != n or out and size + n > max_bytes:
                         break
                     out.append(b)
                     size += n
@@ -108,8 +122,11 @@ class SourceJournal:
                 q = msgspec.msgpack.decode(raw, type=JournalQuery)
             except (msgspec.ValidationError, msgspec.DecodeError) as e:
                 raise M.MessageError("journalquery", "(decode)", str(e)[:160]) from None
-            for b in self.frames(q.epoch, q.lo, q.hi):
-                query.reply(key, b)
+            frames = self.frames(q.epoch, q.lo, q.hi, q.max_bytes)
+            if not frames:   # said, so that the asker stops asking (an answer that never came is no such word)
+                query.reply_err(NONE_HELD)
+            for b in frames:
+                query.reply(key, b, **self.reply_qos)
                 self.served += 1
         except (M.MessageError, OSError) as e:   # said to the asker; the source goes on
             self.errors += 1
@@ -141,19 +158,68 @@ class SourceJournal:
             self.f.close()
 
 
+class Asker:
+    """Asks one source's journal for frames, in sequence, the way TCP sends: each ask at most
+    `chunk` bytes, doubled when the answer came whole and in time, halved when it did not
+    (a congested link drops yielding replies, or the timeout cut them), so that k askers
+    behind one slow link share it instead of each flooding it."""
+
+    def __init__(self, timeout: float = 3.0, chunk: int = FIRST_ASK_BYTES):
+        self.timeout, self.chunk = timeout, chunk
+        self.why = ""   # why the last ask ended: done, none held, no answer, congested
+
+    def ask(self, session, key: str, epoch: int, lo: int, hi: int, seq_of, budget_s: float = 3.0) -> list[bytes]:
+        """Frames lo..hi of `epoch` from the journal at `key`, in sequence from `lo` as far
+        as they came within `budget_s` of wall time (`seq_of(frame)`: its seq, or None when
+        it cannot be read). Fewer when the journal holds fewer (`why` "none held"), nobody
+        answers ("no answer"), or the link gave no more in time ("congested")."""
+        out: list[bytes] = []
+        want, silent = lo, 0
+        self.why = "done"
+        end = time.monotonic() + budget_s
+        while want <= hi:
+            if time.monotonic() >= end:
+                self.why = "congested"
+                break
+            got: dict[int, bytes] = {}
+            said_none = answered = False
+            sent = time.monotonic()
+            q = msgspec.msgpack.encode(JournalQuery(epoch=epoch, lo=want, hi=hi, max_bytes=self.chunk))
+            for r in session.get(key, payload=q, timeout=self.timeout,
+                                 consolidation=zenoh.ConsolidationMode.NONE):   # every frame, one key
+                answered = True
+                if r.ok is not None:
+                    b = r.ok.payload.to_bytes()
+                    s = seq_of(b)
+                    if s is not None and want <= s <= hi:
+                        got.setdefault(s, b)
+                elif r.err is not None and r.err.payload.to_bytes() == NONE_HELD:
+                    said_none = True
+            late = time.monotonic() - sent > 0.8 * self.timeout
+            start = want
+            while want in got:
+                out.append(got.pop(want))
+                want += 1
+            if said_none:
+                self.why = "none held"
+                break
+            if want == start and not answered and not late:   # no journal there (or no link): a few tries
+                silent += 1
+                if silent >= 3:
+                    self.why = "no answer"
+                    break
+            whole = not got and not late   # no hole, in time
+            self.chunk = min(MAX_BYTES, self.chunk * 2) if whole else max(MIN_ASK_BYTES, self.chunk // 2)
+        return out
+
+
 def ask(session, key: str, epoch: int, lo: int, hi: int, timeout: float = 3.0) -> list[bytes]:
-    """Frames lo..hi of `epoch` from the journal at `key` (as many as it holds and sends;
-    errors and timeouts give fewer)."""
-    out: list[bytes] = []
-    want = lo
-    while want <= hi:
-        got = []
-        for r in session.get(key, payload=msgspec.msgpack.encode(JournalQuery(epoch=epoch, lo=want, hi=hi)),
-                             timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE):   # every frame, one key
-            if r.ok is not None:
-                got.append(r.ok.payload.to_bytes())
-        if not got:
-            break
-        out += got
-        want += len(got)
-    return out
+    """Frames lo..hi of `epoch` from the journal at `key`, in sequence (`Asker`, one use)."""
+    from . import frames as F
+
+    def seq_of(b: bytes) -> int | None:
+        try:
+            return F.decode(b, 1 << 26).seq
+        except M.MessageError:
+            return None
+    return Asker(timeout).ask(session, key, epoch, lo, hi, seq_of, budget_s=4 * timeout)
