@@ -40,7 +40,8 @@ from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh import results
 from saim_mesh.stats import percentiles
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
+
 LONGTASKS = """window.__longTasks = [];
 try { new PerformanceObserver((l) => { for (const e of l.getEntries()) window.__longTasks.push(e.duration); })
       .observe({ type: "longtask", buffered: true }); } catch (e) {}"""

@@ -20,7 +20,7 @@ from ea_agent.domains.suo import make_ea
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
 
 
 def feed(ea, sc) -> float:

@@ -25,7 +25,8 @@ from saim_mesh import scenario as S
 from saim_mesh.fusion.datasets import DATASETS, DataSet
 from saim_mesh.fusion.tracker import KalmanTracker
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
+
 SS_Q = {"ground": 0.5, "air": 40.0}          # Stone Soup's process noise by the data set's class
 SS_GRID = (0.1, 0.5, 2.0, 10.0, 40.0, 200.0, 1000.0)
 EPOCH = datetime(2026, 1, 1)

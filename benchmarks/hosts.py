@@ -38,7 +38,7 @@ from pathlib import Path
 
 from . import partition as P
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
 
 
 def _iso(t: float) -> str:

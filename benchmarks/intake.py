@@ -21,7 +21,7 @@ from .ea import feed
 from saim_mesh.offline import run, stream
 from saim_mesh.runner import config_for, make_ea
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
 
 
 def _same(a) -> tuple:

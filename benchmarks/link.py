@@ -17,7 +17,9 @@ from pathlib import Path
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh import results
 
-OUT = Path(__file__).resolve().parents[1] / "bench" / "results" / "link.json"
+from . import RESULTS
+
+OUT = RESULTS / "link.json"
 
 
 def _cpu_s(pid: int) -> float:

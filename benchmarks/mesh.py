@@ -44,7 +44,8 @@ from saim_mesh.zconf import config, free_port
 
 RAW_ROOT = "bench/raw"
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
+
 BLOCK = zenoh.CongestionControl.BLOCK
 
 

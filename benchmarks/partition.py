@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import signal
 import threading
@@ -31,7 +30,7 @@ from pathlib import Path
 
 from saim_mesh.stats import percentiles
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
 
 
 def _key(a: dict) -> tuple:

@@ -35,7 +35,8 @@ from saim_mesh.ondemand import ensure
 from saim_mesh.runner import config_for, make_ea
 from saim_mesh.zconf import config, free_port
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
+
 RATE_KBPS = 64.0   # a tactical data link (the figure)
 
 

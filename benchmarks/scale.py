@@ -33,7 +33,7 @@ from saim_mesh.mesh import Supervisor, mesh_units, start_replay, up
 from saim_mesh.proc import Proc, clean_env
 from saim_mesh.procstat import Sampler
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
 
 
 def _inproc(args: tuple[str, list[str]]) -> dict[str, list[str]]:

@@ -7,10 +7,8 @@ bench/results/sign.json."""
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
-from pathlib import Path
 
 import cryptography
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -22,7 +20,7 @@ from saim_mesh import wire as W
 from saim_mesh.security import sign as G
 from saim_mesh import results
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
 
 
 def per_message_us(fn, n: int, rounds: int) -> float:

@@ -15,7 +15,6 @@ import argparse
 import platform
 import time
 from datetime import datetime, timezone
-from pathlib import Path
 
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
@@ -23,7 +22,8 @@ from saim_mesh.tak import cot as C
 from saim_mesh.tak.picture import Options, Picture
 from saim_mesh import results
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
+
 EPOCH = datetime(2026, 5, 1, 6, 0, 0, tzinfo=timezone.utc)
 TICK_S = 2.0
 

@@ -35,7 +35,8 @@ from ea_agent.domains.uv import load_uv_config, make_ea
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 
-ROOT = Path(__file__).resolve().parents[1]
+from . import ROOT
+
 EPSG, LON0, LAT0 = 32611, -116.60, 35.26
 HZ = 2.0
 

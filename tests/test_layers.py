@@ -79,14 +79,17 @@ def test_no_runtime_module_imports_a_benchmark():
 
 
 def test_benchmarks_find_the_repository():
-    """Each benchmark resolves the repository root it reads scenarios from and writes
-    bench/results/ under from its own path: after the move out of saim_mesh/bench that
-    is one level up, not two (two levels wrote results beside the clone)."""
+    """The benchmarks read scenarios and write bench/results/ under one root, found once
+    (benchmarks.ROOT): after the move out of saim_mesh/bench each module computing its own
+    from its path got it wrong (two levels up wrote results beside the clone)."""
     import importlib
+
+    import benchmarks
+    assert (benchmarks.ROOT / "pyproject.toml").is_file() and (benchmarks.ROOT / "benchmarks").is_dir()
+    assert benchmarks.RESULTS == benchmarks.ROOT / "bench" / "results"
     for p in sorted((ROOT / "benchmarks").glob("*.py")):
-        text = p.read_text()
-        if "Path(__file__).resolve().parents[" not in text:
+        if p.name == "__init__.py":
             continue
+        assert "__file__" not in p.read_text(), f"{p.name}: finds its own root; use benchmarks.ROOT"
         mod = importlib.import_module(f"benchmarks.{p.stem}")
-        root = getattr(mod, "ROOT", None) or mod.OUT.parents[2]
-        assert (root / "pyproject.toml").is_file() and (root / "benchmarks").is_dir(), (p.name, root)
+        assert getattr(mod, "ROOT", benchmarks.ROOT) is benchmarks.ROOT, p.name
