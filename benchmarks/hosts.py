@@ -30,6 +30,8 @@ import io
 import json
 import re
 import shutil
+import signal
+import sys
 import subprocess
 import time
 import tomllib
@@ -360,6 +362,7 @@ def main(argv=None) -> int:
     ap.add_argument("--equal-from", metavar="JSON", help="with --analyze-only: the in-process comparison of an "
                     "earlier analysis of the same fault-free run (when the EA's code changed since the runs)")
     a = ap.parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: the hosts' namespaces still go
     from saim_mesh import scenario as S
     from saim_mesh.net import netns
     from saim_mesh.ondemand import ensure
