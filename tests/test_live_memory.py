@@ -32,10 +32,13 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
     by_seq = {i + 1: f for i, (_, f) in enumerate(a)}
     asked = []
 
-    def ask(session, key, epoch, lo, hi, timeout=3.0):   # the journal of src.a
-        asked.append((lo, hi))
-        return [by_seq[s] for s in range(lo, min(hi, len(by_seq)) + 1)]
-    monkeypatch.setattr(P, "ask", ask)
+    class Asker:   # the journal of src.a
+        why = "done"
+
+        def ask(self, session, key, epoch, lo, hi, seq_of, budget_s=3.0):
+            asked.append((lo, hi))
+            return [by_seq[s] for s in range(lo, min(hi, len(by_seq)) + 1)]
+    monkeypatch.setattr(P, "Asker", Asker)
 
     def peer():
         return P.LivePeer(sc, "BN", config(["tcp/127.0.0.1:0"], None), "t/mem", ["src.a", "src.b"])
