@@ -91,12 +91,13 @@ class Deployment:
     source_linger: float = 30.0
     path: Path | None = None            # the file it came from
     attach_map: dict[str, str] = field(default_factory=dict)   # unit -> router (a topology file's [attach])
-    catch_up: str | None = None         # "yield" | "block"; default: yield when there is more than one host
+    catch_up: str | None = None         # "yield" | "block" (the default)
 
     def yielding(self) -> bool:
-        """Sources' recoveries and catch-ups yield to live traffic (live/source.py): across
-        radio links between hosts, where a router stalled on them closes its links."""
-        return self.catch_up == "yield" or self.catch_up is None and len(self.hosts) > 1
+        """Sources' recoveries and catch-ups yield to live traffic (live/source.py), asked
+        for across radio links between hosts; not the default: it did not stop a router's
+        links flapping after a heal (docs/deployment.md)."""
+        return self.catch_up == "yield"
 
     # -- who runs where ---------------------------------------------------------------
     def host_of(self, what: str, kind: str = "eas") -> str | None:

@@ -96,8 +96,8 @@ def to_toml(dep: Deployment, sc_name: str) -> str:
              '# start = "2026-11-27T09:00:00Z"   # event time 0 (live, or paced sources: the same on every host)',
              "# until = 1800   # end the sources at this event time",
              "# source_linger = 30   # seconds a source stays up after its end (it serves catch-up)",
-             '# catch_up = "yield"   # recoveries yield to live traffic (DROP, lower priority): the default '
-             'with several hosts; "block" on one', ""]
+             '# catch_up = "yield"   # recoveries yield to live traffic (DROP, lower priority); default "block"',
+             ""]
     for h in dep.hosts.values():
         lines += ["[[host]]", f"name = {_q(h.name)}", f"addresses = {_list(h.addresses)}",
                   f"names = {_list(h.names)}                      # DNS names, in its certificates too",
