@@ -35,9 +35,9 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
     class Asker:   # the journal of src.a
         why = "done"
 
-        def ask(self, session, key, epoch, lo, hi, seq_of, budget_s=3.0):
+        def ask(self, session, key, epoch, lo, hi, read, budget_s=3.0):
             asked.append((lo, hi))
-            return [by_seq[s] for s in range(lo, min(hi, len(by_seq)) + 1)]
+            return [(by_seq[s], read(by_seq[s])) for s in range(lo, min(hi, len(by_seq)) + 1)]
     monkeypatch.setattr(P, "Asker", Asker)
 
     def peer():

@@ -119,14 +119,23 @@ def seq_of(b: bytes) -> int:
     return int.from_bytes(b[:4], "big")
 
 
+class Read:   # a frame as the asker's `read` gives it: its seq
+    def __init__(self, b: bytes):
+        self.seq = seq_of(b)
+
+
+def seqs(got) -> list[int]:
+    return [f.seq for _, f in got]
+
+
 def test_an_asker_gets_every_frame_in_sequence_through_a_lossy_link(tmp_path):
     """Yielding replies dropped at a congested router leave holes: the asker keeps what
     came in sequence, asks again from the first one missing, and asks for less."""
     j = frames_journal(tmp_path)
     s = LossySession(j, drop=lambda n: n % 7 == 3)
     a = Asker(chunk=16_000)
-    got = a.ask(s, "k", 1, 5, 60, seq_of, budget_s=30)
-    assert [seq_of(b) for b in got] == list(range(5, 61)) and a.why == "done"
+    got = a.ask(s, "k", 1, 5, 60, Read, budget_s=30)
+    assert seqs(got) == list(range(5, 61)) and a.why == "done"
     assert len(s.asks) > 4 and min(q.max_bytes for q in s.asks) < 16_000   # smaller asks after the holes
     assert all(q.lo >= p.lo for p, q in zip(s.asks, s.asks[1:]))            # never from the start again
 
@@ -135,10 +144,10 @@ def test_an_asker_stops_when_the_journal_holds_no_more_or_nobody_answers(tmp_pat
     j = frames_journal(tmp_path, n=10)
     s = LossySession(j)
     a = Asker()
-    assert [seq_of(b) for b in a.ask(s, "k", 1, 8, 50, seq_of)] == [8, 9, 10] and a.why == "none held"
+    assert seqs(a.ask(s, "k", 1, 8, 50, Read)) == [8, 9, 10] and a.why == "none held"
     assert len(s.asks) == 2   # the frames, then "none held": no third ask
     gone = LossySession(None)
-    assert a.ask(gone, "k", 1, 1, 5, seq_of) == [] and a.why == "no answer" and gone.asks == []
+    assert a.ask(gone, "k", 1, 1, 5, Read) == [] and a.why == "no answer" and gone.asks == []
 
 
 def test_the_journal_answers_at_most_the_bytes_asked_but_always_one_frame(tmp_path):

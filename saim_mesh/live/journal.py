@@ -5,10 +5,10 @@ says what the EA decided and when in its input (../shared/notes/live-mesh.md: id
 detected by wall clock is not reproducible, a decision written down is).
 
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
-as written (frames: before the next thing the peer tells anyone, see `frame`): ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body]
-(a directive: saim_mesh/directives.py), ["peer", unit, up] (another EA left without a goodbye, or
-came back) or ["back", source]. A half-written last
-record (a kill) is ignored on reading."""
+as written (frames: before the next thing the peer tells anyone, see `frame`):
+["frame", payload], ["lost", source, released, why], ["dir", by, kind, body] (a directive:
+saim_mesh/directives.py), ["peer", unit, up] (another EA left without a goodbye, or came
+back) or ["back", source]. A half-written last record (a kill) is ignored on reading."""
 from __future__ import annotations
 
 import struct

@@ -170,18 +170,23 @@ class LivePeer:
             a = replace(a, details={**a.details, "late": True, "due_from": round(due, 3)})
             self.late += 1
         self.given.append(a)
-        if self.journal is not None:   # its inputs on disk before the alert: a restart never raises it twice
-            self.journal.flush()
+        self._inputs_on_disk()
         if self.alog:
             self.alog.write(a)
         if self.session is not None:
             self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
 
+    def _inputs_on_disk(self) -> None:
+        """The input journal's buffered frames written out before anything they caused leaves
+        the peer (an alert, a notice, a confirmation): a restart replays them and never tells
+        it twice."""
+        if self.journal is not None:
+            self.journal.flush()
+
     def _notice(self, n) -> None:
         if self.restoring:
             return   # re-notifications and escalations of the past are not sent again
-        if self.journal is not None:
-            self.journal.flush()
+        self._inputs_on_disk()
         if self.nlog:
             self.nlog(n)
         if self.session is not None:   # signed in secure mode: an escalation crosses the router
@@ -200,8 +205,7 @@ class LivePeer:
         self.confirmed_up.add((c.mission, c.phase))
         if self.restoring or self.session is None:
             return
-        if self.journal is not None:
-            self.journal.flush()
+        self._inputs_on_disk()
         at = math.ceil((c.t + D.CONFIRM_LEAD_S) / self.ea.epoch_s) * self.ea.epoch_s
         try:
             d = D.publish(self.session, self.ks.root, self.signer, self.unit, "confirm", at=at, mission=c.mission,
@@ -351,18 +355,14 @@ class LivePeer:
             return
         key = self.ks.src(source)
 
-        def seq_of(b: bytes) -> int | None:
-            try:
-                return F.decode(b, self.max_bytes).seq
-            except M.MessageError:
-                return None   # counted below, where it is read for good
+        def read(b: bytes):   # checked as a live frame (a bad one counted), once
+            f = self._frame(b, key)
+            return f if f is not None and f.source == source and f.epoch == epoch else None
         asker = self.askers.get(source)
         if asker is None:
             asker = self.askers[source] = Asker()
-        for b in asker.ask(self.session, self.ks.srcj(source), epoch, lo, hi, seq_of):
-            f = self._frame(b, key)
-            if f is not None and f.source == source and f.epoch == epoch and f.seq >= lo:
-                yield b, key, f
+        for b, f in asker.ask(self.session, self.ks.srcj(source), epoch, lo, hi, read):
+            yield b, key, f
 
     def _frame(self, payload: bytes, key: str):
         try:

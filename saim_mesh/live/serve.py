@@ -78,8 +78,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 if key is not None and now < next_check:
                     continue   # while frames flow, the checks below run every CHECK_S
                 next_check = now + CHECK_S
-                if peer.journal is not None:
-                    peer.journal.flush()
+                peer._inputs_on_disk()
                 if peer.hold.waiting:
                     peer._retry()
                 if peer.behind:

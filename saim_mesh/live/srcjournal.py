@@ -6,11 +6,11 @@ restarted: the cache dies with the process, the file does not).
 
 A query is a `JournalQuery` (epoch, first and last seq wanted, at most how many bytes);
 the answer is one reply per frame held, in order, at most `MAX_FRAMES` and the bytes asked
-for per query (ask again from where it stopped). Over a slow radio link the replies can
-yield to live traffic (`reply_qos`: DROP at a lower priority, so a router never stalls on
-them and closes its links); the asker (`ask`) then takes what came in sequence, asks again
-from the first one missing, and sizes its asks to what came back in time (AIMD). A query that cannot be read is answered with an error, and the source
-lives on. Files: `<dir>/<name>.<epoch>.frames`, records length-prefixed (4 bytes,
+for per query (ask again from where it stopped), or "none held". Over a slow radio link
+the replies can yield to live traffic (`reply_qos`: DROP at a lower priority); the
+`Asker` then takes what came in sequence, asks again from the first one missing, and
+sizes its asks to what came back in time (AIMD). A query that cannot be read is answered
+with an error, and the source lives on. Files: `<dir>/<name>.<epoch>.frames`, records length-prefixed (4 bytes,
 big-endian); a half-written last record (a kill) is ignored on reading."""
 from __future__ import annotations
 
@@ -18,7 +18,6 @@ import struct
 import threading
 import time
 from pathlib import Path
-
 from typing import Annotated
 
 import msgspec
@@ -168,12 +167,13 @@ class Asker:
         self.timeout, self.chunk = timeout, chunk
         self.why = ""   # why the last ask ended: done, none held, no answer, congested
 
-    def ask(self, session, key: str, epoch: int, lo: int, hi: int, seq_of, budget_s: float = 3.0) -> list[bytes]:
+    def ask(self, session, key: str, epoch: int, lo: int, hi: int, read, budget_s: float = 3.0) -> list[tuple]:
         """Frames lo..hi of `epoch` from the journal at `key`, in sequence from `lo` as far
-        as they came within `budget_s` of wall time (`seq_of(frame)`: its seq, or None when
-        it cannot be read). Fewer when the journal holds fewer (`why` "none held"), nobody
-        answers ("no answer"), or the link gave no more in time ("congested")."""
-        out: list[bytes] = []
+        as they came within `budget_s` of wall time, each as (bytes, `read(bytes)`): the
+        frame read once, with its `seq` (None: it cannot be read). Fewer when the journal
+        holds fewer (`why` "none held"), nobody answers ("no answer"), or the link gave no
+        more in time ("congested")."""
+        out: list[tuple] = []
         want, silent = lo, 0
         self.why = "done"
         end = time.monotonic() + budget_s
@@ -181,7 +181,7 @@ class Asker:
             if time.monotonic() >= end:
                 self.why = "congested"
                 break
-            got: dict[int, bytes] = {}
+            got: dict[int, tuple] = {}
             said_none = answered = False
             sent = time.monotonic()
             q = msgspec.msgpack.encode(JournalQuery(epoch=epoch, lo=want, hi=hi, max_bytes=self.chunk))
@@ -190,9 +190,9 @@ class Asker:
                 answered = True
                 if r.ok is not None:
                     b = r.ok.payload.to_bytes()
-                    s = seq_of(b)
-                    if s is not None and want <= s <= hi:
-                        got.setdefault(s, b)
+                    f = read(b)
+                    if f is not None and want <= f.seq <= hi:
+                        got.setdefault(f.seq, (b, f))
                 elif r.err is not None and r.err.payload.to_bytes() == NONE_HELD:
                     said_none = True
             late = time.monotonic() - sent > 0.8 * self.timeout
@@ -212,14 +212,3 @@ class Asker:
             self.chunk = min(MAX_BYTES, self.chunk * 2) if whole else max(MIN_ASK_BYTES, self.chunk // 2)
         return out
 
-
-def ask(session, key: str, epoch: int, lo: int, hi: int, timeout: float = 3.0) -> list[bytes]:
-    """Frames lo..hi of `epoch` from the journal at `key`, in sequence (`Asker`, one use)."""
-    from . import frames as F
-
-    def seq_of(b: bytes) -> int | None:
-        try:
-            return F.decode(b, 1 << 26).seq
-        except M.MessageError:
-            return None
-    return Asker(timeout).ask(session, key, epoch, lo, hi, seq_of, budget_s=4 * timeout)
