@@ -298,6 +298,10 @@ def live_phase(scenario: str, tmp: Path, link: dict, insecure: bool, units: list
            "sources": res["sources"], "secure": res["secure"],
            "ea_peer_pss_mb": {"max": max(pss, default=None), "mean": round(sum(pss) / len(pss), 1) if pss else None},
            "ea_peers_within_40_mb": sum(1 for x in pss if x <= 40.0),
+           "ea_peer_pss_mb_top": dict(sorted(((u, procs[u]["pss_mb"]) for u in peers if procs.get(u, {}).get("pss_mb")),
+                                             key=lambda x: -x[1])[:5]),
+           # a source declared lost and back in a fault-free run (held by pacing, starved of CPU)
+           "rebuilds": sum(s.get("rebuilds", 0) for s in peers.values()),
            "links": _link_bytes(res.get("links") or {}),
            "alerts_equal_in_process": sum(same.values()), "alerts_differ": sorted(u for u, ok in same.items() if not ok),
            "gaps": sum(s.get("gaps", 0) for s in peers.values()),

@@ -81,6 +81,44 @@ def test_a_fast_source_waits_for_its_slowest_ea(reports):
     assert pace.waits >= 3
 
 
+@pytest.mark.timeout(60)
+def test_a_held_source_beats_so_no_ea_takes_it_for_a_silent_one(reports):
+    """Held back by a slow EA for longer than an EA's `source_silence_s`, a source still
+    says it is alive: an empty frame every `beat_s`, its watermark unchanged, nothing
+    new promised and nothing lost from the stream."""
+    sc, msgs = reports
+    with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
+        ks = KeySpace.of(sc, f"test/{uuid.uuid4().hex[:8]}")
+        src = SRC.LiveSource(s, ks, "cp.test")
+        src.pub.undeclare()
+        src.pub = wire = Wire()
+        pace = P.SourcePace(s, ks, "cp.test", lead_s=60.0, stale_s=3600.0, first_s=3600.0, beat_s=0.05,
+                            log=lambda *a, **k: None)
+        done = []
+        th = threading.Thread(target=lambda: done.append(play.publish(src, msgs, speed=None, pace=pace,
+                                                                        log=lambda *a, **k: None)))
+        th.start()
+        try:
+            with pace.cv:   # held at 60 (nobody acked) and beating
+                assert pace.cv.wait_for(lambda: pace.blocked.is_set() and pace.beats >= 3, timeout=20)
+            held = list(wire.frames)
+            flushed = max(i for i, f in enumerate(held) if f.msgs)
+            beats = held[flushed + 1:]
+            assert len(beats) >= 3 and all(not f.msgs and not f.end for f in beats)
+            assert {f.wm for f in beats} == {held[flushed].wm} and held[flushed].wm <= 60.0
+            ack(s, ks, "A1", 1e6)
+            th.join(30)
+        finally:
+            pace.acks["stop"] = (math.inf, math.inf)
+            with pace.cv:
+                pace.cv.notify_all()
+            th.join(30)
+        assert not th.is_alive() and done == [len(msgs)]
+        src.close()
+        pace.close()
+    check_stream(wire.frames, msgs)
+
+
 def test_an_ea_not_heard_for_stale_s_holds_nobody(reports):
     sc, _ = reports
     with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:

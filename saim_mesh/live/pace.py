@@ -12,7 +12,11 @@ back pressure, in event time). An EA not heard for `STALE_S` of wall time (gone,
 or no longer keeping up because another source holds it) no longer holds the source back:
 a cut link or a dead EA stops nobody else. Before it waits, the source flushes what it
 holds, so every EA can reach what the source allows (no deadlock: each waiting source has
-promised up to at least the slowest EA's progress plus `LEAD_S` less an epoch)."""
+promised up to at least the slowest EA's progress plus `LEAD_S` less an epoch). While it
+waits it beats every `BEAT_S` (an empty frame, its watermark unchanged): an EA that has
+taken all it promised would otherwise take a source held back by a slower EA for a
+silent one, declare it lost and rebuild when it speaks again (the brigade at max speed
+did, twice, in a fault-free run)."""
 from __future__ import annotations
 
 import math
@@ -26,6 +30,7 @@ LEAD_S = 120.0        # event seconds a source may run ahead of the slowest EA d
 ACK_EVERY_S = 30.0    # event seconds between an EA's acks (and its first release)
 STALE_S = 5.0         # wall seconds after which an EA's last ack no longer holds a source back
 FIRST_S = 5.0         # wall seconds a source waits, past its first LEAD_S, for a first ack
+BEAT_S = 2.0          # wall seconds between a waiting source's heartbeats (well inside `source_silence_s`)
 
 
 class SourcePace:
@@ -33,8 +38,10 @@ class SourcePace:
     (unbounded once no EA acks at all). Thread-safe: acks arrive on Zenoh's threads."""
 
     def __init__(self, session, ks, name: str, lead_s: float = LEAD_S, stale_s: float = STALE_S,
-                 first_s: float = FIRST_S, log=print):
+                 first_s: float = FIRST_S, log=print, beat_s: float = BEAT_S):
         self.lead_s, self.stale_s, self.first_s, self.log = lead_s, stale_s, first_s, log
+        self.beat_s = beat_s
+        self.beats = 0
         self.acks: dict[str, tuple[float, float]] = {}   # unit -> (event time, wall time heard)
         self.cv = threading.Condition()
         self.limit = lead_s          # allowed without asking again
@@ -66,8 +73,9 @@ class SourcePace:
             return math.inf if self.acks or self.unpaced else self.lead_s
         return min(fresh) + self.lead_s
 
-    def wait(self, t: float, flush) -> None:
-        """Return once event time `t` may be published; `flush()` first if it must wait."""
+    def wait(self, t: float, flush, beat=None) -> None:
+        """Return once event time `t` may be published; `flush()` first if it must wait,
+        `beat()` every `beat_s` while it waits (called outside the lock: it publishes)."""
         if t <= self.limit:
             return
         with self.cv:
@@ -75,19 +83,27 @@ class SourcePace:
         if t <= self.limit:
             return
         flush()
-        t0 = time.monotonic()
-        with self.cv:
-            self.blocked_t = t
-            self.blocked.set()
-            self.cv.notify_all()
-            while t > (lim := self.allowed()):
-                if not self.acks and time.monotonic() - t0 > self.first_s:
-                    self.unpaced = True
-                    self.log(f"no EA acknowledged in {self.first_s:.0f} s: the source goes on unpaced", flush=True)
-                    continue
-                self.cv.wait(timeout=0.1)
-            self.limit = lim
-            self.blocked.clear()
+        t0 = last = time.monotonic()
+        while True:
+            with self.cv:
+                self.blocked_t = t
+                self.blocked.set()
+                self.cv.notify_all()
+                while t > (lim := self.allowed()):
+                    if not self.acks and time.monotonic() - t0 > self.first_s:
+                        self.unpaced = True
+                        self.log(f"no EA acknowledged in {self.first_s:.0f} s: the source goes on unpaced", flush=True)
+                        continue
+                    if beat is not None and time.monotonic() - last >= self.beat_s:
+                        break
+                    self.cv.wait(timeout=min(0.1, self.beat_s))
+                else:
+                    self.limit = lim
+                    self.blocked.clear()
+                    break
+            beat()
+            self.beats += 1
+            last = time.monotonic()
         self.waits += 1
         self.waited_s += time.monotonic() - t0
 

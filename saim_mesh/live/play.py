@@ -140,7 +140,7 @@ def publish(src: LiveSource, msgs: Iterable[M.Message], speed: float | None = No
             last_wm = _idle(src, clock, m.t, epoch_s, last_wm)
         w = math.ceil(m.t / epoch_s) * epoch_s - epoch_s   # the last boundary strictly before m.t
         if clock is None and pace is not None:   # what is held goes out before it waits
-            pace.wait(m.t, lambda: src.watermark(max(w, last_wm)))
+            pace.wait(m.t, lambda: src.watermark(max(w, last_wm)), beat=src.heartbeat)
         if w > last_wm:
             src.watermark(w, linger=clock is None)   # as fast as possible: fuller frames
             last_wm = w

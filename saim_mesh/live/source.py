@@ -111,6 +111,11 @@ class LiveSource:
             return
         self._send(max(t, self.wm))
 
+    def heartbeat(self) -> None:
+        """An empty frame, the watermark unchanged: alive, held back (`pace.SourcePace`),
+        not silent. Whatever is pending goes with it."""
+        self._send(self.wm)
+
     def close(self, end: bool = True) -> None:
         """The last frame (`end`: the source is done: its watermark is +inf). The publisher
         (its cache, for late joiners and recoveries) and the journal's queryable stay until
