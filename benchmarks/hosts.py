@@ -65,10 +65,12 @@ def deployment(scenario: str, out: Path, pki: Path) -> dict:
     return tomllib.loads(out.read_text())
 
 
-def with_pace(base: Path, out: Path, speed: float, start: float, until: float | None) -> None:
-    """The base file with this run's pace: `speed`, one `start` for every host, `until`."""
+def with_pace(base: Path, out: Path, speed: float, start: float, until: float | None, catch_up: str | None = None) -> None:
+    """The base file with this run's pace: `speed`, one `start` for every host, `until`
+    (and `catch_up` when asked)."""
     text = base.read_text()
-    head = f'speed = {speed:g}\nstart = "{_iso(start)}"\n' + (f"until = {until:g}\n" if until else "")
+    head = (f'speed = {speed:g}\nstart = "{_iso(start)}"\n' + (f"until = {until:g}\n" if until else "")
+            + (f'catch_up = "{catch_up}"\n' if catch_up else ""))
     text, n = re.subn(r'^speed = "max".*$', head.rstrip("\n"), text, count=1, flags=re.M)
     if n != 1:
         raise RuntimeError(f"{base}: no `speed = \"max\"` line to replace")
@@ -109,7 +111,8 @@ def kept_state(run_dir: Path, host: str) -> bool:
 
 def run_hosts(base: Path, hosts: dict, run_dir: Path, speed: float, until: float | None, rate: dict, lead: float,
               duration: float, *, cut: tuple[str, float, float] | None = None,
-              kill: tuple[str, float, float] | None = None, grace: float = 180.0, log=print) -> dict:
+              kill: tuple[str, float, float] | None = None, grace: float = 180.0, log=print,
+              catch_up: str | None = None) -> dict:
     """One run over fresh namespaced hosts; returns what was measured (and writes each host's
     summary.json under run_dir/hosts/<H>/)."""
     from saim_mesh.net import netns
@@ -135,7 +138,7 @@ def run_hosts(base: Path, hosts: dict, run_dir: Path, speed: float, until: float
         before = {h: iface_bytes(hs, h) for h in hosts}
         start = time.time() + lead
         f = base.parent / f"{base.stem}-{run_dir.name}.toml"
-        with_pace(base, f, speed, start, until)
+        with_pace(base, f, speed, start, until, catch_up)
         cmd = lambda h, extra=(): hs.wrap(h, [*py(), "deploy", str(f), "--host", h, "--out-dir",  # noqa: E731
                                               str(hdir / h), "--quiet", *extra])
         try:
@@ -344,6 +347,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rate-kbit", type=int, default=64, help="tbf rate on each host link below the top's")
     ap.add_argument("--rate-hosts", help="comma-separated hosts whose link is rated (default: every host but the top's)")
     ap.add_argument("--runs", default="free,cut,kill", help="which runs (free is always run)")
+    ap.add_argument("--catch-up", choices=["block", "yield"], help="the deployment's catch_up (default: the file's)")
     ap.add_argument("--cut-host", help="default: the first host below the top's (1BN)")
     ap.add_argument("--cut-from", type=float, default=300.0)
     ap.add_argument("--cut-s", type=float, default=300.0)
@@ -400,15 +404,15 @@ def main(argv=None) -> int:
     if not a.analyze_only:
         if "free" not in res:
             res["free"] = run_hosts(base, hosts, out_dir / "free", a.speed, a.until, rate, lead, duration,
-                                    grace=a.grace)
+                                    grace=a.grace, catch_up=a.catch_up)
             saved.write_text(json.dumps(res, indent=1))
         if "cut" in runs and "cut" not in res:
             res["cut"] = run_hosts(base, hosts, out_dir / "cut", a.speed, a.until, rate, lead, duration,
-                                   cut=(cut_host, a.cut_from, a.cut_s), grace=a.grace)
+                                   cut=(cut_host, a.cut_from, a.cut_s), grace=a.grace, catch_up=a.catch_up)
             saved.write_text(json.dumps(res, indent=1))
         if "kill" in runs and "kill" not in res:
             res["kill"] = run_hosts(base, hosts, out_dir / "kill", a.speed, a.until, rate, lead, duration,
-                                    kill=(kill_host, a.kill_at, a.down_s), grace=a.grace)
+                                    kill=(kill_host, a.kill_at, a.down_s), grace=a.grace, catch_up=a.catch_up)
             saved.write_text(json.dumps(res, indent=1))
     runs = set(res)
     merge(out_dir / "free", hosts, res["free"]["start"])
@@ -433,7 +437,7 @@ def main(argv=None) -> int:
         "scenario": Path(scenario).name, "hosts": names, "host_count": len(names), "ea_peers": n_eas,
         "sources": sorted(s for h in hosts.values() for s in h["sources"]),
         "secure": json.loads((out_dir / "free" / "summary.json").read_text()).get("secure"),
-        "link_rate_kbps": a.rate_kbit or None, "rated_links": [f"{h}-{top}" for h in rated],
+        "link_rate_kbps": a.rate_kbit or None, "catch_up": a.catch_up or "block", "rated_links": [f"{h}-{top}" for h in rated],
         "speed": a.speed, "event_s": duration, "wall_s": free["wall_s"],
         "times_real_time": free["times_real_time"],
         "alerts_equal_in_process": not unequal and len(units) > 0, "unequal": unequal,

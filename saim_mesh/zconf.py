@@ -8,6 +8,12 @@ from pathlib import Path
 import zenoh
 
 DEFAULT = Path(__file__).resolve().parents[1] / "configs" / "zenoh-peer.json5"
+# A router's links may cross a radio of tens of kbit/s, where one full batch (16 KB: the
+# file's batch_size) takes 2 s at 64 kbit/s. Zenoh reads a batch whole within the lease:
+# at the file's 2 s lease (for leaves: a dead process is noticed at once) a router that
+# sent full batches (a catch-up after a heal) had its links expire one after the other,
+# and every reconnection started another catch-up (the brigade's BDE router, docs/deployment.md).
+ROUTER_LEASE_MS = 10_000   # Zenoh's own default: five full batches at 64 kbit/s
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -37,6 +43,8 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None,
         if mode != "peer":
             conf.insert_json5("scouting/gossip/enabled", "false")
             conf.insert_json5("transport/shared_memory/enabled", "false")   # it would bypass an emulated link
+        if mode == "router":
+            conf.insert_json5("transport/link/tx/lease", str(ROUTER_LEASE_MS))
         if mode == "client":
             listen = []
     if multicast:

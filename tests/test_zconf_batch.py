@@ -39,3 +39,15 @@ def test_messages_of_any_size_cross_a_router_whole_and_in_order(size):
             return len(got) >= len(sent)
         wait_until(take, 30, f"5 messages of {size} bytes")
         assert got == sent
+
+
+def test_a_router_link_outlasts_a_full_batch_on_a_64_kbit_radio():
+    """Zenoh reads a batch whole within the lease: a 16 KB batch takes 2 s at 64 kbit/s,
+    so at the leaves' 2 s lease a router link that sent full batches (a catch-up after a
+    heal) expired, again and again. Routers take a longer lease; leaves keep theirs (a
+    dead process on the same host is noticed at once)."""
+    batch_bits = 8 * int(config(mode="router", listen=["tcp/127.0.0.1:1"]).get_json("transport/link/tx/batch_size"))
+    router = int(config(mode="router", listen=["tcp/127.0.0.1:1"]).get_json("transport/link/tx/lease"))
+    leaf = int(config(mode="client", connect=["tcp/127.0.0.1:1"]).get_json("transport/link/tx/lease"))
+    assert router >= 4 * 1000 * batch_bits / 64_000   # ms: four full batches at 64 kbit/s
+    assert leaf == 2000
