@@ -10,9 +10,9 @@ import zenoh
 DEFAULT = Path(__file__).resolve().parents[1] / "configs" / "zenoh-peer.json5"
 # A router's links may cross a radio of tens of kbit/s, where one full batch (16 KB: the
 # file's batch_size) takes 2 s at 64 kbit/s. Zenoh reads a batch whole within the lease:
-# at the file's 2 s lease (for leaves: a dead process is noticed at once) a router that
-# sent full batches (a catch-up after a heal) had its links expire one after the other,
-# and every reconnection started another catch-up (the brigade's BDE router, docs/deployment.md).
+# at the file's 2 s lease (for leaves: a dead process is noticed at once) a router link
+# that carries full batches (a catch-up after a heal) expires though data flows. This alone
+# did not stop the brigade's router links flapping after a heal (docs/deployment.md).
 ROUTER_LEASE_MS = 10_000   # Zenoh's own default: five full batches at 64 kbit/s
 
 
