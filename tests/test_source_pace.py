@@ -34,6 +34,21 @@ def ack(s, ks, unit: str, t: float) -> None:
     s.put(ks.ack(unit, "cp.test"), W.encode(W.make(W.Ack, t=t)))
 
 
+def release(pace: P.SourcePace, th: threading.Thread) -> None:
+    """Never leave the publishing thread waiting, whatever the test asserted."""
+    pace.acks["stop"] = (math.inf, math.inf)
+    with pace.cv:
+        pace.cv.notify_all()
+    th.join(30)
+
+
+def published_all(src, pace, th, done: list, msgs) -> None:
+    """The publishing thread ended having published every message; source and pace closed."""
+    assert not th.is_alive() and done == [len(msgs)]
+    src.close()
+    pace.close()
+
+
 def sent_upto(wire: Wire) -> float:
     return max((M.decode(b).t for f in wire.frames for b in f.msgs), default=-math.inf)
 
@@ -70,13 +85,8 @@ def test_a_fast_source_waits_for_its_slowest_ea(reports):
             ack(s, ks, "A2", 1e6)
             th.join(30)
         finally:
-            pace.acks["stop"] = (math.inf, math.inf)   # never leave the thread waiting
-            with pace.cv:
-                pace.cv.notify_all()
-            th.join(30)
-        assert not th.is_alive() and done == [len(msgs)]
-        src.close()
-        pace.close()
+            release(pace, th)
+        published_all(src, pace, th, done, msgs)
     check_stream(wire.frames, msgs)
     assert pace.waits >= 3
 
@@ -109,13 +119,8 @@ def test_a_held_source_beats_so_no_ea_takes_it_for_a_silent_one(reports):
             ack(s, ks, "A1", 1e6)
             th.join(30)
         finally:
-            pace.acks["stop"] = (math.inf, math.inf)
-            with pace.cv:
-                pace.cv.notify_all()
-            th.join(30)
-        assert not th.is_alive() and done == [len(msgs)]
-        src.close()
-        pace.close()
+            release(pace, th)
+        published_all(src, pace, th, done, msgs)
     check_stream(wire.frames, msgs)
 
 
