@@ -205,7 +205,7 @@ def _exists(pid: int) -> bool:
 
 class Zygote:
     def __init__(self, env: dict | None = None):
-        env = dict(os.environ if env is None else env)
+        env = dict(env or os.environ)   # as clean_env takes it: none (or empty) is ours
         # glibc reads MALLOC_ARENA_MAX at start: here, for every EA peer. One arena, not two:
         # Zenoh's threads and the EA then share one heap's free memory instead of each arena
         # keeping its own (the brigade live: peak PSS 40.26 -> 39.17 MB for BDE, mean 36.5 ->
