@@ -278,11 +278,11 @@ def test_a_frame_the_full_order_refuses_is_offered_again_never_dropped(sc):
     peer.receive(frame("cp.a", 1, reps[1].t, reps[0:2]), "")
     peer.receive(frame("cp.a", 2, reps[3].t, reps[2:4]), "")   # 4 facts would wait: refused as full
     peer.receive(frame("cp.a", 3, reps[5].t, reps[4:6]), "")   # queues behind it
-    assert [f.seq for _, _, f in peer.hold.waiting["cp.a"]] == [2, 3] and peer.ea.n_in == 0
+    assert [f.seq for _, _, f in peer.seq.hold.waiting["cp.a"]] == [2, 3] and peer.ea.n_in == 0
     peer.receive(frame("cp.b", 1, 1e5, []), "")                # cp.b's promise releases cp.a's first facts
-    peer._retry()
-    peer._retry()
-    assert not peer.hold.waiting_for("cp.a") and peer.ea.n_in == 6 and peer.frames == 4
+    peer.seq.retry()
+    peer.seq.retry()
+    assert not peer.seq.hold.waiting_for("cp.a") and peer.ea.n_in == 6 and peer.frames == 4
 
 
 def test_a_source_back_after_every_other_ended_does_not_kill_the_peer(sc, tmp_path):

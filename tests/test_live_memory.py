@@ -10,6 +10,7 @@ import pytest
 from saim_mesh import scenario as S
 from saim_mesh.live import play
 from saim_mesh.live import peer as P
+from saim_mesh.live import sequence as SQ
 from saim_mesh.zconf import config
 
 from .conftest import SMALL
@@ -38,7 +39,7 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
         def ask(self, session, key, epoch, lo, hi, read, budget_s=3.0):
             asked.append((lo, hi))
             return [(by_seq[s], read(by_seq[s])) for s in range(lo, min(hi, len(by_seq)) + 1)]
-    monkeypatch.setattr(P, "Asker", Asker)
+    monkeypatch.setattr(SQ, "Asker", Asker)
 
     def peer():
         return P.LivePeer(sc, "BN", config(["tcp/127.0.0.1:0"], None), "t/mem", ["src.a", "src.b"])
@@ -50,24 +51,24 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
 
     p = peer()
     p.session = FakeSession()
-    p.max_held = 400_000
+    p.max_held = p.seq.max_held = 400_000
     p.order.max_buffered = 800
     peak = 0
     for _, f in a:                    # src.a runs far ahead: src.b has promised nothing yet
         p.receive(f, "")
-        peak = max(peak, p.hold.bytes)
-    assert p.dropped > 0 and p.behind.get("src.a")
+        peak = max(peak, p.seq.hold.bytes)
+    assert p.seq.dropped > 0 and p.seq.behind.get("src.a")
     assert peak <= p.max_held // 2 + max(len(f) for _, f in a)
     assert p.order.buffered() <= p.order.max_buffered
     for _, f in b:                    # src.b catches up; the loop's checks fetch src.a again
         p.receive(f, "")
-        p._retry()
-        p._refetch_behind()
+        p.seq.retry()
+        p.seq.refetch_behind()
     for _ in range(50):
-        if not p.behind.get("src.a") and not p.hold.waiting_for("src.a"):
+        if not p.seq.behind.get("src.a") and not p.seq.hold.waiting_for("src.a"):
             break
-        p._retry()
-        p._refetch_behind()
+        p.seq.retry()
+        p.seq.refetch_behind()
     p.ea.finish(p.end_t())
-    assert asked and p.fetched >= p.dropped and p.gaps == 0
+    assert asked and p.seq.fetched >= p.seq.dropped and p.seq.gaps == 0
     assert keyed(p.given) == keyed(ref.given) and len(keyed(ref.given)) >= 5

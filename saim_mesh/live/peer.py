@@ -40,18 +40,14 @@ from ..security.sign import signer_for
 from . import frames as F
 from .authority import DirectiveIntake
 from .depend import depends
-from .held import Held
 from .journal import InputJournal
 from .order import EventTimeOrder
 from .presence import PeerPresence
-from .srcjournal import Asker
+from .sequence import Sequencer
 from .timeline import Timeline
 
 BLOCK = zenoh.CongestionControl.BLOCK
-GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
-PATIENCE = 40         # asks of a journal that gave nothing over a congested link before the rest is a gap
 CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, silences) while frames flow
-HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report, its heap entry: 315 B measured)
 DATA = frozenset((M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
                   M.Reorganization))
@@ -112,19 +108,14 @@ class LivePeer:
         self.ended: set[str] = set()
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
-        self.misses = 0
         self.alert_lat: list[float] = []      # live: wall seconds from its epoch's close to an alert's raising
         self.due_lat: list[float] = []        # ... and from the alert's own event time
-        self.gaps = 0                         # frames that never came (beyond recovery)
-        self.seq_of: dict[str, list[int]] = {}        # source -> [epoch, next seq expected]
-        self.hold = Held(HELD_FRAMES)        # frames outside the order: early, or waiting for room
         self.promised: dict[str, float] = {}          # source -> the furthest watermark its frames gave
-        self.behind: dict[str, bool] = {}     # sources whose frames are dropped until fetched again
-        self.dropped = 0                      # ... how many (all fetched again from the journal, or gaps)
+        # each source's frames in its own sequence: held, fetched again, gaps (`sequence`)
+        self.seq = Sequencer(self.take, self._frame, self.ks, log, self.max_held,
+                             room=lambda: self.order.buffered() < self.order.max_buffered // 2,
+                             session=lambda: self.session)
         self.frames = 0
-        self.fetched = 0                      # frames caught up from sources' journals
-        self.askers: dict[str, Asker] = {}    # ... each source's, sized to what its link gives
-        self.patience: dict[str, int] = {}    # ... asks that brought nothing over a congested link
         self.late = 0
         self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given and shown
         self.muted: set[tuple] = set()        # ... given inhibited
@@ -248,121 +239,18 @@ class LivePeer:
 
     # -- input ---------------------------------------------------------------------------
     def receive(self, payload: bytes, key: str) -> None:
-        """A frame off the wire: taken in its source's own sequence. One that comes ahead of
-        a missing one (a subscriber that joined after the source's first frames gets those
-        from the publisher's cache, after newer ones) waits for it, at most `GAP_WAIT_S`."""
+        """A frame off the wire: taken in its source's own sequence (`Sequencer.arrive`)."""
         f = self._frame(payload, key)
         if f is None:
             return
         if self.catching_up:   # what the EA raises up to the sources' edge when it came back is late
             self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
             self.heard_again.add(f.source)
-        st = self.seq_of.get(f.source)
-        if st is not None and f.epoch > st[0]:   # the source restarted: the rest of its last epoch first
-            self._catch_up(f.source, st[0], st[1], W.SEQ_LIMIT, take=True)
-        if st is None or f.epoch > st[0]:   # first heard, or the source restarted: its seq starts at 1
-            st = self.seq_of[f.source] = [f.epoch, 1]
-            self.hold.reset_early(f.source)
-        if f.epoch < st[0] or f.seq < st[1]:
-            return   # an old epoch's frame, or one taken already
-        if self.behind.get(f.source) or self.hold.bytes + len(payload) > self.max_held // 2 and (
-                f.seq > st[1] or self.hold.waiting_for(f.source)):
-            if not self.behind.get(f.source):
-                self.log(f"source {f.source}: over {self.max_held >> 21} MB held: its frames from {st[1]} "
-                         f"are fetched again from its journal when there is room", flush=True)
-            self.behind[f.source] = True   # heard (not silent), but not kept
-            self.heard[f.source] = time.monotonic()
-            self.dropped += 1
-            return
-        if f.seq > st[1]:
-            if not self.hold.early_of(f.source):
-                self.log(f"source {f.source}: frame {f.seq} came before {st[1]}: waiting for it", flush=True)
-            self.hold.hold_early(f.source, f.seq, (payload, key, f), time.monotonic())
-            return
-        self.take(payload, key, f=f)
-        st[1] = f.seq + 1
-        self._drain_held(f.source)
-
-    def _drain_held(self, source: str, force: bool = False) -> None:
-        """Held frames now in sequence (or, `force`d after the wait, from the lowest held on:
-        the missing ones are gone, counted as a gap)."""
-        st, early = self.seq_of[source], self.hold.early_of(source)
-        if force and early and st[1] not in early:   # beyond recovery: the source's journal, if it keeps one
-            got = self._catch_up(source, st[0], st[1], min(early) - 1)
-            why = self.askers[source].why if source in self.askers else ""
-            if not got and why == "congested" and self.patience.get(source, 0) < PATIENCE:
-                # the journal is there but its replies yield to live traffic on a slow link: the
-                # frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`
-                self.patience[source] = self.patience.get(source, 0) + 1
-                self.hold.gap_since[source] = time.monotonic()
-                return
-            self.patience.pop(source, None)
-        if force and early and st[1] not in early:
-            low = min(early)
-            self.gaps += low - st[1]
-            self.log(f"source {source}: frames {st[1]}..{low - 1} never came: going on without them", flush=True)
-            st[1] = low
-        while (item := self.hold.pop_early(source, st[1])) is not None:
-            payload, key, f = item
-            self.take(payload, key, f=f)
-            st[1] += 1
+        if not self.seq.arrive(payload, key, f):
+            self.heard[f.source] = time.monotonic()   # heard (not silent), but not kept: fetched again
 
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
-
-    def _refetch_behind(self) -> None:
-        """Sources we fell behind on: their frames fetched again from their journals, in
-        sequence, while there is room (what no journal holds is a gap, said and counted)."""
-        for src in [s for s, b in self.behind.items() if b]:
-            st = self.seq_of[src]
-            while (self.hold.bytes < self.max_held // 4 and not self.hold.waiting_for(src)
-                   and self.order.buffered() < self.order.max_buffered // 2):
-                n = 0
-                for b, key, f in self._journal_frames(src, st[0], st[1], st[1] + 499):
-                    if f.seq != st[1]:
-                        continue
-                    n += 1
-                    self.fetched += 1
-                    ok = self.take(b, key, f=f)
-                    st[1] = f.seq + 1
-                    if not ok:
-                        break
-                if not n:   # the journal has no more (the live edge, or no journal): live frames again
-                    self.behind[src] = False
-                    self.log(f"source {src}: caught up from its journal to {st[1] - 1}", flush=True)
-                    break
-
-    def _catch_up(self, source: str, epoch: int, lo: int, hi: int, take: bool = False) -> int:
-        """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>): held
-        for `_drain_held`, or (`take`: an epoch that ended with a restart) taken now. How
-        many came."""
-        got = 0
-        for b, key, f in self._journal_frames(source, epoch, lo, hi):
-            got += 1
-            if take:
-                self.take(b, key, f=f)
-            else:
-                self.hold.hold_early(source, f.seq, (b, key, f), time.monotonic())
-        if got:
-            self.fetched += got
-            self.log(f"source {source}: {got} frames of epoch {epoch} from its journal", flush=True)
-        return got
-
-    def _journal_frames(self, source: str, epoch: int, lo: int, hi: int):
-        """Frames lo..hi of a source's epoch from its durable journal (srcj/<name>), each
-        checked as a live one; nothing without a session or a journal."""
-        if self.session is None or lo > hi:
-            return
-        key = self.ks.src(source)
-
-        def read(b: bytes):   # checked as a live frame (a bad one counted), once
-            f = self._frame(b, key)
-            return f if f is not None and f.source == source and f.epoch == epoch else None
-        asker = self.askers.get(source)
-        if asker is None:
-            asker = self.askers[source] = Asker()
-        for b, f in asker.ask(self.session, self.ks.srcj(source), epoch, lo, hi, read):
-            yield b, key, f
 
     def _frame(self, payload: bytes, key: str):
         try:
@@ -380,14 +268,14 @@ class LivePeer:
     def take(self, payload: bytes, key: str, journal: bool = True, f=None, retrying: bool = False) -> bool:
         """One frame, in its source's sequence: checked, ordered, journalled; then everything
         the watermarks allow is applied. False when the order could not take it yet (kept
-        waiting for `_retry`, and the source's later frames queue behind it; `retrying`:
+        waiting for `Sequencer.retry`, and the source's later frames queue behind it; `retrying`:
         it is the head of that queue, offered again)."""
         if f is None:
             f = self._frame(payload, key)
             if f is None:
                 return True
-        if not retrying and journal and self.hold.waiting_for(f.source):
-            self.hold.wait(f.source, (payload, key, f))
+        if not retrying and journal and self.seq.hold.waiting_for(f.source):
+            self.seq.hold.wait(f.source, (payload, key, f))
             return False
         if f.source in self.order.lost and self.rebuilding is None:   # back: rebuild as if never lost
             if journal and self.journal is not None:
@@ -410,7 +298,7 @@ class LivePeer:
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             if not retrying:
-                self.hold.wait(f.source, (payload, key, f))
+                self.seq.hold.wait(f.source, (payload, key, f))
             return False
         if why is not None:
             return True
@@ -447,7 +335,7 @@ class LivePeer:
         self.ea.start(0.0)
         self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
         self.dirs.reset()
-        waiting = self.hold.take_waiting()   # never journalled: offered again after the journal's frames
+        waiting = self.seq.hold.take_waiting()   # never journalled: offered again after the journal's frames
         returned = {source} | {r[1] for r in records if r[0] == "back"}
         try:
             for rec in records:
@@ -461,7 +349,7 @@ class LivePeer:
             self.rebuilding = None
             for src, q in waiting.items():
                 for item in q:
-                    self.hold.wait(src, item)
+                    self.seq.hold.wait(src, item)
 
     def restart(self) -> int:
         """A restarted peer (its host or process died): its input journal is replayed
@@ -496,7 +384,7 @@ class LivePeer:
             f = self._frame(rec[1], "")
             if f is not None:
                 self.take(rec[1], "", journal=False, f=f)
-                self.seq_of[f.source] = [f.epoch, f.seq + 1]
+                self.seq.resume(f.source, f.epoch, f.seq + 1)
         elif rec[0] == "lost":
             self.lose(rec[1], rec[3], journal=False)
         elif rec[0] == "dir":
@@ -520,15 +408,6 @@ class LivePeer:
             raise RuntimeError("a live peer with no input journal cannot rebuild its EA when a source returns")
         from .journal import records
         return records(self.journal.path)
-
-    def _retry(self) -> None:
-        """Offer the frames the order refused as full again, each source's in its order."""
-        for src in self.hold.sources_waiting():
-            while (item := self.hold.head(src)) is not None:
-                payload, key, f = item
-                if not self.take(payload, key, f=f, retrying=True):
-                    break                     # still full: it stays at the head
-                self.hold.done_head(src)
 
     def lose(self, source: str, why: str, journal: bool = True) -> None:
         """Declare a depended source lost: monitoring goes on without it (a logged decision)."""
@@ -692,8 +571,8 @@ class LivePeer:
         return serve(self, deadline_s, linger_s)
 
     def summary(self) -> dict:
-        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.misses, "fetched": self.fetched, "dropped": self.dropped,
-                "gaps": self.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
+        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.seq.misses, "fetched": self.seq.fetched,
+                "dropped": self.seq.dropped, "gaps": self.seq.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
                 "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "rejects_by_sender": dict(self.gate.rejects.by_sender),

@@ -16,7 +16,7 @@ import zenoh.ext as zx
 
 from .. import wire as W
 from .pace import EaProgress
-from .peer import BLOCK, CHECK_S, GAP_WAIT_S
+from .peer import BLOCK, CHECK_S
 from .source import CACHE
 
 
@@ -66,7 +66,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 except queue.Empty:
                     key = None
                 if key == "miss":
-                    peer.misses += payload
+                    peer.seq.misses += payload
                     peer.log(f"missed {payload} frames beyond the publisher's cache", flush=True)
                 elif key == "alive":
                     peer._alive(*payload)
@@ -79,13 +79,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                     continue   # while frames flow, the checks below run every CHECK_S
                 next_check = now + CHECK_S
                 peer._inputs_on_disk()
-                if peer.hold.waiting:
-                    peer._retry()
-                if peer.behind:
-                    peer._refetch_behind()
-                for src, since in list(peer.hold.gap_since.items()):
-                    if now - since > GAP_WAIT_S:
-                        peer._drain_held(src, force=True)
+                peer.seq.checks(now)   # refused frames again, sources fetched again, gaps waited out
                 for src in peer.sources:   # silence: a decision, journalled
                     last = peer.heard.get(src)
                     quiet, limit = (now - started, peer.join_s) if last is None else (now - last, peer.silence_s)
