@@ -20,20 +20,16 @@ import math
 import queue
 import sys
 import time
-from dataclasses import replace
 
 import zenoh
 
 from dissemination.keyspace import KeySpace
 from ea_agent.core.alert import hms
 
-from .. import cmdlog
 from .. import commands as C
 from .. import directives as D
 from .. import messages as M
-from .. import noticelog
 from .. import wire as W
-from ..alertlog import AlertLog
 from ..runner import config_for, make_ea
 from ..scenario import Scenario
 from ..security.sign import signer_for
@@ -42,6 +38,7 @@ from .authority import DirectiveIntake
 from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
+from .outputs import Outputs
 from .presence import PeerPresence
 from .sequence import Sequencer
 from .timeline import Timeline
@@ -96,12 +93,10 @@ class LivePeer:
         self.named = sorted(dict.fromkeys(sources))
         self.sources = depends(sc, self.ea, self.named)
         self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
-        self.alog = AlertLog(out_path, mesh["fsync"]) if out_path else None
-        self.nlog = noticelog.NoticeLog(noticelog.path_for(out_path)) if out_path else None
         self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
-        self.clog = cmdlog.CommandLog(cmdlog.path_for(out_path)) if out_path else None
+        self.signer = signer_for(conf)   # secure mode: our notices and confirmations are signed
+        self.out = Outputs(self.ks, unit, out_path, mesh["fsync"], self.journal, self.signer)   # logs, the mesh
         self.ea.notice_sinks.append(self._notice)
-        self.signer = signer_for(conf)   # secure mode: our notices are signed
         self.session = None
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.heard: dict[str, float] = {}     # source -> wall time of its last frame
@@ -116,10 +111,6 @@ class LivePeer:
                              room=lambda: self.order.buffered() < self.order.max_buffered // 2,
                              session=lambda: self.session)
         self.frames = 0
-        self.late = 0
-        self.emitted: set[tuple] = set()      # (t, type, subjects, message) of every alert given and shown
-        self.muted: set[tuple] = set()        # ... given inhibited
-        self.given: list[M.Alert] = []        # every alert given, in order (the log's)
         self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
         self.rebuilds = 0
@@ -133,18 +124,24 @@ class LivePeer:
         self.cpu0 = (time.thread_time(), time.process_time())
         self.timeline = Timeline(self.ea.epoch_s)   # for benchmarks: wall times of epochs and alerts
 
+    @property
+    def session(self):
+        """Its Zenoh session while it is on the mesh (`serve`), else None (a journal replay)."""
+        return self.out.session
+
+    @session.setter
+    def session(self, s) -> None:
+        self.out.session = s
+
+    @property
+    def given(self) -> list[M.Alert]:
+        """Every alert given, in order (the log's)."""
+        return self.out.given
+
     # -- sinks ---------------------------------------------------------------------------
     def _sink(self, a: M.Alert) -> None:
-        key = (a.t, a.type, a.subjects, a.message)
-        quiet = "inhibited_by" in a.details
-        if key in self.emitted or quiet and key in self.muted:
-            return   # raised already (by the EA before a rebuild): never twice
-        if self.restoring and self.alog is not None and self.alog.already(a):
-            (self.muted if quiet else self.emitted).add(key)   # told before the restart: never twice
-            self.given.append(a)
-            return
-        # an alert given inhibited (never shown) that a rebuilt EA raises uninhibited is shown now
-        (self.muted if quiet else self.emitted).add(key)
+        if not self.out.fresh(a, self.restoring):
+            return   # raised already (by the EA before a rebuild, or before a restart): never twice
         self.timeline.raised(a)
         if self.live_start is not None and not a.details.get("wall_clock_driven"):
             # live: from the close of the epoch the alert falls in (on event time, the earliest
@@ -157,34 +154,14 @@ class LivePeer:
         due = self.late_from
         if due is None and (a.t <= self.caught_up_to or self.restoring) and not a.details.get("wall_clock_driven"):
             due = a.t   # a rebuilt or restarted EA raises what fell due while a source was lost or it was down
-        if due is not None:
-            a = replace(a, details={**a.details, "late": True, "due_from": round(due, 3)})
-            self.late += 1
-        self.given.append(a)
-        self._inputs_on_disk()
-        if self.alog:
-            self.alog.write(a)
-        if self.session is not None:
-            self.session.put(self.ks.key(a, None, None), M.encode(a), congestion_control=BLOCK)
+        self.out.give(a, due)
 
     def _inputs_on_disk(self) -> None:
-        """The input journal's buffered frames written out before anything they caused leaves
-        the peer (an alert, a notice, a confirmation): a restart replays them and never tells
-        it twice."""
-        if self.journal is not None:
-            self.journal.flush()
+        self.out.inputs_on_disk()
 
     def _notice(self, n) -> None:
-        if self.restoring:
-            return   # re-notifications and escalations of the past are not sent again
-        self._inputs_on_disk()
-        if self.nlog:
-            self.nlog(n)
-        if self.session is not None:   # signed in secure mode: an escalation crosses the router
-            key = self.ks.notice(n.to, n.owner)
-            payload = W.encode(W.notice_of(n))
-            self.session.put(key, payload if self.signer is None else self.signer.sign(key, payload),
-                             congestion_control=BLOCK)
+        if not self.restoring:   # re-notifications and escalations of the past are not sent again
+            self.out.notice(n)
 
     def _confirm_up(self, c) -> None:
         """Its EA inferred that one of its own unit's missions started (the unit crossed its
@@ -515,10 +492,9 @@ class LivePeer:
         if not ok:
             self.gate.rejects.add(M.MessageError("directive", "(authority)", why), D.key(self.ks.root, tk.by, "?"))
         res = D.result(tk, ok, tk.t, why, late, due)
-        if self.clog is not None:
-            self.clog.directive(self.unit, tk, res)
-        if self.session is not None:
-            self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
+        if self.out.clog is not None:
+            self.out.clog.directive(self.unit, tk, res)
+        self.out.result(res)
         self.log(f"directive {res.kind} by {tk.by} at {tk.t:.1f} ok={ok}" + (f" error={res.error}" if res.error else ""),
                  flush=True)
 
@@ -542,12 +518,11 @@ class LivePeer:
         """A commander's command (docs/console.md 1), taken as every peer takes one
         (`commands.receive`) at the EA's time, answered on cmdlog/<unit>."""
         # taken after every fact at the EA's time (it advanced as far as its sources promised)
-        res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.clog,
+        res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.out.clog,
                         after=True)
         if res is None:
             return
-        if self.session is not None:
-            self.session.put(self.ks.cmdlog(self.unit), W.encode(res), congestion_control=BLOCK)
+        self.out.result(res)
         self.log(f"cmd {res.kind} req={res.req} ok={res.ok}" + (f" error={res.error}" if res.error else ""), flush=True)
 
     def end_t(self) -> float:
@@ -574,7 +549,7 @@ class LivePeer:
         return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.seq.misses, "fetched": self.seq.fetched,
                 "dropped": self.seq.dropped, "gaps": self.seq.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
                 "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
-                "late_alerts": self.late, "lost": dict(self.order.lost), "released": self.order.released,
+                "late_alerts": self.out.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "rejects_by_sender": dict(self.gate.rejects.by_sender),
                 "messages": self.ea.n_in,
                 "wall_s": round(time.monotonic() - self.t0, 2),

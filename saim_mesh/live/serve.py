@@ -112,9 +112,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 x.undeclare()
             peer.session = None
     finally:
-        for x in (peer.alog, peer.nlog, peer.journal, peer.clog):
-            if x is not None:
-                x.close()
+        peer.out.close()   # its logs and its input journal
     summary = peer.summary()
     peer.log("summary " + json.dumps(summary, sort_keys=True), flush=True)
     return summary
