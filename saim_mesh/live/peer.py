@@ -39,6 +39,7 @@ from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
 from .outputs import Outputs
+from .liveness import SourceWatch
 from .presence import PeerPresence
 from .sequence import Sequencer
 from .timeline import Timeline
@@ -63,8 +64,7 @@ class LivePeer:
         self.ks = KeySpace.of(sc, root)
         self.cfg = config_for(sc, unit, config_path)
         mesh = self.cfg["mesh"]
-        self.silence_s = float(mesh["source_silence_s"] if silence_s is None else silence_s)
-        self.join_s = max(self.silence_s, float(mesh["source_join_s"]))
+        silence_s = float(mesh["source_silence_s"] if silence_s is None else silence_s)
         self.max_bytes = int(max_bytes or mesh["max_payload_bytes"])
         # memory held for the order: frames waiting (out of sequence, or for room in the
         # order) up to half of it, facts in the order the other half; beyond, a source's
@@ -99,13 +99,10 @@ class LivePeer:
         self.ea.notice_sinks.append(self._notice)
         self.session = None
         self.q: queue.SimpleQueue = queue.SimpleQueue()
-        self.heard: dict[str, float] = {}     # source -> wall time of its last frame
-        self.ended: set[str] = set()
+        # the depended sources' liveness: heard when, promised how far, ended
+        self.watch = SourceWatch(self.sources, silence_s, max(silence_s, float(mesh["source_join_s"])))
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
-        self.alert_lat: list[float] = []      # live: wall seconds from its epoch's close to an alert's raising
-        self.due_lat: list[float] = []        # ... and from the alert's own event time
-        self.promised: dict[str, float] = {}          # source -> the furthest watermark its frames gave
         # each source's frames in its own sequence: held, fetched again, gaps (`sequence`)
         self.seq = Sequencer(self.take, self._frame, self.ks, log, self.max_held,
                              room=lambda: self.order.buffered() < self.order.max_buffered // 2,
@@ -120,9 +117,7 @@ class LivePeer:
         self.catching_up = False              # ... then taking what its sources sent while it was down
         self.heard_again: set[str] = set()    # ... the sources heard since it came back (their edge known)
         self.restored = 0                     # input records the restart replayed
-        self.t0 = time.monotonic()
-        self.cpu0 = (time.thread_time(), time.process_time())
-        self.timeline = Timeline(self.ea.epoch_s)   # for benchmarks: wall times of epochs and alerts
+        self.timeline = Timeline(self.ea.epoch_s, live_start)   # for benchmarks: epochs, alerts, latency, CPU
 
     @property
     def session(self):
@@ -143,14 +138,6 @@ class LivePeer:
         if not self.out.fresh(a, self.restoring):
             return   # raised already (by the EA before a rebuild, or before a restart): never twice
         self.timeline.raised(a)
-        if self.live_start is not None and not a.details.get("wall_clock_driven"):
-            # live: from the close of the epoch the alert falls in (on event time, the earliest
-            # it can be raised: an epoch closes once every source promised it) to its raising;
-            # `due_lat` from the alert's own time (a timer due mid-epoch waits for the close)
-            now = time.time() - self.live_start
-            ep = self.ea.epoch_s
-            self.alert_lat.append(now - math.ceil(a.t / ep - 1e-9) * ep)
-            self.due_lat.append(now - a.t)
         due = self.late_from
         if due is None and (a.t <= self.caught_up_to or self.restoring) and not a.details.get("wall_clock_driven"):
             due = a.t   # a rebuilt or restarted EA raises what fell due while a source was lost or it was down
@@ -224,7 +211,7 @@ class LivePeer:
             self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
             self.heard_again.add(f.source)
         if not self.seq.arrive(payload, key, f):
-            self.heard[f.source] = time.monotonic()   # heard (not silent), but not kept: fetched again
+            self.watch.heard_from(f.source)   # heard (not silent), but not kept: fetched again
 
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
@@ -282,10 +269,7 @@ class LivePeer:
         if journal and self.journal is not None:   # what was taken, in the order taken: replays to the same
             self.journal.frame(payload)
         self.frames += 1
-        self.promised[f.source] = max(self.promised.get(f.source, -1.0), f.wm)   # finite, also in its last frame
-        self.heard[f.source] = time.monotonic()
-        if f.end:
-            self.ended.add(f.source)
+        self.watch.took(f)
         self._apply()
         return True
 
@@ -460,7 +444,7 @@ class LivePeer:
         """A restarted peer knows the sources' edge once every source it depends on was
         heard since (or ended, or is lost) and no frame waits in its queue: a source that
         restarted with it (the same host) or whose cache is still arriving would move it."""
-        return self.q.empty() and all(s in self.heard_again or s in self.ended or s in self.order.lost
+        return self.q.empty() and all(s in self.heard_again or s in self.watch.ended or s in self.order.lost
                                       for s in self.sources)
 
     def directive(self, key: str, payload: bytes) -> None:
@@ -531,13 +515,12 @@ class LivePeer:
         journal is replayed)."""
         if self.live_start is None:
             return self.sc.duration_s
-        fin = [w for w in self.promised.values() if math.isfinite(w)]
-        return max([self.ea.now, *fin])
+        return max([self.ea.now, *self.watch.furthest()])
 
     def done(self) -> bool:
         """Every source ended, or ended and lost ones (at least one ended: a mesh where
         every source is silent keeps waiting for them)."""
-        return bool(self.ended) and set(self.sources) <= self.ended | set(self.order.lost)
+        return self.watch.all_ended(self.order.lost)
 
     # -- loop ------------------------------------------------------------------------------
     def run(self, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
@@ -546,18 +529,12 @@ class LivePeer:
         return serve(self, deadline_s, linger_s)
 
     def summary(self) -> dict:
-        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds, "restored": self.restored, "frames": self.frames, "misses": self.seq.misses, "fetched": self.seq.fetched,
-                "dropped": self.seq.dropped, "gaps": self.seq.gaps, "alert_latencies_ms": [round(1000 * x, 2) for x in self.alert_lat[:5000]],
-                "due_latencies_ms": [round(1000 * x, 2) for x in self.due_lat[:5000]],
+        return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds,
+                "restored": self.restored, "frames": self.frames, "misses": self.seq.misses,
+                "fetched": self.seq.fetched, "dropped": self.seq.dropped, "gaps": self.seq.gaps,
                 "late_alerts": self.out.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "rejects_by_sender": dict(self.gate.rejects.by_sender),
-                "messages": self.ea.n_in,
-                "wall_s": round(time.monotonic() - self.t0, 2),
-                # CPU of the loop that decodes, orders and runs the EA, and of the whole process
-                # (Zenoh's threads too): for benchmarks, robust to this machine's varying share
-                "thread_cpu_s": round(time.thread_time() - self.cpu0[0], 3),
-                "process_cpu_s": round(time.process_time() - self.cpu0[1], 3),
-                "timeline": self.timeline.as_dict()}
+                "messages": self.ea.n_in, **self.timeline.summary()}
 
 
 def main_live_peer(sc: Scenario, unit: str, conf, root: str, sources: list[str], out: str | None, config_path=None,

@@ -57,7 +57,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             peer.log(f"ready {peer.unit} sources={','.join(peer.sources)}"
                      + (f" (not depending on {','.join(sorted(set(peer.named) - set(peer.sources)))})"
                         if len(peer.sources) < len(peer.named) else ""), flush=True)
-            started = time.monotonic()
+            peer.watch.started = time.monotonic()   # a source never heard is waited for from here
             next_check = 0.0
             progress = EaProgress(peer.ks, peer.unit)
             while not peer.done() and time.monotonic() < end_wall:
@@ -80,13 +80,8 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 next_check = now + CHECK_S
                 peer._inputs_on_disk()
                 peer.seq.checks(now)   # refused frames again, sources fetched again, gaps waited out
-                for src in peer.sources:   # silence: a decision, journalled
-                    last = peer.heard.get(src)
-                    quiet, limit = (now - started, peer.join_s) if last is None else (now - last, peer.silence_s)
-                    ahead = peer.promised.get(src, -math.inf) > peer.order.released   # holds nothing back
-                    if src not in peer.ended and src not in peer.order.lost and quiet > limit and not ahead:
-                        peer.lose(src, f"silent for {quiet:.0f} s" if last is not None else
-                                  f"never heard in {quiet:.0f} s")
+                for src, why in peer.watch.silent(now, peer.order.released, peer.order.lost):
+                    peer.lose(src, why)   # silence: a decision, journalled
                 if peer.live_start is not None:
                     peer._apply()
                 progress.send(s, peer.order.released, peer.sources)   # how far it got: its sources' pace
