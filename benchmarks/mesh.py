@@ -37,7 +37,7 @@ from saim_mesh import wire as W
 from saim_mesh import zygote
 from .ea import feed
 from saim_mesh.procstat import Sampler
-from saim_mesh.mesh import Proc, start_peer, up
+from saim_mesh.mesh import Proc, mesh_units, start_peer, up
 from saim_mesh.proc import leaf_env
 from saim_mesh.runner import config_for, make_ea, run
 from saim_mesh.zconf import config, free_port
@@ -271,8 +271,15 @@ def live_scenario(scenario: str, out_dir: Path) -> dict:
     name = Path(scenario).name
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "pids.json").unlink(missing_ok=True)   # the sampler must not read an earlier run's pids
+    from .beside import InProcessBeside
+    streams = source_streams(sc)
+    beside = InProcessBeside(sc, mesh_units(sc), streams)
     with Sampler(out_dir / "pids.json", every_s=0.25) as mem:
-        res = live_up(scenario, units=None, out_dir=out_dir, speed="max", show=False, insecure=False)
+        beside.start()   # the in-process baseline again, at the same moment as the peers
+        try:
+            res = live_up(scenario, units=None, out_dir=out_dir, speed="max", show=False, insecure=False)
+        finally:
+            beside.stop()
     peers = res["peers"]
     units = list(res["units"])
     missing = [u for u in units if u not in peers]
@@ -285,7 +292,6 @@ def live_scenario(scenario: str, out_dir: Path) -> dict:
             for ea in eas}
     all_msgs = sum(ea.n_in for ea in eas)
     del eas
-    streams = source_streams(sc)
     same_in = in_process_same_input(sc, units, streams)
     rep = journal_replay(sc, list(peers), out_dir, res["root"], res["sources"])
     got = {u: logged_alerts(out_dir / f"{u}.jsonl") for u in peers}
@@ -313,6 +319,8 @@ def live_scenario(scenario: str, out_dir: Path) -> dict:
         "in_process_cpu_us_per_event": round(ip_us, 2),
         "ea_cpu_ratio": round(ea_us / ip_us, 3),
         "ea_process_cpu_us_per_event": round(1e6 * proc / msgs, 2),
+        # the same comparison against the in-process EA run beside the mesh, at the same moment
+        **beside.ratio(peers),
         "in_process_all_events_cpu_us_per_event": round(1e6 * all_cpu / all_msgs, 2),
         # where the live loop's CPU goes: the EA in process (above); + decoding, gate and order
         # (the journals replayed with no session); the rest is the live loop itself (queue,
@@ -338,7 +346,9 @@ def live_scenario(scenario: str, out_dir: Path) -> dict:
           + (f", unequal {unequal}" if unequal else "")
           + (f"; against the same input unequal {unequal_same_input}" if unequal_same_input else "")
           + f"; EA CPU {ea_us:.1f} us/message (process {out['ea_process_cpu_us_per_event']}) against "
-          f"{ip_us:.1f} in process: ratio {out['ea_cpu_ratio']} (journals replayed: {rep_us:.1f}); "
+          f"{ip_us:.1f} in process: ratio {out['ea_cpu_ratio']} (journals replayed: {rep_us:.1f}; against the "
+          f"in-process EA run at the same moment, units {','.join(out['same_time_units'])}: "
+          f"{out['ea_cpu_ratio_same_time']}); "
           f"peak PSS per EA peer {out['live_pss_mb_max']} MB",
           flush=True)
     return out
@@ -358,6 +368,7 @@ def live_phase(root: Path, tmp: Path) -> dict:
         "ea_cpu_us_per_event": bn["ea_cpu_us_per_event"],
         "in_process_cpu_us_per_event": bn["in_process_cpu_us_per_event"],
         "ea_cpu_ratio": bn["ea_cpu_ratio"],
+        "ea_cpu_ratio_same_time": bn["ea_cpu_ratio_same_time"],
         "ea_process_cpu_us_per_event": bn["ea_process_cpu_us_per_event"],
         "live_pss_mb_max": max(x["live_pss_mb_max"] for x in live.values()),
         "live_alerts_equal_in_process": {k: x["live_all_equal"] for k, x in live.items()},

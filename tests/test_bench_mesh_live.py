@@ -62,3 +62,27 @@ def test_in_process_same_input_is_what_the_peer_gets(small):
     got = in_process_same_input(small, ["A2"], streams)["A2"]
     assert got["messages"] == len(msgs) > 0
     assert all(a[1] == "A2" for a in got["alerts"])
+
+
+def test_beside_ratio_compares_the_units_it_finished_only(small):
+    """The same-moment baseline: peers' CPU per message over the units the thread finished,
+    against the thread's own; a unit it did not finish, or a peer with no messages, is left
+    out; nothing finished gives no ratio rather than a made-up one."""
+    from benchmarks.beside import InProcessBeside
+    b = InProcessBeside(small, ["A1", "A2"], {})
+    assert b.ratio({"A1": {"messages": 100, "thread_cpu_s": 0.003}})["ea_cpu_ratio_same_time"] is None
+    b.done = {"A1": [0.001, 100], "A2": [0.002, 100]}
+    peers = {"A1": {"messages": 100, "thread_cpu_s": 0.003}, "A2": {"messages": 0, "thread_cpu_s": 0.5},
+             "BN": {"messages": 100, "thread_cpu_s": 9.0}}
+    r = b.ratio(peers)
+    assert r["same_time_units"] == ["A1"]
+    assert r["in_process_same_time_cpu_us_per_event"] == 10.0 and r["ea_cpu_us_per_event_same_units"] == 30.0
+    assert r["ea_cpu_ratio_same_time"] == 3.0
+
+
+def test_beside_stopped_before_it_ran_counts_nothing(small):
+    from benchmarks.beside import InProcessBeside
+    b = InProcessBeside(small, ["A2"], {})
+    b._halt.set()
+    b.run()   # on this thread: returns at once
+    assert b.done == {}
