@@ -51,7 +51,7 @@ def test_a_peer_far_behind_drops_then_fetches_again_and_loses_nothing(sc, monkey
 
     p = peer()
     p.session = FakeSession()
-    p.max_held = p.seq.max_held = 400_000
+    p.max_held = 400_000
     p.order.max_buffered = 800
     peak = 0
     for _, f in a:                    # src.a runs far ahead: src.b has promised nothing yet

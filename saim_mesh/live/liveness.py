@@ -29,18 +29,17 @@ class SourceWatch:
         if f.end:
             self.ended.add(f.source)
 
-    def silent(self, now: float, released: float, lost) -> list[tuple[str, str]]:
-        """The depended sources, not ended nor lost, silent past their limit, whose
-        promise holds the EA back: (source, why) for each."""
-        out = []
+    def silent(self, now: float, order):
+        """The depended sources, not ended nor lost, silent past their limit, whose promise
+        holds the EA back: (source, why) for each, one at a time against the order as it is
+        then (declaring one lost can release the EA past another's promise)."""
         for src in self.sources:
-            if src in self.ended or src in lost:
+            if src in self.ended or src in order.lost:
                 continue
             last = self.heard.get(src)
             quiet, limit = (now - self.started, self.join_s) if last is None else (now - last, self.silence_s)
-            if quiet > limit and not self.promised.get(src, -math.inf) > released:
-                out.append((src, f"silent for {quiet:.0f} s" if last is not None else f"never heard in {quiet:.0f} s"))
-        return out
+            if quiet > limit and not self.promised.get(src, -math.inf) > order.released:
+                yield src, (f"silent for {quiet:.0f} s" if last is not None else f"never heard in {quiet:.0f} s")
 
     def furthest(self) -> list[float]:
         """Every finite watermark promised."""

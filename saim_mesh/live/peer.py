@@ -104,7 +104,7 @@ class LivePeer:
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
         # each source's frames in its own sequence: held, fetched again, gaps (`sequence`)
-        self.seq = Sequencer(self.take, self._frame, self.ks, log, self.max_held,
+        self.seq = Sequencer(self.take, self._frame, self.ks, log, lambda: self.max_held,
                              room=lambda: self.order.buffered() < self.order.max_buffered // 2,
                              session=lambda: self.session)
         self.frames = 0

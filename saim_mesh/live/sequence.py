@@ -38,10 +38,10 @@ class Sequencer:
     Zenoh session (None: no catch-up, e.g. a journal replay); `room()` says whether the
     order can take more facts now."""
 
-    def __init__(self, take: Take, read: Read, ks, log, max_held: int, room: Callable[[], bool],
+    def __init__(self, take: Take, read: Read, ks, log, max_held: Callable[[], int], room: Callable[[], bool],
                  session: Callable[[], object]):
         self.take, self.read, self.ks, self.log = take, read, ks, log
-        self.max_held = max_held          # bytes the peer may hold for the order (half of them here)
+        self.max_held = max_held          # () -> bytes the peer may hold for the order (half of them here)
         self.room, self.session = room, session
         self.seq_of: dict[str, list[int]] = {}   # source -> [epoch, next seq expected]
         self.hold = Held(HELD_FRAMES)
@@ -69,10 +69,10 @@ class Sequencer:
             self.hold.reset_early(f.source)
         if f.epoch < st[0] or f.seq < st[1]:
             return True   # an old epoch's frame, or one taken already
-        if self.behind.get(f.source) or self.hold.bytes + len(payload) > self.max_held // 2 and (
+        if self.behind.get(f.source) or self.hold.bytes + len(payload) > self.max_held() // 2 and (
                 f.seq > st[1] or self.hold.waiting_for(f.source)):
             if not self.behind.get(f.source):
-                self.log(f"source {f.source}: over {self.max_held >> 21} MB held: its frames from {st[1]} "
+                self.log(f"source {f.source}: over {self.max_held() >> 21} MB held: its frames from {st[1]} "
                          f"are fetched again from its journal when there is room", flush=True)
             self.behind[f.source] = True
             self.dropped += 1
@@ -125,7 +125,7 @@ class Sequencer:
         sequence, while there is room (what no journal holds is a gap, said and counted)."""
         for src in [s for s, b in self.behind.items() if b]:
             st = self.seq_of[src]
-            while self.hold.bytes < self.max_held // 4 and not self.hold.waiting_for(src) and self.room():
+            while self.hold.bytes < self.max_held() // 4 and not self.hold.waiting_for(src) and self.room():
                 n = 0
                 for b, key, f in self.journal_frames(src, st[0], st[1], st[1] + REFETCH - 1):
                     if f.seq != st[1]:

@@ -80,7 +80,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 next_check = now + CHECK_S
                 peer._inputs_on_disk()
                 peer.seq.checks(now)   # refused frames again, sources fetched again, gaps waited out
-                for src, why in peer.watch.silent(now, peer.order.released, peer.order.lost):
+                for src, why in peer.watch.silent(now, peer.order):
                     peer.lose(src, why)   # silence: a decision, journalled
                 if peer.live_start is not None:
                     peer._apply()

@@ -1,0 +1,62 @@
+"""A live EA's watch on its sources (`live/liveness.py`): who is silent past the limit, on
+the wall clock handed in (no sleeping here)."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from saim_mesh.live.liveness import SourceWatch
+
+
+class Order:
+    def __init__(self):
+        self.lost: dict[str, str] = {}
+        self.released = 0.0
+
+
+def frame(source, wm, end=False):
+    return SimpleNamespace(source=source, wm=wm, end=end)
+
+
+def test_a_source_never_heard_waits_join_s_and_a_heard_one_silence_s():
+    w = SourceWatch(["a", "b"], silence_s=10.0, join_s=30.0)
+    w.took(frame("a", 4.0))
+    o = Order()
+    o.released = 4.0             # the EA took all `a` promised: now it holds the EA back
+    t = w.heard["a"]
+    w.started = t
+    assert list(w.silent(t + 9.0, o)) == []
+    assert list(w.silent(t + 11.0, o)) == [("a", "silent for 11 s")]
+    assert list(w.silent(t + 31.0, o)) == [("a", "silent for 31 s"), ("b", "never heard in 31 s")]
+
+
+def test_ended_lost_and_ahead_sources_are_never_called_silent():
+    w = SourceWatch(["a", "b", "c"], silence_s=10.0, join_s=10.0)
+    w.took(frame("a", 50.0, end=True))
+    w.took(frame("b", 50.0))
+    w.took(frame("c", 5.0))
+    o = Order()
+    o.released = 20.0            # b promised beyond it: it holds nothing back
+    t = max(w.heard.values()) + 100.0
+    assert list(w.silent(t, o)) == [("c", "silent for 100 s")]
+    o.lost["c"] = "silent"
+    assert list(w.silent(t, o)) == []
+    assert w.all_ended(o.lost) is False
+    w.took(frame("b", 60.0, end=True))
+    assert w.all_ended(o.lost) is True and w.furthest() == [50.0, 60.0, 5.0]
+
+
+def test_each_source_is_judged_against_the_order_as_it_is_then():
+    """Declaring one source lost can release the EA past another's promise: that one is
+    then silent in the same pass, not one check later."""
+    w = SourceWatch(["a", "b"], silence_s=10.0, join_s=10.0)
+    w.took(frame("a", 5.0))
+    w.took(frame("b", 30.0))
+    o = Order()
+    o.released = 20.0
+    t = max(w.heard.values()) + 60.0
+    said = []
+    for src, why in w.silent(t, o):
+        said.append(src)
+        o.lost[src] = why
+        o.released = 40.0        # the loss of `a` released the EA past b's promise
+    assert said == ["a", "b"]
