@@ -7,11 +7,6 @@ Both are reported; the issue's `ea_cpu_ratio` stays the one against the quiet ba
 from __future__ import annotations
 
 import threading
-import time
-
-from saim_mesh.runner import config_for, make_ea
-
-CHUNK = 2_000   # messages submitted between looks at the stop flag (none inside the measured loop)
 
 
 class InProcessBeside(threading.Thread):
@@ -30,25 +25,15 @@ class InProcessBeside(threading.Thread):
         self.join()
 
     def run(self) -> None:
-        from .mesh import peer_inputs
+        from .mesh import same_input_run
         i = 0
         while not self._halt.is_set():
             u = self.units[i % len(self.units)]
             i += 1
-            ea = make_ea(self.sc, u, config_for(self.sc, u, None), sinks=[])
-            ea.start(0.0)
-            msgs = peer_inputs(self.sc, ea, self.streams)
-            submit = ea.submit
-            c0 = time.thread_time()
-            for k in range(0, len(msgs), CHUNK):
-                for m in msgs[k:k + CHUNK]:
-                    submit(m)
-                if self._halt.is_set():
-                    return
-            ea.finish(self.sc.duration_s)
-            cpu = time.thread_time() - c0
-            if self._halt.is_set():
-                return
+            got = same_input_run(self.sc, u, self.streams, self._halt.is_set)
+            if got is None or self._halt.is_set():
+                return   # cut by the stop, or ended after it: not counted
+            cpu, ea = got
             acc = self.done.setdefault(u, [0.0, 0])
             acc[0] += cpu
             acc[1] += ea.n_in

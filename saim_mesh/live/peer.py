@@ -143,9 +143,6 @@ class LivePeer:
             due = a.t   # a rebuilt or restarted EA raises what fell due while a source was lost or it was down
         self.out.give(a, due)
 
-    def _inputs_on_disk(self) -> None:
-        self.out.inputs_on_disk()
-
     def _notice(self, n) -> None:
         if not self.restoring:   # re-notifications and escalations of the past are not sent again
             self.out.notice(n)
@@ -160,7 +157,7 @@ class LivePeer:
         self.confirmed_up.add((c.mission, c.phase))
         if self.restoring or self.session is None:
             return
-        self._inputs_on_disk()
+        self.out.inputs_on_disk()
         at = math.ceil((c.t + D.CONFIRM_LEAD_S) / self.ea.epoch_s) * self.ea.epoch_s
         try:
             d = D.publish(self.session, self.ks.root, self.signer, self.unit, "confirm", at=at, mission=c.mission,

@@ -78,7 +78,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 if key is not None and now < next_check:
                     continue   # while frames flow, the checks below run every CHECK_S
                 next_check = now + CHECK_S
-                peer._inputs_on_disk()
+                peer.out.inputs_on_disk()
                 peer.seq.checks(now)   # refused frames again, sources fetched again, gaps waited out
                 for src, why in peer.watch.silent(now, peer.order):
                     peer.lose(src, why)   # silence: a decision, journalled
