@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import sys
 import typing
-from dataclasses import asdict, fields
+from dataclasses import MISSING, asdict, fields
 from typing import Annotated, Any, Literal
 
 import msgpack
@@ -129,6 +129,8 @@ def register(*classes: type) -> None:
         for c in _TYPED.values():
             if c.KIND not in _DIRECT and _bounded(c):
                 _DIRECT[c.KIND] = msgspec.msgpack.Decoder(c)
+                if (p := _prefix(c)) is not None:
+                    _PREFIXED[p] = _DIRECT[c.KIND]
 
 
 class _Head(msgspec.Struct):
@@ -139,6 +141,21 @@ class _Head(msgspec.Struct):
 
 _head = msgspec.msgpack.Decoder(_Head)
 _DIRECT: dict[str, msgspec.msgpack.Decoder] = {}   # kind -> a decoder straight into its dataclass
+_PREFIXED: dict[bytes, msgspec.msgpack.Decoder] = {}   # encode's prefix -> the same, no look at the kind
+
+
+def _prefix(cls: type) -> bytes | None:
+    """The bytes `encode` starts a `cls` message with (map header, `kind`, `v`), when they
+    name it exactly: every field required and the header counting all of them, so a map
+    with that prefix has no room for a second `kind` or `v`, nor a field twice (one
+    missing makes the decoder refuse it). None for a class with defaults (the kind is read
+    first, `_head`) or a name too long for the fixed layout (`decode`'s slice)."""
+    fs = fields(cls)
+    kind = cls.KIND.encode()
+    if any(f.default is not MISSING or f.default_factory is not MISSING for f in fs) or len(fs) + 2 > 15 \
+            or not 0 < len(kind) < 32:
+        return None
+    return bytes([0x80 + len(fs) + 2]) + b"\xa4kind" + bytes([0xA0 + len(kind)]) + kind + b"\xa1v" + bytes([VERSION])
 
 
 def _bounded(cls: type) -> bool:
@@ -201,14 +218,25 @@ def to_dict(msg: Message) -> dict:
 
 
 def encode(msg: Message) -> bytes:
-    """Wire form: msgpack map with a version `v` and a `kind` tag."""
-    d = to_dict(msg)
-    d["v"] = VERSION
+    """Wire form: msgpack map with a `kind` tag and a version `v` first (`decode` reads
+    them as a fixed prefix), then every field."""
+    d = {"kind": msg.KIND, "v": VERSION}
+    d.update(msg.to_json_dict() if hasattr(msg, "to_json_dict") else asdict(msg))
     return msgpack.packb(d, use_bin_type=True)
 
 
 def decode(data: bytes) -> Message:
     """Parse and validate wire bytes; raises MessageError on anything malformed."""
+    if len(data) > 6:   # `encode`'s fixed prefix (map header, kind, v) names the direct decoder
+        pre = _PREFIXED.get(data[:10 + data[6] - 0xA0])
+        if pre is not None:
+            try:
+                m = pre.decode(data)
+            except Exception:   # refused: the paths below name the field
+                pass
+            else:
+                if type(m) not in _RULED or m.valid():
+                    return m
     direct = None
     if _DIRECT:
         try:

@@ -6,8 +6,8 @@ and a *watermark* `wm`: "nothing at or before event time wm will follow from me"
 order below is the one stream processors use (Flink's per-partition watermarks with
 idleness and `MAX_WATERMARK` for a finished source, Kafka Streams' `max.task.idle.ms`):
 
-* items wait in a buffer and are released in `(t, source, epoch, seq, index in frame)`
-  order, only up to the *bound*: the minimum watermark over the sources this EA depends on
+* items wait in a buffer (one time-sorted run per frame) and are released in
+  `(t, source, epoch, seq, index in frame)` order, only up to the *bound*: the minimum watermark over the sources this EA depends on
   that are not declared lost;
 * if every source keeps its watermark promise, whatever is released at bound B is every
   item with t <= B that will ever come, so the released sequence depends on the data only,
@@ -24,6 +24,7 @@ what is ready (`release`).
 """
 from __future__ import annotations
 
+import bisect
 import heapq
 import math
 from dataclasses import dataclass
@@ -51,6 +52,16 @@ class _Source:
     ended: bool = False
 
 
+@dataclass(slots=True)
+class _Run:
+    """A taken frame's items not yet released, sorted by event time (ties in frame order):
+    the order keeps runs, not items, and merges only what a release lets out."""
+    key: tuple[str, int, int]    # (source, epoch, seq)
+    times: list[float]
+    items: list
+    start: int = 0               # the first item not yet released
+
+
 class EventTimeOrder(Generic[T]):
     """Puts the items of many per-source frame streams in one deterministic event-time order.
 
@@ -73,9 +84,10 @@ class EventTimeOrder(Generic[T]):
         self.lost: dict[str, str] = {}
         self.late: list[tuple[str, T]] = []
         self.unknown = 0
-        # (t, source, epoch, seq, index, item): the key is unique (a frame is taken once), so
-        # the item itself is never compared
-        self._heap: list[tuple[float, str, int, int, int, T]] = []
+        # (first unreleased t, source, epoch, seq, run): the key is unique (a frame is taken
+        # once), so the run itself is never compared
+        self._runs: list[tuple[float, str, int, int, _Run]] = []
+        self._n = 0   # items buffered
         self._released = -INF
         for name in sources:
             self.add_source(name)
@@ -134,23 +146,28 @@ class EventTimeOrder(Generic[T]):
                 return "old epoch"
             if epoch == st.epoch and seq <= st.seq:
                 return "duplicate"
-        if fresh and len(self._heap) + fresh > self.max_buffered and not self._holds(source, st):
+        if fresh and self._n + fresh > self.max_buffered and not self._holds(source, st):
             return "full"
 
         self.lost.pop(source, None)
         if st.epoch == epoch:
             self.gaps[source] += seq - st.seq - 1
         st.epoch, st.seq = epoch, seq
-        heap, push = self._heap, heapq.heappush
-        if fresh == len(times):   # the usual frame: nothing late
-            for i, (t, x) in enumerate(zip(times, items)):
-                push(heap, (t, source, epoch, seq, i, x))
-        else:
-            for i, (t, x) in enumerate(zip(times, items)):
+        if fresh != len(times):
+            keep = []
+            for t, x in zip(times, items):
                 if t <= released:
                     self.late.append((source, x))
                 else:
-                    push(heap, (t, source, epoch, seq, i, x))
+                    keep.append(x)
+            times, items = [t for t in times if t > released], keep
+        if times:
+            items = list(items)
+            if times != sorted(times):   # a stable sort by time: ties stay in frame order
+                idx = sorted(range(len(times)), key=times.__getitem__)
+                times, items = [times[k] for k in idx], [items[k] for k in idx]
+            heapq.heappush(self._runs, (times[0], source, epoch, seq, _Run((source, epoch, seq), times, items)))
+            self._n += len(times)
         st.wm = max(st.wm, float(wm))
         if end:
             st.ended, st.wm = True, INF
@@ -195,11 +212,26 @@ class EventTimeOrder(Generic[T]):
         b = self.bound()
         if upto is not None:
             b = min(b, upto)
-        out: list[T] = []
-        heap = self._heap
-        while heap and heap[0][0] <= b:
-            out.append(heapq.heappop(heap)[5])
+        runs = self._runs
+        pieces: list[tuple[tuple[str, int, int], list[float], list]] = []
+        while runs and runs[0][0] <= b:
+            r = heapq.heappop(runs)[4]
+            k = bisect.bisect_right(r.times, b, r.start)
+            pieces.append((r.key, r.times[r.start:k], r.items[r.start:k]))
+            if k < len(r.times):
+                r.start = k
+                heapq.heappush(runs, (r.times[k], *r.key, r))
         self._released = max(self._released, b)
+        if not pieces:
+            return []
+        if len(pieces) == 1:
+            out = pieces[0][2]
+        else:   # runs in (source, epoch, seq) order, then a stable sort by time alone
+            pieces.sort(key=lambda p: p[0])
+            times = [t for p in pieces for t in p[1]]
+            items = [x for p in pieces for x in p[2]]
+            out = [items[k] for k in sorted(range(len(times)), key=times.__getitem__)]
+        self._n -= len(out)
         return out
 
     @property
@@ -209,7 +241,7 @@ class EventTimeOrder(Generic[T]):
 
     def buffered(self) -> int:
         """How many items wait to be released."""
-        return len(self._heap)
+        return self._n
 
     def watermarks(self) -> dict[str, float]:
         """Each depended source's watermark (-inf: nothing yet; +inf: ended), lost or not."""

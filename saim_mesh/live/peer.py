@@ -243,7 +243,8 @@ class LivePeer:
                 self.journal.back(f.source)
             self.back(f.source)
         items = self.gate.data_many(f.msgs, key or f"src/{f.source}")
-        if any(type(m) not in DATA for m in items):
+        kinds = {type(m) for m in items}
+        if not kinds <= DATA:
             for m in items:
                 if type(m) not in DATA:
                     self.gate.rejects.add(M.MessageError(m.KIND, "(kind)", f"a {m.KIND} message in a source's "
@@ -252,10 +253,10 @@ class LivePeer:
         reported = self.reports.get(f.source)
         if reported is None:
             reported = self.reports[f.source] = set()
-        unit_of = self.sc.taskorg.entity_unit.get
-        for m in items:
-            if type(m) is LOCATION and (u := unit_of(m.entity)) is not None:
-                reported.add(u)
+        if LOCATION in kinds:
+            unit_of = self.sc.taskorg.entity_unit.get
+            reported.update(u for e in {m.entity for m in items if type(m) is LOCATION}
+                            if (u := unit_of(e)) is not None)
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             if not retrying:

@@ -266,6 +266,11 @@ class Verifier:
         if why is not None:
             raise _err("key", f"{msg.KIND} inside: {why}")
 
+    @property
+    def guarded(self) -> tuple[type, ...]:
+        """The message types `unsigned` may refuse (none when signatures are not required)."""
+        return AUTHORITY if self.require else ()
+
     def unsigned(self, msg) -> None:
         """Raise when `msg` carries authority, came unsigned and signatures are required."""
         if self.require and type(msg) in AUTHORITY:
