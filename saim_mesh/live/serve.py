@@ -17,7 +17,7 @@ import zenoh.ext as zx
 from .. import wire as W
 from .pace import EaProgress
 from .peer import BLOCK, CHECK_S
-from .source import CACHE
+from .source import HISTORY
 
 
 def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
@@ -36,7 +36,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             # one advanced subscriber per source depended on: nothing else crosses a link to us
             subs = [zx.declare_advanced_subscriber(
                 s, peer.ks.src(name), lambda smp: put((str(smp.key_expr), smp.payload.to_bytes())),
-                history=zx.HistoryConfig(detect_late_publishers=True, max_samples=CACHE),
+                history=zx.HistoryConfig(detect_late_publishers=False, max_samples=HISTORY),
                 recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True) for name in peer.sources]
             misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
             cmds = s.declare_subscriber(peer.ks.cmd(peer.unit, "*", "*"),
