@@ -386,11 +386,15 @@ def best_of(runs: list[dict]) -> dict:
         "ea_cpu_ratio": round(ea_us / ip_us, 3),
         "ea_cpu_ratio_same_time": min(r["ea_cpu_ratio_same_time"] for r in runs),
         "ea_cpu_ratio_after_setup": round(min(r["ea_cpu_us_per_event_after_setup"] for r in runs) / ip_us, 3),
+        "journal_replay_cpu_us_per_event": (rep := min(r["journal_replay_cpu_us_per_event"] for r in runs)),
+        "cpu_split_us_per_event": {"ea": ip_us, "decode_gate_order": round(rep - ip_us, 2),
+                                   "live_loop": round(ea_us - rep, 2)},
         "live_all_equal": all(r["live_all_equal"] for r in runs),
         "live_pss_mb_max": max(r["live_pss_mb_max"] for r in runs),
         "by_round": [{k: r[k] for k in ("ea_cpu_us_per_event", "in_process_cpu_us_per_event", "ea_cpu_ratio",
                                         "ea_cpu_ratio_same_time", "ea_cpu_ratio_after_setup", "live_all_equal",
-                                        "live_pss_mb_max", "wall_s")} for r in runs],
+                                        "journal_replay_cpu_us_per_event", "live_pss_mb_max", "wall_s")}
+                     for r in runs],
     })
     return out
 

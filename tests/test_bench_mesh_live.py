@@ -95,10 +95,11 @@ def test_best_of_rounds_takes_each_sides_least_cpu_and_equal_only_when_every_rou
         return {"ea_cpu_us_per_event": ea, "in_process_cpu_us_per_event": ip, "ea_cpu_ratio": round(ea / ip, 3),
                 "ea_cpu_ratio_same_time": ea / ip - 0.1, "ea_cpu_us_per_event_after_setup": ea - 1,
                 "ea_cpu_ratio_after_setup": (ea - 1) / ip, "live_all_equal": eq, "live_pss_mb_max": pss,
-                "wall_s": 20.0}
+                "journal_replay_cpu_us_per_event": ip + 1.5, "wall_s": 20.0}
     out = best_of([rnd(20.0, 12.0, True, 30.0), rnd(17.0, 13.0, True, 31.0), rnd(19.0, 11.5, False, 29.0)])
     assert out["ea_cpu_us_per_event"] == 17.0 and out["in_process_cpu_us_per_event"] == 11.5
     assert out["ea_cpu_ratio"] == round(17.0 / 11.5, 3)
     assert out["ea_cpu_ratio_after_setup"] == round(16.0 / 11.5, 3)
     assert out["live_all_equal"] is False
+    assert out["cpu_split_us_per_event"] == {"ea": 11.5, "decode_gate_order": 1.5, "live_loop": 4.0}
     assert out["live_pss_mb_max"] == 31.0 and out["rounds"] == 3 and len(out["by_round"]) == 3
