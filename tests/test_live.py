@@ -306,3 +306,25 @@ def test_a_source_back_after_every_other_ended_does_not_kill_the_peer(sc, tmp_pa
     back = [a for a in peer.given if a.details.get("event") == "source-back"]
     assert len(back) == 1 and "since the end" in back[0].message, [a.message for a in peer.given]
     assert peer.rebuilds == 1
+
+
+def test_a_peer_that_joins_after_a_source_with_no_journal_gets_its_frames_from_the_cache(tmp_path, sc):
+    """A late joiner (or a restarted EA) of a source that keeps no journal (no --state): the
+    publisher's cache is all there is, so the subscriber asks it when declared."""
+    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
+    procs = []
+    try:
+        src = Proc("source-cp.all", [*py(), "source", SC, "--name", "cp.all", "--listen", ep, "--root", root,
+                                     "--linger", "600", "--tracks", "--speed", "max"], env=clean_env(), log_dir=tmp_path)
+        procs.append(src)
+        src.wait_for("end source cp.all", 120)   # everything published before the peer exists
+        procs.append(Proc("peer-A2", [*py(), "peer", "--scenario", SC, "--unit", "A2", "--connect", ep, "--root",
+                                      root, "--sources", "cp.all", "--out", str(tmp_path / "A2.jsonl")],
+                          env=clean_env(), log_dir=tmp_path))
+        line = procs[1].wait_for("summary ", 180)
+    finally:
+        reap(procs)
+    summary = json.loads(line.split(" ", 1)[1])
+    assert summary["gaps"] == 0 and summary["lost"] == {}, summary
+    want = plan_alerts(in_process(sc, "A2", {"cp.all": list(play.share(sc, None, True))}))
+    assert len(want) >= 5 and plan_alerts(load(tmp_path / "A2.jsonl")) == want

@@ -24,13 +24,15 @@ from .srcjournal import YIELDING, SourceJournal
 
 BLOCK = zenoh.CongestionControl.BLOCK
 CACHE = 100_000        # frames kept for recovery and late joiners (a frame is one flush)
-# frames an EA's subscriber asks of a publisher each time it (re)discovers it. zenoh.ext asks
-# the last `max_samples` at every liveliness PUT, a healed link's too, whatever it already
-# has: with the whole cache, k EAs behind a healed radio link pulled k copies of each
-# source's history, and the link never recovered. A gap is fetched by range instead (the
-# heartbeat's recovery, from the last frame delivered) and, beyond the cache, from the
-# source's journal (`Sequencer`).
-HISTORY = 1
+# frames an EA's subscriber asks of the publishers it finds when it is declared (a late
+# joiner, a restarted EA: a source with no journal has nothing else to give it). It does not
+# ask again when a publisher reappears: zenoh.ext's late-publisher detection asks the last
+# `max_samples` at every liveliness PUT, a healed link's too, whatever the subscriber has, so
+# k EAs behind a healed radio link pulled k copies of each source's whole history at each
+# heal and each flap, and the link never recovered. A healed link's gap comes by range
+# instead (the heartbeat's recovery, from the last frame delivered) and, beyond the cache,
+# from the source's journal (`Sequencer`).
+HISTORY = CACHE
 FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
 LINGER_S = 0.05        # the longest a lingering source holds a watermark back (wall seconds)
 
