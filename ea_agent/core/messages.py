@@ -11,8 +11,9 @@ msgspec struct (about 0.4 us against 3-4 us for dict-then-fields) and becomes th
 dataclass. Where every field is bounded already, msgspec builds the dataclass itself
 after a look at the kind (0.7 us against 1.3 us for struct-then-dataclass: the hot path
 of every position report); `encode` writes the kind and version first, so for a kind whose
-fields are all required that look is a fixed prefix, not a pass over the message. The typed decoders are never more lenient than `from_dict`:
-anything they refuse goes through `from_dict`, which accepts it or names the bad field.
+fields are all required that look is a fixed prefix, not a pass over the message. The
+typed decoders are never more lenient than `from_dict`: anything they refuse goes through
+`from_dict`, which accepts it or names the bad field.
 """
 from __future__ import annotations
 

@@ -7,8 +7,8 @@ order below is the one stream processors use (Flink's per-partition watermarks w
 idleness and `MAX_WATERMARK` for a finished source, Kafka Streams' `max.task.idle.ms`):
 
 * items wait in a buffer (one time-sorted run per frame) and are released in
-  `(t, source, epoch, seq, index in frame)` order, only up to the *bound*: the minimum watermark over the sources this EA depends on
-  that are not declared lost;
+  `(t, source, epoch, seq, index in frame)` order, only up to the *bound*: the minimum
+  watermark over the sources this EA depends on that are not declared lost;
 * if every source keeps its watermark promise, whatever is released at bound B is every
   item with t <= B that will ever come, so the released sequence depends on the data only,
   never on how the frames of different sources interleave on arrival;
@@ -153,16 +153,17 @@ class EventTimeOrder(Generic[T]):
         if st.epoch == epoch:
             self.gaps[source] += seq - st.seq - 1
         st.epoch, st.seq = epoch, seq
-        if fresh != len(times):
-            keep = []
+        if fresh != len(times):   # the late ones out, in one pass
+            keep_t, keep = [], []
             for t, x in zip(times, items):
                 if t <= released:
                     self.late.append((source, x))
                 else:
+                    keep_t.append(t)
                     keep.append(x)
-            times, items = [t for t in times if t > released], keep
+            times, items = keep_t, keep
         if times:
-            items = list(items)
+            items = list(items)   # the caller's sequence is not kept
             if times != sorted(times):   # a stable sort by time: ties stay in frame order
                 idx = sorted(range(len(times)), key=times.__getitem__)
                 times, items = [times[k] for k in idx], [items[k] for k in idx]
