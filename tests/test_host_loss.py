@@ -41,6 +41,8 @@ pytestmark = pytest.mark.timeout(900)
 WHY = netns.unavailable()
 SPEED = 40            # the battle (5,400 s) in about 135 s of wall time
 KILL_AT = 2400        # event time of the host's own source when the host is killed
+BACK_AT = 3100        # ... and the earliest its clock reads when it is started again: each
+                      # downed host (A, B) has plan alerts due in between (A at 3030, B at 2900)
 SLACK_S = 6.0         # beyond source_silence_s: the loss is said within this
 
 
@@ -221,8 +223,12 @@ def finish(b: Battalion, down_host: str, before: dict[str, int], down_evt: tuple
 
 def restart(b: Battalion, h: str) -> float:
     """Start the host again on its output folder (not --fresh): it keeps its state and
-    its clock. Returns the wall time its EA peers are back."""
+    its clock, not before that clock reads BACK_AT (so that some of its alerts fell due
+    while it was down, however fast the loss was said). Returns the wall time its EA
+    peers are back."""
     clock = json.loads((b.out(h) / "host.json").read_text())["paced_start"]
+    poll(lambda: (time.time() - clock) * SPEED >= BACK_AT, (BACK_AT - KILL_AT) / SPEED + 60,
+         f"host {h}'s paced clock at event time {BACK_AT}", every=0.05)
     again = b.start(h)
     line = again.wait_for(f"host {h}: ", 60)
     assert f"host {h}: restart: keeping the state" in line and "on the same clock" in line, line
