@@ -102,3 +102,81 @@ def test_a_source_back_after_a_loss_gives_the_fault_free_alerts_late_and_once(sc
                 for d in (x.to_json_dict() for x in alerts)]
     again = peer(sc)
     assert same(replay(again, tmp_path / "BN.input")) == same(p.given)
+
+
+NAMES = ("src.a", "src.b")
+
+
+def flapping(p: LivePeer, merged: list, downs: dict[int, list[tuple[float, float]]]) -> None:
+    """Frames to the peer as links that go down and up would give them: a source's frames
+    within one of its down intervals (event time) held back, it declared lost at the
+    interval's start, its backlog delivered at the end (its return)."""
+    held: dict[int, list] = {0: [], 1: []}
+    down: dict[int, bool] = {0: False, 1: False}
+    for t, i, f in merged:
+        for j in (0, 1):
+            now = any(s < t <= e for s, e in downs.get(j, ()))
+            if now and not down[j]:
+                p.lose(NAMES[j], "test: link cut")
+            elif down[j] and not now:
+                for g in held[j]:
+                    p.take(g, "")
+                held[j] = []
+            down[j] = now
+        if down[i]:
+            held[i].append(f)
+        else:
+            p.take(f, "")
+    for j in (0, 1):
+        for g in held[j]:
+            p.take(g, "")
+    p.ea.finish(p.end_t())
+
+
+def test_a_rebuild_from_the_copy_taken_at_the_loss_equals_one_from_event_time_zero(sc, tmp_path):
+    """A link that flaps, and the other source lost while the first is: every return
+    rebuilds the EA from the copy taken at that loss, and gives exactly what rebuilding it
+    from event time 0 gives (alerts, their order, late marks); the journal replays to it."""
+    a = frames("src.a", list(play.share(sc, ["A"], False)))
+    b = frames("src.b", list(play.share(sc, None, True, ["A"])))
+    merged = sorted([(t, 0, f) for t, f in a] + [(t, 1, f) for t, f in b], key=lambda x: x[:2])
+    downs = {1: [(400.0, 600.0), (1200.0, 1800.0)], 0: [(1500.0, 2100.0)]}
+
+    def strip(alerts):
+        return [{**d, "details": {k: v for k, v in d["details"].items() if k != "declared_wall"}}
+                for d in (x.to_json_dict() for x in alerts)]
+
+    said: list[str] = []
+    for d in ("fast", "slow"):
+        (tmp_path / d).mkdir()
+    fast = LivePeer(sc, "BN", config(["tcp/127.0.0.1:0"], None), "t/rebuild", list(NAMES),
+                    str(tmp_path / "fast" / "BN.jsonl"), log=lambda s, **k: said.append(s))
+    flapping(fast, merged, downs)
+    slow = LivePeer(sc, "BN", config(["tcp/127.0.0.1:0"], None), "t/rebuild", list(NAMES),
+                    str(tmp_path / "slow" / "BN.jsonl"), log=lambda s, **k: None)
+    slow._keep_before_loss = lambda source, n: None   # no copies: every return rebuilds from 0
+    flapping(slow, merged, downs)
+
+    assert fast.rebuilds == slow.rebuilds == 3
+    assert sum("EA rebuilt from its loss" in s for s in said) == 3, [s for s in said if "back" in s]
+    assert any(x.details.get("late") for x in fast.given)
+    assert strip(fast.given) == strip(slow.given)
+    fast.journal.close()
+    assert strip(replay(peer(sc), tmp_path / "fast" / "BN.input")) == strip(fast.given)
+
+
+def test_a_journal_cut_by_a_kill_is_cut_at_its_last_whole_record_when_opened_again(tmp_path):
+    """What a restarted peer appends after a record a kill cut in half can be read."""
+    from saim_mesh.live.journal import InputJournal, records
+    path = tmp_path / "BN.input"
+    j = InputJournal(path)
+    j.lost("src.a", 10.0, "silent")
+    j.back("src.a")
+    j.close()
+    whole = path.read_bytes()
+    path.write_bytes(whole + whole[:7])   # the next record's length and a few of its bytes
+    j = InputJournal(path)
+    assert j.n == 2
+    j.peer("A1", False)
+    j.close()
+    assert records(path) == [["lost", "src.a", 10.0, "silent"], ["back", "src.a"], ["peer", "A1", False]]

@@ -8,7 +8,8 @@ Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), f
 as written (frames: before the next thing the peer tells anyone, see `frame`):
 ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body] (a directive:
 saim_mesh/directives.py), ["peer", unit, up] (another EA left without a goodbye, or came
-back) or ["back", source]. A half-written last record (a kill) is ignored on reading."""
+back) or ["back", source]. A half-written last record (a kill) is ignored on reading, and
+cut off when the journal is opened again, so that what a restart appends can be read."""
 from __future__ import annotations
 
 import struct
@@ -23,11 +24,19 @@ _LEN = struct.Struct(">I")
 class InputJournal:
     def __init__(self, path: str | Path):
         self.path = Path(path)
+        self.n = 0   # records in the file: the index the next one gets
+        end = 0
+        if self.path.exists():
+            self.n, end = _whole(self.path.read_bytes())
         self.f = open(self.path, "ab")
+        if end < self.f.tell():   # a record cut by a kill: what follows it would not be read
+            self.f.truncate(end)
+            self.f.seek(end)
 
     def _write(self, rec: list, flush: bool = True) -> None:
         b = _ENC.encode(rec)
         self.f.write(_LEN.pack(len(b)) + b)
+        self.n += 1
         if flush:
             self.f.flush()
 
@@ -60,6 +69,17 @@ class InputJournal:
         self.f.close()
 
 
+def _whole(data: bytes) -> tuple[int, int]:
+    """The whole records at the start of `data`: how many, and where they end."""
+    n, i = 0, 0
+    while i + 4 <= len(data):
+        (k,) = _LEN.unpack_from(data, i)
+        if i + 4 + k > len(data):
+            break
+        n, i = n + 1, i + 4 + k
+    return n, i
+
+
 def records(path: str | Path) -> list[list]:
     data = Path(path).read_bytes()
     out, i = [], 0
@@ -80,5 +100,6 @@ def replay(peer, path: str | Path) -> list:
     for rec in records(path):
         peer.replay_record(rec)
         peer.history.append(rec)
+    peer.at_record = None
     peer.ea.finish(peer.end_t())
     return peer.given

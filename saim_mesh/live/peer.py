@@ -16,15 +16,18 @@ monitoring goes on with the others. When it comes back its facts are taken on a 
 and what they raise is marked late."""
 from __future__ import annotations
 
+import copy
 import math
 import queue
 import sys
 import time
+from dataclasses import dataclass
 
 import zenoh
 
 from dissemination.keyspace import KeySpace
 from ea_agent.core.alert import hms
+from ea_agent.core.snapshot import snapshot
 
 from .. import commands as C
 from .. import directives as D
@@ -50,6 +53,16 @@ ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded r
 DATA = frozenset((M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
                   M.Reorganization))
 LOCATION = M.LocationReport
+
+
+@dataclass
+class BeforeLoss:
+    """What a source's return rebuilds the EA from: its input record index `n` (the loss)
+    and copies of the EA, the order and the held directives just before it."""
+    n: int
+    ea: object
+    order: EventTimeOrder
+    pending: list
 
 
 class LivePeer:
@@ -112,6 +125,9 @@ class LivePeer:
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
         self.rebuilds = 0
         self.history: list | None = None      # journal replay: the records taken so far (else the file)
+        self.at_record: int | None = None     # the index of the input record a replay is taking
+        # per lost source, the EA as it stood just before the loss: its return rebuilds from there
+        self.before_loss: dict[str, BeforeLoss] = {}
         self.presence = PeerPresence(unit, self.ks, self.gate)   # the other EAs it watches
         self.restoring = False                # a restarted peer replaying its own input journal
         self.catching_up = False              # ... then taking what its sources sent while it was down
@@ -286,18 +302,31 @@ class LivePeer:
                      event="source-back")
         self.rebuilds += 1
         self.rebuilding = source
-        self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
-        self.ea.notice_sinks.append(self._notice)
-        self.ea.domain.inferred.append(self._confirm_up)
-        if self.armed:
-            self.ea.arm()
-        self.ea.start(0.0)
-        self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
-        self.dirs.reset()
+        snap = self.before_loss.pop(source, None)
+        if snap is not None and snap.n < len(records) and records[snap.n][:2] == ["lost", source]:
+            self.ea, self.order, self.dirs.pending = snap.ea, snap.order, snap.pending
+            start = snap.n + 1
+            self.log(f"source {source} back: EA rebuilt from its loss ({len(records) - start} records)", flush=True)
+        else:   # from event time 0 (no copy: it could not be made, or the peer restarted since)
+            self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
+            self.ea.notice_sinks.append(self._notice)
+            self.ea.domain.inferred.append(self._confirm_up)
+            if self.armed:
+                self.ea.arm()
+            self.ea.start(0.0)
+            self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
+            self.dirs.reset()
+            start = 0
+        lost_at = max((i for i, r in enumerate(records) if r[:2] == ["lost", source]), default=-1)
+        for s, b in list(self.before_loss.items()):   # taken while `source` was lost: taken again below
+            if b.n > lost_at:
+                del self.before_loss[s]
         waiting = self.seq.hold.take_waiting()   # never journalled: offered again after the journal's frames
         returned = {source} | {r[1] for r in records if r[0] == "back"}
         try:
-            for rec in records:
+            for i in range(start, len(records)):
+                rec = records[i]
+                self.at_record = i
                 if rec[0] == "frame":
                     self.take(rec[1], "", journal=False)
                 elif rec[0] == "dir":
@@ -305,7 +334,7 @@ class LivePeer:
                 elif rec[0] == "lost" and rec[1] not in returned:
                     self.lose(rec[1], rec[3], journal=False)
         finally:
-            self.rebuilding = None
+            self.rebuilding, self.at_record = None, None
             for src, q in waiting.items():
                 for item in q:
                     self.seq.hold.wait(src, item)
@@ -329,7 +358,7 @@ class LivePeer:
                 self.replay_record(rec)
                 self.history.append(rec)
         finally:
-            self.history, self.restoring = None, False
+            self.history, self.restoring, self.at_record = None, False, None
         self.restored = len(recs)
         self.catching_up = True
         self.log(f"restart: {len(recs)} input records replayed, EA at {hms(max(self.ea.now, 0.0))}; "
@@ -338,7 +367,9 @@ class LivePeer:
 
     def replay_record(self, rec: list) -> None:
         """One input-journal record taken again, as the decision it records was taken live
-        (a restart, or `journal.replay`); each source's sequence resumes after its frames."""
+        (a restart, or `journal.replay`: `history` holds the records before it); each
+        source's sequence resumes after its frames."""
+        self.at_record = len(self.history) if self.history is not None else None
         if rec[0] == "frame":
             f = self._frame(rec[1], "")
             if f is not None:
@@ -372,6 +403,9 @@ class LivePeer:
         """Declare a depended source lost: monitoring goes on without it (a logged decision)."""
         if source in self.order.lost:
             return
+        n = self.at_record if self.at_record is not None else self.journal.n if self.journal is not None else None
+        if n is not None:
+            self._keep_before_loss(source, n)
         if journal and self.journal is not None:
             self.journal.lost(source, self.order.released, why)
         self.order.lose(source, why)
@@ -384,6 +418,18 @@ class LivePeer:
                              f" ({why}); monitoring of {named or 'what it reports'} degraded",
                      event="source-lost", why=why, units=units, declared_wall=round(time.time(), 3))
         self._apply()
+
+    def _keep_before_loss(self, source: str, n: int) -> None:
+        """A copy of the EA, its order and held directives as they stand before the loss of
+        `source` (input record `n`): when it returns, the EA is rebuilt from there rather
+        than from event time 0, which at every flap of a link cost each EA beyond it its
+        whole journal again (docs/deployment.md). The copy shares the scenario and this peer."""
+        try:
+            ea, order, pending = snapshot((self.ea, self.order, list(self.dirs.pending)), share=(self, self.sc))
+        except (TypeError, copy.Error) as e:   # state that cannot be copied: the return rebuilds from 0
+            self.log(f"source {source} lost: no copy of the EA to rebuild from ({e})", flush=True)
+            return
+        self.before_loss[source] = BeforeLoss(n, ea, order, pending)
 
     def _inhibit_unknown(self, source: str) -> None:
         """While the loss stands, what the EA concludes about the units the source reported
