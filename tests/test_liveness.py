@@ -60,3 +60,17 @@ def test_each_source_is_judged_against_the_order_as_it_is_then():
         o.lost[src] = why
         o.released = 40.0        # the loss of `a` released the EA past b's promise
     assert said == ["a", "b"]
+
+
+def test_a_source_whose_frames_arrived_but_wait_in_the_peers_queue_is_not_silent():
+    """Silence is the source's, not the EA's: frames that came (the subscriber's callback)
+    while the EA was busy with a backlog keep the source alive though not yet taken."""
+    w = SourceWatch(["a", "b"], silence_s=10.0, join_s=30.0)
+    w.took(frame("a", 4.0))
+    w.took(frame("b", 4.0))
+    o = Order()
+    o.released = 4.0
+    t = max(w.heard.values())
+    w.arrived("a", t + 8.0)     # a frame of `a` arrived, still in the queue
+    assert list(w.silent(t + 12.0, o)) == [("b", "silent for 12 s")]
+    assert list(w.silent(t + 19.0, o)) == [("a", "silent for 11 s"), ("b", "silent for 19 s")]
