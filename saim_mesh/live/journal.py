@@ -69,27 +69,29 @@ class InputJournal:
         self.f.close()
 
 
+def _spans(data: bytes):
+    """(start, end) of each whole record's body at the start of `data` (a record cut by a
+    kill ends it)."""
+    i = 0
+    while i + 4 <= len(data):
+        (n,) = _LEN.unpack_from(data, i)
+        if i + 4 + n > len(data):
+            return
+        yield i + 4, i + 4 + n
+        i += 4 + n
+
+
 def _whole(data: bytes) -> tuple[int, int]:
     """The whole records at the start of `data`: how many, and where they end."""
-    n, i = 0, 0
-    while i + 4 <= len(data):
-        (k,) = _LEN.unpack_from(data, i)
-        if i + 4 + k > len(data):
-            break
-        n, i = n + 1, i + 4 + k
-    return n, i
+    n, end = 0, 0
+    for _, end in _spans(data):
+        n += 1
+    return n, end
 
 
 def records(path: str | Path) -> list[list]:
     data = Path(path).read_bytes()
-    out, i = [], 0
-    while i + 4 <= len(data):
-        (n,) = _LEN.unpack_from(data, i)
-        if i + 4 + n > len(data):
-            break   # cut by a kill
-        out.append(msgspec.msgpack.decode(data[i + 4:i + 4 + n]))
-        i += 4 + n
-    return out
+    return [msgspec.msgpack.decode(data[a:b]) for a, b in _spans(data)]
 
 
 def replay(peer, path: str | Path) -> list:

@@ -14,7 +14,6 @@ class SourceWatch:
         self.silence_s = silence_s           # wall seconds a heard source may be silent
         self.join_s = join_s                 # ... one never heard, from the start
         self.heard: dict[str, float] = {}    # source -> wall time (monotonic) of its last frame
-        self.came: dict[str, float] = {}     # ... of its last frame's arrival (the subscriber's thread)
         self.promised: dict[str, float] = {}   # source -> the furthest watermark its frames gave
         self.ended: set[str] = set()
         self.started = time.monotonic()
@@ -26,7 +25,7 @@ class SourceWatch:
     def arrived(self, source: str, now: float | None = None) -> None:
         """A frame of `source` came off the wire (called on the subscriber's thread): the
         source is not silent, even while the EA is still busy with a backlog before it."""
-        self.came[source] = time.monotonic() if now is None else now
+        self.heard[source] = time.monotonic() if now is None else now
 
     def took(self, f) -> None:
         """A frame taken: its promise, and its end."""
@@ -42,9 +41,7 @@ class SourceWatch:
         for src in self.sources:
             if src in self.ended or src in order.lost:
                 continue
-            last, came = self.heard.get(src), self.came.get(src)
-            if came is not None and (last is None or came > last):
-                last = came
+            last = self.heard.get(src)
             quiet, limit = (now - self.started, self.join_s) if last is None else (now - last, self.silence_s)
             if quiet > limit and not self.promised.get(src, -math.inf) > order.released:
                 yield src, (f"silent for {quiet:.0f} s" if last is not None else f"never heard in {quiet:.0f} s")

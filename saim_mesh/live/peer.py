@@ -317,7 +317,8 @@ class LivePeer:
             self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
             self.dirs.reset()
             start = 0
-        lost_at = max((i for i, r in enumerate(records) if r[:2] == ["lost", source]), default=-1)
+        lost_at = start - 1 if start else max((i for i, r in enumerate(records) if r[:2] == ["lost", source]),
+                                              default=-1)
         for s, b in list(self.before_loss.items()):   # taken while `source` was lost: taken again below
             if b.n > lost_at:
                 del self.before_loss[s]
