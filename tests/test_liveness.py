@@ -74,3 +74,24 @@ def test_a_source_whose_frames_arrived_but_wait_in_the_peers_queue_is_not_silent
     w.arrived("a", t + 8.0)     # a frame of `a` arrived, still in the queue
     assert list(w.silent(t + 12.0, o)) == [("b", "silent for 12 s")]
     assert list(w.silent(t + 19.0, o)) == [("a", "silent for 11 s"), ("b", "silent for 19 s")]
+
+
+def test_a_lost_source_is_waited_for_end_wait_s_once_every_other_ended():
+    """A link healed near the end still brings what it held: with the rest ended, the EA
+    finishes only after `end_wait_s` of wall time, or as soon as the lost one ends too."""
+    w = SourceWatch(["a", "b"], silence_s=10.0, join_s=10.0, end_wait_s=30.0)
+    o = Order()
+    o.lost["b"] = "silent"
+    w.took(frame("a", 50.0))
+    assert w.finished(o.lost, 100.0) is False and w.rest_ended is None
+    w.took(frame("a", 60.0, end=True))
+    assert w.finished(o.lost, 100.0) is False and w.rest_ended == 100.0
+    assert w.finished(o.lost, 129.0) is False
+    assert w.finished(o.lost, 130.0) is True
+    del o.lost["b"]                  # back before the wait ran out: it is waited for to its end
+    w2 = SourceWatch(["a", "b"], silence_s=10.0, join_s=10.0, end_wait_s=30.0)
+    w2.took(frame("a", 60.0, end=True))
+    assert w2.finished({"b": "silent"}, 100.0) is False
+    assert w2.finished({}, 200.0) is False and w2.rest_ended is None
+    w2.took(frame("b", 70.0, end=True))
+    assert w2.finished({}, 200.0) is True

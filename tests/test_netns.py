@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -122,9 +123,11 @@ def lines(log: Path) -> list[str]:
 
 
 def last(log: Path, word: str) -> int:
-    """The last number after `word` in a log (-1 before any)."""
-    vals = [int(x.split()[1]) for x in lines(log) if x.startswith(word + " ")]
-    return vals[-1] if vals else -1
+    """The last number after `word` in a log (-1 before any); a line still being written
+    (no newline yet, or cut inside the number) is not read."""
+    text = log.read_text(errors="replace") if log.exists() else ""
+    vals = re.findall(rf"^{re.escape(word)} (\d+)\n", text, re.M)
+    return int(vals[-1]) if vals else -1
 
 
 def wait_line(log: Path, proc: subprocess.Popen, prefix: str, timeout: float) -> str:

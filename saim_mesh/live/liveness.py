@@ -9,10 +9,12 @@ import time
 
 
 class SourceWatch:
-    def __init__(self, sources: list[str], silence_s: float, join_s: float):
+    def __init__(self, sources: list[str], silence_s: float, join_s: float, end_wait_s: float = 0.0):
         self.sources = sources
         self.silence_s = silence_s           # wall seconds a heard source may be silent
         self.join_s = join_s                 # ... one never heard, from the start
+        self.end_wait_s = end_wait_s         # ... a lost one, once every other has ended
+        self.rest_ended: float | None = None   # wall time every source not lost had ended
         self.heard: dict[str, float] = {}    # source -> wall time (monotonic) of its last frame
         self.promised: dict[str, float] = {}   # source -> the furthest watermark its frames gave
         self.ended: set[str] = set()
@@ -54,3 +56,16 @@ class SourceWatch:
         """Every source ended, or ended and lost ones (at least one ended: a mesh where
         every source is silent keeps waiting for them)."""
         return bool(self.ended) and set(self.sources) <= self.ended | set(lost)
+
+    def finished(self, lost, now: float) -> bool:
+        """All ended (`all_ended`), and a lost source not ended given `end_wait_s` from
+        then to come back: a link healed near the end still brings what it held, a source
+        gone for good does not hold the EA for ever."""
+        if not self.all_ended(lost):
+            self.rest_ended = None
+            return False
+        if set(self.sources) <= self.ended:
+            return True
+        if self.rest_ended is None:
+            self.rest_ended = now
+        return now - self.rest_ended >= self.end_wait_s

@@ -113,7 +113,8 @@ class LivePeer:
         self.session = None
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         # the depended sources' liveness: heard when, promised how far, ended
-        self.watch = SourceWatch(self.sources, silence_s, max(silence_s, float(mesh["source_join_s"])))
+        self.watch = SourceWatch(self.sources, silence_s, max(silence_s, float(mesh["source_join_s"])),
+                                 float(mesh["source_end_wait_s"]))
         self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
         self.late_from: float | None = None   # set while facts of a returning source are taken
         # each source's frames in its own sequence: held, fetched again, gaps (`sequence`)
@@ -562,10 +563,17 @@ class LivePeer:
             return self.sc.duration_s
         return max([self.ea.now, *self.watch.furthest()])
 
-    def done(self) -> bool:
+    def done(self, now: float) -> bool:
         """Every source ended, or ended and lost ones (at least one ended: a mesh where
-        every source is silent keeps waiting for them)."""
-        return self.watch.all_ended(self.order.lost)
+        every source is silent keeps waiting for them); lost ones waited for a while
+        (`[mesh] source_end_wait_s`), said once."""
+        waiting = self.watch.rest_ended is not None
+        if self.watch.finished(self.order.lost, now):
+            return True
+        if not waiting and self.watch.rest_ended is not None:
+            self.log(f"every other source ended: waiting up to {self.watch.end_wait_s:g} s for "
+                     f"{', '.join(sorted(set(self.order.lost) - self.watch.ended))} (lost) to come back", flush=True)
+        return False
 
     # -- loop ------------------------------------------------------------------------------
     def run(self, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:

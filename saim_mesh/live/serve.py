@@ -63,7 +63,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             peer.watch.started = time.monotonic()   # a source never heard is waited for from here
             next_check = 0.0
             progress = EaProgress(peer.ks, peer.unit)
-            while not peer.done() and time.monotonic() < end_wall:
+            while not peer.done(time.monotonic()) and time.monotonic() < end_wall:
                 try:
                     key, payload = peer.q.get(timeout=0.5)
                 except queue.Empty:
