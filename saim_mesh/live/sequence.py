@@ -91,23 +91,24 @@ class Sequencer:
         """Held frames now in sequence (or, `force`d after the wait, from the lowest held on:
         the missing ones are gone, counted as a gap)."""
         st, early = self.seq_of[source], self.hold.early_of(source)
-        why = ""
+        why, asked = "", 0
         if force and early and st[1] not in early:   # beyond recovery: the source's journal, if it keeps one
             got = self.catch_up(source, st[0], st[1], min(early) - 1)
             why = self.askers[source].why if source in self.askers else "no journal asked"
             if not got and why == "congested" and self.patience.get(source, 0) < PATIENCE:
                 # the journal is there but its replies yield to live traffic on a slow link: the
-                # frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`
+                # frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`. Nobody
+                # answering is not waited for: asked again while the source's later frames are
+                # held, its EA stood still (bench_hosts: hosts that never finished)
                 self.patience[source] = self.patience.get(source, 0) + 1
                 self.hold.gap_since[source] = time.monotonic()
                 return
-            self.patience.pop(source, None)
+            asked = self.patience.pop(source, 0) + 1
         if force and early and st[1] not in early:
             low = min(early)
             self.gaps += low - st[1]
-            self.log(f"source {source}: frames {st[1]}..{low - 1} never came (its journal: {why or 'not asked'}"
-                     f"{', after %d asks' % (PATIENCE + 1) if why == 'congested' else ''}): going on without them",
-                     flush=True)
+            self.log(f"source {source}: frames {st[1]}..{low - 1} never came (its journal: {why or 'not asked'}, "
+                     f"asked {asked} times): going on without them", flush=True)
             st[1] = low
         while (item := self.hold.pop_early(source, st[1])) is not None:
             payload, key, f = item
