@@ -100,3 +100,17 @@ def test_typed_decoding_keeps_numbers_as_floats():
     d = {"v": M.VERSION, "kind": "location", "t": 3, "entity": "E", "lon": 1, "lat": 2}
     m = M.decode(msgpack.packb(d))
     assert m == M.LocationReport(3.0, "E", 1.0, 2.0) and all(type(x) is float for x in (m.t, m.lon, m.lat))
+
+
+@pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: m.KIND)
+def test_any_bytes_like_payload_decodes(msg):
+    """A payload handed over as a bytearray or memoryview (a socket's buffer) decodes like
+    bytes: an unhashable slice used to raise TypeError out of the fast path."""
+    b = M.encode(msg)
+    assert M.decode(bytearray(b)) == msg
+    assert M.decode(memoryview(b)) == msg
+
+
+def test_a_bytes_like_bad_payload_is_refused_by_name():
+    with pytest.raises(M.MessageError):
+        M.decode(bytearray(b"\xc1\xc1garbage"))

@@ -75,11 +75,17 @@ c.sendall(b"x" * int(sys.argv[3]))
 c.close()
 """
 
-# A Zenoh client: "pub" puts a counter every 20 ms and prints each; "sub" prints each received.
+# A Zenoh client: "pub" puts a numbered message every PERIOD s (default 0.02) and prints each;
+# "sub" prints the number of each received. Optional: KEY (default test/netns/n), BYTES of
+# random padding (random: the links compress), "block" for BLOCK congestion control.
 ZCLIENT = """
-import json, signal, sys, threading, time
+import json, os, signal, sys, threading, time
 import zenoh
 role, endpoint = sys.argv[1], sys.argv[2]
+key = sys.argv[3] if len(sys.argv) > 3 else "test/netns/n"
+pad = int(sys.argv[4]) if len(sys.argv) > 4 else 0
+period = float(sys.argv[5]) if len(sys.argv) > 5 else 0.02
+cc = zenoh.CongestionControl.BLOCK if sys.argv[6:7] == ["block"] else zenoh.CongestionControl.DROP
 c = zenoh.Config()
 c.insert_json5("mode", '"client"')
 c.insert_json5("scouting/multicast/enabled", "false")
@@ -90,19 +96,19 @@ stop = threading.Event()
 signal.signal(signal.SIGTERM, lambda *_: stop.set())
 with zenoh.open(c) as s:
     if role == "pub":
-        pub = s.declare_publisher("test/netns/n", express=True)
+        pub = s.declare_publisher(key, express=not pad, congestion_control=cc)
         i = 0
-        while not stop.wait(0.02):
-            pub.put(str(i)); print("pub", i, flush=True); i += 1
+        while not stop.wait(period):
+            pub.put(f"{i} ".encode() + os.urandom(pad)); print("pub", i, flush=True); i += 1
     else:
-        sub = s.declare_subscriber("test/netns/n", zenoh.handlers.FifoChannel(10000))
+        sub = s.declare_subscriber(key, zenoh.handlers.FifoChannel(100000))
         print("subscribed", flush=True)
         while not stop.is_set():
             smp = sub.try_recv()
             if smp is None:
                 time.sleep(0.005)
             else:
-                print("got", smp.payload.to_string(), flush=True)
+                print("got", smp.payload.to_bytes().split(b" ", 1)[0].decode(), flush=True)
 """
 
 

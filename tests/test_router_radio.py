@@ -18,45 +18,13 @@ from saim_mesh.net import netns
 from saim_mesh.net.netns import Hosts
 
 from .conftest import ROOT, SMALL, wait_until
-from .test_netns import last, script, wait_line
+from .test_netns import ZCLIENT, last, script, wait_line
 
 WHY = netns.unavailable()
 pytestmark = [pytest.mark.timeout(180),
               pytest.mark.skipif(WHY is not None, reason=f"no namespaced hosts here: {WHY}")]
 PY = sys.executable
 ROOT_KEY = "t/radio"
-
-# "pub": an 8 kB frame every 10 ms on a source's key, BLOCK, numbered (6.4 Mbit/s: within
-# seconds past what the kernel's socket buffers, 4 MB, hide); "sub": prints each received.
-CLIENT = """
-import json, os, signal, sys, threading, time
-import zenoh
-role, endpoint, key = sys.argv[1], sys.argv[2], sys.argv[3]
-c = zenoh.Config()
-c.insert_json5("mode", '"client"')
-c.insert_json5("scouting/multicast/enabled", "false")
-c.insert_json5("transport/shared_memory/enabled", "false")
-c.insert_json5("connect/endpoints", json.dumps([endpoint]))
-stop = threading.Event()
-signal.signal(signal.SIGTERM, lambda *_: stop.set())
-with zenoh.open(c) as s:
-    if role == "pub":
-        pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-        i = 0
-        while not stop.wait(0.01):
-            pub.put(f"{i} ".encode() + os.urandom(8000))   # random: the links compress
-            print("pub", i, flush=True)
-            i += 1
-    else:
-        sub = s.declare_subscriber(key, zenoh.handlers.FifoChannel(100000))
-        print("subscribed", flush=True)
-        while not stop.is_set():
-            smp = sub.try_recv()
-            if smp is None:
-                time.sleep(0.005)
-            else:
-                print("got", smp.payload.to_bytes().split(b" ", 1)[0].decode(), flush=True)
-"""
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -82,7 +50,7 @@ def test_a_full_radio_link_holds_neither_the_publisher_nor_the_other_links(tmp_p
             procs.append(p)
         wait_line(tmp_path / "r0.log", procs[0], "router r2 reachable", 60)
         wait_line(tmp_path / "r0.log", procs[0], "router r1 reachable", 60)
-        client = script(tmp_path, "client", CLIENT)
+        client = script(tmp_path, "client", ZCLIENT)
         key = f"{ROOT_KEY}/src/cp.X"
         slow, fast, plog = tmp_path / "slow.log", tmp_path / "fast.log", tmp_path / "pub.log"
         for h, log in (("h1", slow), ("h2", fast)):
@@ -90,7 +58,9 @@ def test_a_full_radio_link_holds_neither_the_publisher_nor_the_other_links(tmp_p
             wait_line(log, p, "subscribed", 60)
             procs.append(p)
         hs.set_rate("h1", 16)
-        pub = hs.run("h0", [PY, client, "pub", eps["h0"], key], log=plog)
+        # an 8 kB frame every 10 ms, BLOCK (6.4 Mbit/s: within seconds past what the kernel's
+        # socket buffers, 4 MB, hide)
+        pub = hs.run("h0", [PY, client, "pub", eps["h0"], key, "8000", "0.01", "block"], log=plog)
         procs.append(pub)
         wait_until(lambda: last(fast, "got") >= 10 and last(slow, "got") >= 0, 60, "both subscribers served")
         at = last(plog, "pub")

@@ -229,6 +229,11 @@ def encode(msg: Message) -> bytes:
 
 def decode(data: bytes) -> Message:
     """Parse and validate wire bytes; raises MessageError on anything malformed."""
+    if type(data) is not bytes:   # a bytearray or memoryview (a socket's buffer): its slices are unhashable
+        try:
+            data = bytes(memoryview(data))
+        except TypeError:
+            raise MessageError("?", "(bytes)", f"expected bytes, got {type(data).__name__}") from None
     if len(data) > 6:   # `encode`'s fixed prefix (map header, kind, v) names the direct decoder
         pre = _PREFIXED.get(data[:10 + data[6] - 0xA0])
         if pre is not None:
