@@ -112,9 +112,9 @@ def kept_state(run_dir: Path, host: str) -> bool:
 def run_hosts(base: Path, hosts: dict, run_dir: Path, speed: float, until: float | None, rate: dict, lead: float,
               duration: float, *, cut: tuple[str, float, float] | None = None,
               kill: tuple[str, float, float] | None = None, grace: float = 180.0, log=print,
-              catch_up: str | None = None) -> dict:
-    """One run over fresh namespaced hosts; returns what was measured (and writes each host's
-    summary.json under run_dir/hosts/<H>/)."""
+              catch_up: str | None = None, sysctls: dict | None = None) -> dict:
+    """One run over fresh namespaced hosts (`sysctls` set in each host's stack); returns
+    what was measured (and writes each host's summary.json under run_dir/hosts/<H>/)."""
     from saim_mesh.net import netns
     from saim_mesh.proc import Proc, clean_env, py
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -131,7 +131,7 @@ def run_hosts(base: Path, hosts: dict, run_dir: Path, speed: float, until: float
         events.append(f"{time.time():.2f} {m}")
         log(f"bench_hosts: {m}")
 
-    with netns.Hosts(list(hosts), rate_kbit=rate, log=say) as hs:
+    with netns.Hosts(list(hosts), rate_kbit=rate, log=say, sysctls=sysctls or {}) as hs:
         for h, spec in hosts.items():
             if spec["addresses"][0] != hs.address(h):
                 raise RuntimeError(f"host {h}: the file says {spec['addresses']}, the namespace has {hs.address(h)}")
@@ -348,6 +348,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rate-hosts", help="comma-separated hosts whose link is rated (default: every host but the top's)")
     ap.add_argument("--runs", default="free,cut,kill", help="which runs (free is always run)")
     ap.add_argument("--catch-up", choices=["block", "yield"], help="the deployment's catch_up (default: the file's)")
+    ap.add_argument("--notsent-lowat", type=int, metavar="BYTES",
+                    help="net.ipv4.tcp_notsent_lowat in every host (unsent bytes a socket holds before Zenoh's "
+                         "priority queues, not the kernel, order what goes next); default: the kernel's")
     ap.add_argument("--cut-host", help="default: the first host below the top's (1BN)")
     ap.add_argument("--cut-from", type=float, default=300.0)
     ap.add_argument("--cut-s", type=float, default=300.0)
@@ -398,21 +401,23 @@ def main(argv=None) -> int:
     runs = {x.strip() for x in a.runs.split(",") if x.strip()} | {"free"}
     print(f"bench_hosts: {Path(scenario).name}: {len(hosts)} hosts ({', '.join(names)}), {n_eas} EA peers, "
           f"{a.rate_kbit} kbit/s on {', '.join(rated)}; {duration:g} s at {a.speed:g}x; runs {sorted(runs)}", flush=True)
+    sysctls = {"net.ipv4.tcp_notsent_lowat": a.notsent_lowat} if a.notsent_lowat else {}
+    common = {"grace": a.grace, "catch_up": a.catch_up, "sysctls": sysctls}
     saved = out_dir / "runs.json"
     res = json.loads(saved.read_text()) if a.analyze_only or keep else {}
     res = {k: v for k, v in res.items() if a.analyze_only or k in keep}
     if not a.analyze_only:
         if "free" not in res:
             res["free"] = run_hosts(base, hosts, out_dir / "free", a.speed, a.until, rate, lead, duration,
-                                    grace=a.grace, catch_up=a.catch_up)
+                                    **common)
             saved.write_text(json.dumps(res, indent=1))
         if "cut" in runs and "cut" not in res:
             res["cut"] = run_hosts(base, hosts, out_dir / "cut", a.speed, a.until, rate, lead, duration,
-                                   cut=(cut_host, a.cut_from, a.cut_s), grace=a.grace, catch_up=a.catch_up)
+                                   cut=(cut_host, a.cut_from, a.cut_s), **common)
             saved.write_text(json.dumps(res, indent=1))
         if "kill" in runs and "kill" not in res:
             res["kill"] = run_hosts(base, hosts, out_dir / "kill", a.speed, a.until, rate, lead, duration,
-                                    kill=(kill_host, a.kill_at, a.down_s), grace=a.grace, catch_up=a.catch_up)
+                                    kill=(kill_host, a.kill_at, a.down_s), **common)
             saved.write_text(json.dumps(res, indent=1))
     runs = set(res)
     merge(out_dir / "free", hosts, res["free"]["start"])
@@ -437,7 +442,8 @@ def main(argv=None) -> int:
         "scenario": Path(scenario).name, "hosts": names, "host_count": len(names), "ea_peers": n_eas,
         "sources": sorted(s for h in hosts.values() for s in h["sources"]),
         "secure": json.loads((out_dir / "free" / "summary.json").read_text()).get("secure"),
-        "link_rate_kbps": a.rate_kbit or None, "catch_up": a.catch_up or "block", "rated_links": [f"{h}-{top}" for h in rated],
+        "link_rate_kbps": a.rate_kbit or None, "catch_up": a.catch_up or "block",
+        "tcp_notsent_lowat": a.notsent_lowat, "rated_links": [f"{h}-{top}" for h in rated],
         "speed": a.speed, "event_s": duration, "wall_s": free["wall_s"],
         "times_real_time": free["times_real_time"],
         "alerts_equal_in_process": not unequal and len(units) > 0, "unequal": unequal,

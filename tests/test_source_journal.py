@@ -12,7 +12,7 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.live import play
-from saim_mesh.live.srcjournal import NONE_HELD, Asker, JournalQuery, SourceJournal
+from saim_mesh.live.srcjournal import HELD, NONE_HELD, Asker, JournalQuery, SourceJournal
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
@@ -26,10 +26,12 @@ class FakeQuery:
     def __init__(self, payload: bytes):
         self.payload = type("P", (), {"to_bytes": lambda _s: payload})()
         self.replies: list[bytes] = []
+        self.qos: list[dict] = []
         self.error: bytes | None = None
 
-    def reply(self, key, b):
+    def reply(self, key, b, **qos):
         self.replies.append(b)
+        self.qos.append(qos)
 
     def reply_err(self, b):
         self.error = b
@@ -49,7 +51,7 @@ def test_the_journal_keeps_every_epoch_and_answers_bad_queries_with_an_error(tmp
         j2.append(3, b"skipped one")
     q = FakeQuery(msgspec.msgpack.encode(JournalQuery(epoch=1, lo=1, hi=2)))
     j2.serve(q, "k")
-    assert q.replies == [b"frame-1", b"frame-2"] and q.error is None
+    assert q.replies == [HELD, b"frame-1", b"frame-2"] and q.error is None
     for bad in (b"\xc1", msgspec.msgpack.encode({"epoch": -1, "lo": 1, "hi": 2}), b"x" * 300,
                 msgspec.msgpack.encode({"epoch": 1, "lo": 1, "hi": 2, "extra": 1})):
         q = FakeQuery(bad)
@@ -88,8 +90,9 @@ class Reply:
 
 
 class LossySession:
-    """A journal behind a congested link: the `drop`-th replies (counted over the whole
-    session) never arrive, as DROP replies at a full router queue; each ask is recorded."""
+    """A journal behind a congested link: the `drop`-th frames (counted over the whole
+    session) never arrive, as DROP replies at a full router queue (`HELD`, sent BLOCK,
+    always does); each ask is recorded."""
 
     def __init__(self, journal: SourceJournal | None, drop=lambda n: False):
         self.journal, self.drop, self.sent, self.asks = journal, drop, 0, []
@@ -102,6 +105,9 @@ class LossySession:
         self.journal.serve(q, key)
         out = []
         for b in q.replies:
+            if b == HELD:
+                out.append(Reply(ok=b))
+                continue
             self.sent += 1
             if not self.drop(self.sent):
                 out.append(Reply(ok=b))
@@ -157,3 +163,25 @@ def test_the_journal_answers_at_most_the_bytes_asked_but_always_one_frame(tmp_pa
     q = FakeQuery(msgspec.msgpack.encode(JournalQuery(epoch=1, lo=11, hi=20)))
     j.serve(q, "k")
     assert q.replies == [] and q.error == NONE_HELD
+
+
+def test_a_journal_that_holds_frames_says_so_first_and_never_yielding(tmp_path):
+    j = SourceJournal(tmp_path, "cp.x", 1, reply_qos={"priority": "low", "congestion_control": "drop"})
+    for seq in (1, 2):
+        j.append(seq, seq.to_bytes(4, "big") + b"x" * 10)
+    q = FakeQuery(msgspec.msgpack.encode(JournalQuery(epoch=1, lo=1, hi=2)))
+    j.serve(q, "k")
+    assert q.replies[0] == HELD and [seq_of(b) for b in q.replies[1:]] == [1, 2]
+    assert "priority" not in q.qos[0] and q.qos[0]["congestion_control"] != "drop"
+    assert q.qos[1] == {"priority": "low", "congestion_control": "drop"}
+
+
+def test_an_asker_whose_frames_are_all_dropped_says_congested_and_asks_for_less(tmp_path):
+    """Every yielding frame dropped on a full link, the journal's `HELD` through: not "no
+    answer" (a journal that is not there is given up for good), but congestion, asked
+    again with smaller asks until the budget is spent."""
+    j = frames_journal(tmp_path)
+    s = LossySession(j, drop=lambda n: True)
+    a = Asker(chunk=64_000)
+    assert a.ask(s, "k", 1, 1, 60, Read, budget_s=0.2) == [] and a.why == "congested"
+    assert len(s.asks) > 3 and s.asks[-1].max_bytes < 64_000

@@ -5,11 +5,13 @@ run, an EA that missed more than the cache holds, frames of an epoch before the 
 restarted: the cache dies with the process, the file does not).
 
 A query is a `JournalQuery` (epoch, first and last seq wanted, at most how many bytes);
-the answer is one reply per frame held, in order, at most `MAX_FRAMES` and the bytes asked
-for per query (ask again from where it stopped), or "none held". Over a slow radio link
-the replies can yield to live traffic (`reply_qos`: DROP at a lower priority); the
+the answer is `HELD` (a few bytes, never yielding: the asker knows the journal was
+reached), then one reply per frame held, in order, at most `MAX_FRAMES` and the bytes
+asked for per query (ask again from where it stopped), or "none held". Over a slow radio
+link the frames can yield to live traffic (`reply_qos`: DROP at a lower priority); the
 `Asker` then takes what came in sequence, asks again from the first one missing, and
-sizes its asks to what came back in time (AIMD). A query that cannot be read is answered
+sizes its asks to what came back in time (AIMD): an answer of `HELD` alone (every frame
+dropped) is congestion, not a journal that is not there. A query that cannot be read is answered
 with an error, and the source lives on. Files: `<dir>/<name>.<epoch>.frames`, records length-prefixed (4 bytes,
 big-endian); a half-written last record (a kill) is ignored on reading."""
 from __future__ import annotations
@@ -32,6 +34,7 @@ MAX_BYTES = 16 * 2**20
 FIRST_ASK_BYTES = 256 * 1024   # an asker's first chunk; halved when it does not come in time
 MIN_ASK_BYTES = 4 * 1024
 NONE_HELD = b"none held"
+HELD = b"\x00held"   # not a frame (a frame is a msgpack map): the journal was reached
 YIELDING = {"congestion_control": zenoh.CongestionControl.DROP, "priority": zenoh.Priority.DATA_LOW}
 
 
@@ -124,6 +127,8 @@ class SourceJournal:
             frames = self.frames(q.epoch, q.lo, q.hi, q.max_bytes)
             if not frames:   # said, so that the asker stops asking (an answer that never came is no such word)
                 query.reply_err(NONE_HELD)
+            else:   # reached, whatever becomes of the yielding frames on the way
+                query.reply(key, HELD, congestion_control=zenoh.CongestionControl.BLOCK)
             for b in frames:
                 query.reply(key, b, **self.reply_qos)
                 self.served += 1
@@ -172,7 +177,7 @@ class Asker:
         as they came within `budget_s` of wall time, each as (bytes, `read(bytes)`): the
         frame read once, with its `seq` (None: it cannot be read). Fewer when the journal
         holds fewer (`why` "none held"), nobody answers ("no answer"), or the link gave no
-        more in time ("congested")."""
+        more in time ("congested": also when only `HELD` came, every frame dropped on the way)."""
         out: list[tuple] = []
         want, silent = lo, 0
         self.why = "done"
@@ -182,7 +187,7 @@ class Asker:
                 self.why = "congested"
                 break
             got: dict[int, tuple] = {}
-            said_none = answered = False
+            said_none = answered = reached = False
             sent = time.monotonic()
             q = msgspec.msgpack.encode(JournalQuery(epoch=epoch, lo=want, hi=hi, max_bytes=self.chunk))
             for r in session.get(key, payload=q, timeout=self.timeout,
@@ -190,6 +195,9 @@ class Asker:
                 answered = True
                 if r.ok is not None:
                     b = r.ok.payload.to_bytes()
+                    if b == HELD:
+                        reached = True
+                        continue
                     f = read(b)
                     if f is not None and want <= f.seq <= hi:
                         got.setdefault(f.seq, (b, f))
@@ -203,12 +211,12 @@ class Asker:
             if said_none:
                 self.why = "none held"
                 break
-            if want == start and not answered and not late:   # no journal there (or no link): a few tries
+            if want == start and not answered and not reached and not late:   # no journal there (or no link)
                 silent += 1
                 if silent >= 3:
                     self.why = "no answer"
                     break
-            whole = not got and not late   # no hole, in time
+            whole = want > start and not got and not late   # something came, no hole, in time
             self.chunk = min(MAX_BYTES, self.chunk * 2) if whole else max(MIN_ASK_BYTES, self.chunk // 2)
         return out
 

@@ -199,7 +199,9 @@ class Hosts:
 
     `hosts`: a count (h0, h1, ...) or names. `rate_kbit`: a tbf rate for every host link
     or per host name (kbit/s, both directions). `use_nft`: None = nft when it works,
-    else the fallback (said once); False forces the fallback.
+    else the fallback (said once); False forces the fallback. `sysctls`: kernel settings
+    of each host's own network stack (e.g. `net.ipv4.tcp_notsent_lowat`), as a real host
+    behind a radio link would be tuned.
     """
     hosts_spec: int | Sequence[str] = 2
     rate_kbit: int | Mapping[str, int | None] | None = None
@@ -208,6 +210,7 @@ class Hosts:
     use_nft: bool | None = None
     stop_timeout: float = 3.0
     log: Callable[[str], None] = _stderr
+    sysctls: Mapping[str, str | int] = field(default_factory=dict)
     hosts: dict[str, Host] = field(default_factory=dict, init=False)
     procs: list[subprocess.Popen] = field(default_factory=list, init=False)
     nft: bool = field(default=False, init=False)
@@ -291,6 +294,8 @@ class Hosts:
         self._ip(h.netns, "link", "set", "lo", "up", what="bringing lo up")
         self._ip(h.netns, "addr", "add", f"{h.address}/{h.prefixlen}", "dev", IFACE, what=f"addressing {h.name}")
         self._ip(h.netns, "link", "set", IFACE, "up", what=f"bringing {h.name}'s {IFACE} up")
+        for k, v in self.sysctls.items():
+            sh(["ip", "netns", "exec", h.netns, "sysctl", "-q", "-w", f"{k}={v}"], f"setting {k} in host {h.name}")
 
     def _setup_nft(self) -> bool:
         if self.use_nft is False:
