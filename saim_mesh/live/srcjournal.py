@@ -187,7 +187,7 @@ class Asker:
                 self.why = "congested"
                 break
             got: dict[int, tuple] = {}
-            said_none = answered = reached = False
+            said_none = answered = False
             sent = time.monotonic()
             q = msgspec.msgpack.encode(JournalQuery(epoch=epoch, lo=want, hi=hi, max_bytes=self.chunk))
             for r in session.get(key, payload=q, timeout=self.timeout,
@@ -195,8 +195,7 @@ class Asker:
                 answered = True
                 if r.ok is not None:
                     b = r.ok.payload.to_bytes()
-                    if b == HELD:
-                        reached = True
+                    if b == HELD:   # the journal was reached (answered): nothing to read
                         continue
                     f = read(b)
                     if f is not None and want <= f.seq <= hi:
@@ -211,7 +210,7 @@ class Asker:
             if said_none:
                 self.why = "none held"
                 break
-            if want == start and not answered and not reached and not late:   # no journal there (or no link)
+            if want == start and not answered and not late:   # no journal there (or no link): a few tries
                 silent += 1
                 if silent >= 3:
                     self.why = "no answer"
