@@ -12,7 +12,8 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.live import play
-from saim_mesh.live.srcjournal import HELD, NONE_HELD, Asker, JournalQuery, SourceJournal
+from saim_mesh.live.srcjournal import (ASK_TIMEOUT_S, HELD, MAX_ASK_TIMEOUT_S, NONE_HELD, Asker, JournalQuery,
+                                      SourceJournal)
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
@@ -185,3 +186,32 @@ def test_an_asker_whose_frames_are_all_dropped_says_congested_and_asks_for_less(
     a = Asker(chunk=64_000)
     assert a.ask(s, "k", 1, 1, 60, Read, budget_s=0.2) == [] and a.why == "congested"
     assert len(s.asks) > 3 and s.asks[-1].max_bytes < 64_000
+
+
+class SlowLink(LossySession):
+    """A router queue that drains slower than an ask waits: an ask that waits less than
+    `needs` seconds gets only the journal's `HELD` (its frames come after it stopped
+    listening); each ask's timeout is recorded."""
+
+    def __init__(self, journal: SourceJournal, needs: float):
+        super().__init__(journal)
+        self.needs, self.timeouts = needs, []
+
+    def get(self, key, payload, timeout, consolidation):
+        self.timeouts.append(timeout)
+        self.drop = (lambda n: False) if timeout >= self.needs else (lambda n: True)
+        return super().get(key, payload, timeout, consolidation)
+
+
+def test_an_asker_whose_frames_come_after_it_stopped_listening_waits_longer_next_time(tmp_path):
+    """Like TCP's retransmission timer: answered but nothing in time doubles the wait, up to
+    a bound; answers that come whole bring it back down."""
+    j = frames_journal(tmp_path, n=10, size=100)
+    s = SlowLink(j, needs=6.0)
+    a = Asker()
+    assert seqs(a.ask(s, "k", 1, 1, 10, Read, budget_s=5)) == list(range(1, 11)) and a.why == "done"
+    assert s.timeouts[:2] == [ASK_TIMEOUT_S, 2 * ASK_TIMEOUT_S] and a.timeout == ASK_TIMEOUT_S
+    never = SlowLink(j, needs=1e9)
+    b = Asker()
+    assert b.ask(never, "k", 1, 1, 10, Read, budget_s=0.2) == [] and b.why == "congested"
+    assert max(never.timeouts) == MAX_ASK_TIMEOUT_S and len(never.timeouts) > 3

@@ -4,7 +4,8 @@ them (issue 31.1; `LivePeer` composes one).
 What can break a source's sequence on a lossy mesh, and what is done about it here:
 - a frame comes ahead of a missing one (a late joiner gets the publisher's cache after
   newer frames; recovery is under way): it waits for it, at most `GAP_WAIT_S`, then the
-  source's durable journal is asked; what no journal holds is a gap, said and counted;
+  source's durable journal is asked (again, a bounded number of times, when the journal's
+  replies were congested or nobody answered); what no journal holds is a gap, said and counted;
 - the source restarted (a higher epoch): the rest of its last epoch comes from its
   journal first;
 - the peer fell behind (frames held over half its memory bound): the source's frames are
@@ -25,6 +26,7 @@ from .srcjournal import Asker
 
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
 PATIENCE = 40         # asks of a journal that gave nothing over a congested link before the rest is a gap
+NO_ANSWER_PATIENCE = 5   # asks of a journal nobody answered (no route to it now) before the rest is a gap
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 REFETCH = 500         # frames asked of a journal at a time when fetching a source again
 
@@ -95,11 +97,13 @@ class Sequencer:
         if force and early and st[1] not in early:   # beyond recovery: the source's journal, if it keeps one
             got = self.catch_up(source, st[0], st[1], min(early) - 1)
             why = self.askers[source].why if source in self.askers else "no journal asked"
-            if not got and why == "congested" and self.patience.get(source, 0) < PATIENCE:
-                # the journal is there but its replies yield to live traffic on a slow link: the
-                # frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`. Nobody
-                # answering is not waited for: asked again while the source's later frames are
-                # held, its EA stood still (bench_hosts: hosts that never finished)
+            bound = PATIENCE if why == "congested" else NO_ANSWER_PATIENCE if why == "no answer" else 0
+            if not got and self.patience.get(source, 0) < bound:
+                # the frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`. Congested:
+                # the journal is there but its replies yield to live traffic on a slow link. Nobody
+                # answering: no route to it now (a router link that flapped after a heal drops its
+                # routes for a second; bench_hosts), or no journal at all: asked a few times only,
+                # since the source's later frames wait here and its EA stands still meanwhile
                 self.patience[source] = self.patience.get(source, 0) + 1
                 self.hold.gap_since[source] = time.monotonic()
                 return
