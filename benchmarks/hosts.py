@@ -342,7 +342,7 @@ CUT_KEYS = ("frozen_epochs_uncut", "on_time_share_uncut", "lost_alert_s_max", "a
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="bench_hosts", description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", help="default: brigade-small, generated on demand into out/scenarios")
-    ap.add_argument("--speed", type=float, default=3.0, help="the sources' pace (x real time)")
+    ap.add_argument("--speed", type=float, default=1.5, help="the sources' pace (x real time; at 3x the 64 kbit/s links carry three times real time's traffic)")
     ap.add_argument("--until", type=float, help="end the sources at this event time (default: the whole scenario)")
     ap.add_argument("--rate-kbit", type=int, default=64, help="tbf rate on each host link below the top's")
     ap.add_argument("--rate-hosts", help="comma-separated hosts whose link is rated (default: every host but the top's)")
