@@ -200,6 +200,19 @@ class Commander(_Session):
         default the timeout), and any other that answered meanwhile."""
         return self._direct("order", expect, wait_s, at=at, action=action, plan=plan, mission=mission)
 
+    def reorganize(self, unit: str, new_parent: str, at: float, expect=(), wait_s: float | None = None
+                   ) -> dict[str, dict]:
+        """Put `unit` (a subordinate of this commander) under `new_parent` (in its subtree)
+        from event time `at`: every EA takes it, so all agree on the chain of command."""
+        return self._direct("reorganize", expect, wait_s, at=at, unit=unit, new_parent=new_parent)
+
+    def decision(self, alert: str, mission: str, option: str, at: float, expect=(),
+                 wait_s: float | None = None) -> dict[str, dict]:
+        """Decide on an alert that asked for a decision (`option`: abort, continue or
+        branch:<id>) for the whole subtree: every EA of it that runs `mission` carries it
+        out at event time `at` (`decide` above tells the alert's own EA only)."""
+        return self._direct("decide", expect, wait_s, at=at, alert=alert, mission=mission, option=option)
+
     def confirm_up(self, mission: str, phase: str, at: float, expect=(), wait_s: float | None = None
                    ) -> dict[str, dict]:
         """Confirm that `unit`'s mission started or ended, at event time `at`: its own EA and

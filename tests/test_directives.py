@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import uuid
 
+import msgspec
 import pytest
 
 from saim_mesh import cmdlog
@@ -116,6 +117,10 @@ def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tm
         assert cli.p.wait(60) == 0, cli.tail()
         with Commander(SC, "BN", connect=[ep], root=root) as bn:
             bn.order("execute-plan", at=1600.0, plan="withdrawal", wait_s=0)
+        cli = Proc("reorg-cli", [*py(), "order", "--scenario", SC, "--unit", "BN", "--action", "reorganize",
+                                 "--target", "A3", "--new-parent", "B", "--at", "1700", "--connect", ep,
+                                 "--root", root, "--timeout", "2"], env=clean_env(), log_dir=tmp_path)
+        assert cli.p.wait(60) == 0, cli.tail()
         with Commander(SC, "A1", connect=[ep], root=root) as a1:
             a1.confirm_up("A1-move", "start", at=200.0, wait_s=0)
         with Commander(SC, "C", connect=[ep], root=root) as c:
@@ -133,10 +138,10 @@ def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tm
               for u in everyone}
     taken = {u: [(c.cmd.by, c.cmd.d.req, c.t) for c in logged[u]] for u in everyone}
     rows = {u: [json.loads(x) for x in open(tmp_path / f"{u}.cmdlog")] for u in everyone}
-    # every EA of BN's subtree took both orders at their event times (none late)
+    # every EA of BN's subtree took both orders and the reorganization at their event times (none late)
     for u in everyone:
         bn = [(req, t) for by, req, t in taken[u] if by == "BN"]
-        assert [t for _, t in bn] == [1500.0, 1600.0], (u, taken[u])
+        assert [t for _, t in bn] == [1500.0, 1600.0, 1700.0], (u, taken[u])   # abort, execute, reorganize
         assert all(r["ok"] and not r["error"] for r in rows[u] if r.get("by") == "BN"), rows[u]
     # A1's confirmation went up to A and BN (and A1's own EA), not to C or to its peer A2
     for u in ("A1", "A", "BN"):
@@ -272,3 +277,72 @@ def test_live_a_plan_version_reaches_the_subtree_and_a_late_joiner_runs_it(tmp_p
     for ea in eas:
         assert set(ea.domain.missions) == {m["id"] for m in a_plan(sc)}, ea.owner
         assert plan_alerts(load(tmp_path / f"{ea.owner}.jsonl")) == plan_alerts(ea.alerts), ea.owner
+
+
+def test_a_forged_misplaced_replayed_or_unsigned_directive_is_refused_and_counted_in_secure_mode():
+    """In secure mode a directive carries authority only under its issuer's own signature:
+    console.BN signs BN's orders; C's console signing on BN's key, a forged signature, an
+    envelope moved to another key, a replay and an unsigned one are each refused, counted,
+    said in one line; the EA goes on."""
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    from saim_mesh import wire as W
+    from saim_mesh.live.authority import DirectiveIntake
+    from saim_mesh.security import sign as G
+    root = "t/dir"
+    keys = {n: Ed25519PrivateKey.generate() for n in ("console.BN", "console.C", "ea.A1")}
+    pubs = {n: k.public_key() for n, k in keys.items()}
+    gate = W.Gate(5400.0, verifier=G.Verifier(pubs, G.rules_for(pubs), root, require=True))
+    intake = DirectiveIntake(root, gate)
+    body = msgspec.msgpack.encode(D.make("order", req="r1", n=1, at=1500.0, action="abort-plan"))
+    k = D.key(root, "BN", "order")
+    good = G.Signer("console.BN", keys["console.BN"]).sign(k, body, 1)
+    tk, _ = intake.check(k, good)
+    assert tk.by == "BN" and tk.d.action == "abort-plan" and gate.errors == 0
+    forged = bytearray(G.Signer("console.BN", keys["console.BN"]).sign(k, body, 4))
+    forged[-3] ^= 0x01   # a byte of the signature
+    bad = {"misplaced": (k, G.Signer("console.C", keys["console.C"]).sign(k, body, 2)),
+           "forged": (k, bytes(forged)),
+           "moved": (D.key(root, "BN", "plan"), G.Signer("console.BN", keys["console.BN"]).sign(k, body, 3)),
+           "unsigned": (D.key(root, "BN", "order"), msgspec.msgpack.encode(
+               D.make("order", req="r9", n=9, at=1500.0, action="abort-plan"))),
+           "replayed": (k, good)}
+    why = {"misplaced": "console.C may not sign", "forged": "signature", "moved": "signed for",
+           "unsigned": "must be signed"}
+    for what, (key_, payload) in bad.items():
+        before = gate.errors
+        assert intake.check(key_, payload) is None, what
+        if what != "replayed":   # a repeat of a taken directive is dropped, not an attack
+            said = gate.rejects.recent[-1]
+            assert gate.errors == before + 1 and why[what] in said and "\n" not in said, (what, said)
+    assert gate.rejects.by_kind.get("signed", 0) + gate.rejects.by_kind.get("directive", 0) >= 4, gate.rejects.by_kind
+    assert [t.d.req for t in [tk]] == ["r1"] and len(intake.kept) == 1
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--action", "reorganize", "--target", "A3"], "--new-parent required"),
+    (["--action", "abort-plan", "--plan", "main"], "--plan not used by this action"),
+    (["--action", "decide", "--alert", "A1/3", "--mission", "A1-move"], "--option required"),
+    (["--action", "start-mission", "--mission", "A1-move", "--target", "A3"], "--target not used"),
+])
+def test_order_refuses_what_its_action_does_not_read_and_asks_for_what_it_needs(args, said):
+    """Nothing a commander writes is silently ignored: one line, exit 2, before any Zenoh
+    session opens (the endpoint below has nobody)."""
+    import subprocess
+    r = subprocess.run([*py(), "order", "--scenario", SC, "--unit", "BN", "--at", "10", *args,
+                        "--connect", "tcp/127.0.0.1:9", "--timeout", "1"], capture_output=True, text=True,
+                       env=clean_env(), timeout=60)
+    assert r.returncode == 2 and said in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_plan_version_is_bounded_in_size():
+    """A plan's missions over 48 kB are refused when made, and any directive over the
+    intake's bound is refused off the wire, counted, before it is decoded."""
+    from saim_mesh import wire as W
+    from saim_mesh.live.authority import MAX_BYTES, DirectiveIntake
+    with pytest.raises(ValueError, match="plan"):
+        D.make("plan", req="p", n=1, at=10.0, name="big", version=2, missions=b"[" + b" " * (48 * 1024) + b"]")
+    gate = W.Gate(5400.0)
+    intake = DirectiveIntake("t/dir", gate)
+    assert intake.check(D.key("t/dir", "A", "plan"), b"\x80" * (MAX_BYTES + 1)) is None
+    assert gate.errors == 1 and f"over the {MAX_BYTES} limit" in gate.rejects.recent[-1]

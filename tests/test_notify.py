@@ -317,3 +317,37 @@ def test_commands_apply_in_process(small):
         C.make("confirm", mission="m", phase="later")
     with pytest.raises(ValueError, match="unknown command kind"):
         C.make("reboot")
+
+
+def test_an_inhibition_in_a_command_log_replays_with_run_armed_commands(small, tmp_path):
+    """A rule set at run time is written to the EA's command log like any command, and
+    `saim-mesh run --armed --commands` replays it: the same alerts, the same ones marked
+    `inhibited_by`, as the EA that took it (none marked without the log)."""
+    import json
+    import subprocess
+    import sys
+
+    from saim_mesh import cmdlog
+
+    from saim_mesh.proc import clean_env
+
+    from .conftest import SMALL
+    cmd = C.make("inhibit", id="r", source=W.MatcherSpec(types=["out-of-position"]),
+                 target=W.MatcherSpec(types=["out-of-position"]), equal=["subjects"], for_s=150.0)
+    ea = run_a2(small, [(0.0, lambda e: C.apply(e, cmd))], armed=False)   # only to get the EA's answer
+    log = cmdlog.CommandLog(tmp_path / f"{OWNER}.cmdlog")
+    log.write(OWNER, 0.0, cmd, C.apply(ea, cmd))
+    log.close()
+
+    def run(*extra) -> list[tuple]:
+        out = tmp_path / f"run{len(extra)}.jsonl"
+        subprocess.run([sys.executable, "-m", "saim_mesh", "run", str(SMALL), "--ea", OWNER, "--armed", "--quiet",
+                        *extra, "--out", str(out)], check=True, env=clean_env(), stdout=subprocess.DEVNULL,
+                       timeout=300)
+        return [(a["t"], a["type"], tuple(a["subjects"]), a["message"], a["details"].get("inhibited_by"))
+                for a in map(json.loads, open(out)) if a["category"] != "system-problem"]
+    replayed, plain = run("--commands", str(tmp_path / f"{OWNER}.cmdlog")), run()
+    marked = [a for a in replayed if a[4]]
+    assert marked and all(a[1] == "out-of-position" and a[4]["rule"] == "r" for a in marked), marked
+    assert not [a for a in plain if a[4]]
+    assert [a[:4] for a in replayed] == [a[:4] for a in plain]   # inhibited: marked, never lost

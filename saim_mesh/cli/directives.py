@@ -11,11 +11,15 @@ import sys
 def add(sub, zenoh_args, seconds) -> None:
     """Register the two subcommands on `sub` (the CLI's subparsers)."""
     o = sub.add_parser("order", help="order a unit's subtree on the live mesh (execute-plan, abort-plan, "
-                                     "start-mission, end-mission), effective at an event time")
+                                     "start-mission, end-mission, reorganize, decide), effective at an event time")
     _common(o, seconds)
-    o.add_argument("--action", required=True, choices=["execute-plan", "abort-plan", "start-mission", "end-mission"])
+    o.add_argument("--action", required=True, choices=list(ACTION_ARGS))
     o.add_argument("--plan", default="", help="execute-plan: the plan's name")
-    o.add_argument("--mission", default="", help="start-mission, end-mission: the mission's id")
+    o.add_argument("--mission", default="", help="start-mission, end-mission, decide: the mission's id")
+    o.add_argument("--target", default="", help="reorganize: the unit put under --new-parent")
+    o.add_argument("--new-parent", default="", help="reorganize: its new superior (in --unit's subtree)")
+    o.add_argument("--alert", default="", help="decide: the alert that asked for a decision (e.g. A1/3)")
+    o.add_argument("--option", default="", help="decide: abort, continue or branch:<id>")
     zenoh_args(o)
     o.set_defaults(fn=cmd_order)
     p = sub.add_parser("plan", help="publish a new plan version for a unit's subtree on the live mesh: "
@@ -26,6 +30,12 @@ def add(sub, zenoh_args, seconds) -> None:
     p.add_argument("--file", required=True, help="a JSON list of missions, as plan.json's plans lists them")
     zenoh_args(p)
     p.set_defaults(fn=cmd_plan)
+
+
+# what each action of `order` reads; anything else given is refused, never ignored
+ACTION_ARGS = {"execute-plan": ("plan",), "abort-plan": (), "start-mission": ("mission",),
+               "end-mission": ("mission",), "reorganize": ("target", "new_parent"),
+               "decide": ("alert", "mission", "option")}
 
 
 def _common(p, seconds) -> None:
@@ -56,9 +66,23 @@ def _report(got: dict[str, dict], expect: list[str]) -> int:
 
 
 def cmd_order(a) -> int:
+    used = ACTION_ARGS[a.action]
+    extra = [f"--{n.replace('_', '-')}" for n in ("plan", "mission", "target", "new_parent", "alert", "option")
+             if getattr(a, n) and n not in used]
+    if extra:
+        raise ValueError(f"order --action {a.action}: {', '.join(extra)} not used by this action "
+                         f"(it reads {', '.join('--' + n.replace('_', '-') for n in used) or 'nothing more'})")
+    missing = [f"--{n.replace('_', '-')}" for n in used if not getattr(a, n)]
+    if missing:
+        raise ValueError(f"order --action {a.action}: {', '.join(missing)} required")
     with _commander(a) as c:
         try:
-            got = c.order(a.action, at=a.at, plan=a.plan, mission=a.mission, expect=a.expect)
+            if a.action == "reorganize":
+                got = c.reorganize(a.target, a.new_parent, at=a.at, expect=a.expect)
+            elif a.action == "decide":
+                got = c.decision(a.alert, a.mission, a.option, at=a.at, expect=a.expect)
+            else:
+                got = c.order(a.action, at=a.at, plan=a.plan, mission=a.mission, expect=a.expect)
         except TimeoutError as e:
             print(f"order: {e}", file=sys.stderr)
             return 2
