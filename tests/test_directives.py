@@ -15,6 +15,7 @@ import json
 import uuid
 
 import msgspec
+import numpy as np
 import pytest
 
 from saim_mesh import cmdlog
@@ -189,6 +190,33 @@ def test_a_call_for_fire_is_confirmed_by_its_requester_or_a_superior_for_every_e
     ok, why = D.take(ea, mk("C", 1))
     assert not ok and "C does not command A1" in why
     assert D.take(ea, mk("A", 2)) == (True, "")   # A commands A1; C2's EA warns of its own units near it
+
+
+def test_a_confirmed_call_for_fire_warns_the_eas_whose_own_units_are_near_its_target(sc):
+    """A's confirmation of A1's call for fire, aimed where one of C2's elements stands: C2's
+    EA (not in A's chain) warns of its own unit at once (flash, friendly); A3's EA, whose
+    units are far from it, raises nothing."""
+    def fed(unit: str):   # the scenario's facts up to 100 s: positions known
+        ea = _ea(sc, unit, 0.0)
+        for ev in sc.events:
+            if ev.t >= 100.0:
+                break
+            ea.submit(ev)
+        ea.advance(100.0, strict=True)
+        return ea
+    near, far = fed("C2"), fed("A3")
+    pic, own = near.domain.pic, near.domain.own_leaves
+    i = next(i for i, leaf in enumerate(pic.ent_leaf) if leaf in own and np.isfinite(pic.xy[i]).all())
+    lon, lat = pic.proj.to_lonlat(float(pic.xy[i, 0]), float(pic.xy[i, 1]))
+    cff = D.Taken("A", D.make("cff", req="f1", n=1, at=100.0, cff="F9", requester="A1", lon=float(lon),
+                              lat=float(lat), radius_m=150.0))
+    for ea in (near, far):
+        assert D.take(ea, cff) == (True, "")
+        ea.advance(104.0, strict=True)
+    warned = [a for a in near.alerts if a.type == "call-for-fire" and a.details.get("cff") == "F9"]
+    assert len(warned) == 1 and warned[0].priority == "flash" and warned[0].details["confirmed"], warned
+    assert "Planned fire F9" in warned[0].message
+    assert not [a for a in far.alerts if a.type == "call-for-fire" and a.details.get("cff") == "F9"]
 
 
 def test_a_decision_reaches_the_missions_ea_and_a_bad_one_is_refused(sc):
