@@ -16,6 +16,13 @@ def check(res):
     assert res["naive_alerts"] >= 50 * res["alerts"]
     # the measure can fail: with VOA off, most alerts repeat what was told with no material change
     assert res["naive"]["unwanted_share"] >= 0.5 and res["naive"]["unwanted_flash"] > 0, res["naive"]
+    check_projections(res)
+
+
+def check_projections(res):
+    """Issue 34: projections lead or are not projections (the oracle times the violation)."""
+    p = res["projections"]
+    assert p["alerts"] > 0 and p["after_the_fact"] == 0 and p["lead_s_median"] >= 30, p
 
 
 def test_small_scenario_meets_targets():

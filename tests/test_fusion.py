@@ -19,6 +19,7 @@ from saim_mesh.runner import run
 from saim_mesh.zconf import free_port
 
 from .conftest import ROOT
+from .test_evaluate import check_projections
 
 SMALL_SENSORS = ROOT / "scenarios" / "small-sensors"
 
@@ -77,6 +78,7 @@ def test_battalion_with_sensors_meets_targets():
     res = evaluate(S.load(ROOT / "scenarios" / "battalion-sensors"))
     assert res["recall"] == 1.0, res["missed"]
     assert res["unwanted_share"] <= 0.05 and res["unwanted_flash"] == 0
+    check_projections(res)
 
 
 @pytest.fixture(scope="module")

@@ -129,3 +129,21 @@ def test_really_stuck_robot_still_is():
     spinning = turn_in_place("UGV1", 0, 60, 270.0, 18.0)       # turns round and round, never moves
     stuck = of(run(ea(scenario([GOTO1], [SLOW_TURNER, robot("UGV2")])), spinning, 60), "stuck")
     assert stuck and stuck[0].t <= 10.0 + 180.0 / 18.0 + 1.0 + 10.0 + 5.0
+
+
+def test_the_shipped_uv_team_tells_each_handoff_once_per_audience():
+    """scenarios/uv-team (issue 34's done-when): each handoff is one alert at each EA that
+    tells it (the handing robot's and the operator's at the policy's word, the receiver's
+    on the delegate), never a second one on the accept."""
+    from collections import Counter
+
+    from saim_mesh import scenario as S
+    from saim_mesh.runner import run as run_all
+
+    from .conftest import ROOT
+    sc = S.load(ROOT / "scenarios" / "uv-team")
+    told = Counter((ea.owner, a.details["from"], a.details["to"], a.details["target"])
+                   for ea in run_all(sc, list(sc.taskorg.units)) for a in ea.alerts if a.type == "handoff")
+    assert told and set(told.values()) == {1}, told
+    ev1 = {owner for owner, frm, to, target in told if (frm, to, target) == ("UGV1", "UGV2", "EV1")}
+    assert ev1 == {"TEAM", "UGV1", "UGV2"}, told
