@@ -208,6 +208,10 @@ def test_clear_is_told_of_a_hostile_left_on_the_objective_and_seize_is_not(tmp_p
     es = of(_taking(tmp_path, "clear", HOSTILE_LEFT), "end-state")
     assert len(es) == 1 and es[0].t == 300.0 and es[0].subjects == ("A1", "H1")
     assert not of(_taking(tmp_path, "seize", HOSTILE_LEFT), "end-state")
+
+
+def test_a_clear_whose_objective_holds_no_hostile_at_its_end_is_silent(tmp_path):
+    """The hostile seen last far from the objective: nothing left to clear, nothing told."""
     assert not of(_taking(tmp_path, "clear", [track(120, "H1", 3500, 3000)]), "end-state")
 
 
