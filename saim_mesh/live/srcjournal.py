@@ -181,7 +181,8 @@ class Asker:
 
     def ask(self, session, key: str, epoch: int, lo: int, hi: int, read, budget_s: float = 3.0) -> list[tuple]:
         """Frames lo..hi of `epoch` from the journal at `key`, in sequence from `lo` as far
-        as they came within `budget_s` of wall time, each as (bytes, `read(bytes)`): the
+        as they came within `budget_s` of wall time (no new ask after it; the last may wait
+        out its own timeout), each as (bytes, `read(bytes)`): the
         frame read once, with its `seq` (None: it cannot be read). Fewer when the journal
         holds fewer (`why` "none held"), nobody answers ("no answer"), or the link gave no
         more in time ("congested": also when only `HELD` came, every frame dropped on the way)."""
