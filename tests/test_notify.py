@@ -328,7 +328,6 @@ def test_an_inhibition_in_a_command_log_replays_with_run_armed_commands(small, t
     import sys
 
     from saim_mesh import cmdlog
-
     from saim_mesh.proc import clean_env
 
     from .conftest import SMALL

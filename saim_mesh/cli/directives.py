@@ -36,6 +36,11 @@ def add(sub, zenoh_args, seconds) -> None:
 ACTION_ARGS = {"execute-plan": ("plan",), "abort-plan": (), "start-mission": ("mission",),
                "end-mission": ("mission",), "reorganize": ("target", "new_parent"),
                "decide": ("alert", "mission", "option")}
+ORDER_ARGS = tuple(dict.fromkeys(n for used in ACTION_ARGS.values() for n in used))
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
 
 
 def _common(p, seconds) -> None:
@@ -67,12 +72,11 @@ def _report(got: dict[str, dict], expect: list[str]) -> int:
 
 def cmd_order(a) -> int:
     used = ACTION_ARGS[a.action]
-    extra = [f"--{n.replace('_', '-')}" for n in ("plan", "mission", "target", "new_parent", "alert", "option")
-             if getattr(a, n) and n not in used]
+    extra = [_flag(n) for n in ORDER_ARGS if getattr(a, n) and n not in used]
     if extra:
         raise ValueError(f"order --action {a.action}: {', '.join(extra)} not used by this action "
-                         f"(it reads {', '.join('--' + n.replace('_', '-') for n in used) or 'nothing more'})")
-    missing = [f"--{n.replace('_', '-')}" for n in used if not getattr(a, n)]
+                         f"(it reads {', '.join(map(_flag, used)) or 'nothing more'})")
+    missing = [_flag(n) for n in used if not getattr(a, n)]
     if missing:
         raise ValueError(f"order --action {a.action}: {', '.join(missing)} required")
     with _commander(a) as c:

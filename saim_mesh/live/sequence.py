@@ -27,6 +27,7 @@ from .srcjournal import Asker
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
 PATIENCE = 40         # asks of a journal that gave nothing over a congested link before the rest is a gap
 NO_ANSWER_PATIENCE = 5   # asks of a journal nobody answered (no route to it now) before the rest is a gap
+ASK_AGAIN = {"congested": PATIENCE, "no answer": NO_ANSWER_PATIENCE}   # why an ask gave nothing -> asks before a gap
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 REFETCH = 500         # frames asked of a journal at a time when fetching a source again
 
@@ -97,8 +98,7 @@ class Sequencer:
         if force and early and st[1] not in early:   # beyond recovery: the source's journal, if it keeps one
             got = self.catch_up(source, st[0], st[1], min(early) - 1)
             why = self.askers[source].why if source in self.askers else "no journal asked"
-            bound = PATIENCE if why == "congested" else NO_ANSWER_PATIENCE if why == "no answer" else 0
-            if not got and self.patience.get(source, 0) < bound:
+            if not got and self.patience.get(source, 0) < ASK_AGAIN.get(why, 0):
                 # the frames are not gone, so no gap yet; asked again after `GAP_WAIT_S`. Congested:
                 # the journal is there but its replies yield to live traffic on a slow link. Nobody
                 # answering: no route to it now (a router link that flapped after a heal drops its
