@@ -17,7 +17,7 @@ from saim_mesh.live.srcjournal import (ASK_TIMEOUT_S, HELD, MAX_ASK_TIMEOUT_S, N
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
-from .conftest import SMALL
+from .conftest import SMALL, wait_until
 from .test_live import in_process, load, plan_alerts, reap
 
 pytestmark = pytest.mark.timeout(300)
@@ -215,3 +215,34 @@ def test_an_asker_whose_frames_come_after_it_stopped_listening_waits_longer_next
     b = Asker()
     assert b.ask(never, "k", 1, 1, 10, Read, budget_s=0.2) == [] and b.why == "congested"
     assert max(never.timeouts) == MAX_ASK_TIMEOUT_S and len(never.timeouts) > 3
+
+
+@pytest.mark.parametrize("yielding, first", [(True, 49), (False, 1)])
+def test_a_yielding_source_leaves_a_long_gap_to_its_journal_not_its_cache(tmp_path, yielding, first):
+    """A heal's recovery asked the cache for every missed frame at once, one copy per EA
+    behind the link, and the copies held up the live frames of every source sharing it. A
+    source that yields across radio links and keeps a journal caches only the last
+    `YIELDING_CACHE` frames; the journal, asked in sizes that fit the link, has the rest.
+    A late joiner's history from the cache shows what it holds: the last 32 of 80 frames,
+    or all 80 for a source that does not yield."""
+    import zenoh
+    import zenoh.ext as zx
+
+    from dissemination.keyspace import KeySpace
+    from saim_mesh.live import frames as F
+    from saim_mesh.live.source import HISTORY, YIELDING_CACHE, LiveSource
+    from saim_mesh.zconf import config
+    assert YIELDING_CACHE == 32
+    ks = KeySpace(f"test/{uuid.uuid4().hex[:8]}")
+    got: list[int] = []
+    with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
+        src = LiveSource(s, ks, "cp.test", tmp_path, yielding=yielding)
+        for k in range(1, 81):
+            src.heartbeat() if k > 1 else src.watermark(float(k))
+        assert src.seq == 80 and len(src.journal.frames(src.epoch, 1, 80)) == 80
+        zx.declare_advanced_subscriber(
+            s, ks.src("cp.test"), lambda smp: got.append(F.decode(smp.payload.to_bytes(), 1 << 20).seq),
+            history=zx.HistoryConfig(max_samples=HISTORY))
+        wait_until(lambda: len(got) >= 80 - first + 1, 20, "the late joiner's history")
+        assert got[0] == first and got[-1] == 80
+        src.close()

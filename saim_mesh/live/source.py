@@ -33,6 +33,12 @@ CACHE = 100_000        # frames kept for recovery and late joiners (a frame is o
 # instead (the heartbeat's recovery, from the last frame delivered) and, beyond the cache,
 # from the source's journal (`Sequencer`).
 HISTORY = CACHE
+# the cache of a source that yields across radio links and keeps a journal: a heal's
+# recovery asks the cache for every frame missed at once, one copy per EA behind the link
+# (k EAs on a host: k copies at the same moment), which filled the link and held up the
+# live frames of other sources that share it. A small cache leaves the rest of the gap to
+# the journal, whose askers size what they ask to what comes back in time.
+YIELDING_CACHE = 32
 FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
 LINGER_S = 0.05        # the longest a lingering source holds a watermark back (wall seconds)
 
@@ -58,11 +64,12 @@ class LiveSource:
     """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
 
     def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
-                 cache: int | None = CACHE, frame_bytes: int = FRAME_BYTES, yielding: bool = False):
+                 cache: int | None = None, frame_bytes: int = FRAME_BYTES, yielding: bool = False):
         """`yielding` (across slow radio links): what it sends again for recoveries and
         catch-ups (its cache's and its journal's replies) yields to live traffic: DROP at a
         lower priority, so no router stalls on it and closes its links; the EAs ask again."""
-        cache = CACHE if cache is None else cache
+        if cache is None:
+            cache = YIELDING_CACHE if yielding and state_dir is not None else CACHE
         if cache < 1:
             raise ValueError(f"source {name}: --cache {cache}: at least 1 frame")
         F.Frame(v=1, source=name, epoch=0, seq=1, wm=0.0)   # the name is checked as a frame checks it

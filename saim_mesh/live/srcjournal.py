@@ -31,7 +31,7 @@ from .. import wire as W
 _LEN = struct.Struct(">I")
 MAX_FRAMES = 2_000
 MAX_BYTES = 16 * 2**20
-FIRST_ASK_BYTES = 256 * 1024   # an asker's first chunk; halved when it does not come in time
+FIRST_ASK_BYTES = 16 * 1024   # an asker's first chunk (2 s at 64 kbit/s): doubled while it comes in time, halved when not
 MIN_ASK_BYTES = 4 * 1024
 ASK_TIMEOUT_S = 3.0      # an ask's wait for its replies, doubled (to `MAX_ASK_TIMEOUT_S`) while they come late
 MAX_ASK_TIMEOUT_S = 12.0
