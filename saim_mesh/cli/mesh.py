@@ -246,7 +246,8 @@ def add(sub) -> None:
     so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start) and its "
                     "durable journal of frames, served for catch-up beyond the publisher's cache")
     so.add_argument("--cache", type=int, default=None, metavar="N",
-                    help="frames the publisher keeps in memory for recovery and late joiners (default 100000)")
+                    help="frames the publisher keeps in memory for recovery and late joiners (default 100000; "
+                    "32 with --yield-catch-up and --state: its journal gives the rest, in asks that fit the link)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
     so.add_argument("--yield-catch-up", action="store_true",
                     help="recoveries and journal catch-ups yield to live traffic (DROP, lower priority): "

@@ -1,0 +1,88 @@
+"""Do Zenoh's priorities keep live frames on time over a radio link that a catch-up
+fills? Two namespaced hosts, a router each, one 64 kbit/s `tbf` link between them (as in
+`bench_hosts`); on the far host a live publisher (BLOCK, default priority, 200 B every
+100 ms) and, in the second and third phases, a bulk publisher as a yielding journal sends
+(DROP, DATA_LOW, 8 kB every 20 ms); the subscriber beyond the link times each live message.
+Phases: live alone; behind the bulk; behind the bulk with the routers' kernel send buffer
+bounded (SO_SNDBUF 8 kB). Writes bench/results/radio_priority.json (needs root)."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from saim_mesh.stats import percentiles
+
+from . import RESULTS, ROOT
+
+OUT = RESULTS / "radio_priority.json"
+PHASES = {"alone": (False, None), "behind_bulk": (True, None), "behind_bulk_sndbuf_8k": (True, "8192")}
+
+
+def wait_ready(log: Path, proc, timeout: float = 60.0) -> None:
+    end = time.monotonic() + timeout
+    while not (log.exists() and "ready" in log.read_text()):
+        if proc.poll() is not None or time.monotonic() > end:
+            raise RuntimeError(f"{log.name}: not ready ({log.read_text()[-300:] if log.exists() else 'no log'})")
+        time.sleep(0.1)
+
+
+def phase(out: Path, bulk: bool, sndbuf: str | None, rate: int, secs: float) -> dict:
+    from saim_mesh.net.netns import Hosts
+    shutil.rmtree(out, ignore_errors=True)   # the logs are appended to
+    out.mkdir(parents=True)
+    env = {**os.environ, **({"RADIO_SNDBUF": sndbuf} if sndbuf else {})}
+    with Hosts(2) as hs:
+        e0, e1 = (f"tcp/{hs.address(h)}:7447" for h in ("h0", "h1"))
+
+        def run(host: str, args: list[str], name: str) -> Path:
+            log = out / f"{name}.log"
+            p = hs.run(host, [sys.executable, "-m", "benchmarks.radio_node", *args], log=log,
+                       cwd=ROOT, env=env)
+            wait_ready(log, p)
+            return log
+        run("h0", ["router", e0], "r0")
+        run("h1", ["router", e1, e0], "r1")
+        hs.set_rate("h1", rate)
+        sub = run("h0", ["sub", e0, "radio/**"], "sub")
+        run("h1", ["live", e1, "radio/live"], "live")
+        if bulk:
+            run("h1", ["bulk", e1, "radio/bulk"], "bulk")
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < secs:   # the measurement's length, not a synchronisation
+            time.sleep(1.0)
+    text = sub.read_text()
+    lat = [float(x) for x in re.findall(r"^lat ([\d.]+)$", text, re.M)]
+    bulk_bytes = sum(int(x) for x in re.findall(r"^bulk (\d+)$", text, re.M))
+    return {"live_latency_s": percentiles(lat, 3), "live_sent_per_s": 10,
+            "live_received": len(lat), "bulk_kbit_s": round(bulk_bytes * 8 / 1000 / secs, 1)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="bench_radio_priority", description=__doc__)
+    ap.add_argument("--rate-kbit", type=int, default=64)
+    ap.add_argument("--secs", type=float, default=60.0, help="wall seconds per phase")
+    ap.add_argument("--out-dir", default="out/bench-radio-priority")
+    ap.add_argument("--out", default=str(OUT))
+    a = ap.parse_args(argv)
+    from saim_mesh.net import netns
+    if why := netns.unavailable():
+        print(f"bench_radio_priority: skipped: no namespaced hosts here: {why}")
+        return 3
+    netns.cleanup_stale()
+    res = {"rate_kbit": a.rate_kbit, "secs_per_phase": a.secs, "phases": {}}
+    for name, (bulk, sndbuf) in PHASES.items():
+        res["phases"][name] = phase(Path(a.out_dir) / name, bulk, sndbuf, a.rate_kbit, a.secs)
+        print(name, json.dumps(res["phases"][name]), flush=True)
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(json.dumps(res, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
