@@ -53,9 +53,7 @@ def phase(out: Path, bulk: bool, sndbuf: str | None, rate: int, secs: float) -> 
         run("h1", ["live", e1, "radio/live"], "live")
         if bulk:
             run("h1", ["bulk", e1, "radio/bulk"], "bulk")
-        t0 = time.monotonic()
-        while time.monotonic() - t0 < secs:   # the measurement's length, not a synchronisation
-            time.sleep(1.0)
+        time.sleep(secs)   # the measurement's length, not a synchronisation
     text = sub.read_text()
     lat = [float(x) for x in re.findall(r"^lat ([\d.]+)$", text, re.M)]
     bulk_bytes = sum(int(x) for x in re.findall(r"^bulk (\d+)$", text, re.M))
