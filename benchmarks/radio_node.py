@@ -22,18 +22,23 @@ def main(argv: list[str]) -> int:
         conf = zconf.config(listen=[ep], connect=rest, mode="router")
         if os.environ.get("RADIO_SNDBUF"):
             conf.insert_json5("transport/link/tcp/so_sndbuf", os.environ["RADIO_SNDBUF"])
+        if os.environ.get("RADIO_BATCH"):
+            conf.insert_json5("transport/link/tx/batch_size", os.environ["RADIO_BATCH"])
         with zenoh.open(conf):
             print("ready", flush=True)
             stop.wait()
         return 0
     with zenoh.open(zconf.config(connect=[ep], mode="client")) as s:
         key = rest[0]
-        if role == "bulk":   # a catch-up as a yielding journal sends it: DROP, low priority, 8 kB every 20 ms
+        if role == "bulk":   # a catch-up as a yielding journal sends it: DROP, low priority, 8 kB every 20 ms or RADIO_BULK_EVERY s
             pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP,
                                       priority=zenoh.Priority.DATA_LOW)
+            every = float(os.environ.get("RADIO_BULK_EVERY", "0.02"))
             print("ready", flush=True)
-            while not stop.wait(0.02):
+            while True:
                 pub.put(os.urandom(8000))
+                if stop.wait(every):
+                    break
         elif role == "live":   # a source's live frames: BLOCK, 200 bytes every 100 ms
             pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
             print("ready", flush=True)

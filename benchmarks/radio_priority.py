@@ -4,7 +4,9 @@ fills? Two namespaced hosts, a router each, one 64 kbit/s `tbf` link between the
 100 ms) and, in the second and third phases, a bulk publisher as a yielding journal sends
 (DROP, DATA_LOW, 8 kB every 20 ms); the subscriber beyond the link times each live message.
 Phases: live alone; behind the bulk; behind the bulk with the routers' kernel send buffer
-bounded (SO_SNDBUF 8 kB). Writes bench/results/radio_priority.json (needs root)."""
+bounded (SO_SNDBUF 8 kB), with Zenoh batches of 2 kB (and 4 kB send buffers); behind a
+bulk paced below the link's rate (24 and 48 kbit/s offered: what `srcjournal.Pacer` does).
+Writes bench/results/radio_priority.json (needs root)."""
 from __future__ import annotations
 
 import argparse
@@ -21,7 +23,12 @@ from saim_mesh.stats import percentiles
 from . import RESULTS, ROOT
 
 OUT = RESULTS / "radio_priority.json"
-PHASES = {"alone": (False, None), "behind_bulk": (True, None), "behind_bulk_sndbuf_8k": (True, "8192")}
+# phase: (the bulk's kbit/s offered: None none, 3200 as fast as it can go; the routers' SO_SNDBUF;
+# their Zenoh batch_size): None as deployed
+PHASES = {"alone": (None, None, None), "behind_bulk": (3200, None, None),
+          "behind_bulk_sndbuf_8k": (3200, "8192", None), "behind_bulk_batch_2k": (3200, None, "2048"),
+          "behind_bulk_batch_2k_sndbuf_4k": (3200, "4096", "2048"),
+          "behind_bulk_paced_24k": (24, None, None), "behind_bulk_paced_48k": (48, None, None)}
 
 
 def wait_ready(log: Path, proc, timeout: float = 60.0) -> None:
@@ -32,11 +39,12 @@ def wait_ready(log: Path, proc, timeout: float = 60.0) -> None:
         time.sleep(0.1)
 
 
-def phase(out: Path, bulk: bool, sndbuf: str | None, rate: int, secs: float) -> dict:
+def phase(out: Path, bulk: float | None, sndbuf: str | None, batch: str | None, rate: int, secs: float) -> dict:
     from saim_mesh.net.netns import Hosts
     shutil.rmtree(out, ignore_errors=True)   # the logs are appended to
     out.mkdir(parents=True)
-    env = {**os.environ, **({"RADIO_SNDBUF": sndbuf} if sndbuf else {})}
+    env = {**os.environ, **({"RADIO_SNDBUF": sndbuf} if sndbuf else {}), **({"RADIO_BATCH": batch} if batch else {}),
+           **({"RADIO_BULK_EVERY": f"{8000 * 8 / 1000 / bulk:g}"} if bulk else {})}
     with Hosts(2) as hs:
         e0, e1 = (f"tcp/{hs.address(h)}:7447" for h in ("h0", "h1"))
 
@@ -51,7 +59,7 @@ def phase(out: Path, bulk: bool, sndbuf: str | None, rate: int, secs: float) -> 
         hs.set_rate("h1", rate)
         sub = run("h0", ["sub", e0, "radio/**"], "sub")
         run("h1", ["live", e1, "radio/live"], "live")
-        if bulk:
+        if bulk is not None:
             run("h1", ["bulk", e1, "radio/bulk"], "bulk")
         time.sleep(secs)   # the measurement's length, not a synchronisation
     text = sub.read_text()
@@ -74,8 +82,8 @@ def main(argv=None) -> int:
         return 3
     netns.cleanup_stale()
     res = {"rate_kbit": a.rate_kbit, "secs_per_phase": a.secs, "phases": {}}
-    for name, (bulk, sndbuf) in PHASES.items():
-        res["phases"][name] = phase(Path(a.out_dir) / name, bulk, sndbuf, a.rate_kbit, a.secs)
+    for name, (bulk, sndbuf, batch) in PHASES.items():
+        res["phases"][name] = phase(Path(a.out_dir) / name, bulk, sndbuf, batch, a.rate_kbit, a.secs)
         print(name, json.dumps(res["phases"][name]), flush=True)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(res, indent=1) + "\n")

@@ -131,6 +131,8 @@ BAD = [   # (what the file says, the one line expected)
     ("secure = true\n", "scenario: missing"),
     (BASE.replace('secure = false', 'secure = false\nlive = true'), "live = true needs start"),
     (BASE.replace('secure = false', 'secure = false\nstart = "yesterday"'), "start: 'yesterday' is not an ISO 8601"),
+    (BASE.replace('secure = false', 'secure = false\ncatch_up_kbit = 0'), "catch_up_kbit: a pace must be > 0"),
+    (BASE.replace('secure = false', 'secure = false\ncatch_up_kbit = "fast"'), "catch_up_kbit: expected a number"),
 ]
 
 

@@ -9,11 +9,12 @@ import uuid
 
 import msgspec
 import pytest
+import zenoh
 
 from saim_mesh import scenario as S
 from saim_mesh.live import play
-from saim_mesh.live.srcjournal import (ASK_TIMEOUT_S, HELD, MAX_ASK_TIMEOUT_S, NONE_HELD, Asker, JournalQuery,
-                                      SourceJournal)
+from saim_mesh.live.srcjournal import (ASK_TIMEOUT_S, HELD, MAX_ASK_TIMEOUT_S, NONE_HELD, PACED, Asker,
+                                      JournalQuery, Pacer, SourceJournal)
 from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
@@ -106,7 +107,7 @@ class LossySession:
         self.journal.serve(q, key)
         out = []
         for b in q.replies:
-            if b == HELD:
+            if b in (HELD, PACED):   # sent BLOCK: never dropped
                 out.append(Reply(ok=b))
                 continue
             self.sent += 1
@@ -188,6 +189,45 @@ def test_an_asker_whose_frames_are_all_dropped_says_congested_and_asks_for_less(
     assert len(s.asks) > 3 and s.asks[-1].max_bytes < 64_000
 
 
+def test_a_pacer_grants_what_its_bucket_pays_for_at_most_a_burst_an_ask():
+    """Frames in order while the bucket is not in debt, at most `burst` bytes to one ask
+    (the askers share it), refilled at its rate."""
+    t = [0.0]
+    p = Pacer(1000, clock=lambda: t[0])
+    assert p.grant([400] * 5) == 3            # 1000 -> -200
+    assert p.grant([100]) == 0                # in debt
+    t[0] = 0.5
+    assert p.grant([100] * 10) == 3           # -200 + 500 = 300 -> 0
+    t[0] = 100.0                              # full again, not more than its burst
+    assert p.grant([600] * 5) == 2 and p.tokens == -200
+    assert p.withheld == 2 + 1 + 7 + 3
+    with pytest.raises(ValueError, match="must be > 0"):
+        Pacer(0)
+
+
+def test_a_paced_journal_sends_its_share_says_so_and_the_asker_comes_back_later(tmp_path):
+    """k EAs catching up across one radio link each pull a copy: a yielding journal paces
+    its answers over all of them together. An ask beyond the bucket gets what it pays for
+    and `PACED` (BLOCK, after the frames); its asker stops there rather than asking again at
+    once (each ask crosses the link too) and comes back for the rest, its ask size kept."""
+    t = [0.0]
+    j = frames_journal(tmp_path, n=30, size=1000)   # 1,004-byte frames
+    j.pacer = Pacer(4000, clock=lambda: t[0])
+    q = FakeQuery(msgspec.msgpack.encode(JournalQuery(epoch=1, lo=1, hi=30)))
+    j.serve(q, "k")
+    assert q.replies[0] == HELD and [seq_of(b) for b in q.replies[1:-1]] == [1, 2, 3, 4] and q.replies[-1] == PACED
+    assert q.qos[-1]["congestion_control"] == zenoh.CongestionControl.BLOCK
+    s = LossySession(j)
+    a = Asker(chunk=64_000)
+    assert a.ask(s, "k", 1, 5, 30, Read, budget_s=30) == [] and a.why == "paced" and len(s.asks) == 1
+    t[0] = 2.0
+    assert seqs(a.ask(s, "k", 1, 5, 30, Read, budget_s=30)) == [5, 6, 7, 8] and a.why == "paced"
+    assert len(s.asks) == 2 and a.chunk == 64_000 and a.timeout == ASK_TIMEOUT_S
+    t[0] = 100.0
+    j.pacer.burst = 1e9
+    assert seqs(a.ask(s, "k", 1, 9, 30, Read, budget_s=30)) == list(range(9, 31)) and a.why == "done"
+
+
 class SlowLink(LossySession):
     """A router queue that drains slower than an ask waits: an ask that waits less than
     `needs` seconds gets only the journal's `HELD` (its frames come after it stopped
@@ -217,13 +257,13 @@ def test_an_asker_whose_frames_come_after_it_stopped_listening_waits_longer_next
     assert max(never.timeouts) == MAX_ASK_TIMEOUT_S and len(never.timeouts) > 3
 
 
-@pytest.mark.parametrize("yielding, first", [(True, 49), (False, 1)])
+@pytest.mark.parametrize("yielding, first", [(True, 77), (False, 1)])
 def test_a_yielding_source_leaves_a_long_gap_to_its_journal_not_its_cache(tmp_path, yielding, first):
     """A heal's recovery asked the cache for every missed frame at once, one copy per EA
     behind the link, and the copies held up the live frames of every source sharing it. A
     source that yields across radio links and keeps a journal caches only the last
     `YIELDING_CACHE` frames; the journal, asked in sizes that fit the link, has the rest.
-    A late joiner's history from the cache shows what it holds: the last 32 of 80 frames,
+    A late joiner's history from the cache shows what it holds: the last 4 of 80 frames,
     or all 80 for a source that does not yield."""
     import zenoh
     import zenoh.ext as zx
@@ -232,7 +272,7 @@ def test_a_yielding_source_leaves_a_long_gap_to_its_journal_not_its_cache(tmp_pa
     from saim_mesh.live import frames as F
     from saim_mesh.live.source import HISTORY, YIELDING_CACHE, LiveSource
     from saim_mesh.zconf import config
-    assert YIELDING_CACHE == 32
+    assert YIELDING_CACHE == 4
     ks = KeySpace(f"test/{uuid.uuid4().hex[:8]}")
     got: list[int] = []
     with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
@@ -240,6 +280,7 @@ def test_a_yielding_source_leaves_a_long_gap_to_its_journal_not_its_cache(tmp_pa
         for k in range(1, 81):
             src.heartbeat() if k > 1 else src.watermark(float(k))
         assert src.seq == 80 and len(src.journal.frames(src.epoch, 1, 80)) == 80
+        assert (src.journal.pacer is not None) is yielding   # its journal paced too (a test above)
         zx.declare_advanced_subscriber(
             s, ks.src("cp.test"), lambda smp: got.append(F.decode(smp.payload.to_bytes(), 1 << 20).seq),
             history=zx.HistoryConfig(max_samples=HISTORY))

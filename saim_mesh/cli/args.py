@@ -37,6 +37,14 @@ def _seconds(v: str) -> float:
     return f
 
 
+def _positive(v: str) -> float:
+    """A finite number > 0 (a rate)."""
+    f = _seconds(v)
+    if f == 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, not {v!r}")
+    return f
+
+
 def _progress(frac: float) -> None:
     if sys.stderr.isatty():
         n = int(frac * 40)

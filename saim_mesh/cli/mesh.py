@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from .. import scenario as S
-from .args import _speed, _seconds, _zmode, _zenoh_args, _start_of, _instant, DEFAULT_SCENARIO
+from .args import _speed, _positive, _seconds, _zmode, _zenoh_args, _start_of, _instant, DEFAULT_SCENARIO
 
 
 def cmd_replay(a) -> int:
@@ -54,7 +54,8 @@ def cmd_source(a) -> int:
         msgs = play.read_lines(f, a.format, a.entity, start)
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"source.{a.name}", sc, root, **_zmode(a))
     with zenoh.open(conf) as s:
-        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache, yielding=a.yield_catch_up)
+        src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache, yielding=a.yield_catch_up,
+                         catch_up_kbit=a.catch_up_kbit)
         pace = None
         if not a.speed and not a.live:   # as fast as possible: no further ahead than its EAs allow
             from ..live.pace import SourcePace
@@ -247,11 +248,15 @@ def add(sub) -> None:
                     "durable journal of frames, served for catch-up beyond the publisher's cache")
     so.add_argument("--cache", type=int, default=None, metavar="N",
                     help="frames the publisher keeps in memory for recovery and late joiners (default 100000; "
-                    "32 with --yield-catch-up and --state: its journal gives the rest, in asks that fit the link)")
+                    "4 with --yield-catch-up and --state: its journal gives the rest, paced)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
     so.add_argument("--yield-catch-up", action="store_true",
                     help="recoveries and journal catch-ups yield to live traffic (DROP, lower priority): "
-                         "across slow radio links, where a router stalled on them closes its links")
+                         "across slow radio links, where a router stalled on them closes its links; its "
+                         "journal's answers are paced (--catch-up-kbit)")
+    so.add_argument("--catch-up-kbit", type=_positive, default=None, metavar="KBIT",
+                    help="the journal's answers over all askers together, at most KBIT kbit/s (default: "
+                         "24 with --yield-catch-up, under half of a 64 kbit/s radio; else unpaced)")
     so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
     so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")
     _zenoh_args(so)

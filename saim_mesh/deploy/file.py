@@ -20,7 +20,8 @@ from pathlib import Path
 DEFAULT_PORT = 7447           # Zenoh's own default
 NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 DNS_RE = re.compile(r"^[A-Za-z0-9]([A-Za-z0-9.-]*[A-Za-z0-9])?$")
-TOP_KEYS = {"scenario", "root", "secure", "pki", "speed", "live", "start", "until", "source_linger", "catch_up", "host",
+TOP_KEYS = {"scenario", "root", "secure", "pki", "speed", "live", "start", "until", "source_linger", "catch_up",
+            "catch_up_kbit", "host",
             "router"}
 HOST_KEYS = {"name", "addresses", "names", "interface", "attach", "eas", "sources", "fusion", "consoles", "tak"}
 ROUTER_KEYS = {"name", "host", "cp", "port", "links"}
@@ -92,6 +93,7 @@ class Deployment:
     path: Path | None = None            # the file it came from
     attach_map: dict[str, str] = field(default_factory=dict)   # unit -> router (a topology file's [attach])
     catch_up: str | None = None         # "yield" | "block" (the default)
+    catch_up_kbit: float | None = None  # the sources' journals' pace (default with "yield": live/srcjournal.py)
 
     def yielding(self) -> bool:
         """Sources' recoveries and catch-ups yield to live traffic (live/source.py), asked
@@ -269,6 +271,10 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
     if catch_up is not None and catch_up not in ("yield", "block"):
         e(f"catch_up: {catch_up!r} is not 'yield' or 'block'")
         catch_up = None
+    catch_up_kbit = _number(doc.get("catch_up_kbit"), e, "catch_up_kbit")
+    if catch_up_kbit == 0:
+        e("catch_up_kbit: a pace must be > 0 kbit/s")
+        catch_up_kbit = None
     hosts: dict[str, Host] = {}
     raw_hosts = doc.get("host", [])
     if not isinstance(raw_hosts, list) or not all(isinstance(h, dict) for h in raw_hosts):
@@ -355,7 +361,8 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
     sc_path = Path(scen) if Path(scen).is_absolute() else (base / scen)
     dep = Deployment(str(sc_path.resolve()) if path else scen, hosts, routers, root, _bool(doc.get("secure"), e,
                      "secure", True), (base / pki).resolve() if pki else (base / "pki").resolve(), speed, live,
-                     start, until, 30.0 if linger is None else linger, path, catch_up=catch_up)
+                     start, until, 30.0 if linger is None else linger, path, catch_up=catch_up,
+                     catch_up_kbit=catch_up_kbit)
     return dep, e.lines
 
 

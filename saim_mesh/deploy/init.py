@@ -97,6 +97,7 @@ def to_toml(dep: Deployment, sc_name: str) -> str:
              "# until = 1800   # end the sources at this event time",
              "# source_linger = 30   # seconds a source stays up after its end (it serves catch-up)",
              '# catch_up = "yield"   # recoveries yield to live traffic (DROP, lower priority); default "block"',
+             "# catch_up_kbit = 24   # with yield: each source's journal answers at most this, all askers together",
              ""]
     for h in dep.hosts.values():
         lines += ["[[host]]", f"name = {_q(h.name)}", f"addresses = {_list(h.addresses)}",

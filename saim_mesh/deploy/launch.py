@@ -207,6 +207,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
                                 *where(name.removeprefix("cp.")), "--root", root, "--speed", dep.speed,
                                 "--state", str(out_dir / "sources"), "--linger", f"{dep.source_linger:g}",
                                 *(["--yield-catch-up"] if dep.yielding() else []),
+                                *(["--catch-up-kbit", f"{dep.catch_up_kbit:g}"] if dep.catch_up_kbit else []),
                                 *live_args, *pace_args, *until_args], env=clean_env(), log_dir=logs))
         if h.sources:
             echo(f"host {host}: sources {', '.join(h.sources)} started", flush=True)

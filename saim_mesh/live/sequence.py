@@ -27,7 +27,7 @@ from .srcjournal import Asker
 GAP_WAIT_S = 3.0      # wall seconds a frame that came early waits for the missing ones (recovery, history)
 PATIENCE = 40         # asks of a journal that gave nothing over a congested link before the rest is a gap
 NO_ANSWER_PATIENCE = 5   # asks of a journal nobody answered (no route to it now) before the rest is a gap
-ASK_AGAIN = {"congested": PATIENCE, "no answer": NO_ANSWER_PATIENCE}   # why an ask gave nothing -> asks before a gap
+ASK_AGAIN = {"congested": PATIENCE, "paced": PATIENCE, "no answer": NO_ANSWER_PATIENCE}   # why an ask gave nothing -> asks before a gap
 HELD_FRAMES = 20_000  # frames held per source meanwhile (beyond: dropped, recovered again or a gap)
 REFETCH = 500         # frames asked of a journal at a time when fetching a source again
 

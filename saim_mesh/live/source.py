@@ -20,7 +20,7 @@ from dissemination.keyspace import KeySpace
 
 from .. import messages as M
 from . import frames as F
-from .srcjournal import YIELDING, SourceJournal
+from .srcjournal import CATCH_UP_KBIT, YIELDING, Pacer, SourceJournal
 
 BLOCK = zenoh.CongestionControl.BLOCK
 CACHE = 100_000        # frames kept for recovery and late joiners (a frame is one flush)
@@ -37,8 +37,10 @@ HISTORY = CACHE
 # recovery asks the cache for every frame missed at once, one copy per EA behind the link
 # (k EAs on a host: k copies at the same moment), which filled the link and held up the
 # live frames of other sources that share it. A small cache leaves the rest of the gap to
-# the journal, whose askers size what they ask to what comes back in time.
-YIELDING_CACHE = 32
+# the journal, whose answers are paced over all askers together (`Pacer`). At 32 frames
+# (~140 B each, brigade-small) the 15 EAs of a healed BN host still pulled ~68 kB at once,
+# 8.5 s of a 64 kbit/s link; at 4, about 1 s.
+YIELDING_CACHE = 4
 FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
 LINGER_S = 0.05        # the longest a lingering source holds a watermark back (wall seconds)
 
@@ -64,10 +66,13 @@ class LiveSource:
     """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
 
     def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
-                 cache: int | None = None, frame_bytes: int = FRAME_BYTES, yielding: bool = False):
+                 cache: int | None = None, frame_bytes: int = FRAME_BYTES, yielding: bool = False,
+                 catch_up_kbit: float | None = None):
         """`yielding` (across slow radio links): what it sends again for recoveries and
         catch-ups (its cache's and its journal's replies) yields to live traffic: DROP at a
-        lower priority, so no router stalls on it and closes its links; the EAs ask again."""
+        lower priority, so no router stalls on it and closes its links; the EAs ask again.
+        Its journal's answers are then paced at `catch_up_kbit` (default `CATCH_UP_KBIT`)
+        over all askers together: k EAs beyond one link pull k copies of a gap."""
         if cache is None:
             cache = YIELDING_CACHE if yielding and state_dir is not None else CACHE
         if cache < 1:
@@ -84,7 +89,10 @@ class LiveSource:
         self.sent = 0
         # the durable journal (with a state directory), served for catch-up beyond the cache
         qos = YIELDING if yielding else None
-        self.journal = SourceJournal(state_dir, name, self.epoch, qos) if state_dir is not None else None
+        if catch_up_kbit is None and yielding:
+            catch_up_kbit = CATCH_UP_KBIT
+        pacer = Pacer(catch_up_kbit * 1000 / 8) if catch_up_kbit is not None else None
+        self.journal = SourceJournal(state_dir, name, self.epoch, qos, pacer) if state_dir is not None else None
         # a restart (its journal holds earlier epochs) resumes after what it published then:
         # `publish` skips that many messages of the same stream, and nothing older follows
         self.published_before, self.resumed_epoch = 0, 0

@@ -8,7 +8,9 @@ A query is a `JournalQuery` (epoch, first and last seq wanted, at most how many 
 the answer is `HELD` (a few bytes, never yielding: the asker knows the journal was
 reached), then one reply per frame held, in order, at most `MAX_FRAMES` and the bytes
 asked for per query (ask again from where it stopped), or "none held". Over a slow radio
-link the frames can yield to live traffic (`reply_qos`: DROP at a lower priority); the
+link the frames can yield to live traffic (`reply_qos`: DROP at a lower priority) and be
+paced (`Pacer`: at most so many bytes a second over every asker together, so that k EAs
+catching up across one link leave room for the live frames behind them); the
 `Asker` then takes what came in sequence, asks again from the first one missing, and
 sizes its asks to what came back in time (AIMD): an answer of `HELD` alone (every frame
 dropped) is congestion, not a journal that is not there. A query that cannot be read is answered
@@ -37,7 +39,42 @@ ASK_TIMEOUT_S = 3.0      # an ask's wait for its replies, doubled (to `MAX_ASK_T
 MAX_ASK_TIMEOUT_S = 12.0
 NONE_HELD = b"none held"
 HELD = b"\x00held"   # not a frame (a frame is a msgpack map): the journal was reached
+PACED = b"\x00paced"   # ... and held more than it sent now (`Pacer`): ask again later, not at once
 YIELDING = {"congestion_control": zenoh.CongestionControl.DROP, "priority": zenoh.Priority.DATA_LOW}
+
+
+CATCH_UP_KBIT = 24.0   # a yielding journal's pace: under half of a 64 kbit/s radio, the rest for live frames
+
+
+class Pacer:
+    """A token bucket over a journal's answers: `rate` bytes a second, `burst` at once.
+    A lower Zenoh priority does not keep live frames on time once the catch-up's bytes are
+    in the connection (bench/results/radio_priority.json: 11.6 s behind a yielding bulk,
+    under 1 s behind one paced below the link's rate), so the journal sends less rather
+    than lower. An ask beyond the bucket gets the frames it can pay for (at least one while
+    the bucket is not in debt, and at most `burst` bytes, so that the askers share it); the
+    journal says `PACED` and the asker comes back later for the rest. `clock`: monotonic
+    seconds (a test's own)."""
+
+    def __init__(self, rate: float, burst: float | None = None, clock=time.monotonic):
+        if not rate > 0:
+            raise ValueError(f"catch-up pace {rate!r} bytes/s: must be > 0")
+        self.rate, self.burst, self.clock = rate, burst if burst is not None else rate, clock
+        self.tokens, self.at = self.burst, clock()
+        self.withheld = 0   # frames asked for and not sent at once (asked again)
+
+    def grant(self, sizes: list[int]) -> int:
+        """How many of these frames (in order) go now; their bytes are taken from the bucket."""
+        now = self.clock()
+        self.tokens = min(self.burst, self.tokens + (now - self.at) * self.rate)
+        self.at = now
+        n = given = 0
+        while n < len(sizes) and self.tokens > 0 and given < self.burst:
+            self.tokens -= sizes[n]
+            given += sizes[n]
+            n += 1
+        self.withheld += len(sizes) - n
+        return n
 
 
 class JournalQuery(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
@@ -53,9 +90,11 @@ class SourceJournal:
     """Append-only frames of one source, indexed by (epoch, seq); thread-safe: the source
     appends, the queryable's callback reads."""
 
-    def __init__(self, state_dir: str | Path, name: str, epoch: int, reply_qos: dict | None = None):
+    def __init__(self, state_dir: str | Path, name: str, epoch: int, reply_qos: dict | None = None,
+                 pacer: Pacer | None = None):
         self.dir, self.name, self.epoch = Path(state_dir), name, epoch
         self.reply_qos = reply_qos or {}   # YIELDING across radio links
+        self.pacer = pacer                 # ... and paced there
         self.dir.mkdir(parents=True, exist_ok=True)
         self.lock = threading.Lock()
         self.f = open(self.path(epoch), "ab")
@@ -127,13 +166,19 @@ class SourceJournal:
             except (msgspec.ValidationError, msgspec.DecodeError) as e:
                 raise M.MessageError("journalquery", "(decode)", str(e)[:160]) from None
             frames = self.frames(q.epoch, q.lo, q.hi, q.max_bytes)
-            if not frames:   # said, so that the asker stops asking (an answer that never came is no such word)
+            held = len(frames)
+            if self.pacer is not None:
+                with self.lock:   # answers come on Zenoh's threads
+                    frames = frames[:self.pacer.grant([len(b) for b in frames])]
+            if not held:   # said, so that the asker stops asking (an answer that never came is no such word)
                 query.reply_err(NONE_HELD)
             else:   # reached, whatever becomes of the yielding frames on the way
                 query.reply(key, HELD, congestion_control=zenoh.CongestionControl.BLOCK)
             for b in frames:
                 query.reply(key, b, **self.reply_qos)
                 self.served += 1
+            if len(frames) < held:   # the rest later: the asker does not ask again at once
+                query.reply(key, PACED, congestion_control=zenoh.CongestionControl.BLOCK)
         except (M.MessageError, OSError) as e:   # said to the asker; the source goes on
             self.errors += 1
             query.reply_err(str(e)[:200].encode())
@@ -195,7 +240,7 @@ class Asker:
                 self.why = "congested"
                 break
             got: dict[int, tuple] = {}
-            said_none = answered = False
+            said_none = answered = paced = False
             sent = time.monotonic()
             q = msgspec.msgpack.encode(JournalQuery(epoch=epoch, lo=want, hi=hi, max_bytes=self.chunk))
             for r in session.get(key, payload=q, timeout=self.timeout,
@@ -204,6 +249,9 @@ class Asker:
                 if r.ok is not None:
                     b = r.ok.payload.to_bytes()
                     if b == HELD:   # the journal was reached (answered): nothing to read
+                        continue
+                    if b == PACED:
+                        paced = True
                         continue
                     f = read(b)
                     if f is not None and want <= f.seq <= hi:
@@ -217,6 +265,9 @@ class Asker:
                 want += 1
             if said_none:
                 self.why = "none held"
+                break
+            if paced:   # the journal's pace, shared by every asker: no faster by asking again now
+                self.why = "paced"
                 break
             if want == start and not answered and not late:   # no journal there (or no link): a few tries
                 silent += 1
