@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+from saim_mesh.proc import wait_line
 from saim_mesh.stats import percentiles
 
 from . import RESULTS, ROOT
@@ -29,14 +30,6 @@ PHASES = {"alone": (None, None, None), "behind_bulk": (3200, None, None),
           "behind_bulk_sndbuf_8k": (3200, "8192", None), "behind_bulk_batch_2k": (3200, None, "2048"),
           "behind_bulk_batch_2k_sndbuf_4k": (3200, "4096", "2048"),
           "behind_bulk_paced_24k": (24, None, None), "behind_bulk_paced_48k": (48, None, None)}
-
-
-def wait_ready(log: Path, proc, timeout: float = 60.0) -> None:
-    end = time.monotonic() + timeout
-    while not (log.exists() and "ready" in log.read_text()):
-        if proc.poll() is not None or time.monotonic() > end:
-            raise RuntimeError(f"{log.name}: not ready ({log.read_text()[-300:] if log.exists() else 'no log'})")
-        time.sleep(0.1)
 
 
 def phase(out: Path, bulk: float | None, sndbuf: str | None, batch: str | None, rate: int, secs: float) -> dict:
@@ -52,7 +45,7 @@ def phase(out: Path, bulk: float | None, sndbuf: str | None, batch: str | None, 
             log = out / f"{name}.log"
             p = hs.run(host, [sys.executable, "-m", "benchmarks.radio_node", *args], log=log,
                        cwd=ROOT, env=env)
-            wait_ready(log, p)
+            wait_line(log, p, "ready", 60)
             return log
         run("h0", ["router", e0], "r0")
         run("h1", ["router", e1, e0], "r1")

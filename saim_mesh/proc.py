@@ -108,6 +108,23 @@ class Proc:
 PR_SET_PDEATHSIG = 1
 
 
+def wait_line(log: Path, proc, prefix: str, timeout: float) -> str:
+    """The first line of `log` that starts with `prefix`, waited for: a process that is
+    not a `Proc` (one started in a namespaced host, its output appended to a file).
+    RuntimeError, with the log's last lines, when it exits first or `timeout` passes."""
+    end = time.monotonic() + timeout
+
+    def lines() -> list[str]:
+        return log.read_text(errors="replace").splitlines() if log.exists() else []
+    while (got := next((x for x in lines() if x.startswith(prefix)), None)) is None:
+        if proc.poll() is not None:
+            raise RuntimeError(f"exited {proc.returncode} before '{prefix}': {lines()[-10:]}")
+        if time.monotonic() > end:
+            raise RuntimeError(f"within {timeout} s: no '{prefix}' in {log}: {lines()[-10:]}")
+        time.sleep(0.01)
+    return got
+
+
 def _prctl():
     """libc's prctl (Linux), or None."""
     if not sys.platform.startswith("linux"):

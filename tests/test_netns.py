@@ -12,13 +12,13 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from saim_mesh.net import netns
 from saim_mesh.net.netns import Hosts, NetnsError, cleanup, namespaces, stale_prefixes
+from saim_mesh.proc import wait_line
 
 from .conftest import ROOT, SMALL, wait_until
 
@@ -134,19 +134,6 @@ def last(log: Path, word: str) -> int:
     text = log.read_text(errors="replace") if log.exists() else ""
     vals = re.findall(rf"^{re.escape(word)} (\d+)\n", text, re.M)
     return int(vals[-1]) if vals else -1
-
-
-def wait_line(log: Path, proc: subprocess.Popen, prefix: str, timeout: float) -> str:
-    end = time.monotonic() + timeout
-    while True:
-        got = next((x for x in lines(log) if x.startswith(prefix)), None)
-        if got is not None:
-            return got
-        if proc.poll() is not None:
-            raise AssertionError(f"exited {proc.returncode} before '{prefix}': {lines(log)[-10:]}")
-        if time.monotonic() > end:
-            raise AssertionError(f"within {timeout} s: no '{prefix}' in {log}: {lines(log)[-10:]}")
-        time.sleep(0.01)
 
 
 def probe(hs: Hosts, src: str, dst: str, tmp_path: Path, timeout: float = 1.0, port: int = 9000) -> str:

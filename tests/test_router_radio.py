@@ -16,9 +16,10 @@ import pytest
 
 from saim_mesh.net import netns
 from saim_mesh.net.netns import Hosts
+from saim_mesh.proc import wait_line
 
 from .conftest import ROOT, SMALL, wait_until
-from .test_netns import ZCLIENT, last, script, wait_line
+from .test_netns import ZCLIENT, last, script
 
 WHY = netns.unavailable()
 pytestmark = [pytest.mark.timeout(180),

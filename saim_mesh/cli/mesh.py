@@ -69,6 +69,9 @@ def cmd_source(a) -> int:
             pace.close()
         if a.linger:
             time.sleep(a.linger)   # the publisher's cache serves late joiners and recoveries meanwhile
+        if (j := src.journal) is not None:
+            print(f"source {a.name}: its journal sent {j.served} frames, held back {j.pacer.withheld if j.pacer else 0} "
+                  f"for its pace, answered {j.errors} bad asks", flush=True)
         src.stop()
     return 0
 

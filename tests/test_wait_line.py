@@ -1,0 +1,45 @@
+"""`proc.wait_line`: a line waited for in the log of a process that is not a `Proc` (one
+started in a namespaced host): found once written, and an early exit or the timeout said
+with the log's last lines rather than waited out."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from saim_mesh.proc import wait_line
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def spawn(tmp_path, code: str):
+    log = tmp_path / "child.log"
+    with open(log, "ab") as f:
+        return log, subprocess.Popen([sys.executable, "-c", code], stdout=f, stderr=subprocess.STDOUT)
+
+
+def test_the_line_written_is_found(tmp_path):
+    log, p = spawn(tmp_path, "import sys, time; print('starting'); sys.stdout.flush(); time.sleep(0.3); "
+                             "print('ready at 7', flush=True); time.sleep(30)")
+    try:
+        assert wait_line(log, p, "ready", 20) == "ready at 7"
+    finally:
+        p.kill()
+        p.wait()
+
+
+def test_an_exit_before_the_line_is_said_with_its_code_and_last_lines(tmp_path):
+    log, p = spawn(tmp_path, "print('no route to 198.18.0.9', flush=True); raise SystemExit(4)")
+    with pytest.raises(RuntimeError, match=r"exited 4 before 'ready'.*no route to 198.18.0.9"):
+        wait_line(log, p, "ready", 20)
+
+
+def test_the_timeout_is_said_not_waited_past(tmp_path):
+    log, p = spawn(tmp_path, "import time; print('still starting', flush=True); time.sleep(30)")
+    try:
+        with pytest.raises(RuntimeError, match=r"within 0.5 s: no 'ready'.*still starting"):
+            wait_line(log, p, "ready", 0.5)
+    finally:
+        p.kill()
+        p.wait()
