@@ -33,6 +33,7 @@ from dissemination.keyspace import KeySpace
 from saim_mesh import batch as B
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
+from saim_mesh import gate as G
 from saim_mesh import wire as W
 from saim_mesh import zygote
 from .ea import feed
@@ -93,7 +94,7 @@ def role_sub(endpoint: str, subs_path: str) -> None:
     spec = json.loads(Path(subs_path).read_text())
     want = exact(spec["fine"], RAW_ROOT)
     groups = B.groups_of(RAW_ROOT)
-    gate = W.Gate(1e9)
+    gate = G.Gate(1e9)
     with zenoh.open(config([], [endpoint])) as s:
         subs = [s.declare_subscriber(k, zenoh.handlers.FifoChannel(1_000_000)) for k in spec["coarse"]]
         print("ready", flush=True)

@@ -1,5 +1,5 @@
 """What signatures cost per message: Ed25519 signing (the replay, a console) and checking
-through `wire.Gate` (every receiver), against the same gate on unsigned messages.
+through `gate.Gate` (every receiver), against the same gate on unsigned messages.
 
 CPU time of this process per message (`time.process_time`), the best of several rounds:
 on a shared 2-core machine wall time mostly measures the neighbours. Writes
@@ -16,7 +16,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from dissemination.keyspace import KeySpace
 
 from saim_mesh import messages as M
-from saim_mesh import wire as W
+from saim_mesh.gate import Gate
 from saim_mesh.security import sign as G
 from saim_mesh import results
 
@@ -42,8 +42,8 @@ def measure(n: int = 2000, rounds: int = 5) -> dict:
     okey, body = ks.key(order, None, None), M.encode(order)
     pos = M.encode(M.LocationReport(1.0, "A2S1", 10.0, 50.0))
 
-    def gate() -> W.Gate:   # a fresh window each round: every counter is new to it
-        return W.Gate(1e6, verifier=G.Verifier({"replay": key.public_key()}, G.rules_for(["replay"]), "bench",
+    def gate() -> Gate:   # a fresh window each round: every counter is new to it
+        return Gate(1e6, verifier=G.Verifier({"replay": key.public_key()}, G.rules_for(["replay"]), "bench",
                                                window=n * rounds + 1))
     envs = [signer.sign(okey, body, i + 1) for i in range(n)]
     sig, canon, pub = key.sign(body), body, key.public_key()
@@ -53,7 +53,7 @@ def measure(n: int = 2000, rounds: int = 5) -> dict:
         if i == 0:
             gates.append(gate())
         assert gates[-1].data(envs[i], okey) is not None
-    plain, secure = W.Gate(1e6), gate()
+    plain, secure = Gate(1e6), gate()
     out = {
         "ed25519_sign_raw_us": per_message_us(lambda i: key.sign(canon), n, rounds),
         "ed25519_verify_raw_us": per_message_us(lambda i: pub.verify(sig, canon), n, rounds),

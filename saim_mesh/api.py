@@ -30,6 +30,7 @@ from dissemination.keyspace import KeySpace
 from . import commands as C
 from . import messages as M
 from . import scenario as S
+from . import gate as G
 from . import wire as W
 from .live.source import LiveSource
 from .zconf import config
@@ -114,7 +115,7 @@ class Alerts(_Session):
         super().__init__(scenario, identity, connect, None, root, pki)
         self.units, self.types = set(units or ()), set(types or ())
         self.priorities = set(priorities or ())
-        self.gate = W.Gate(W.T_LIMIT)
+        self.gate = G.Gate(W.T_LIMIT)
         self.q: queue.SimpleQueue = queue.SimpleQueue()
 
     def _opened(self) -> None:
@@ -225,7 +226,7 @@ class Commander(_Session):
         D.make(kind, req="check", n=1, **fields)   # a bad directive: ValueError before anything is declared
         key = D.key(self.ks.root, self.unit, kind)
         answers: queue.SimpleQueue = queue.SimpleQueue()
-        gate = W.Gate(W.T_LIMIT)
+        gate = G.Gate(W.T_LIMIT)
         sub = self.session.declare_subscriber(self.ks.cmdlog("*"),
                                               lambda smp: answers.put((str(smp.key_expr), smp.payload.to_bytes())))
         pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)

@@ -19,6 +19,7 @@ from dissemination.groups import GROUP_DEPTH, Groups
 from dissemination.keyspace import template
 
 from . import messages as M
+from . import gate as G
 from . import wire as W
 
 MAX_ENTRIES = 4096
@@ -63,7 +64,7 @@ def decode(payload: bytes, max_bytes: int) -> Batch:
     return b
 
 
-def unpack(gate: W.Gate, groups: Groups, payload: bytes, key: str) -> list[tuple[int, str, bytes]]:
+def unpack(gate: G.Gate, groups: Groups, payload: bytes, key: str) -> list[tuple[int, str, bytes]]:
     """The entries of a batch received on `key`, each on a key of that group; a bad
     batch is counted whole, an entry on a foreign key is counted and left out."""
     try:

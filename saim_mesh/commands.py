@@ -14,6 +14,7 @@ import msgspec
 import zenoh
 
 from . import messages as M
+from . import gate as G
 from . import wire as W
 
 KIND_OF = {cls: kind for kind, cls in W.COMMANDS.items()}
@@ -114,7 +115,7 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
     return result(cmd, True, t)
 
 
-def receive(ea, unit: str, root: str, gate: W.Gate, key: str, payload: bytes, t: float,
+def receive(ea, unit: str, root: str, gate: G.Gate, key: str, payload: bytes, t: float,
             clog=None, after: bool = False) -> W.CmdResult | None:
     """A command off the wire for `unit`'s EA, as every peer takes one: its key (to this
     unit, a known kind, a sender), the gate (size, type, signature in secure mode), the
@@ -232,7 +233,7 @@ def send(session, ks, unit: str, cmd, by: str, timeout: float = 10.0, signer=Non
     kind = KIND_OF[type(cmd)]
     end = time.monotonic() + timeout
     answers: queue.SimpleQueue = queue.SimpleQueue()
-    gate = W.Gate(W.T_LIMIT)
+    gate = G.Gate(W.T_LIMIT)
     sub = session.declare_subscriber(ks.cmdlog(unit), lambda s: answers.put(s.payload.to_bytes()))
     key = ks.cmd(unit, kind, by)
     pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)

@@ -8,6 +8,8 @@ import zenoh
 
 from dissemination.keyspace import KeySpace
 
+from . import gate as G
+
 from . import wire as W
 from .inbox import Waker
 
@@ -23,7 +25,7 @@ class Pacer:
     (`ack/<zid>`), and stop counting when their token goes or when they make no
     progress for `stall_s` of wall time."""
 
-    def __init__(self, s, ks: KeySpace, window_s: float, serve, log, gate: W.Gate, box, stall_s: float = 30.0):
+    def __init__(self, s, ks: KeySpace, window_s: float, serve, log, gate: G.Gate, box, stall_s: float = 30.0):
         """`box`: `Replay.inbox`, so that an ack or a token wakes the wait."""
         self.window_s, self.serve, self.log, self.stall_s, self.gate = window_s, serve, log, stall_s, gate
         self.ks = ks

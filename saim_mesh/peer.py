@@ -2,7 +2,7 @@
 
 The same EA core as `saim-mesh run`; only the source of facts (subscriptions
 computed by `dissemination`) and the sinks (a durable alert log + the mesh) differ.
-Every payload goes through `wire.Gate` before use, and nothing a peer receives can
+Every payload goes through `gate.Gate` before use, and nothing a peer receives can
 stop it: a bad message is counted, a lost source or fusion node is an alert.
 """
 from __future__ import annotations
@@ -35,6 +35,7 @@ from . import commands as C
 from . import messages as M
 from . import batch as B
 from . import storeq
+from . import gate as G
 from . import wire as W
 from .alertlog import AlertLog
 from .cmdlog import CommandLog
@@ -78,7 +79,7 @@ class Peer(Intake, TickWait):
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         dis, mesh = self.cfg["dissemination"], self.cfg["mesh"]
         self.interest = Interest(self.ks, radius_m or dis["radius_m"], int(dis["block_share"]))
-        self.gate = W.Gate(sc.duration_s, int(mesh["max_payload_bytes"]), log=log,
+        self.gate = G.Gate(sc.duration_s, int(mesh["max_payload_bytes"]), log=log,
                            verifier=verifier_for(conf, root))   # secure mode: authority must come signed
         self.max_ahead, self.silence_s = float(mesh["max_ahead_s"]), float(mesh["clock_silence_s"])
         self.reject_alert = int(mesh["reject_alert"])

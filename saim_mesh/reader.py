@@ -17,7 +17,7 @@ from dissemination.keyspace import KeySpace
 from . import batch as B
 from . import messages as M
 from . import storeq
-from . import wire as W
+from . import gate as G
 from .security.sign import verifier_for
 
 
@@ -27,7 +27,7 @@ class MeshReader:
     def __init__(self, sc, conf, root: str, classes: tuple, log: Callable = print):
         self.sc, self.conf, self.classes, self.log = sc, conf, classes, log
         self.ks = KeySpace.of(sc, root)
-        self.gate = W.Gate(sc.duration_s, log=log, verifier=verifier_for(conf, root))   # secure: authority signed
+        self.gate = G.Gate(sc.duration_s, log=log, verifier=verifier_for(conf, root))   # secure: authority signed
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         self.session = None
         self.caught_up = False

@@ -35,6 +35,7 @@ from dissemination.keyspace import KeySpace, matcher
 from ea_agent import domains
 
 from . import messages as M
+from . import gate as G
 from . import wire as W
 from .batch import Batcher, groups_of
 from .inbox import Inbox, Waker
@@ -79,7 +80,7 @@ class Replay:
         self.n_ticks = 0
         self.until = until
         self.window_s = window_s if speed is None else 0.0   # pacing only at max speed
-        self.gate = W.Gate(sc.duration_s, max_bytes, log=log)
+        self.gate = G.Gate(sc.duration_s, max_bytes, log=log)
         self.fusion_t: dict[str, float] = {}   # group -> clock time its tracks are out to
         self.state_path = Path(state_path) if state_path else None
         self.resumed_from: dict | None = None

@@ -7,10 +7,12 @@ import time
 
 import zenoh
 
+from . import gate as G
+
 from . import wire as W
 
 
-def query(session, ks, gate: W.Gate, since: int = 0, keys: list[str] | None = None,
+def query(session, ks, gate: G.Gate, since: int = 0, keys: list[str] | None = None,
           timeout: float = 10.0, expect: int = 1, before: int = 0, latest: bool = False) -> W.StoreReply | None:
     """Every store's entries after `since` on `keys` (all when None), merged; None when
     no store answered. `t` is the earliest time any store reached (a store behind a slow

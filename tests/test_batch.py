@@ -12,6 +12,7 @@ from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 from saim_mesh import batch as B
 from saim_mesh import messages as M
+from saim_mesh import gate as G
 from saim_mesh import wire as W
 from saim_mesh.runner import config_for, make_ea
 
@@ -81,13 +82,13 @@ def _batch(entries) -> bytes:
     (b"\x90" * 70000, "(bytes)"),
 ])
 def test_bad_batches_are_rejected_whole_and_counted(payload, field):
-    gate = W.Gate(3600.0)
+    gate = G.Gate(3600.0)
     assert B.unpack(gate, B.groups_of(ROOT), payload, f"{ROOT}/pos/X1Y1/_b/BN/A") == []
     assert gate.rejects.total == 1 and f"field '{field}'" in gate.rejects.recent[-1]
 
 
 def test_an_entry_on_another_groups_key_is_left_out_and_counted():
-    gate = W.Gate(3600.0)
+    gate = G.Gate(3600.0)
     k1, p1 = pos("e1", "BN/A/A1")
     k2, p2 = pos("e2", "BN/B")            # not of group BN/A
     k3, p3 = pos("e3", "BN/A", block="X2Y2")   # another block

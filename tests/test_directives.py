@@ -314,13 +314,13 @@ def test_a_forged_misplaced_replayed_or_unsigned_directive_is_refused_and_counte
     said in one line; the EA goes on."""
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
-    from saim_mesh import wire as W
+    from saim_mesh.gate import Gate
     from saim_mesh.live.authority import DirectiveIntake
     from saim_mesh.security import sign as G
     root = "t/dir"
     keys = {n: Ed25519PrivateKey.generate() for n in ("console.BN", "console.C", "ea.A1")}
     pubs = {n: k.public_key() for n, k in keys.items()}
-    gate = W.Gate(5400.0, verifier=G.Verifier(pubs, G.rules_for(pubs), root, require=True))
+    gate = Gate(5400.0, verifier=G.Verifier(pubs, G.rules_for(pubs), root, require=True))
     intake = DirectiveIntake(root, gate)
     body = msgspec.msgpack.encode(D.make("order", req="r1", n=1, at=1500.0, action="abort-plan"))
     k = D.key(root, "BN", "order")
@@ -366,11 +366,11 @@ def test_order_refuses_what_its_action_does_not_read_and_asks_for_what_it_needs(
 def test_a_plan_version_is_bounded_in_size():
     """A plan's missions over 48 kB are refused when made, and any directive over the
     intake's bound is refused off the wire, counted, before it is decoded."""
-    from saim_mesh import wire as W
+    from saim_mesh.gate import Gate
     from saim_mesh.live.authority import MAX_BYTES, DirectiveIntake
     with pytest.raises(ValueError, match="plan"):
         D.make("plan", req="p", n=1, at=10.0, name="big", version=2, missions=b"[" + b" " * (48 * 1024) + b"]")
-    gate = W.Gate(5400.0)
+    gate = Gate(5400.0)
     intake = DirectiveIntake("t/dir", gate)
     assert intake.check(D.key("t/dir", "A", "plan"), b"\x80" * (MAX_BYTES + 1)) is None
     assert gate.errors == 1 and f"over the {MAX_BYTES} limit" in gate.rejects.recent[-1]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import uuid
 
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
+from saim_mesh import gate as G
 from saim_mesh.live.peer import LivePeer
 from saim_mesh.zconf import config
 
@@ -14,11 +14,11 @@ from .conftest import SMALL
 
 
 def test_sender_of_names_who_put_it():
-    assert W.sender_of("saim/x/src/cp.A") == "src/cp.A"
-    assert W.sender_of("saim/x/cmd/A2/ack/C") == "cmd/C"
-    assert W.sender_of("saim/x/dir/BN/order") == "dir/BN"
-    assert W.sender_of("") == "(unknown)"
-    assert W.sender_of("saim/x/weird") == "(other keys)"
+    assert G.sender_of("saim/x/src/cp.A") == "src/cp.A"
+    assert G.sender_of("saim/x/cmd/A2/ack/C") == "cmd/C"
+    assert G.sender_of("saim/x/dir/BN/order") == "dir/BN"
+    assert G.sender_of("") == "(unknown)"
+    assert G.sender_of("saim/x/weird") == "(other keys)"
 
 
 def test_a_flood_of_junk_from_one_source_is_counted_and_said_at_each_threshold():

@@ -1,6 +1,6 @@
 """Signatures that survive relays (security/sign.py): Ed25519 envelopes around orders,
 reorganizations, mission confirmations, task delegations and commands, checked by the
-receiver's `wire.Gate`; forged or replayed envelopes are refused with a reason and counted.
+receiver's `gate.Gate`; forged or replayed envelopes are refused with a reason and counted.
 In process: no Zenoh session is opened."""
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from dissemination.keyspace import KeySpace
 from saim_mesh import commands as C
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
+from saim_mesh.gate import Gate
 from saim_mesh import wire as W
 from saim_mesh.peer import Peer
 from saim_mesh.replay import Replay
@@ -49,7 +50,7 @@ def verifier(keys, require=True, window=G.WINDOW):
 
 
 def gate(keys, **kw):
-    return W.Gate(5400.0, verifier=verifier(keys, **kw))
+    return Gate(5400.0, verifier=verifier(keys, **kw))
 
 
 def signed_order(keys, n=1, who="replay", key=ORDER_KEY, msg=ORDER):
@@ -65,7 +66,7 @@ def unwrap(env: bytes) -> list:
     return msgspec.msgpack.decode(msgspec.msgpack.decode(env, type=msgspec.msgpack.Ext).data)
 
 
-def rejected(g: W.Gate, payload: bytes, key: str) -> str:
+def rejected(g: Gate, payload: bytes, key: str) -> str:
     """The reason `g` refused `payload` (it must have)."""
     before = g.errors
     assert g.data(payload, key) is None
@@ -207,7 +208,7 @@ def test_unsigned_authority_in_secure_and_open_mode(keys):
     assert "bad signature" in rejected(open_, G.Signer("replay", Ed25519PrivateKey.generate())
                                        .sign(ORDER_KEY, M.encode(ORDER), 2), ORDER_KEY)
     # no verifier at all: an envelope cannot be checked, so it is refused
-    bare = W.Gate(5400.0)
+    bare = Gate(5400.0)
     assert "no signers' keys" in rejected(bare, signed_order(keys), ORDER_KEY)
     assert bare.data(M.encode(ORDER), ORDER_KEY) == ORDER
 

@@ -1,6 +1,6 @@
 """Property tests of the mesh's single entry point for network payloads.
 
-`messages.decode`, `wire.decode_control` and `wire.Gate` must turn *any* input bytes
+`messages.decode`, `wire.decode_control` and `gate.Gate` must turn *any* input bytes
 into either a message that satisfies the documented bounds or the project's own
 rejection (`MessageError`, or None + a count from `Gate`) -- never any other exception.
 """
@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from saim_mesh import messages as M
+from saim_mesh import gate as G
 from saim_mesh import wire as W
 
 SETTINGS = settings(max_examples=300, deadline=None,
@@ -52,9 +53,9 @@ def decode_control_only_rejects(cls, payload: bytes, max_bytes: int = BIG):
         return None
 
 
-def gate_all(payload: bytes, gate: W.Gate | None = None) -> None:
+def gate_all(payload: bytes, gate: G.Gate | None = None) -> None:
     """Feed one payload to every entry point; only the project's rejection may come out."""
-    gate = gate or W.Gate(T_MAX)
+    gate = gate or G.Gate(T_MAX)
     before = gate.rejects.total + gate.ok
     n = 1
     m = gate.data(payload, "fuzz/data")
@@ -352,7 +353,7 @@ def test_mutated_data_messages(case):
         check_data(m)
         assert type(d.get("v")) is int and d["v"] == 1, "only an exact integer 1 is version 1"
         assert type(m) is M.MESSAGE_TYPES[d["kind"]]
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     g = gate.data(payload, "fuzz/data")
     if g is not None:
         check_data(g, T_MAX)
@@ -374,7 +375,7 @@ def test_mutated_control_messages(case):
         check_control(c)
         # (a *missing* `v` is covered by test_version_control_rejected)
         assert "v" not in d or (type(d["v"]) is int and d["v"] == 1), "only an exact integer 1 is version 1"
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     g = gate.control(cls, payload, "fuzz/ctl")
     if g is not None:
         check_control(g, T_MAX)
@@ -442,7 +443,7 @@ def test_deeply_nested_values_at_default_recursion_limit(depth, container, where
 def test_data_round_trip(m):
     payload = M.encode(m)
     assert M.decode(payload) == m
-    gate = W.Gate(W.T_LIMIT, max_bytes=BIG)
+    gate = G.Gate(W.T_LIMIT, max_bytes=BIG)
     assert gate.data(payload, "rt") == m
     assert gate.ok == 1 and gate.rejects.total == 0
 
@@ -452,7 +453,7 @@ def test_data_round_trip(m):
 def test_control_round_trip(m):
     payload = W.encode(m)
     assert W.decode_control(type(m), payload, BIG) == m
-    gate = W.Gate(W.T_LIMIT, max_bytes=BIG, max_reply_bytes=BIG)
+    gate = G.Gate(W.T_LIMIT, max_bytes=BIG, max_reply_bytes=BIG)
     assert gate.control(type(m), payload, "rt") == m
     assert gate.ok == 1 and gate.rejects.total == 0
 
@@ -489,7 +490,7 @@ class _Spy:
 
 
 def test_size_bound_data_rejected_before_decoding():
-    gate = W.Gate(T_MAX, max_bytes=100)
+    gate = G.Gate(T_MAX, max_bytes=100)
     over, at = _padded_location(101), _padded_location(100)
     assert M.decode(over).KIND == "location"            # valid, only too big
     with mock.patch.object(M, "decode", wraps=M.decode) as spy:
@@ -504,7 +505,7 @@ def test_size_bound_data_rejected_before_decoding():
 @pytest.mark.parametrize("cls", [W.Bye, W.FusionReply])
 def test_size_bound_control_rejected_before_decoding(cls):
     big = cls is W.FusionReply
-    gate = W.Gate(T_MAX, max_bytes=100, max_reply_bytes=200)
+    gate = G.Gate(T_MAX, max_bytes=100, max_reply_bytes=200)
     limit = 200 if big else 100
     over, at = _padded_control(cls, limit + 1), _padded_control(cls, limit)
     spy = _Spy(W._DECODERS[cls])
@@ -526,7 +527,7 @@ def test_size_bound_property(m, slack):
     is_ctl = isinstance(m, msgspec.Struct)
     payload = W.encode(m) if is_ctl else M.encode(m)
     limit = max(0, len(payload) + slack)
-    gate = W.Gate(W.T_LIMIT, max_bytes=limit, max_reply_bytes=limit)
+    gate = G.Gate(W.T_LIMIT, max_bytes=limit, max_reply_bytes=limit)
     if is_ctl:
         spy = _Spy(W._DECODERS[type(m)])
         with mock.patch.dict(W._DECODERS, {type(m): spy}):
@@ -569,7 +570,7 @@ def test_version_data_rejected(sample, v):
     with pytest.raises(M.MessageError) as ei:
         M.decode(payload)
     assert ei.value.field == "v"
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     assert gate.data(payload) is None and gate.rejects.total == 1
     assert M.decode(_with_version(raw_dict(M.encode(sample)), 1)) == sample   # the control case
 
@@ -581,7 +582,7 @@ def test_version_control_rejected(sample, v):
     payload = _with_version(raw_dict(W.encode(sample)), v)
     with pytest.raises(M.MessageError):
         W.decode_control(cls, payload, BIG)
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     assert gate.control(cls, payload) is None and gate.rejects.total == 1
     assert W.decode_control(cls, _with_version(raw_dict(W.encode(sample)), 1), BIG) == sample
 
@@ -597,7 +598,7 @@ TIMED_CONTROL = [s for s in CONTROL_SAMPLES if hasattr(s, "t")]
 def test_time_bound_data(sample, t):
     d = raw_dict(M.encode(sample))
     d["t"] = t
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     assert gate.data(packb(d), "k") is None
     assert gate.rejects.total == 1 and gate.ok == 0
     d["t"] = T_MAX                                      # the end itself is inside the clock
@@ -610,7 +611,7 @@ def test_time_bound_control(sample, t):
     cls = type(sample)
     d = raw_dict(W.encode(sample))
     d["t"] = t
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     assert gate.control(cls, packb(d), "k") is None
     assert gate.rejects.total == 1 and gate.ok == 0
     d["t"] = T_MAX
@@ -624,7 +625,7 @@ def test_time_bound_property(t_max, t, sample):
     is_ctl = isinstance(sample, msgspec.Struct)
     d = raw_dict(W.encode(sample) if is_ctl else M.encode(sample))
     d["t"] = t
-    gate = W.Gate(t_max)
+    gate = G.Gate(t_max)
     got = gate.control(type(sample), packb(d)) if is_ctl else gate.data(packb(d))
     ok = isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t <= t_max
     ok = ok and all(ft <= t_max for ft in d.get("fusion", {}).values())   # a store reply's fusion times too
@@ -640,7 +641,7 @@ def test_time_bound_property(t_max, t, sample):
 def test_tick_seq_bounds(field, value):
     d = raw_dict(W.encode(CONTROL_SAMPLES[0]))
     d[field] = value
-    gate = W.Gate(T_MAX)
+    gate = G.Gate(T_MAX)
     assert gate.control(W.Tick, packb(d)) is None and gate.rejects.total == 1
 
 
@@ -674,7 +675,7 @@ def _bad_payloads(n: int):
 
 def test_rejects_log_bounded_fixed_kinds():
     calls = []
-    gate = W.Gate(T_MAX, log=lambda *a, **k: calls.append(a))
+    gate = G.Gate(T_MAX, log=lambda *a, **k: calls.append(a))
     for i, p in enumerate(_bad_payloads(10_000)):
         assert gate.data(p, f"saim/x/{i}") is None
     r = gate.rejects
@@ -690,7 +691,7 @@ def test_rejects_log_bounded_attacker_chosen_kinds():
     """The kind a reject is counted under must not be chosen freely by the sender: a flood of
     payloads each with a fresh `kind` string must still cost counters, not log lines or memory."""
     calls = []
-    gate = W.Gate(T_MAX, log=lambda *a, **k: calls.append(a))
+    gate = G.Gate(T_MAX, log=lambda *a, **k: calls.append(a))
     for i in range(10_000):
         if i % 2:
             p = packb({"v": 1, "kind": f"kind-{i}", "t": 1.0})          # unknown kind
@@ -705,7 +706,7 @@ def test_rejects_log_bounded_attacker_chosen_kinds():
 
 def test_rejects_log_bounded_control():
     calls = []
-    gate = W.Gate(T_MAX, log=lambda *a, **k: calls.append(a))
+    gate = G.Gate(T_MAX, log=lambda *a, **k: calls.append(a))
     for i in range(10_000):
         cls = W.CONTROL[i % len(W.CONTROL)]
         assert gate.control(cls, b"\xc1" if i % 3 else None, f"k{i}") is None

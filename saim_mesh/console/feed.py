@@ -1,7 +1,7 @@
 """What feeds the console's state: the mesh (a Zenoh session as `console.<U>`), or the
 EAs of an in-process run: alerts, re-notifications and escalations (notices), command
 results, the clock and the data messages it draws. Every mesh payload goes through
-`wire.Gate` and must fit the key it came on; nothing received can stop the console (a
+`gate.Gate` and must fit the key it came on; nothing received can stop the console (a
 bad payload is counted).
 
 No liveliness token: the replay's pacer waits for every `alive/<name>` it does not know

@@ -19,6 +19,7 @@ import zenoh
 from dissemination.keyspace import KeySpace, matcher
 from saim_mesh import messages as M
 from saim_mesh import storeq
+from saim_mesh import gate as G
 from saim_mesh import wire as W
 from saim_mesh.scenario import Scenario
 
@@ -42,7 +43,7 @@ class FusionPeer:
         self.ks = KeySpace.of(sc, root)
         self.node = make_node(sc, group)
         self.rnd = random.Random(shuffle) if shuffle is not None else None
-        self.gate = W.Gate(sc.duration_s, max_bytes, log=log)
+        self.gate = G.Gate(sc.duration_s, max_bytes, log=log)
         self.sent = 0
         self.log_out: list[tuple[str, bytes]] = []   # what we published, for peers that subscribe later
         self.heap: list = []                         # (seq, hit) waiting for their tick

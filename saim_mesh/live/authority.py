@@ -11,6 +11,7 @@ import heapq
 
 from .. import directives as D
 from .. import messages as M
+from .. import gate as G
 from .. import wire as W
 
 MAX_DIRECTIVES = 10_000   # taken per EA over a run (a flood beyond is refused and counted)
@@ -18,7 +19,7 @@ MAX_BYTES = 64 * 1024     # one directive's payload, envelope included (a plan v
 
 
 class DirectiveIntake:
-    def __init__(self, root: str, gate: W.Gate):
+    def __init__(self, root: str, gate: G.Gate):
         self.root, self.gate = root, gate
         self.pending: list[tuple[tuple, D.Taken]] = []
         self.seen: set[bytes] = set()

@@ -12,6 +12,7 @@ from typing import Annotated, Literal
 import msgspec
 
 from .. import messages as M
+from .. import gate as G
 from .. import wire as W
 
 MAX_MSGS = 1024   # data messages in one frame
@@ -57,9 +58,9 @@ class FrameReader:
     src/<name>; its messages are not signed one by one), and a clock: the event time every
     source heard so far has promised, the end once each of them has ended."""
 
-    def __init__(self, ks, gate: W.Gate, t_max: float, log=print):
+    def __init__(self, ks, gate: G.Gate, t_max: float, log=print):
         self.ks, self.gate = ks, gate
-        self.data_gate = W.Gate(t_max, gate.max_bytes, log=log)
+        self.data_gate = G.Gate(t_max, gate.max_bytes, log=log)
         self.data_gate.rejects = gate.rejects   # one count of what was refused
         self.wm: dict[str, float] = {}
         self.ended: set[str] = set()

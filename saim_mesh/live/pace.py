@@ -24,6 +24,7 @@ import threading
 import time
 
 from .. import messages as M
+from .. import gate as G
 from .. import wire as W
 
 LEAD_S = 120.0        # event seconds a source may run ahead of the slowest EA depending on it
@@ -47,7 +48,7 @@ class SourcePace:
         self.limit = lead_s          # allowed without asking again
         self.waits = 0
         self.waited_s = 0.0
-        self.rejects = W.Rejects(log)
+        self.rejects = G.Rejects(log)
         self.unpaced = False         # no EA ever acked within FIRST_S: the source went on unpaced
         self.blocked = threading.Event()   # set while it waits (for whoever watches it: a test) ...
         self.blocked_t = -math.inf         # ... for this event time

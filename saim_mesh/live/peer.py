@@ -32,6 +32,7 @@ from ea_agent.core.snapshot import snapshot
 from .. import commands as C
 from .. import directives as D
 from .. import messages as M
+from .. import gate as G
 from .. import wire as W
 from ..runner import config_for, make_ea
 from ..scenario import Scenario
@@ -83,12 +84,12 @@ class LivePeer:
         # order) up to half of it, facts in the order the other half; beyond, a source's
         # frames are dropped and fetched again from its journal when there is room
         self.max_held = int(float(mesh["max_held_mb"]) * 2**20)
-        self.gate = W.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
+        self.gate = G.Gate(W.T_LIMIT if live_start is not None else sc.duration_s, self.max_bytes, log=log)
         # a commander's commands are signed end to end (secure mode): checked by their own gate.
         # A source's frame is trusted by its key (only source.<name> may put on src/<name>),
         # its contents not signed one by one (issue 33: authority over the mesh)
         from ..security.sign import verifier_for
-        self.cmd_gate = W.Gate(self.gate.t_max, self.max_bytes, log=log, verifier=verifier_for(conf, root))
+        self.cmd_gate = G.Gate(self.gate.t_max, self.max_bytes, log=log, verifier=verifier_for(conf, root))
         self.cmd_gate.rejects = self.gate.rejects   # one count of what was refused
         self.gate.rejects.on_flood = self._flood     # ... per sender: a flood is said (threat model)
         self.dirs = DirectiveIntake(root, self.cmd_gate)   # orders down, confirmations up (issue 33)

@@ -3,11 +3,13 @@ leave was clean (a goodbye) or not. It decides when a change is worth saying; th
 it (one system problem, journalled so a replay says the same)."""
 from __future__ import annotations
 
+from .. import gate as G
+
 from .. import wire as W
 
 
 class PeerPresence:
-    def __init__(self, unit: str, ks, gate: W.Gate):
+    def __init__(self, unit: str, ks, gate: G.Gate):
         self.unit, self.ks, self.gate = unit, ks, gate
         self.tokens: dict[str, set[str]] = {}   # another EA's unit -> its liveliness tokens now
         self.left: set[str] = set()             # ... gone without a goodbye (said)

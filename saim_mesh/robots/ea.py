@@ -28,7 +28,7 @@ from ea_agent.domains.uv import tasks as T
 
 from .. import messages as M
 from .. import scenario as S
-from .. import wire as W
+from .. import gate as G
 from ..live import frames as F
 from ..live.order import EventTimeOrder
 from ..live.source import next_epoch
@@ -42,7 +42,7 @@ CACHE = 100_000
 class Streams:
     """Each robot's frames taken in their own sequence (held until the missing ones come)."""
 
-    def __init__(self, root: str, robots: list[str], order: EventTimeOrder, gate: W.Gate):
+    def __init__(self, root: str, robots: list[str], order: EventTimeOrder, gate: G.Gate):
         self.root, self.order, self.gate = root, order, gate
         self.seq: dict[str, list[int]] = {}
         self.held: dict[str, dict[int, F.Frame]] = {r: {} for r in robots}
@@ -95,7 +95,7 @@ def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[s
     ea = make_ea(sc, unit, config_for(sc, unit), sinks=[lambda a: alerts.append(a.to_json_dict())])
     ea.start(0.0)
     order: EventTimeOrder = EventTimeOrder(robots)
-    gate = W.Gate(sc.duration_s, wire.MAX_BYTES, log=log)
+    gate = G.Gate(sc.duration_s, wire.MAX_BYTES, log=log)
     streams = Streams(root, robots, order, gate)
     commands = unit in robots
     sig = wire.signer(keys, f"ea.{unit}") if commands else None

@@ -39,7 +39,7 @@ from saim_mesh import wire as W
 from .pki import NAME_RE, SecurityError, _load_key, _read, _write
 
 VERSION = 1
-KIND = "signed"                  # what a rejected envelope is counted under (wire.Rejects)
+KIND = "signed"                  # what a rejected envelope is counted under (gate.Rejects)
 EXT = 83                         # msgpack ext type of an envelope ('S')
 SIGNERS_FILE = "signers.json"
 SIGN_SUFFIX = ".sign.pem"
