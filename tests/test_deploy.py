@@ -12,8 +12,8 @@ import pytest
 from cryptography import x509
 
 from saim_mesh import cli
-from saim_mesh.deploy import file as F
 from saim_mesh.deploy import init
+from saim_mesh.deploy.check import load
 from saim_mesh.deploy.launch import plan
 
 from .conftest import SMALL
@@ -90,7 +90,7 @@ def test_init_on_one_address_gives_each_host_its_own_ports(small):
 def test_a_good_file_checks_and_plans_endpoints_on_the_hosts_addresses(tmp_path, capsys):
     rc, lines = check(tmp_path, BASE, capsys=capsys)
     assert rc == 0 and lines[0].endswith("OK: 2 hosts, 2 routers, 7 EA peers, 6 sources; insecure"), lines
-    dep, sc = F.load(tmp_path / "deploy.toml")
+    dep, sc = load(tmp_path / "deploy.toml")
     pl = plan(dep, "A")
     assert pl.listen == {"r-A": ["tcp/198.18.0.2:7447"]}
     assert pl.endpoints == {"r-A": "tcp/198.18.0.2:7447", "r-BN": "tcp/198.18.0.1:7447"}
@@ -213,7 +213,7 @@ def test_a_secure_host_without_its_certificates_is_one_line(tmp_path, capsys):
 def test_the_example_deployment_checks(capsys):
     f = SMALL.parents[1] / "configs" / "deploy-battalion.toml"
     assert cli.main(["deploy", str(f), "--check"]) == 0, capsys.readouterr()
-    dep, _ = F.load(f)
+    dep, _ = load(f)
     assert all(ipaddress.ip_address(h.addresses[0]) in ipaddress.ip_network("198.18.0.0/15")
                for h in dep.hosts.values())
 
@@ -239,7 +239,7 @@ eas = ["A2"]
 '''
     rc, lines = check(tmp_path, text, "--host", "vehicle", capsys=capsys)
     assert rc == 0, lines
-    dep, sc = F.load(tmp_path / "deploy.toml")
+    dep, sc = load(tmp_path / "deploy.toml")
     assert dep.attach("vehicle", "A2", sc.taskorg) == "r-A"   # its company's router, on host A
     pl = plan(dep, "vehicle")
     assert pl.listen == {} and pl.endpoints["r-A"] == "tcp/198.18.0.2:7447"

@@ -14,7 +14,8 @@ def cmd_certs(a) -> int:
     from ..security.pki import make_pki, names_for
     if a.deploy:   # each host's addresses and names in its processes' certificates
         from ..deploy import certs
-        from ..deploy.file import DeployError, load
+        from ..deploy.check import load
+        from ..deploy.file import DeployError
         try:
             dep, sc = load(a.deploy)
         except DeployError as e:
@@ -35,7 +36,8 @@ def cmd_certs(a) -> int:
 
 def cmd_deploy(a) -> int:
     """`deploy init SCENARIO`, `deploy FILE --check [--host H]`, `deploy FILE --host H`."""
-    from ..deploy.file import DeployError, load
+    from ..deploy.check import load
+    from ..deploy.file import DeployError
     if a.file == "init":
         if not a.scenario:
             raise ValueError("deploy init SCENARIO: give the scenario folder")

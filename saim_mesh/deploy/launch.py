@@ -33,7 +33,8 @@ from .. import zygote
 from ..mesh import Supervisor
 from ..proc import Proc, clean_env, leaf_env, py
 from ..zconf import free_port
-from .file import Deployment, endpoint, interface_addresses
+from .check import interface_addresses
+from .file import Deployment, endpoint
 
 
 class HostSupervisor(Supervisor):
