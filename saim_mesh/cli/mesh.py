@@ -324,7 +324,7 @@ def add(sub) -> None:
     tp.add_argument("--out", metavar="TOML", help="write the topology as TOML")
     tp.set_defaults(fn=cmd_topology)
 
-    from ..tak.gateway import add_arguments as tak_arguments
+    from ..tak.options import add_arguments as tak_arguments
     tk = sub.add_parser("tak", help="the Cursor-on-Target gateway: the mesh's picture and alerts to TAK, "
                                     "TAK PLI in as location reports (docs/tak.md)")
     tk.add_argument("scenario")
