@@ -287,3 +287,36 @@ def test_a_yielding_source_leaves_a_long_gap_to_its_journal_not_its_cache(tmp_pa
         wait_until(lambda: len(got) >= 80 - first + 1, 20, "the late joiner's history")
         assert got[0] == first and got[-1] == 80
         src.close()
+
+
+class _Lingering:
+    """A source's journal asked at the given (fake) times while the source lingers."""
+
+    def __init__(self, asks: list[float]):
+        self.t, self.asks = 0.0, sorted(asks)
+        self.journal = type("J", (), {"asked_at": None})()
+
+    def clock(self) -> float:
+        return self.t
+
+    def sleep(self, d: float) -> None:
+        self.t += d
+        while self.asks and self.asks[0] <= self.t:
+            self.journal.asked_at = self.asks.pop(0)
+
+
+@pytest.mark.parametrize("asks, stayed", [
+    ([], 10.0),                        # nobody asked: its --linger
+    ([3.0, 12.0, 21.0], 31.0),         # asked again within 10 s each time: 10 s after the last ask
+    ([3.0, 25.0], 13.0),               # an ask after it left is not waited for
+    ([float(k) for k in range(100)], 60.0),   # asked all the time: at most --linger-max
+])
+def test_a_source_lingers_while_its_journal_is_still_asked(asks, stayed):
+    """A source that left 30 s after its end while the EAs beyond a healed radio link were
+    still catching up from it (k EAs, k copies through one link) left them a gap: it stays
+    while asked, within `--linger` of the last ask, at most `--linger-max`."""
+    from saim_mesh.live.source import LiveSource
+    fake = _Lingering(asks)
+    src = object.__new__(LiveSource)   # only its journal matters here
+    src.journal = fake.journal
+    assert LiveSource.linger(src, 10.0, 60.0, clock=fake.clock, sleep=fake.sleep) == pytest.approx(stayed)

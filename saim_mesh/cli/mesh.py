@@ -2,7 +2,6 @@
 mesh's processes, one command each."""
 from __future__ import annotations
 
-import time
 import sys
 from pathlib import Path
 
@@ -67,11 +66,10 @@ def cmd_source(a) -> int:
         print(f"end source {a.name} messages={n} frames={src.seq}{waited}", flush=True)
         if pace is not None:
             pace.close()
-        if a.linger:
-            time.sleep(a.linger)   # the publisher's cache serves late joiners and recoveries meanwhile
+        stayed = src.linger(a.linger, a.linger_max) if a.linger else 0.0   # serving late joiners and catch-ups
         if (j := src.journal) is not None:
-            print(f"source {a.name}: its journal sent {j.served} frames, held back {j.pacer.withheld if j.pacer else 0} "
-                  f"for its pace, answered {j.errors} bad asks", flush=True)
+            print(f"source {a.name}: stayed {stayed:.0f} s after its end; its journal sent {j.served} frames, held "
+                  f"back {j.pacer.withheld if j.pacer else 0} for its pace, answered {j.errors} bad asks", flush=True)
         src.stop()
     return 0
 
@@ -261,7 +259,11 @@ def add(sub) -> None:
                     help="the journal's answers over all askers together, at most KBIT kbit/s (default: "
                          "24 with --yield-catch-up, under half of a 64 kbit/s radio; else unpaced)")
     so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
-    so.add_argument("--linger", type=_seconds, default=0.0, help="seconds to stay up after the last frame")
+    so.add_argument("--linger", type=_seconds, default=0.0,
+                    help="seconds to stay up after the last frame, and longer while its journal is still asked "
+                         "(within that many seconds), up to --linger-max")
+    so.add_argument("--linger-max", type=_seconds, default=600.0, metavar="S",
+                    help="the longest a source stays after its end while it is still asked (default 600)")
     _zenoh_args(so)
     so.set_defaults(fn=cmd_source)
     fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")

@@ -95,7 +95,7 @@ def to_toml(dep: Deployment, sc_name: str) -> str:
              "# live = true   # event time is the wall clock from `start`",
              '# start = "2026-11-27T09:00:00Z"   # event time 0 (live, or paced sources: the same on every host)',
              "# until = 1800   # end the sources at this event time",
-             "# source_linger = 30   # seconds a source stays up after its end (it serves catch-up)",
+             "# source_linger = 30   # seconds a source stays up after its end, and while its journal is still asked",
              '# catch_up = "yield"   # recoveries yield to live traffic (DROP, lower priority); default "block"',
              "# catch_up_kbit = 24   # with yield: each source's journal answers at most this, all askers together",
              ""]

@@ -146,6 +146,21 @@ class LiveSource:
         `stop` or the session's end: a source lingers to serve them."""
         self._send(self.wm, end=end)
 
+    def linger(self, least_s: float, most_s: float, clock=time.monotonic, sleep=time.sleep) -> float:
+        """Stay up after the end (the cache and the journal serve late joiners and
+        catch-ups): at least `least_s`, then as long as the journal was asked within the
+        last `least_s`, at most `most_s` in all. A source that left while EAs were still
+        catching up from it (a healed link: k EAs pull k copies through one radio) left
+        them a gap they could not fill. Returns the seconds it stayed."""
+        start = clock()
+        end = start + least_s
+        while (now := clock()) < min(end, start + max(most_s, least_s)):
+            sleep(min(1.0, end - now))
+            asked = self.journal.asked_at if self.journal is not None else None
+            if asked is not None:
+                end = max(end, asked + least_s)
+        return clock() - start
+
     def stop(self) -> None:
         """Undeclare the publisher and the journal's queryable; close the journal."""
         self.pub.undeclare()

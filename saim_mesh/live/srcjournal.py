@@ -101,6 +101,7 @@ class SourceJournal:
         self.index: dict[int, list[int]] = {epoch: []}   # epoch -> offset of seq 1, 2, ...
         self.served = 0
         self.errors = 0
+        self.asked_at: float | None = None   # monotonic: when it was last asked (a source lingers while asked)
 
     def path(self, epoch: int) -> Path:
         return self.dir / f"{self.name}.{epoch}.frames"
@@ -157,6 +158,7 @@ class SourceJournal:
 
     def serve(self, query, key: str) -> None:
         """Answer one query (a Zenoh queryable's callback): the frames, or an error."""
+        self.asked_at = time.monotonic()
         try:
             raw = query.payload.to_bytes() if query.payload is not None else b""
             if len(raw) > 256:
