@@ -334,9 +334,14 @@ def test_a_forged_misplaced_replayed_or_unsigned_directive_is_refused_and_counte
            "moved": (D.key(root, "BN", "plan"), G.Signer("console.BN", keys["console.BN"]).sign(k, body, 3)),
            "unsigned": (D.key(root, "BN", "order"), msgspec.msgpack.encode(
                D.make("order", req="r9", n=9, at=1500.0, action="abort-plan"))),
-           "replayed": (k, good)}
+           "replayed": (k, good),
+           # the good one's exact bytes on another key: not a repeat, a moved envelope
+           "copied-to-plan": (D.key(root, "BN", "plan"), good),
+           "copied-to-confirm": (D.key(root, "BN", "confirm"), good),
+           "copied-to-C": (D.key(root, "C", "order"), good)}
     why = {"misplaced": "console.C may not sign", "forged": "signature", "moved": "signed for",
-           "unsigned": "must be signed"}
+           "unsigned": "must be signed", "copied-to-plan": "signed for", "copied-to-confirm": "signed for",
+           "copied-to-C": "signed for"}
     for what, (key_, payload) in bad.items():
         before = gate.errors
         assert intake.check(key_, payload) is None, what

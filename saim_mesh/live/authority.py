@@ -35,7 +35,9 @@ class DirectiveIntake:
                 raise M.MessageError("directive", "(key)", f"not a directive key: {key[:80]!r}")
             if len(payload) > MAX_BYTES:
                 raise M.MessageError("directive", "(bytes)", f"{len(payload)} bytes, over the {MAX_BYTES} limit")
-            digest = hashlib.blake2b(payload, digest_size=16).digest()
+            # a repeat is the same bytes on the same key: the same bytes on another key are
+            # checked as new (a signed envelope names its key: moved, it is refused and counted)
+            digest = hashlib.blake2b(key.encode() + b"\0" + payload, digest_size=16).digest()
             if digest in self.seen:
                 return None
             if len(self.seen) >= MAX_DIRECTIVES:
