@@ -78,9 +78,28 @@ def _zmode(a) -> dict:
     return {"mode": getattr(a, "mode", None), "routers": routers}
 
 
+_IP_PROTOS = ("tcp", "tls", "udp", "quic", "ws")
+_PROTOS = (*_IP_PROTOS, "unixsock-stream", "unixpipe", "serial", "vsock")
+
+
+def _endpoint(v: str) -> str:
+    """A Zenoh locator, `<proto>/<address>` (tcp, tls, udp, quic and ws: `host:port`), checked
+    as the arguments are read: a garbage endpoint is one line, exit 2, before any session."""
+    proto, sep, addr = v.partition("/")
+    addr = addr.split("#", 1)[0].split("?", 1)[0]
+    if not sep or proto not in _PROTOS or not addr:
+        raise argparse.ArgumentTypeError(f"{v[:80]!r} is not a Zenoh endpoint (<proto>/<address>, proto one of "
+                                         f"{', '.join(_PROTOS)}; e.g. tcp/127.0.0.1:7447)")
+    if proto in _IP_PROTOS:
+        host, colon, port = addr.rpartition(":")
+        if not colon or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+            raise argparse.ArgumentTypeError(f"{v[:80]!r}: a {proto} endpoint is {proto}/<host>:<port 0-65535>")
+    return v
+
+
 def _zenoh_args(p) -> None:
-    p.add_argument("--listen", nargs="*", metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
-    p.add_argument("--connect", nargs="*", metavar="ENDPOINT")
+    p.add_argument("--listen", nargs="*", type=_endpoint, metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--connect", nargs="*", type=_endpoint, metavar="ENDPOINT")
     p.add_argument("--zenoh-config", metavar="JSON5", help="default configs/zenoh-peer.json5")
     p.add_argument("--multicast", action="store_true",
                    help="discover peers by UDP multicast scouting (a LAN) instead of configured endpoints only")
