@@ -116,12 +116,13 @@ def apply(ea, cmd, t: float | None = None) -> W.CmdResult:
 
 
 def receive(ea, unit: str, root: str, gate: G.Gate, key: str, payload: bytes, t: float,
-            clog=None, after: bool = False) -> W.CmdResult | None:
+            clog=None, after: bool = False, taken=None) -> W.CmdResult | None:
     """A command off the wire for `unit`'s EA, as every peer takes one: its key (to this
     unit, a known kind, a sender), the gate (size, type, signature in secure mode), the
     sender's authority in the task organization as the EA knows it now (reorganizations
     included); applied at `t` and logged (`clog`). Returns the result to answer on
-    cmdlog/<unit>, a refusal when the command's req can be read, else None (counted)."""
+    cmdlog/<unit>, a refusal when the command's req can be read, else None (counted).
+    `taken(kind, cmd, t)` is told of every command applied (a live peer journals it)."""
     prefix = f"{root}/cmd/"
     to, kind, by = (key[len(prefix):].split("/") + ["", "", ""])[:3] if key.startswith(prefix) else ("", "", "")
     cls = W.COMMANDS.get(kind)
@@ -138,6 +139,8 @@ def receive(ea, unit: str, root: str, gate: G.Gate, key: str, payload: bytes, t:
         gate.rejects.add(M.MessageError("cmd", "(authority)", refused), key)
         return result(cmd, False, t, refused)
     res = apply(ea, cmd, t)
+    if taken is not None:
+        taken(kind, cmd, t)
     if clog is not None:
         clog.write(unit, t, cmd, res, after)
     return res

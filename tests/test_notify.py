@@ -57,10 +57,15 @@ def notices(ea, kind=None, alert=None):
     return [n for n in ea.notices if (kind is None or n.kind == kind) and (alert is None or n.alert == alert)]
 
 
+def aid(ea, n: int) -> str:
+    """The id of the EA's n-th alert (ids name what an alert says, not its rank)."""
+    return ea.alerts[n - 1].details["id"]
+
+
 def test_ids_are_unique_and_deterministic(small):
     a, b = run_a2(small, armed=False), run_a2(small, armed=False)
     ids = [x.details["id"] for x in a.alerts]
-    assert ids == [f"{OWNER}/{n}" for n in range(1, len(ids) + 1)]
+    assert len(set(ids)) == len(ids) and all(i.startswith(f"{OWNER}/{int(x.t)}.") for i, x in zip(ids, a.alerts))
     assert ids == [x.details["id"] for x in b.alerts]
     assert not a.notices   # not armed (no commander acted): the paper's baseline, nobody to re-notify
 
@@ -84,13 +89,13 @@ def test_unacknowledged_urgent_alert_is_renotified_never_reraised(small):
     key = lambda a: (a.t, a.type, a.priority, a.subjects, a.message, a.details["id"])   # noqa: E731
     assert [key(a) for a in armed.alerts] == [key(a) for a in plain.alerts]
     first = next(a for a in armed.alerts if a.priority == "immediate")
-    assert (first.t, first.type, first.details["id"]) == (942.0, "out-of-position", "A2/1")
+    assert (first.t, first.type, first.details["id"]) == (942.0, "out-of-position", aid(armed, 1))
     every, times = armed.cfg["notify"]["immediate"]["every_s"], armed.cfg["notify"]["immediate"]["times"]
-    ren = notices(armed, "renotify", "A2/1")
+    ren = notices(armed, "renotify", aid(armed, 1))
     assert [(n.t, n.count) for n in ren] == [(first.t + every * k, k) for k in range(1, times + 1)]
     assert all((n.type, n.priority, n.subjects, n.message, n.to, n.due_t) ==
                (first.type, first.priority, first.subjects, first.message, OWNER, first.t) for n in ren)
-    (esc,) = notices(armed, "escalate", "A2/1")
+    (esc,) = notices(armed, "escalate", aid(armed, 1))
     assert esc.t == first.t + armed.cfg["notify"]["escalate_s"] and esc.to == "A" and esc.priority == "immediate"
     assert armed.stats["renotifications"] == len(notices(armed, "renotify"))
     assert armed.stats["escalations"] == len(notices(armed, "escalate"))
@@ -107,21 +112,21 @@ def test_cadence_cap_and_escalation_are_configuration(small):
         cfg["notify"]["immediate"] = {"every_s": 60.0, "times": 5}
         cfg["notify"]["escalate_s"] = 0.0
     ea = run_a2(small, config=cadence)
-    assert [n.t for n in notices(ea, "renotify", "A2/1")] == [942.0 + 60.0 * k for k in range(1, 6)]
+    assert [n.t for n in notices(ea, "renotify", aid(ea, 1))] == [942.0 + 60.0 * k for k in range(1, 6)]
     assert not notices(ea, "escalate")
 
 
 def test_ack_stops_renotification_and_escalation(small):
     acks = []
-    ea = run_a2(small, [(1300.0, lambda e: acks.append(e.ack("A2/1")))], until=2500.0)
+    ea = run_a2(small, [(1300.0, lambda e: acks.append(e.ack(aid(e, 1))))], until=2500.0)
     # at 1242 (300 s after it): re-notified once and escalated; acknowledged at 1300, the second
     # re-notification (1542) never comes
-    assert [n.t for n in notices(ea, "renotify", "A2/1")] == [1242.0]
-    assert [n.t for n in notices(ea, "escalate", "A2/1")] == [1242.0]
+    assert [n.t for n in notices(ea, "renotify", aid(ea, 1))] == [1242.0]
+    assert [n.t for n in notices(ea, "escalate", aid(ea, 1))] == [1242.0]
     assert acks[0]["stopped"] and acks[0]["renotified"] == 1 and acks[0]["escalated"]
-    early = run_a2(small, [(1000.0, lambda e: e.ack("A2/1"))], until=2500.0)
-    assert not notices(early, alert="A2/1")
-    ea.ack("A2/1")   # again: fine, nothing to stop
+    early = run_a2(small, [(1000.0, lambda e: e.ack(aid(e, 1)))], until=2500.0)
+    assert not notices(early, alert=aid(early, 1))
+    ea.ack(aid(ea, 1))   # again: fine, nothing to stop
     with pytest.raises(KeyError, match="unknown alert"):
         ea.ack("A2/999")
 
@@ -152,7 +157,7 @@ def test_silence_marks_matching_alerts_and_expires(small):
     oop = of(ea, "out-of-position", mission="A2-move")
     assert [(a.t, a.details.get("silenced")) for a in oop] == [(942.0, "s1"), (1062.0, "s1"), (1216.0, None)]
     assert not notices(ea, alert=oop[0].details["id"])   # silenced: never re-notified or escalated
-    assert [n.alert for n in notices(ea, "renotify")][:2] == ["A2/3", "A2/3"]   # a flash fratricide: not silenced
+    assert [n.alert for n in notices(ea, "renotify")][:2] == [aid(ea, 3), aid(ea, 3)]   # a flash fratricide: not silenced
     assert "s1" not in ea.notify.silences               # expired
     assert ea.stats["silenced"] == 2
     # subjects and areas must match too; unsilence lifts it at once
@@ -168,8 +173,8 @@ def test_a_silence_set_after_an_alert_stops_its_renotifications(small):
     """Silenced while it waits: nothing more of it, even after the silence ends (the
     commander knows of it); it can still be acknowledged."""
     ea = run_a2(small, [(1000.0, lambda e: e.silence("s", types=["out-of-position"], until_t=3000.0))])
-    assert not notices(ea, alert="A2/1")
-    assert ea.ack("A2/1")["stopped"]
+    assert not notices(ea, alert=aid(ea, 1))
+    assert ea.ack(aid(ea, 1))["stopped"]
 
 
 RULE = {"id": "oop-after-oop", "source": {"types": ["out-of-position"]}, "target": {"types": ["out-of-position"]},
@@ -180,7 +185,7 @@ def test_an_inhibition_rule_from_the_config_marks_and_quiets(small):
     ea = run_a2(small, config=lambda cfg: cfg.update(inhibit=[RULE]))
     oop = of(ea, "out-of-position", mission="A2-move")
     # 942 is the first (nothing active); 1062 falls within 150 s of it: inhibited by it; 1216 is 154 s after 1062
-    assert [a.details.get("inhibited_by") for a in oop] == [None, {"rule": "oop-after-oop", "source": "A2/1"}, None]
+    assert [a.details.get("inhibited_by") for a in oop] == [None, {"rule": "oop-after-oop", "source": oop[0].details["id"]}, None]
     assert ea.stats["inhibited"] == 1 and not notices(ea, alert=oop[1].details["id"])
     assert notices(ea, alert=oop[0].details["id"])
 
@@ -287,7 +292,7 @@ def test_bad_input_raises_and_changes_nothing(small):
 def test_commands_apply_in_process(small):
     """`commands.apply`: the same effects as the EA's methods, answered, never raising."""
     ea = run_a2(small, armed=False, until=3950.0)
-    ok = C.apply(ea, C.make("ack", alert="A2/1", by="cdr"))
+    ok = C.apply(ea, C.make("ack", alert=aid(ea, 1), by="cdr"))
     assert ok.ok and ok.kind == "ack" and ok.t == ea.now and ea.notify.armed
     bad = C.apply(ea, C.make("ack", alert="A2/999"))
     assert not bad.ok and "unknown alert" in bad.error and bad.req != ok.req

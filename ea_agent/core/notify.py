@@ -4,10 +4,10 @@ rules, and thresholds changed at run time.
 
 Everything runs on scenario time and is driven by the manager's epoch closes, so a
 run gives the same alerts and notices whatever the wall clock did:
- - every alert gets `details["id"] = "<owner>/<n>"`, n counting from 1 in emission
-   order (wall-clock-driven system alerts count apart, `<owner>/w<n>`, so that a
-   presence note never shifts the ids of the plan's alerts), and `details["story"]`,
-   the id of the first alert of its story (same type and subjects, not expired);
+ - every alert gets `details["id"]`, derived from what it says (`ids.AlertIds`: one id
+   names one alert for ever, across rebuilds, restarts and late joins), and
+   `details["story"]`, the id of the first alert of its story (same type and subjects,
+   not expired);
  - once armed (a commander acted on this EA: a batch run stays the paper's baseline),
    a flash or immediate alert not acknowledged is *re-notified* (a `Notice`, never a new
    alert: Alertmanager's repeat_interval) every `[notify.<priority>] every_s`, at most
@@ -28,6 +28,7 @@ from typing import Any, Callable
 
 from .alert import Alert
 from .config import check_setting
+from .ids import AlertIds
 from .inhibit import Inhibitor, Rule, rule as make_rule
 
 log = logging.getLogger(__name__)
@@ -111,8 +112,7 @@ class Notifier:
         self.story_s = expiry       # a story ends when nothing was told on it for this long
         self.armed = False
         self.ack_after_s: float | None = None   # a commander model (evaluate --commander): acks after this
-        self.n = 0                  # plan alerts issued (ids <owner>/1..n)
-        self.nw = 0                 # wall-clock-driven alerts issued (ids <owner>/w1..wn)
+        self.ids = AlertIds(owner)  # every id issued (a live peer shares its own across rebuilds)
         self.chains: dict[str, Chain] = {}
         self.due: list[tuple[float, int, int, str]] = []  # (scenario time, kind, tie, original id)
         self._tie = 0
@@ -127,12 +127,7 @@ class Notifier:
         """The alert with its id, story, silence or inhibition mark; watched for its
         acknowledgement when urgent and armed."""
         d = dict(alert.details)
-        if d.get("wall_clock_driven"):
-            self.nw += 1
-            d["id"] = f"{self.owner}/w{self.nw}"
-        else:
-            self.n += 1
-            d["id"] = f"{self.owner}/{self.n}"
+        d["id"] = self.ids.issue(alert, wall=bool(d.get("wall_clock_driven")))
         d["story"] = self._story(alert, d["id"])
         d.pop("silenced", None)
         d.pop("inhibited_by", None)
@@ -218,17 +213,12 @@ class Notifier:
     # -- commands ------------------------------------------------------------------
     def known(self, alert_id: Any) -> bool:
         """An id this EA issued."""
-        if not isinstance(alert_id, str) or "/" not in alert_id:
-            return False
-        owner, n = alert_id.rsplit("/", 1)
-        wall = n.startswith("w")
-        n = n[1:] if wall else n
-        return owner == self.owner and n.isdigit() and 1 <= int(n) <= (self.nw if wall else self.n)
+        return alert_id in self.ids
 
     def ack(self, alert_id: str, t: float) -> dict:
         if not self.known(alert_id):
             raise KeyError(f"ack: unknown alert {str(alert_id)[:80]!r}: not issued by the EA of {self.owner} "
-                           f"(ids {self.owner}/1..{self.owner}/{self.n})")
+                           f"({len(self.ids)} alerts issued so far)")
         ch = self.chains.pop(alert_id, None)
         if ch is not None:
             self.acked[alert_id] = t

@@ -7,8 +7,9 @@ detected by wall clock is not reproducible, a decision written down is).
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
 as written (frames: before the next thing the peer tells anyone, see `frame`):
 ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body] (a directive:
-saim_mesh/directives.py), ["peer", unit, up] (another EA left without a goodbye, or came
-back) or ["back", source]. A half-written last record (a kill) is ignored on reading, and
+saim_mesh/directives.py), ["cmd", t, kind, body] (a commander's command, taken at event
+time t: a rebuilt or restarted EA takes it again at t), ["peer", unit, up] (another EA left
+without a goodbye, or came back) or ["back", source]. A half-written last record (a kill) is ignored on reading, and
 cut off when the journal is opened again, so that what a restart appends can be read."""
 from __future__ import annotations
 
@@ -56,6 +57,11 @@ class InputJournal:
     def directive(self, by: str, kind: str, body: bytes) -> None:
         """A directive taken (its body out of its envelope: checked when it came)."""
         self._write(["dir", by, kind, body])
+
+    def command(self, t: float, kind: str, body: bytes) -> None:
+        """A commander's command applied at event time `t` (its body out of its envelope:
+        checked, signature and authority, when it came)."""
+        self._write(["cmd", t, kind, body])
 
     def peer(self, unit: str, up: bool) -> None:
         """Another EA left the mesh without a goodbye, or came back (`LivePeer._alive`)."""

@@ -17,6 +17,7 @@ and what they raise is marked late."""
 from __future__ import annotations
 
 import copy
+import heapq
 import math
 import queue
 import sys
@@ -27,6 +28,7 @@ import zenoh
 
 from dissemination.keyspace import KeySpace
 from ea_agent.core.alert import hms
+from ea_agent.core.ids import AlertIds
 from ea_agent.core.snapshot import snapshot
 
 from .. import commands as C
@@ -59,11 +61,12 @@ LOCATION = M.LocationReport
 @dataclass
 class BeforeLoss:
     """What a source's return rebuilds the EA from: its input record index `n` (the loss)
-    and copies of the EA, the order and the held directives just before it."""
+    and copies of the EA, the order, the held directives and commands just before it."""
     n: int
     ea: object
     order: EventTimeOrder
     pending: list
+    cmds: list
 
 
 class LivePeer:
@@ -96,7 +99,9 @@ class LivePeer:
         from ..plans import validator
         self.validate_plan = validator(sc)                   # plan versions checked as plan files are
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
+        self.ids = AlertIds(unit)   # every alert id issued, kept across rebuilds: never rewound
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
+        self.ea.notify.ids = self.ids
         self.ea.domain.inferred.append(self._confirm_up)
         self.confirmed_up: set[tuple[str, str]] = set()   # (mission, phase) published up the chain
         self.armed = armed
@@ -135,6 +140,13 @@ class LivePeer:
         self.catching_up = False              # ... then taking what its sources sent while it was down
         self.heard_again: set[str] = set()    # ... the sources heard since it came back (their edge known)
         self.restored = 0                     # input records the restart replayed
+        # a fresh peer (no journal to replay): per source, whether it was under way when we
+        # joined (its first frame heard was not its first): what we raise up to its edge is late
+        self.join_late: dict[str, bool] | None = None
+        # commands journalled before a rebuild or a restart, taken again at their event time:
+        # (t, tie, kind, command)
+        self.held_cmds: list[tuple[float, int, str, object]] = []
+        self._cmd_tie = 0
         self.timeline = Timeline(self.ea.epoch_s, live_start)   # for benchmarks: epochs, alerts, latency, CPU
 
     @property
@@ -222,11 +234,22 @@ class LivePeer:
         f = self._frame(payload, key)
         if f is None:
             return
-        if self.catching_up:   # what the EA raises up to the sources' edge when it came back is late
-            self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
-            self.heard_again.add(f.source)
+        self.heard(f)
         if not self.seq.arrive(payload, key, f):
             self.watch.heard_from(f.source)   # heard (not silent), but not kept: fetched again
+
+    def heard(self, f) -> None:
+        """A frame heard off the wire while catching up (restarted, or joined late): what the
+        EA raises up to its sources' edge is the past, given late."""
+        if self.catching_up:   # what the EA raises up to the sources' edge when it came back is late
+            late = True
+            if self.join_late is not None:   # a late joiner: only sources already under way count
+                late = self.join_late.setdefault(f.source, f.seq > 1)
+                if not late and len(self.join_late) == len(self.sources) and not any(self.join_late.values()):
+                    self.join_late, self.catching_up = None, False   # it joined before any began
+            if late:
+                self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
+            self.heard_again.add(f.source)
 
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
@@ -295,8 +318,9 @@ class LivePeer:
         in event-time order as if the source had never been lost (the other losses stand),
         then waits for the source to catch up: what it raises that the old EA had not
         raised is given, marked late with when it was due; what both raised is not given
-        again. Alerts the old EA raised on the partial picture stay in the log (never
-        withdrawn). A commander's commands to the old EA are not carried over."""
+        again, and keeps its id (`ids.AlertIds`, shared by both). Alerts the old EA raised
+        on the partial picture stay in the log (never withdrawn). A commander's commands to
+        the old EA are journalled and taken again by the new one at their event time."""
         records = self._history()
         since = self.order.released
         self.caught_up_to = max(self.caught_up_to, self.ea.now)
@@ -306,11 +330,12 @@ class LivePeer:
         self.rebuilding = source
         snap = self.before_loss.pop(source, None)
         if snap is not None and snap.n < len(records) and records[snap.n][:2] == ["lost", source]:
-            self.ea, self.order, self.dirs.pending = snap.ea, snap.order, snap.pending
+            self.ea, self.order, self.dirs.pending, self.held_cmds = snap.ea, snap.order, snap.pending, snap.cmds
             start = snap.n + 1
             self.log(f"source {source} back: EA rebuilt from its loss ({len(records) - start} records)", flush=True)
         else:   # from event time 0 (no copy: it could not be made, or the peer restarted since)
             self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
+            self.ea.notify.ids = self.ids
             self.ea.notice_sinks.append(self._notice)
             self.ea.domain.inferred.append(self._confirm_up)
             if self.armed:
@@ -318,6 +343,7 @@ class LivePeer:
             self.ea.start(0.0)
             self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
             self.dirs.reset()
+            self.held_cmds = []
             start = 0
         lost_at = start - 1 if start else max((i for i, r in enumerate(records) if r[:2] == ["lost", source]),
                                               default=-1)
@@ -334,6 +360,8 @@ class LivePeer:
                     self.take(rec[1], "", journal=False)
                 elif rec[0] == "dir":
                     self.journalled_directive(rec)
+                elif rec[0] == "cmd":
+                    self.journalled_command(rec)
                 elif rec[0] == "lost" and rec[1] not in returned:
                     self.lose(rec[1], rec[3], journal=False)
         finally:
@@ -368,6 +396,12 @@ class LivePeer:
                  f"{len(self.given)} alerts stand", flush=True)
         return len(recs)
 
+    def join(self) -> None:
+        """A fresh peer (no journal to replay) joining the mesh: a source already under way
+        (the first frame heard of it is not its first) tells it the past, and what the EA
+        raises up to that source's edge is given late, as after a restart."""
+        self.join_late, self.catching_up = {}, True
+
     def replay_record(self, rec: list) -> None:
         """One input-journal record taken again, as the decision it records was taken live
         (a restart, or `journal.replay`: `history` holds the records before it); each
@@ -382,6 +416,8 @@ class LivePeer:
             self.lose(rec[1], rec[3], journal=False)
         elif rec[0] == "dir":
             self.journalled_directive(rec)
+        elif rec[0] == "cmd":
+            self.journalled_command(rec)
         elif rec[0] == "peer":
             self.peer_change(rec[1], rec[2])
 
@@ -391,6 +427,27 @@ class LivePeer:
         d = D.decode(kind, body, 1 << 17)
         self.dirs.reqs.add((by, d.req))
         self._hold(D.Taken(by, d))
+
+    def journalled_command(self, rec: list) -> None:
+        """A commander's command as the input journal holds it (checked when it came):
+        taken again at the event time it was taken, now if the EA is there (a restart),
+        else when it gets there (a rebuilt EA behind it)."""
+        _, t, kind, body = rec
+        cls = W.COMMANDS.get(kind)
+        if cls is None:   # a journal of another version: said, never a crash
+            self.log(f"input journal: unknown command kind {str(kind)[:32]!r} not taken again", flush=True)
+            return
+        cmd = W.decode_control(cls, body, self.max_bytes)
+        if t <= self.ea.now:
+            C.apply(self.ea, cmd, t)
+        else:
+            self._cmd_tie += 1
+            heapq.heappush(self.held_cmds, (t, self._cmd_tie, kind, cmd))
+            self._apply()
+
+    def _journal_command(self, kind: str, cmd, t: float) -> None:
+        if self.journal is not None:
+            self.journal.command(t, kind, W.encode(cmd))
 
     def _history(self) -> list:
         """The input records so far (the journal's, flushed as written, or those a journal
@@ -428,11 +485,12 @@ class LivePeer:
         than from event time 0, which at every flap of a link cost each EA beyond it its
         whole journal again (docs/deployment.md). The copy shares the scenario and this peer."""
         try:
-            ea, order, pending = snapshot((self.ea, self.order, list(self.dirs.pending)), share=(self, self.sc))
+            ea, order, pending, cmds = snapshot((self.ea, self.order, list(self.dirs.pending), list(self.held_cmds)),
+                                                share=(self, self.sc, self.ids))
         except (TypeError, copy.Error) as e:   # state that cannot be copied: the return rebuilds from 0
             self.log(f"source {source} lost: no copy of the EA to rebuild from ({e})", flush=True)
             return
-        self.before_loss[source] = BeforeLoss(n, ea, order, pending)
+        self.before_loss[source] = BeforeLoss(n, ea, order, pending, cmds)
 
     def _inhibit_unknown(self, source: str) -> None:
         """While the loss stands, what the EA concludes about the units the source reported
@@ -461,13 +519,25 @@ class LivePeer:
         upto = None   # every source ended or is lost: all they sent is released, nothing beyond
         if self.live_start is not None and math.isfinite(self.order.bound()):
             upto = time.time() - self.live_start   # live: never ahead of the wall clock either
-        if self.dirs.pending:   # a directive takes effect after the facts before its `at`, before those at it
+        if self.dirs.pending or self.held_cmds:
             lim = min(self.order.bound(), math.inf if upto is None else upto)
-            while (tk := self.dirs.due(lim)) is not None:
-                for m in self.order.release(math.nextafter(tk.t, -math.inf)):
-                    self.ea.submit(m)
-                self.ea.advance(tk.t, strict=True)
-                self._take_directive(tk)
+            while True:
+                dt = self.dirs.pending[0][1].t if self.dirs.pending else math.inf
+                ct = self.held_cmds[0][0] if self.held_cmds else math.inf
+                if min(dt, ct) > lim:
+                    break
+                if dt <= ct:   # a directive takes effect after the facts before its `at`, before those at it
+                    tk = self.dirs.due(lim)
+                    for m in self.order.release(math.nextafter(tk.t, -math.inf)):
+                        self.ea.submit(m)
+                    self.ea.advance(tk.t, strict=True)
+                    self._take_directive(tk)
+                else:          # a journalled command, after the facts at its time, as it was taken
+                    t, _, _, cmd = heapq.heappop(self.held_cmds)
+                    for m in self.order.release(t):
+                        self.ea.submit(m)
+                    self.ea.advance(t)
+                    C.apply(self.ea, cmd, t)
         for m in self.order.release(upto):
             self.ea.submit(m)
         r = self.order.released
@@ -476,7 +546,7 @@ class LivePeer:
         self.timeline.released(r)
         if self.catching_up and r >= self.caught_up_to > -math.inf and self._edge_known():
             self.catching_up = False
-            self.log(f"restart: caught up to {hms(r)}", flush=True)
+            self.log(f"{'late join' if self.join_late is not None else 'restart'}: caught up to {hms(r)}", flush=True)
         if self.order.late:
             late, self.order.late[:] = list(self.order.late), []
             self.late_from = min(m.t for _, m in late)
@@ -550,7 +620,7 @@ class LivePeer:
         (`commands.receive`) at the EA's time, answered on cmdlog/<unit>."""
         # taken after every fact at the EA's time (it advanced as far as its sources promised)
         res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.out.clog,
-                        after=True)
+                        after=True, taken=self._journal_command)
         if res is None:
             return
         self.out.result(res)

@@ -29,7 +29,8 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
     signal.signal(signal.SIGTERM, stop)
     end_wall = time.monotonic() + deadline_s if deadline_s else math.inf
     try:
-        peer.restart()
+        if not peer.restart():
+            peer.join()
         with zenoh.open(peer.conf) as s:
             peer.session = s
             put, came = peer.q.put, peer.watch.arrived

@@ -62,7 +62,7 @@ MAX_AGE_S = 600.0        # an acknowledgement dated longer ago than this is hist
 LOG_FIRST = 200          # refusal lines said; then one in every LOG_EVERY
 LOG_EVERY = 100
 _SPLIT = re.compile(r"[\s,;]+")
-_N = re.compile(r"^w?[0-9]{1,9}$")
+_N = re.compile(r"^w?[0-9]{1,9}(\.[0-9a-f]{4}(\.[0-9]{1,3})?)?$")   # ea_agent/core/ids.py
 _UID = re.compile(r"^[^\x00-\x20\x7f]{1,%d}$" % MAX_UID)
 
 
@@ -213,7 +213,7 @@ class AckIn:
 
     # -- what the user named -----------------------------------------------------------
     def alert_id(self, token: str) -> str | None:
-        """An alert id from what a user typed: `BN/12`, `BN-12`, our CoT uid of it; None
+        """An alert id from what a user typed: `BN/942.8f85`, `BN-942.8f85`, our CoT uid of it; None
         when the word is not one (free text after the ids)."""
         tok = token.strip("()[]<>\"'.")
         if tok.startswith(self.alert_prefix):
