@@ -1,6 +1,6 @@
 """Acknowledge an alert as the unit's commander (saim_mesh.api.Commander).
 
-    python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/1"""
+    python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/330.c850"""
 import argparse
 import json
 

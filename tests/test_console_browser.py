@@ -183,6 +183,12 @@ class Stepped:
             assert self.cv.wait_for(lambda: self.at == t or self.done, timeout), f"the run never reached t={t}"
         assert self.error is None, self.error
 
+    def id(self, label: str) -> str:
+        """The id of what this file calls `BN/4`: the 4th alert BN's EA raised in this run
+        (ids say what an alert is, `BN/814.1a2b`; a rank is how a test can name one)."""
+        owner, n = label.split("/")
+        return self.ea[owner].alerts[int(n) - 1].details["id"]
+
     def close(self) -> None:
         self.to(math.inf)
         self.thread.join(30)
@@ -232,10 +238,11 @@ def test_a_pane_counts_stories_and_folds_a_storys_alerts(stepped):
     """Each pane has one row per story, its header counts stories, and a story of several
     alerts (an out-of-position and its VOA update) is one row with its count; a click shows
     the newest alert with the folded ones, newest first."""
+    I = stepped.id   # noqa: E741, N806
     from selenium.webdriver.common.by import By
     stepped.to(1300.0)
     want = expected_stories(stepped.ea["BN"])
-    assert want["immediate"]["BN/4"] == 2   # BN/4 (C off its corridor, immediate), then BN/7 (its update)
+    assert want["immediate"][I("BN/4")] == 2   # BN/4 (C off its corridor, immediate), then BN/7 (its update)
     with chromium() as d:
         d.get(stepped.url)
         for p in PANES:
@@ -243,15 +250,15 @@ def test_a_pane_counts_stories_and_folds_a_storys_alerts(stepped):
             wait(d, lambda d: text(d, f"count-{p}") == str(n) and len(shown(d, p)) == n)
             got = {e.get_attribute("data-story"): int(e.get_attribute("data-count")) for e in shown(d, p)}
             assert got == dict(want[p]), (p, got)
-        row = d.find_element(By.CSS_SELECTOR, '#pane-immediate li.story[data-story="BN/4"]')
+        row = d.find_element(By.CSS_SELECTOR, f'#pane-immediate li.story[data-story="{I("BN/4")}"]')
         assert row.find_element(By.CSS_SELECTOR, ".story-count").text.strip().endswith("2")
         assert (row.get_attribute("data-id"), row.get_attribute("data-type"), row.get_attribute("data-owner"),
-                row.get_attribute("data-priority")) == ("BN/7", "out-of-position", "BN", "immediate")
+                row.get_attribute("data-priority")) == (I("BN/7"), "out-of-position", "BN", "immediate")
         assert float(row.get_attribute("data-t")) == 814.0
         d.execute_script("arguments[0].scrollIntoView(); arguments[0].click();", row)
         folded = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#details ol.story-alerts li"))
-        assert [li.get_attribute("data-id") for li in folded] == ["BN/7", "BN/4"]
-        assert "BN/7" in text(d, "details")
+        assert [li.get_attribute("data-id") for li in folded] == [I("BN/7"), I("BN/4")]
+        assert I("BN/7") in text(d, "details")
         assert js_errors(d) == []
 
 
@@ -259,11 +266,12 @@ def test_a_silence_empties_a_pane_and_its_alerts_go_quiet(stepped):
     """Silencing out-of-position on BN from the page takes BN's out-of-position stories out
     of the panes into the quiet view; the later ones come marked silenced by the EA (still
     in its alert log), never in a pane; lifting the silence brings the stories back."""
+    I = stepped.id   # noqa: E741, N806
     from selenium.webdriver.common.by import By
     stepped.to(1000.0)
     oop = 'li.story[data-type="out-of-position"][data-owner="BN"]'
     stories = {a.details["story"] for a in stepped.ea["BN"].alerts if a.type == "out-of-position"}
-    assert stories == {"BN/3", "BN/4", "BN/9", "BN/11"}
+    assert stories == {I("BN/3"), I("BN/4"), I("BN/9"), I("BN/11")}
     with chromium() as d:
         d.get(stepped.url)
         wait(d, lambda d: {e.get_attribute("data-story") for e in d.find_elements(By.CSS_SELECTOR, f"#pane-immediate {oop}")}
@@ -278,20 +286,20 @@ def test_a_silence_empties_a_pane_and_its_alerts_go_quiet(stepped):
         wait(d, lambda d: int(text(d, "count-immediate")) == before - 4, what="pane count")
         d.find_element(By.ID, "quiet-toggle").click()
         quiet = lambda d: {e.get_attribute("data-id") for e in d.find_elements(By.CSS_SELECTOR, "#pane-quiet li.alert")}   # noqa: E731
-        wait(d, lambda d: d.find_element(By.ID, "pane-quiet").is_displayed() and {"BN/10", "BN/7", "BN/9", "BN/11"} <= quiet(d),
+        wait(d, lambda d: d.find_element(By.ID, "pane-quiet").is_displayed() and {I("BN/10"), I("BN/7"), I("BN/9"), I("BN/11")} <= quiet(d),
              what="the silenced stories in the quiet view")
         stepped.to(1150.0)   # BN/13 (story BN/9) and BN/15 (story BN/11) are raised under the silence
-        wait(d, lambda d: {"BN/13", "BN/15"} <= quiet(d))
+        wait(d, lambda d: {I("BN/13"), I("BN/15")} <= quiet(d))
         logged = {a.details["id"]: a for a in stepped.ea["BN"].alerts}
-        assert logged["BN/13"].details["silenced"] == sid and logged["BN/15"].details["silenced"] == sid
+        assert logged[I("BN/13")].details["silenced"] == sid and logged[I("BN/15")].details["silenced"] == sid
         assert not d.find_elements(By.CSS_SELECTOR, f"#alerts .alert-list {oop}")
-        assert not d.find_elements(By.CSS_SELECTOR, '#pane-priority li[data-id="BN/13"], #pane-priority li[data-id="BN/15"]')
-        why = d.find_element(By.CSS_SELECTOR, '#pane-quiet li.alert[data-id="BN/13"]').text
+        assert not d.find_elements(By.CSS_SELECTOR, f'#pane-priority li[data-id="{I("BN/13")}"], #pane-priority li[data-id="{I("BN/15")}"]')
+        why = d.find_element(By.CSS_SELECTOR, f'#pane-quiet li.alert[data-id="{I("BN/13")}"]').text
         assert f"silenced by {sid}" in why, why
         silences(d)[0].find_element(By.CSS_SELECTOR, "button.lift").click()
         wait(d, lambda d: len(silences(d)) == 0)
         wait(d, lambda d: len(d.find_elements(By.CSS_SELECTOR, f"#pane-immediate {oop}")) == 4, what="shown again")
-        assert {"BN/13", "BN/15"} <= quiet(d)   # what the EA marked stays quiet
+        assert {I("BN/13"), I("BN/15")} <= quiet(d)   # what the EA marked stays quiet
         assert js_errors(d) == []
 
 
@@ -299,6 +307,7 @@ def test_an_inhibition_rule_from_the_page_quiets_its_targets(stepped):
     """`while contact, quiet distance sharing subjects` on BN, from the page: the distance
     alerts BN raises about the units and tracks in contact never reach a pane, are logged by
     the EA marked inhibited_by (rule, source), and the rule is listed until lifted."""
+    I = stepped.id   # noqa: E741, N806
     from selenium.webdriver.common.by import By
     stepped.to(2200.0)
     with chromium() as d:
@@ -316,14 +325,14 @@ def test_an_inhibition_rule_from_the_page_quiets_its_targets(stepped):
         stepped.to(2600.0)   # contacts BN/29 (R, H2) and BN/32 (M, H9); distances BN/34, BN/36, BN/38 about them
         d.find_element(By.ID, "quiet-toggle").click()
         quiet = lambda d: {e.get_attribute("data-id") for e in d.find_elements(By.CSS_SELECTOR, "#pane-quiet li.alert")}   # noqa: E731
-        wait(d, lambda d: {"BN/34", "BN/36", "BN/38"} <= quiet(d))
-        wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, '#pane-flash li.story[data-story="BN/29"]'))
+        wait(d, lambda d: {I("BN/34"), I("BN/36"), I("BN/38")} <= quiet(d))
+        wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, f'#pane-flash li.story[data-story="{I("BN/29")}"]'))
         assert not d.find_elements(By.CSS_SELECTOR, '#alerts .alert-list li.story[data-type="distance"]')
         logged = {a.details["id"]: a for a in stepped.ea["BN"].alerts}
-        assert logged["BN/34"].details["inhibited_by"] == {"rule": "contact-mutes-distance", "source": "BN/29"}
-        assert logged["BN/36"].details["inhibited_by"]["source"] == "BN/32"
+        assert logged[I("BN/34")].details["inhibited_by"] == {"rule": "contact-mutes-distance", "source": I("BN/29")}
+        assert logged[I("BN/36")].details["inhibited_by"]["source"] == I("BN/32")
         assert "inhibited by rule contact-mutes-distance" in \
-            d.find_element(By.CSS_SELECTOR, '#pane-quiet li.alert[data-id="BN/34"]').text
+            d.find_element(By.CSS_SELECTOR, f'#pane-quiet li.alert[data-id="{I("BN/34")}"]').text
         rules(d)[0].find_element(By.CSS_SELECTOR, "button.lift").click()
         wait(d, lambda d: not rules(d))
         assert stepped.ea["BN"].notify.inhibitor.rules == {}
@@ -335,24 +344,25 @@ def test_a_renotified_story_blinks_at_the_top_until_acknowledged(stepped):
     """Nobody acknowledged BN/3 (out-of-position, immediate, at 666): at 966 its EA tells
     the commander again; the story's row goes to the top of its pane and blinks; the ack
     from the page stops the EA's re-notifications and the blinking."""
+    I = stepped.id   # noqa: E741, N806
     from selenium.webdriver.common.by import By
     stepped.to(985.0)
-    assert [(n.kind, n.alert, n.count) for n in stepped.ea["BN"].notices] == [("renotify", "BN/3", 1)]
-    row = '#pane-immediate li.story[data-story="BN/3"]'
+    assert [(n.kind, n.alert, n.count) for n in stepped.ea["BN"].notices] == [("renotify", I("BN/3"), 1)]
+    row = f'#pane-immediate li.story[data-story="{I("BN/3")}"]'
     with chromium() as d:
         d.get(stepped.url)
         wait(d, lambda d: "renotified" in (attr(d, row, "class") or "") and attr(d, row, "data-renotified") == "1")
-        assert shown(d, "immediate")[0].get_attribute("data-story") == "BN/3"   # on top, though older than BN/4, BN/9
+        assert shown(d, "immediate")[0].get_attribute("data-story") == I("BN/3")   # on top, though older than BN/4, BN/9
         blink = d.execute_script("return getComputedStyle(document.querySelector(arguments[0])).animationName", row)
         assert blink == "renotify"
         d.execute_script("arguments[0].click()", d.find_element(By.CSS_SELECTOR, row))
-        wait(d, lambda d: "BN/10" in text(d, "details"))
+        wait(d, lambda d: I("BN/10") in text(d, "details"))
         d.find_element(By.ID, "ack-btn").click()
-        wait(d, lambda d: "renotified" not in (attr(d, row, "class") or "") and "BN/3" in stepped.ea["BN"].notify.acked)
-        assert "BN/3" not in stepped.ea["BN"].notify.chains
+        wait(d, lambda d: "renotified" not in (attr(d, row, "class") or "") and I("BN/3") in stepped.ea["BN"].notify.acked)
+        assert I("BN/3") not in stepped.ea["BN"].notify.chains
         assert ": ok" in text(d, "status"), text(d, "status")
         stepped.to(1400.0)   # its next re-notification was due at 1266: none comes
-        assert [n for n in stepped.ea["BN"].notices if n.alert == "BN/3"] == [stepped.ea["BN"].notices[0]]
+        assert [n for n in stepped.ea["BN"].notices if n.alert == I("BN/3")] == [stepped.ea["BN"].notices[0]]
         assert "renotified" not in (attr(d, row, "class") or "")
         d.refresh()   # a page opened after the ack: told again once, answered, not blinking
         wait(d, lambda d: attr(d, row, "data-renotified") == "1", what="the story after a reload")
@@ -365,25 +375,26 @@ def test_an_escalation_reaches_the_superiors_page(stepped):
     unacknowledged at A for escalate_s (300 s):
     A's EA escalates it to BN; BN's page lists "unacknowledged at A: ..." and shows the
     original alert on a click, and BN's commander acknowledges it on A's EA."""
+    I = stepped.id   # noqa: E741, N806
     from selenium.webdriver.common.by import By
     stepped.to(1280.0)
-    [up] = [n for n in stepped.ea["A"].notices if n.kind == "escalate" and n.alert == "A/2"]
+    [up] = [n for n in stepped.ea["A"].notices if n.kind == "escalate" and n.alert == I("A/2")]
     assert up.to == "BN" and up.owner == "A" and up.t == 942.0 + 300.0
-    esc = '#escalations li.escalation[data-alert="A/2"][data-owner="A"]'
+    esc = f'#escalations li.escalation[data-alert="{I("A/2")}"][data-owner="A"]'
     with chromium() as d:
         d.get(stepped.url)
         assert Select(d.find_element(By.ID, "unit-select")).first_selected_option.get_attribute("value") == "BN"
         li = wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, esc))[0]
         assert li.text.startswith(f"unacknowledged at A: {up.message}"), li.text
-        assert d.find_elements(By.CSS_SELECTOR, '#escalations li.escalation[data-alert="A2/1"][data-owner="A2"]')   # to A
+        assert d.find_elements(By.CSS_SELECTOR, f'#escalations li.escalation[data-alert="{I("A2/1")}"][data-owner="A2"]')   # to A
         assert not d.find_elements(By.CSS_SELECTOR, '#pane-immediate li[data-owner="A"]')   # BN's panes: BN's stories
         li.find_element(By.CSS_SELECTOR, "button.show").click()
-        wait(d, lambda d: attr(d, "#ack-btn", "data-alert") == "A/2")
+        wait(d, lambda d: attr(d, "#ack-btn", "data-alert") == I("A/2"))
         assert up.message in text(d, "details")
         d.find_element(By.ID, "ack-btn").click()
         wait(d, lambda d: "acked" in (attr(d, esc, "class") or ""))
         assert text(d, "status").startswith("ack A: ok"), text(d, "status")
-        assert "A/2" in stepped.ea["A"].notify.acked and "A/2" not in stepped.ea["A"].notify.chains
+        assert I("A/2") in stepped.ea["A"].notify.acked and I("A/2") not in stepped.ea["A"].notify.chains
         assert js_errors(d) == []
 
 

@@ -90,7 +90,9 @@ def test_geochat_and_wilco_forms_name_alerts(small):
     assert pic.alert_uids[ev.uid] == "BN/7" and ev.uid == f"{PREFIX}.alert.BN-7"
     cases = [("ack BN/3", ["BN/3"]), ("ACK: bn/3", ["BN/3"]), ("Acknowledged BN-3, BN/4 moving now", ["BN/3", "BN/4"]),
              (f"wilco {ev.uid}", ["BN/7"]), ("ack BN/w2", ["BN/w2"]), ("ack BN/3 BN/3", ["BN/3"]),
-             ("ack A/2 at 12-30", ["A/2"])]
+             ("ack A/2 at 12-30", ["A/2"]), ("ack BN/942.8f85", ["BN/942.8f85"]),
+             ("ACK bn-w1200.0a1f.1, A/30.ffff", ["BN/w1200.0a1f.1", "A/30.ffff"]),
+             (f"wilco {PREFIX}.alert.BN-942.8f85", ["BN/942.8f85"])]
     for text, want in cases:
         acks, replies = take(g, geochat(BN_USER, "BRAVO6", text))
         assert [a.alert for a in acks] == want and replies == [], text
@@ -116,7 +118,7 @@ def test_geochat_and_wilco_forms_name_alerts(small):
         assert takproto.parse_proto(bytearray(b)) is not None
         acks, _ = take(g, b)
         assert [a.alert for a in acks] == ["BN/8"], fmt
-    assert g.asked == 15 and g.refused == {}
+    assert g.asked == sum(len(w) for _, w in cases) + 7 and g.refused == {}   # the cases, then 7 one by one
 
 
 def test_what_is_not_an_acknowledgement_is_skipped_not_answered(small):
@@ -338,6 +340,21 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
         assert rx.wait(said, 30), f"no GeoChat answer '{start}...'"
         return said(rx.got)[0]
 
+    def I(label: str) -> str:   # noqa: E743, N802
+        """The id of what this test calls `BN/3`: the 3rd alert BN's EA raised (from its log)."""
+        owner, n = label.split("/")
+        if n == "999":
+            return label   # never raised
+        def nth():
+            try:
+                rows = [json.loads(x) for x in open(tmp_path / f"{owner}.jsonl") if x.strip()]
+            except FileNotFoundError:
+                return None
+            rows = [r for r in rows if not r["details"].get("wall_clock_driven")]
+            return rows[int(n) - 1]["details"]["id"] if len(rows) >= int(n) else None
+        _bounded(lambda: nth() is not None, 60, f"{label} in {owner}'s alert log")
+        return nth()
+
     def send(uid: str, data: bytes) -> None:   # an ATAK client's stream to the gateway's TCP port
         if uid not in users:
             users[uid] = socket.create_connection(("127.0.0.1", lport), timeout=10)
@@ -359,20 +376,20 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
                                     extra=["--armed"]))
 
         # 1. BN's commander acknowledges BN/3 in All Chat Rooms; the answer comes back in GeoChat
-        alert_uid("BN/3")
-        send(BN_USER, geochat(BN_USER, "BRAVO6", "ack BN/3"))
-        said = answer("ACK BN/3")
-        assert said.startswith("ACK BN/3: taken by the EA of BN at H+") and "(BRAVO6 as BN)" in said, said
+        alert_uid(I("BN/3"))
+        send(BN_USER, geochat(BN_USER, "BRAVO6", f"ack {I('BN/3')}"))
+        said = answer(f"ACK {I('BN/3')}")
+        assert said.startswith(f"ACK {I('BN/3')}: taken by the EA of BN at H+") and "(BRAVO6 as BN)" in said, said
         # 2. ... and BN/8 with a y-a-w reply to its CoT
-        send(BN_USER, wilco(alert_uid("BN/8"), BN_USER, "BRAVO6"))
-        assert answer("ACK BN/8").startswith("ACK BN/8: taken by the EA of BN"), rx.got[-1]
+        send(BN_USER, wilco(alert_uid(I("BN/8")), BN_USER, "BRAVO6"))
+        assert answer(f"ACK {I('BN/8')}").startswith(f"ACK {I('BN/8')}: taken by the EA of BN"), rx.got[-1]
         # 3. C's commander acknowledging A's alert: refused at the gateway, counted, answered
-        alert_uid("A/2")
-        send(C_USER, geochat(C_USER, "CHARLIE6", "ack A/2"))
-        assert answer("ACK A/2") == "ACK A/2 refused: CHARLIE6 acts for C, which does not command A (BN/A)"
+        alert_uid(I("A/2"))
+        send(C_USER, geochat(C_USER, "CHARLIE6", f"ack {I('A/2')}"))
+        assert answer(f"ACK {I('A/2')}") == f"ACK {I('A/2')} refused: CHARLIE6 acts for C, which does not command A (BN/A)"
         # 4. an alert BN's EA never raised: the EA refuses it, and the user is told
-        send(BN_USER, geochat(BN_USER, "BRAVO6", "ack BN/999"))
-        assert answer("ACK BN/999").startswith("ACK BN/999 refused by the EA of BN: ack: unknown alert")
+        send(BN_USER, geochat(BN_USER, "BRAVO6", f"ack {I('BN/999')}"))
+        assert answer(f"ACK {I('BN/999')}").startswith(f"ACK {I('BN/999')} refused by the EA of BN: ack: unknown alert")
         send(BN_USER, b"<event><junk/></event>")   # bad input: counted, never fatal
 
         # the mesh runs to UNTIL: BN's EA re-notifies BN/4 (left alone) twice, BN/3 and BN/8 no more.
@@ -386,23 +403,23 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
                 if n["kind"] == "renotify":
                     out.setdefault(n["alert"], []).append(n["t"])
             return out
-        _bounded(lambda: len(renotified().get("BN/4", [])) >= 2, 60, "BN/4 re-notified twice by BN's EA")
+        _bounded(lambda: len(renotified().get(I("BN/4"), [])) >= 2, 60, f"{I('BN/4')} re-notified twice by BN's EA")
         log = _cmdlog(tmp_path / "BN.cmdlog")
         taken = {c["cmd"]["alert"]: c for c in log if c["kind"] == "ack"}
-        assert taken["BN/3"]["ok"] and taken["BN/3"]["cmd"]["by"] == f"tak:{BN_USER}"
-        assert taken["BN/8"]["ok"] and not taken["BN/999"]["ok"]
-        assert not any(c["cmd"].get("alert") == "A/2" for c in _cmdlog(tmp_path / "A.cmdlog"))   # never sent
+        assert taken[I("BN/3")]["ok"] and taken[I("BN/3")]["cmd"]["by"] == f"tak:{BN_USER}"
+        assert taken[I("BN/8")]["ok"] and not taken[I("BN/999")]["ok"]
+        assert not any(c["cmd"].get("alert") == I("A/2") for c in _cmdlog(tmp_path / "A.cmdlog"))   # never sent
         told = renotified()
-        assert told["BN/4"] == [994.0, 1294.0], told   # armed: one left unacknowledged is told again
-        for aid in ("BN/3", "BN/8"):
+        assert told[I("BN/4")] == [994.0, 1294.0], told   # armed: one left unacknowledged is told again
+        for aid in (I("BN/3"), I("BN/8")):
             after = [t for t in told.get(aid, []) if t > taken[aid]["t"]]
             assert after == [], f"{aid} re-notified after its ack at t={taken[aid]['t']}: {after}"
-        assert len(told.get("BN/3", [])) < 2 and told.get("BN/8", []) == []   # their schedules were cut short
+        assert len(told.get(I("BN/3"), [])) < 2 and told.get(I("BN/8"), []) == []   # their schedules were cut short
 
         def on_tak(aid):   # how many times the alert's CoT went out (re-notified: the same uid again)
             return sum(1 for _, d in rx.got for ev in [cot(d, "alert")] if ev and ev.detail["__saim"]["id"] == aid)
-        assert rx.wait(lambda g: on_tak("BN/4") >= 3, 30), on_tak("BN/4")
-        assert on_tak("BN/3") == on_tak("BN/8") == 1
+        assert rx.wait(lambda g: on_tak(I("BN/4")) >= 3, 30), on_tak(I("BN/4"))
+        assert on_tak(I("BN/3")) == on_tak(I("BN/8")) == 1
         gw.stop(30)   # SIGTERM: it says what it did
         done = gw.wait_for("tak done", 30)
     finally:
