@@ -661,7 +661,7 @@ def test_the_oracle_follows_the_corridor_when_there_is_no_route():
     assert o.tr._line_of("U-hold", hold) is None
 
 
-# ================================================================ suspected bugs (xfail)
+# ================================================================ once suspected bugs: each asserts the behaviour now
 def test_an_end_confirmation_after_abort_does_not_ready_the_successor(tmp_path):
     ea, msgs, a = _decision_run(tmp_path)
     assert decide(ea, a.details["id"], "abort").ok
