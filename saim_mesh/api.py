@@ -127,9 +127,10 @@ class _Session:
         try:
             self.session = zenoh.open(self.conf)
         except zenoh.ZError as e:
-            why = str(e).split(" at /", 1)[0].split("!", 1)[0].strip().rstrip(".")
+            why = str(e).split(" at /", 1)[0].strip()
+            why = "nobody answered, or refused this identity" if why.startswith("Unable to connect") else why
             raise MeshError(f"{self.identity}: cannot connect to {' '.join(self.connect) or 'the mesh'} within "
-                            f"{CONNECT_S:g} s ({why}): is the mesh up, and its CA this one's?") from None
+                            f"{CONNECT_S:g} s ({why}): is the mesh up, and are these its certificates?") from None
         try:
             self._opened()
         except BaseException:
@@ -137,6 +138,19 @@ class _Session:
             self.session = None
             raise
         return self
+
+    def _opened(self) -> None:
+        pass
+
+    def _closing(self) -> None:
+        pass
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self._closing()
+        finally:
+            self.session.close()
+            self.session = None
 
 class Source(_Session):
     """A source of facts (a unit's reporter, a command post): its own stream of reports and
