@@ -1,20 +1,31 @@
 """Acknowledge an alert as the unit's commander (saim_mesh.api.Commander).
 
-    python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/330.c850"""
+    python examples/acknowledge.py --mesh out/mesh --unit A2 --alert A2/1
+    python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/1
+
+Prints the EA's answer (JSON); exit 0 when it took the acknowledgement, else 2."""
 import argparse
 import json
 
-from saim_mesh.api import Commander
+from saim_mesh.api import Commander, MeshError
 
-p = argparse.ArgumentParser()
-p.add_argument("--scenario", default="scenarios/small")
-p.add_argument("--connect", nargs="+", required=True)
-p.add_argument("--unit", default="A2")
-p.add_argument("--alert", required=True)
-p.add_argument("--root")
-a = p.parse_args()
 
-with Commander(a.scenario, a.unit, connect=a.connect, root=a.root) as cdr:
-    answer = cdr.ack(a.alert)
-print(json.dumps(answer))
-raise SystemExit(0 if answer["ok"] else 2)
+def main(a) -> int:
+    with Commander(a.scenario, a.unit, connect=a.connect, mesh=a.mesh, root=a.root) as cdr:
+        answer = cdr.ack(a.alert)
+    print(json.dumps(answer))
+    return 0 if answer["ok"] else 2
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser()
+    p.add_argument("--scenario", default="scenarios/small")
+    p.add_argument("--mesh", metavar="OUT", help="the output folder of `saim-mesh mesh up` (routers, root, pki)")
+    p.add_argument("--connect", nargs="+", help="or an EA peer's endpoints (no routers, not secure)")
+    p.add_argument("--root")
+    p.add_argument("--unit", default="A2")
+    p.add_argument("--alert", required=True)
+    try:
+        raise SystemExit(main(p.parse_args()))
+    except MeshError as e:
+        raise SystemExit(f"acknowledge: {e}")

@@ -1,30 +1,39 @@
 """Publish one platoon's reports as a live source (saim_mesh.api.Source).
 
-    python examples/publish_reports.py --connect tcp/127.0.0.1:7447 --unit A2
+    python examples/publish_reports.py --mesh out/mesh --unit A2 --name cp.A2
+    python examples/publish_reports.py --connect tcp/127.0.0.1:7447 --unit A2 --name reporter
 
 Reads the platoon's positions from the scenario (a real reporter would read its GPS) and
 publishes them in event time, with a watermark every 2 s of it: an EA that depends on this
-source advances exactly as far as these watermarks promise."""
+source (`saim-mesh peer --sources NAME`) advances exactly as far as these watermarks promise.
+On a secure mesh the certificates know the command posts' sources: name it cp.<UNIT>."""
 import argparse
 import math
 
-from saim_mesh.api import LocationReport, Source
+from saim_mesh.api import LocationReport, MeshError, Source
 from saim_mesh.scenario import load
 
-p = argparse.ArgumentParser()
-p.add_argument("--scenario", default="scenarios/small")
-p.add_argument("--connect", nargs="+", required=True)
-p.add_argument("--unit", default="A2")
-p.add_argument("--name", default="reporter")
-p.add_argument("--root")
-a = p.parse_args()
 
-sc = load(a.scenario)
-mine = set(sc.taskorg.subtree(a.unit))
-reports = [e for e in sc.events if type(e) is LocationReport and sc.taskorg.entity_unit.get(e.entity) in mine]
+def main(a) -> None:
+    sc = load(a.scenario)
+    mine = set(sc.taskorg.subtree(a.unit))
+    reports = [e for e in sc.events if type(e) is LocationReport and sc.taskorg.entity_unit.get(e.entity) in mine]
+    with Source(sc, a.name, connect=a.connect, mesh=a.mesh, root=a.root) as src:
+        for r in reports:
+            src.watermark(math.ceil(r.t / 2.0) * 2.0 - 2.0)   # everything before this report's epoch is out
+            src.report(r.entity, r.lon, r.lat, r.t)
+    print(f"published {len(reports)} reports of {a.unit}")
 
-with Source(sc, a.name, connect=a.connect, root=a.root) as src:
-    for r in reports:
-        src.watermark(math.ceil(r.t / 2.0) * 2.0 - 2.0)   # everything before this report's epoch is out
-        src.report(r.entity, r.lon, r.lat, r.t)
-print(f"published {len(reports)} reports of {a.unit}")
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser()
+    p.add_argument("--scenario", default="scenarios/small")
+    p.add_argument("--mesh", metavar="OUT", help="the output folder of `saim-mesh mesh up` (routers, root, pki)")
+    p.add_argument("--connect", nargs="+", help="or an EA peer's endpoints (no routers, not secure)")
+    p.add_argument("--root")
+    p.add_argument("--unit", default="A2")
+    p.add_argument("--name", default="reporter")
+    try:
+        main(p.parse_args())
+    except MeshError as e:
+        raise SystemExit(f"publish_reports: {e}")

@@ -16,9 +16,20 @@ zenoh-python examples); secure when given a PKI folder (`saim-mesh certs`):
     with Commander("scenarios/small", "A2", connect=[...]) as cdr:
         print(cdr.ack("A2/1"))                       # the EA's answer: {"ok": True, "t": ..., ...}
 
+On a mesh that `saim-mesh mesh up` or `saim-mesh deploy` started (secure, EAs behind
+routers), give its output folder instead of endpoints: `mesh="out/mesh"` reads the routers'
+endpoints and names (`topology.json`), the key root and the PKI (`host.json`, `pki/`) there:
+
+    with Alerts("scenarios/small", mesh="out/mesh", units=["A2"]) as alerts: ...
+
+Or say it all: `connect=[router endpoint], routers=["hub"], pki="out/mesh/pki", root=...`.
+What keeps one from joining (no router reachable, a folder that is no mesh's, missing or
+bad certificates) is a `MeshError`: one line saying what and where.
+
 docs/api.md says more; examples/ has one runnable script per idea."""
 from __future__ import annotations
 
+import json
 import queue
 from pathlib import Path
 from typing import Iterator
@@ -35,29 +46,97 @@ from . import wire as W
 from .live.source import LiveSource
 from .zconf import config
 
-__all__ = ["Source", "Alerts", "Commander", "Alert", "LocationReport"]
+__all__ = ["Source", "Alerts", "Commander", "Alert", "LocationReport", "MeshError"]
 Alert = M.Alert
 LocationReport = M.LocationReport
+
+
+CONNECT_S = 5.0   # how long a session tries its endpoints before `MeshError`
+
+
+class MeshError(ConnectionError):
+    """This object cannot join the mesh; the message says why in one line."""
 
 
 def _scenario(sc) -> S.Scenario:
     return sc if not isinstance(sc, (str, Path)) else S.load(sc, events=False)
 
 
-class _Session:
-    """One Zenoh session as `identity` (secure with `pki`), opened on __enter__."""
+def _mesh(out, sc, near: str | None) -> dict:
+    """What `mesh up` / `deploy` wrote in their output folder `out` for those who join:
+    the routers' endpoints (the router of unit `near` first, the others to fall back on),
+    their names (trusted as relays), the key root and the PKI folder (None: insecure)."""
+    from .net.topology import TopologyError, read_resolved
+    out = Path(out)
+    if not (out / "topology.json").exists():
+        raise MeshError(f"{out}: no topology.json: not the output folder of a running `saim-mesh mesh up` "
+                        f"or `deploy` (its --out-dir)")
+    try:
+        topo, eps = read_resolved(out / "topology.json")
+    except TopologyError as e:
+        raise MeshError(str(e)) from None
+    try:
+        state = json.loads((out / "host.json").read_text())
+        dep = state["deployment"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise MeshError(f"{out}/host.json: unreadable ({type(e).__name__}): not a mesh's output folder") from None
+    if dep.get("scenario") != sc.name:
+        raise MeshError(f"{out} runs scenario {dep.get('scenario')!r}, not {sc.name!r}")
+    first = topo.router_of(near, sc.taskorg) if near in sc.taskorg.units else topo.top
+    first = first if first in eps else sorted(eps)[0]
+    pki = state.get("pki") or (str(out / "pki") if (out / "pki").is_dir() else None)
+    secure = any(e.startswith("tls/") for e in eps.values())
+    return {"connect": [eps[first], *(eps[n] for n in sorted(eps) if n != first)], "routers": sorted(eps),
+            "root": dep.get("root"), "pki": pki if secure else None, "secure": secure}
 
-    def __init__(self, scenario, identity: str, connect=None, listen=None, root=None, pki=None):
+
+class _Session:
+    """One Zenoh session as `identity` (secure with `pki`), opened on __enter__. With
+    `routers` (the names of the routers it connects to) a client of them, trusting what
+    they relay; `mesh` (an output folder of `mesh up` or `deploy`) gives connect, routers,
+    root and pki where not given. `near`: the unit whose router it tries first."""
+
+    def __init__(self, scenario, identity: str, connect=None, listen=None, root=None, pki=None, routers=None,
+                 mesh=None, near: str | None = None):
         self.sc = _scenario(scenario)
+        self.identity = identity
+        if mesh is not None:
+            m = _mesh(mesh, self.sc, near)
+            connect = connect if connect is not None else m["connect"]
+            routers = routers if routers is not None else m["routers"]
+            root = root or m["root"]
+            pki = pki if pki is not None else m["pki"]
+            if m["secure"] and pki is None:
+                raise MeshError(f"{mesh} is a secure mesh (tls endpoints) but has no pki/ folder: give pki=DIR")
         self.root = root or f"saim/{self.sc.name}"
         self.ks = KeySpace.of(self.sc, self.root)
-        self.conf = config(listen if listen is not None else ([] if connect else None), connect, None, False, pki,
-                           identity, self.sc, self.root)
+        self.connect = list(connect or ())
+        from .security.pki import SecurityError
+        try:
+            self.conf = config(listen if listen is not None else ([] if connect else None), connect, None, False,
+                               pki, identity, self.sc, self.root, mode="client" if routers else None,
+                               routers=list(routers or ()))
+        except SecurityError as e:
+            raise MeshError(f"{identity}: {e}") from None
+        if self.connect:   # nobody there: say so, rather than retry forever in silence
+            self.conf.insert_json5("connect/timeout_ms", str(int(CONNECT_S * 1000)))
+            self.conf.insert_json5("connect/exit_on_failure", "true")
         self.session = None
 
     def __enter__(self):
-        self.session = zenoh.open(self.conf)
-        self._opened()
+        try:
+            self.session = zenoh.open(self.conf)
+        except zenoh.ZError as e:
+            why = str(e).split(" at /", 1)[0].strip()
+            why = "nobody answered, or refused this identity" if why.startswith("Unable to connect") else why
+            raise MeshError(f"{self.identity}: cannot connect to {' '.join(self.connect) or 'the mesh'} within "
+                            f"{CONNECT_S:g} s ({why}): is the mesh up, and are these its certificates?") from None
+        try:
+            self._opened()
+        except BaseException:
+            self.session.close()
+            self.session = None
+            raise
         return self
 
     def _opened(self) -> None:
@@ -73,15 +152,16 @@ class _Session:
             self.session.close()
             self.session = None
 
-
 class Source(_Session):
     """A source of facts (a unit's reporter, a command post): its own stream of reports and
     watermarks (`saim_mesh.live`). Event times must increase past each watermark given.
     Secure (`pki`): identity `source.<name>`, which the access-control rules know for the
     command posts' sources `cp.<UNIT>` (`security.acl.source_names`)."""
 
-    def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None):
-        super().__init__(scenario, f"source.{name}", connect, listen, root, pki)
+    def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None,
+                 routers=None, mesh=None):
+        super().__init__(scenario, f"source.{name}", connect, listen, root, pki, routers, mesh,
+                         near=name.removeprefix("cp."))
         self.name, self.state_dir, self.src = name, state_dir, None
 
     def _opened(self) -> None:
@@ -111,8 +191,9 @@ class Alerts(_Session):
     (blocks), or `get(timeout)`. A payload that is not a valid alert is counted, never raised."""
 
     def __init__(self, scenario, connect=None, units=None, types=None, priorities=None, root=None, pki=None,
-                 identity: str = "observer"):
-        super().__init__(scenario, identity, connect, None, root, pki)
+                 identity: str = "observer", routers=None, mesh=None):
+        one = sorted(units)[0] if units and len(set(units)) == 1 else None   # its router first
+        super().__init__(scenario, identity, connect, None, root, pki, routers, mesh, near=one)
         self.units, self.types = set(units or ()), set(types or ())
         self.priorities = set(priorities or ())
         self.gate = G.Gate(W.T_LIMIT)
@@ -153,16 +234,21 @@ class Commander(_Session):
     """The commander of `unit` (identity `console.<unit>`): commands to the EAs of the units
     it commands. Each call returns the EA's answer as a dict (`ok`, `error`, `t`, `ref`)."""
 
-    def __init__(self, scenario, unit: str, connect=None, root=None, pki=None, timeout: float = 10.0):
+    def __init__(self, scenario, unit: str, connect=None, root=None, pki=None, timeout: float = 10.0,
+                 routers=None, mesh=None):
         sc = _scenario(scenario)
         if unit not in sc.taskorg.units:
             raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
-        super().__init__(sc, f"console.{unit}", connect, None, root, pki)
+        super().__init__(sc, f"console.{unit}", connect, None, root, pki, routers, mesh, near=unit)
         self.unit, self.timeout = unit, timeout
 
     def _opened(self) -> None:
+        from .security.pki import SecurityError
         from .security.sign import signer_for
-        self.signer = signer_for(self.conf)
+        try:
+            self.signer = signer_for(self.conf)
+        except SecurityError as e:
+            raise MeshError(f"{self.identity}: {e}") from None
 
     def send(self, kind: str, to: str | None = None, **fields) -> dict:
         """Any command (`commands.make` checks it; ValueError naming the field) to unit `to`'s EA."""

@@ -145,7 +145,8 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     runs = (prior or {}).get("runs", []) + [{"wall": round(time.time(), 3), "pid": os.getpid(),
                                              "restart": prior is not None}]
     start = start if start is not None else time.time() + 20.0
-    _write_state(out_dir, ident, start if live else None, paced_start, runs)
+    pki_of = str(Path(dep.pki).resolve()) if dep.secure else None   # for those who join (saim_mesh.api: mesh=)
+    _write_state(out_dir, ident, start if live else None, paced_start, runs, pki_of)
     live_args = ["--live", "--start", _iso(start)] if live else []
     until_args = ["--until", str(dep.until)] if dep.until is not None else []
     where = lambda unit: ["--connect", pl.endpoints[dep.attach(host, unit, to)], "--mode", "client",  # noqa: E731
@@ -200,7 +201,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
             echo(p.wait_for("console http", 60).split(" ", 1)[1] + f"  <- {c.unit}'s commander's console", flush=True)
         if not live and dep.speed != "max" and paced_start is None:   # one clock: event time 0 at this instant
             paced_start = time.time() + 5.0
-            _write_state(out_dir, ident, None, paced_start, runs)   # a restart keeps it
+            _write_state(out_dir, ident, None, paced_start, runs, pki_of)   # a restart keeps it
         pace_args = ["--start", _iso(paced_start)] if paced_start is not None and not live else []
         share = _share_args(sc)
         for name in h.sources:
@@ -299,10 +300,11 @@ def clear_state(out_dir: Path, units) -> int:
     return n
 
 
-def _write_state(out_dir: Path, ident: dict, start: float | None, paced_start: float | None, runs: list) -> None:
+def _write_state(out_dir: Path, ident: dict, start: float | None, paced_start: float | None, runs: list,
+                 pki: str | None = None) -> None:
     tmp = out_dir / (STATE + ".tmp")
-    tmp.write_text(json.dumps({"deployment": ident, "start": start, "paced_start": paced_start, "runs": runs},
-                              indent=1))
+    tmp.write_text(json.dumps({"deployment": ident, "start": start, "paced_start": paced_start, "runs": runs,
+                               "pki": pki}, indent=1))
     os.replace(tmp, out_dir / STATE)   # a kill leaves the old one or the new one
 
 
