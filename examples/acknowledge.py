@@ -1,7 +1,7 @@
 """Acknowledge an alert as the unit's commander (saim_mesh.api.Commander).
 
-    python examples/acknowledge.py --mesh out/mesh --unit A2 --alert A2/1
-    python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/1
+    python examples/acknowledge.py --mesh out/mesh --unit A2 --alert A2/330.c850
+    python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/330.c850
 
 Prints the EA's answer (JSON); exit 0 when it took the acknowledgement, else 2."""
 import argparse
