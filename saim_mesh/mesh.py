@@ -99,7 +99,7 @@ class Supervisor:
                 if p.starts > self.max_restarts:
                     self.given_up.add(name)
                     ev["given_up"] = True
-                    self.echo(f"supervisor: gave up on {name}: died {p.starts} times, restarted {p.starts - 1} "
+                    self.echo(f"supervisor: gave up on {name}: died {p.starts} time{'s' * (p.starts != 1)}, restarted {p.starts - 1} "
                               f"(--restarts {self.max_restarts}); the rest of the mesh goes on without it")
                     self._write_pids()
                     continue
