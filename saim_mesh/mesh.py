@@ -99,8 +99,9 @@ class Supervisor:
                 if p.starts > self.max_restarts:
                     self.given_up.add(name)
                     ev["given_up"] = True
-                    self.echo(f"supervisor: gave up on {name}: died {p.starts} time{'s' * (p.starts != 1)}, restarted {p.starts - 1} "
-                              f"(--restarts {self.max_restarts}); the rest of the mesh goes on without it")
+                    self.echo(f"supervisor: gave up on {name}: died {p.starts} time{'s' * (p.starts != 1)}, "
+                              f"restarted {p.starts - 1} (--restarts {self.max_restarts}); the rest of the mesh "
+                              "goes on without it")
                     self._write_pids()
                     continue
                 self.due[name] = now + min(8.0, self.backoff_s * 2 ** (p.starts - 1))

@@ -4,12 +4,13 @@ run), its TAK gateway, its EA peers (clients of the host's router), its consoles
 its sources. A child that dies is reported and restarted with backoff, up to
 `max_restarts` times (`--restarts`); one that dies once more is given up with one line
 naming it (also in `given_up.json` beside `pids.json`, and in `summary.json`) and the
-rest of the host goes on without it. Every child's output goes to its own log. `mesh up --sources-per-cp` is this with one host on
-127.0.0.1, free ports, and optionally emulated router links (`link`).
+rest of the host goes on without it. Every child's output goes to its own log.
+`mesh up --sources-per-cp` is this with one host on 127.0.0.1, free ports, and
+optionally emulated router links (`link`).
 
-The host's run ends when each of its EA peers said its summary or was given up (`until_done`), at
-`timeout`, or when stopped (SIGTERM / Ctrl-C); a host whose routers others still need
-keeps running after its EAs are done unless told otherwise.
+The host's run ends when each of its EA peers said its summary or was given up
+(`until_done`), at `timeout`, or when stopped (SIGTERM / Ctrl-C); a host whose routers
+others still need keeps running after its EAs are done unless told otherwise.
 
 A host that comes back (its machine or its supervisor died: every child dies with the
 supervisor, `proc.die_with_parent`) keeps its state when started again on the same
