@@ -99,18 +99,18 @@ class Supervisor:
                 if p.starts > self.max_restarts:
                     self.given_up.add(name)
                     ev["given_up"] = True
+                    self._write_pids()   # given_up.json says so by the time the line does
                     self.echo(f"supervisor: gave up on {name}: died {p.starts} time{'s' * (p.starts != 1)}, "
                               f"restarted {p.starts - 1} (--restarts {self.max_restarts}); the rest of the mesh "
                               "goes on without it")
-                    self._write_pids()
                     continue
                 self.due[name] = now + min(8.0, self.backoff_s * 2 ** (p.starts - 1))
             elif now >= self.due[name]:
                 del self.due[name]
                 p.start()
                 self.events.append({"process": name, "restarted": p.starts - 1})
+                self._write_pids()   # its new pid in pids.json by the time the line says it
                 self.echo(f"supervisor: restarted {name} (restart {p.starts - 1})")
-                self._write_pids()
 
     def _write_pids(self) -> None:
         """`pids.json` (name -> pid of its current run) and beside it `given_up.json` (the

@@ -146,6 +146,7 @@ def test_live_mesh_up_restarts_a_killed_peer_once_then_gives_up_on_it_and_goes_o
         done = wait_line(log, mesh, "host local: 1 of 2 EA peers done", 200)
         rc = mesh.wait(60)
     finally:
+        print("mesh up said:", log.read_text(errors="replace")[-4000:])   # shown when the test fails
         seen |= set(pids(out).values()) if (out / "pids.json").exists() else set()
         if mesh.poll() is None:
             os.killpg(mesh.pid, signal.SIGTERM)   # the launcher stops its children
