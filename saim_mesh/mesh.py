@@ -61,7 +61,9 @@ def start_fusion(scenario: str, group: str, endpoint: str, root: str, shuffle: i
 
 
 class Supervisor:
-    """Restart what dies, with backoff; remember what happened for the summary.
+    """Restart what dies, with backoff, up to `max_restarts` times per process; one that
+    dies once more is given up (one line naming it, `given_up`, `given_up.json` beside
+    `pids.json`) and the others go on. Remember what happened for the summary.
 
     The supervisor is part of its host: each child it starts (`Proc`, and the EA peers
     the zygote forks) gets SIGTERM from the kernel when the supervisor dies, even by
@@ -96,21 +98,30 @@ class Supervisor:
                 self.echo(f"supervisor: {name} exited ({code}); last lines: " + " | ".join(ev["last_lines"][-3:]))
                 if p.starts > self.max_restarts:
                     self.given_up.add(name)
-                    self.echo(f"supervisor: {name} died {p.starts} times: not restarting it")
+                    ev["given_up"] = True
+                    self._write_pids()   # given_up.json says so by the time the line does
+                    self.echo(f"supervisor: gave up on {name}: died {p.starts} time{'s' * (p.starts != 1)}, "
+                              f"restarted {p.starts - 1} (--restarts {self.max_restarts}); the rest of the mesh "
+                              "goes on without it")
                     continue
                 self.due[name] = now + min(8.0, self.backoff_s * 2 ** (p.starts - 1))
             elif now >= self.due[name]:
                 del self.due[name]
                 p.start()
                 self.events.append({"process": name, "restarted": p.starts - 1})
+                self._write_pids()   # its new pid in pids.json by the time the line says it
                 self.echo(f"supervisor: restarted {name} (restart {p.starts - 1})")
-                self._write_pids()
 
     def _write_pids(self) -> None:
+        """`pids.json` (name -> pid of its current run) and beside it `given_up.json` (the
+        processes it stopped restarting, each with its deaths), both replaced whole."""
         if self.pids_path is not None:
-            tmp = self.pids_path.with_suffix(".tmp")
-            tmp.write_text(json.dumps({n: p.pid for n, p in self.procs.items()}))
-            os.replace(tmp, self.pids_path)
+            for path, doc in ((self.pids_path, {n: p.pid for n, p in self.procs.items()}),
+                              (self.pids_path.with_name("given_up.json"),
+                               {n: self.procs[n].starts for n in sorted(self.given_up)})):
+                tmp = path.with_suffix(".tmp")
+                tmp.write_text(json.dumps(doc))
+                os.replace(tmp, path)
 
     def stop(self) -> None:
         for p in reversed(list(self.procs.values())):   # leaves before the routers they hang on

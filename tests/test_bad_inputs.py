@@ -1,6 +1,7 @@
 """Every bad input gives one clear line on stderr and exit code 2: never a traceback,
 a hang, or a silent acceptance. Most cases call `cli.main` in process; a few run the
-real command line."""
+real command line (every garbage endpoint among them)."""
+import argparse
 import gzip
 import json
 import os
@@ -12,6 +13,7 @@ import pytest
 
 from saim_mesh import cli
 from saim_mesh import scenario as S
+from saim_mesh.cli.args import _endpoint
 
 from .conftest import ROOT, SMALL
 
@@ -76,6 +78,23 @@ def config(text):
 def args(*extra):
     """A command-line case: `run DIR <extra>` on the intact scenario."""
     return lambda d: ["run", str(d), "--quiet", *extra]
+
+
+# the mesh's processes with Zenoh options (issue 49.6): a garbage --connect or --listen is
+# one line naming it, before any Zenoh session opens
+COMMANDS = {
+    "peer": lambda d: ["peer", "--scenario", str(d), "--unit", "A2"],
+    "source": lambda d: ["source", str(d), "--name", "cp.A"],
+    "router": lambda d: ["router", "--scenario", str(d), "--name", "r"],
+    "console": lambda d: ["console", str(d)],
+}
+BAD_ENDPOINTS = [("connect-garbage", "--connect", "garbage"), ("listen-notaport", "--listen", "tcp/127.0.0.1:notaport"),
+                 ("connect-carrier-pigeon", "--connect", "carrier-pigeon/roof")]
+
+
+def endpoint(cmd, opt, value):
+    """A case: `cmd`'s command line (on the intact scenario) with `opt value`."""
+    return lambda d: [*COMMANDS[cmd](d), opt, value]
 
 
 def cycle_units(doc):
@@ -238,7 +257,16 @@ CASES = [
     ("out-unwritable", lambda d: ["run", str(d), "--ea", "A2", "--quiet", "--out", str(d / "no" / "a.jsonl")],
      ["a.jsonl", "No such file"]),
     ("not-a-folder", lambda d: ["validate", str(d / "nothing")], ["nothing", "not a scenario folder"]),
+    ("mesh-restarts-negative", lambda d: ["mesh", "up", str(d), "--restarts", "-1"],
+     ["saim-mesh mesh", "--restarts", "whole number >= 0", "'-1'"]),
+    ("mesh-restarts-garbage", lambda d: ["mesh", "up", str(d), "--restarts", "garbage"],
+     ["saim-mesh mesh", "--restarts", "whole number >= 0", "'garbage'"]),
+    ("deploy-restarts-negative", lambda d: ["deploy", str(d / "deploy.toml"), "--restarts", "-2"],
+     ["saim-mesh deploy", "--restarts", "'-2'"]),
+    *((f"{cmd}-{case}", endpoint(cmd, opt, value), [f"saim-mesh {cmd}", opt, value[:20]])
+      for cmd in sorted(COMMANDS) for case, opt, value in BAD_ENDPOINTS),
 ]
+ENDPOINT_CASES = [f"{cmd}-{case}" for cmd in sorted(COMMANDS) for case, _, _ in BAD_ENDPOINTS]
 
 
 def one_error_line(err: str) -> str:
@@ -273,7 +301,9 @@ def run_cli(*argv):
                           timeout=60, env=env)
 
 
-@pytest.mark.parametrize("case", ["truncated-gzip", "config-epoch-zero", "nan-in-overlay"])
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("case", ["truncated-gzip", "config-epoch-zero", "nan-in-overlay", "mesh-restarts-negative",
+                                  *ENDPOINT_CASES])
 def test_real_command_line(scn, case):
     mutate, expect = next(c[1:] for c in CASES if c[0] == case)
     argv = mutate(scn)
@@ -282,6 +312,18 @@ def test_real_command_line(scn, case):
     line = one_error_line(r.stderr)
     for part in expect:
         assert part in line, line
+
+
+@pytest.mark.parametrize("ep", ["tcp/127.0.0.1:7447", "tls/localhost:0", "udp/198.18.0.1:7447",
+                                "tcp/[::1]:7447", "unixsock-stream//tmp/z.sock", "tcp/127.0.0.1:7447#iface=lo"])
+def test_a_good_endpoint_is_taken_as_given(ep):
+    assert _endpoint(ep) == ep
+
+
+@pytest.mark.parametrize("ep", ["", "tcp/", "tcp/127.0.0.1", "tcp/:7447", "tcp/h:99999", "127.0.0.1:7447"])
+def test_a_bad_endpoint_is_refused(ep):
+    with pytest.raises(argparse.ArgumentTypeError):
+        _endpoint(ep)
 
 
 def test_good_scenario_still_validates(capsys):

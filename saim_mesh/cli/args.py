@@ -45,6 +45,17 @@ def _positive(v: str) -> float:
     return f
 
 
+def _count(v: str) -> int:
+    """A whole number >= 0 (a count: restarts)."""
+    try:
+        n = int(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, not {v!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, not {v!r}")
+    return n
+
+
 def _progress(frac: float) -> None:
     if sys.stderr.isatty():
         n = int(frac * 40)

@@ -5,7 +5,7 @@ import sys
 from pathlib import Path
 
 from .. import scenario as S
-from .args import _seconds, _fail, _lines, DEFAULT_SCENARIO
+from .args import _count, _seconds, _fail, _lines, DEFAULT_SCENARIO
 
 
 def cmd_certs(a) -> int:
@@ -112,7 +112,9 @@ def add(sub) -> None:
     de.add_argument("--fresh", action="store_true",
                     help="a clean start: delete the EAs' logs and journals and the sources' state an earlier run left "
                          "in --out-dir (default: a restart keeps them when they are this deployment's)")
-    de.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
+    de.add_argument("--restarts", type=_count, default=10, metavar="N",
+                    help="restart each of the host's processes that dies up to N times (default 10), then give up "
+                         "on it with one line and go on without it (0: never restart)")
     de.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",
                     help="seconds a console stays up after the scenario's end")
     de.add_argument("--out", metavar="TOML", help="init: the file to write (default deploy-<scenario>.toml)")

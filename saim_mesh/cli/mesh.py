@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from .. import scenario as S
-from .args import _speed, _positive, _seconds, _zmode, _zenoh_args, _start_of, _instant, DEFAULT_SCENARIO
+from .args import _count, _speed, _positive, _seconds, _zmode, _zenoh_args, _start_of, _instant, DEFAULT_SCENARIO
 
 
 def cmd_replay(a) -> int:
@@ -153,14 +153,13 @@ def cmd_mesh(a) -> int:
         from ..live.up import up as live_up
         for bad, flag in ((a.tak or a.tak_in or a.tak_uids, "--tak (run `saim-mesh tak --sources` beside it)"),
                           (a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
-                          (a.window != 20.0, "--window (the sources pace themselves)"),
-                          (a.restarts != 10, "--restarts")):
+                          (a.window != 20.0, "--window (the sources pace themselves)")):
             if bad:
                 raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
                       live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
-                      console=a.console, console_linger=a.console_linger)
-        return 0 if len(res["peers"]) == len(a.units or res["peers"]) else 1
+                      console=a.console, console_linger=a.console_linger, max_restarts=a.restarts)
+        return 0 if len(res["peers"]) == len(res["units"]) and not res["given_up"] else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
              console=a.console, console_linger=a.console_linger, tak=_tak_args(a),
@@ -292,7 +291,10 @@ def add(sub) -> None:
     me.add_argument("--insecure", action="store_true",
                     help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
     me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
-    me.add_argument("--restarts", type=int, default=10, help="restarts per process before giving up on it")
+    me.add_argument("--restarts", type=_count, default=10, metavar="N",
+                    help="restart each process that dies (EA peer, source, router, console; with --replay the "
+                         "replay, fusion nodes, EA peers, routers, TAK gateway) up to N times (default 10), then "
+                         "give up on it with one line and go on without it (0: never restart)")
     me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
     me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
                     help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")

@@ -1,13 +1,16 @@
 """Start one host's share of a deployment under its own supervisor: its routers
 (listening on the host's addresses, linked to the routers the file names, wherever they
 run), its TAK gateway, its EA peers (clients of the host's router), its consoles, then
-its sources. A child that dies is reported and restarted with backoff; every child's
-output goes to its own log. `mesh up --sources-per-cp` is this with one host on
-127.0.0.1, free ports, and optionally emulated router links (`link`).
+its sources. A child that dies is reported and restarted with backoff, up to
+`max_restarts` times (`--restarts`); one that dies once more is given up with one line
+naming it (also in `given_up.json` beside `pids.json`, and in `summary.json`) and the
+rest of the host goes on without it. Every child's output goes to its own log.
+`mesh up --sources-per-cp` is this with one host on 127.0.0.1, free ports, and
+optionally emulated router links (`link`).
 
-The host's run ends when each of its EA peers said its summary (`until_done`), at
-`timeout`, or when stopped (SIGTERM / Ctrl-C); a host whose routers others still need
-keeps running after its EAs are done unless told otherwise.
+The host's run ends when each of its EA peers said its summary or was given up
+(`until_done`), at `timeout`, or when stopped (SIGTERM / Ctrl-C); a host whose routers
+others still need keeps running after its EAs are done unless told otherwise.
 
 A host that comes back (its machine or its supervisor died: every child dies with the
 supervisor, `proc.die_with_parent`) keeps its state when started again on the same
@@ -223,9 +226,11 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
                     seen[u] = show_alerts(out_dir / f"{u}.jsonl", seen.get(u, 0), echo, colours, RESET, hms, shown)
                 if u not in summaries and (line := sup.procs[u].find("summary ")) is not None:
                     summaries[u] = json.loads(line[len("summary "):])
-            if units and len(summaries) == len(units) and not done_said:
+            lost = [u for u in units if u in sup.given_up and u not in summaries]
+            if units and len(summaries) + len(lost) == len(units) and not done_said:
                 done_said = True
-                echo(f"host {host}: {len(units)} of {len(units)} EA peers done", flush=True)
+                echo(f"host {host}: {len(summaries)} of {len(units)} EA peers done"
+                     + (f" (given up: {' '.join(lost)})" if lost else ""), flush=True)
                 if until_done:
                     break
             time.sleep(0.1)
@@ -241,7 +246,8 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     wall = time.monotonic() - t0
     result = {"host": host, "peers": summaries, "wall_s": round(wall, 1), "sources": sources, "events": sup.events,
               "secure": dep.secure, "start": start if live else None, "paced_start": paced_start, "root": root,
-              "units": units, "topology": topo.to_dict(), "endpoints": pl.endpoints, "stopped": stopped is not None}
+              "units": units, "topology": topo.to_dict(), "endpoints": pl.endpoints, "stopped": stopped is not None,
+              "given_up": sorted(sup.given_up), "max_restarts": max_restarts}
     if link_files:   # bytes per router link (the emulated links' counters)
         result["links"] = routed.link_stats(link_files)
     (out_dir / "summary.json").write_text(json.dumps(result, indent=1, default=str))
@@ -250,8 +256,9 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     crashes = [e for e in sup.events if "exit_code" in e]
     echo(f"{len(summaries)} of {len(units)} EA peers done in {wall:.1f} s on host {host}, sources "
          f"{', '.join(h.sources) or 'none'}, {'mTLS + access control' if dep.secure else 'insecure'}; "
-         f"{len(crashes)} crash(es), {sum(1 for e in sup.events if 'restarted' in e)} restart(s); "
-         f"alerts in {out_dir}/, logs in {logs}/" + (" (stopped)" if stopped is not None else ""))
+         f"{len(crashes)} crash(es), {sum(1 for e in sup.events if 'restarted' in e)} restart(s)"
+         + (f", gave up on {' '.join(sorted(sup.given_up))} (--restarts {max_restarts})" if sup.given_up else "")
+         + f"; alerts in {out_dir}/, logs in {logs}/" + (" (stopped)" if stopped is not None else ""))
     if stopped is not None:
         raise stopped
     return result

@@ -2,8 +2,10 @@
 command post (each company's subtree; the battalion's own units and the hostile tracks
 its sensors see), one EA peer per unit advancing on those sources' watermarks, no
 replay. Alerts are printed as the peers raise them (read from their durable logs), the
-Fig. 7 table at the end. Supervised like `mesh up`: a child that dies is reported and
-restarted (a restarted source takes a new epoch; a restarted peer starts a new log)."""
+Fig. 7 table at the end. Supervised like `mesh up --replay`: a child that dies is reported
+and restarted, up to `max_restarts` times each (`--restarts`; a restarted source takes a
+new epoch and resumes after what it published, a restarted peer replays its input
+journal), then given up with one line and the mesh goes on without it."""
 from __future__ import annotations
 
 import json
@@ -54,7 +56,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
        echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
        start: float | None = None, insecure: bool = False, topology: str | None = None,
        link: dict | None = None, paced_start: float | None = None, console: int | None = None,
-       console_linger: float = 30.0) -> dict:
+       console_linger: float = 30.0, max_restarts: int = 10) -> dict:
     """`on_started(sup, t0)`: called once every source runs, with the wall time of event time 0 (a benchmark kills one). `start`
     (live): the wall time of event time 0 (default 20 s from now: everyone is up by then).
     `topology`: a topology file or "derive": one router per command post (`mesh up
@@ -64,7 +66,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     `paced_start`: with a speed, the wall time of event time 0 for every source (default:
     5 s after every EA is ready). `console`: the top unit's commander's console on that
     port (0: a free one), drawing the sources' frames; the EAs armed (urgent alerts are
-    re-notified and escalated until acknowledged).
+    re-notified and escalated until acknowledged). `max_restarts`: restarts per process
+    before it is given up (the result's `given_up`).
 
     The one-host case of `saim-mesh deploy` (`deploy.launch.run_host`)."""
     from .. import scenario as S
@@ -78,7 +81,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     dep, topo = one_host(sc, scenario, units, out_dir, speed, live, until, insecure, topology, console)
     res = run_host(dep, sc, LOCAL, out_dir, echo=echo, show=show, timeout=timeout, until_done=True,
                    on_started=on_started, start=start, paced_start=paced_start, link=link,
-                   console_linger=console_linger)
+                   console_linger=console_linger, max_restarts=max_restarts)
     res["topology"] = topo.to_dict() if topo is not None else None
     (out_dir / "summary.json").write_text(json.dumps(res, indent=1, default=str))
     return res
