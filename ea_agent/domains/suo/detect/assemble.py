@@ -3,9 +3,9 @@
 A group's members are reported one track at a time, a fraction of a second apart,
 and an epoch boundary can fall between them: an alert made at the first epoch would
 count only the members reported before it, and the rest would be a repeat inside the
-suppression interval. So a detector holds the first entity-counting alert on a key
-(no alert told on it, or news there) for `voi.group_s` of event time after its first
-member's report; re-offered while held, the latest candidate replaces the held one
+suppression interval. So a detector holds the first entity-counting alert about a
+group (one naming tracks new to the area or envelope) for `voi.group_s` of event time
+after its first member's report; re-offered while held, the latest candidate replaces the held one
 (it counts what arrived since). It is given at the first epoch close at or after
 that time, dated then. Deterministic: it depends on report times and epoch closes
 only, which every EA fed the same reports shares.
