@@ -149,8 +149,12 @@ def test_distance(small_run):
 
 
 def test_strength(small_run):
-    s = within(alerts_of(small_run, "A", "strength"), 5100, 5140, "A2")
-    assert s and s[0].details["strength"] == 12 and "H4B" in s[0].subjects
+    # H4B joining H4 is news for both platoons at once: told merged for A CO (proximity)
+    s = [(a.t, m) for a in within(alerts_of(small_run, "A"), 5100, 5140, "A2") if a.type == "proximity"
+         for m in a.details["merged"] if m["type"] == "strength" and "A2" in m["subjects"]]
+    s += [(a.t, {"details": a.details, "subjects": a.subjects})
+          for a in within(alerts_of(small_run, "A", "strength"), 5100, 5140, "A2")]
+    assert s and s[0][1]["details"]["strength"] == 12 and "H4B" in s[0][1]["subjects"]
     # B CO meets only H7, left on OBJ-B when it ends its attack (from 3000 s)
     assert all("H7" in a.subjects and a.t >= 3000 for a in alerts_of(small_run, "B", "strength"))
 

@@ -60,6 +60,7 @@ class Candidate:
     also: tuple = ()                     # ((key, measure), ...) histories this alert also updates
     projection: bool = False             # a projected violation: `also` names the actual alert's key
     news: bool = False                   # about subjects never told on this key: given whatever its history
+    count: int | None = None             # hostile entities it counts (more than last told, in new tracks: news)
 
 
 

@@ -7,6 +7,9 @@ propose. A candidate is judged against the last alert given on its `key`:
    not told again because the user might have forgotten it);
  - a candidate with `news` (subjects the user was never told of on that key, e.g. a
    new group in a watched area): give it;
+ - a candidate that counts more entities (`count`) than the alert last told on its key,
+   in subjects that alert did not name (a group's members joining it): news, given at
+   once at its own priority; the suppression interval is for repeats, not growth;
  - a similar alert inside the suppression interval (90 s hostile, 120 s friendly): drop;
  - otherwise give it only if its measure crossed the repeat ratio (progressive
    repeat), at one priority lower: the user already knows the gist;
@@ -30,6 +33,16 @@ class Record:
     priority: str
     projected: bool = False   # set by a projection of the violation this key stands for
     seen: float = 0.0         # when the story was last active (a candidate on the key, or touch)
+    count: int | None = None  # the entities it counted
+    told: frozenset = frozenset()   # the subjects it named
+
+
+def grew(c: Candidate, rec: Record) -> bool:
+    """Whether `c` counts more entities than `rec` told, some in subjects `rec` did not name:
+    members who joined the group since are new information, not a repeat (a track whose
+    own strength wavers names no new subject: the repeat ratio judges that)."""
+    return (c.count is not None and rec.count is not None and c.count > rec.count
+            and not rec.told.issuperset(c.subjects))
 
 
 MergeFn = Callable[[Hashable, list[Candidate]], Candidate]
@@ -90,9 +103,10 @@ class Voa:
                 k = "suppressed-" + verdict
                 suppressed[k] = suppressed.get(k, 0) + 1
                 continue
-            history[key] = Record(t, c.measure, c.priority)
+            told = frozenset(c.subjects)
+            history[key] = Record(t, c.measure, c.priority, count=c.count, told=told)
             for k, measure in c.also:  # e.g. a contact sets the baseline for later distance alerts
-                history[k] = Record(t, measure, c.priority, c.projection)
+                history[k] = Record(t, measure, c.priority, c.projection, count=c.count, told=told)
             out.append(c)
         if n:
             stats = self.stats
@@ -108,6 +122,8 @@ class Voa:
     def _verdict_on(self, c: Candidate, rec: Record) -> str | None:
         """Why `c` is suppressed given the unexpired alert `rec` on its key (None: give it)."""
         if c.news and not rec.projected:   # news, unless a projection already told it
+            return None
+        if grew(c, rec) and not rec.projected:
             return None
         ratio = self.repeat.get(c.type, 0.0)
         if rec.projected:   # the violation a projection told: the same story, unless much worse

@@ -23,6 +23,7 @@ from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Assumptions,
                      Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
                      Presence, ReconProgress, ScheduleMonitors, Standoffs, Tempo, ThreatsAhead)
 from .detect.ahead import branches_for
+from .detect.assemble import Assembly
 from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
 from .missions import DEFAULT_PRIORITY, ContingentMission, Mission, make
 from .picture import Picture, Watchman
@@ -72,6 +73,7 @@ class SuoDomain:
         self._reckon_h = 0.0
         self._unit_c: np.ndarray | None = None   # unit centroids of the last update (rows: pic.units)
         self._foreign = True
+        self.assembly = Assembly()   # first entity-counting alerts wait for their group (detect/assemble.py)
         self.detectors: list[Detector] = [cls(self) for cls in DETECTORS]
         # the components the monitoring API routes to
         self.location = self._part(LocationMonitors)
@@ -463,7 +465,7 @@ class SuoDomain:
         return bool(self.dirty_leaves or self.dirty_tracks or self.watchman.quiet or self.pic.adj.moving())
 
     def next_wakeup(self) -> float:
-        return min(self.next_scan, self.auto[0][0] if self.auto else math.inf)
+        return min(self.next_scan, self.auto[0][0] if self.auto else math.inf, self.assembly.next_due())
 
     def apply(self, facts: list) -> None:
         locs = [f for f in facts if type(f) is LocationReport]
@@ -538,6 +540,7 @@ class SuoDomain:
             observe(t, ch)
         for detect in self._detectors:
             detect(t, ch, cands)
+        cands += self.assembly.due(t)   # after the detectors: a group's last offer counts
         if ch.rescan:
             self.next_scan = (math.floor(t / self.scan_s) + 1) * self.scan_s
         self._auto_start(t)

@@ -12,6 +12,7 @@ import shapely
 from ea_agent.core.alert import Candidate, hms
 
 from ..missions import Mission
+from .assemble import hold_first
 from .base import Changes, Detector
 from .geometry import AreaIndex
 
@@ -53,6 +54,7 @@ class Areas(Detector):
         self.red_monitors: dict[str, list[tuple[Mission, bool, str]]] = defaultdict(list)
         self.global_areas: dict[str, str] = {}   # area -> alert type (monitored / ave-of-approach)
         self._mon_v = getattr(self, "_mon_v", 0) + 1
+        self.dom.assembly.drop(lambda k: k[0] in self.TYPES)   # the old plan's watches tell nothing more
 
     def reindex(self) -> None:
         """The watched areas changed: rebuild the spatial index over all of them."""
@@ -95,6 +97,7 @@ class Areas(Detector):
         for area in list(self.red_monitors):
             self.red_monitors[area] = [x for x in self.red_monitors[area] if x[0].id != mid]
         self._mon_v += 1
+        self.dom.assembly.drop(lambda k: k[0] in self.TYPES and len(k) == 3 and k[2] == mid)
 
     def monitored_candidate(self, m: Mission | None, area: str, t: float, tracks: list[str], strength: int,
                             expected: bool, kind: str = "monitored") -> None:
@@ -103,13 +106,16 @@ class Areas(Detector):
         where = f" ({'expected' if expected else 'unexpected'} for {dom.name(m.unit)} {m.TYPE})" if m else ""
         label = {"ave-of-approach": "Enemy activity on ave of approach",
                  "penetration": "Penetration: hostiles in"}.get(kind, "Red activity at")
-        dom.ea.post(Candidate(t, kind, prio, tuple(tracks), f"{label} {area}{where}: {strength} entities in "
-                              f"{len(tracks)} track{'s' if len(tracks) > 1 else ''}",
-                              key=(kind, area, m.id if m else None), measure=float(strength), friendly=False,
-                              news=bool(self._new.get(area)),
-                              details={"place": area, "places": [area], "strength": strength,
-                                       "mission": m.id if m else None, "expected": expected,
-                                       "new_tracks": self._new.get(area, [])}))
+        key = (kind, area, m.id if m else None)
+        new = self._new.get(area, [])
+        c = Candidate(t, kind, prio, tuple(tracks), f"{label} {area}{where}: {strength} entities in "
+                      f"{len(tracks)} track{'s' if len(tracks) > 1 else ''}",
+                      key=key, measure=float(strength), friendly=False, news=bool(new), count=strength,
+                      details={"place": area, "places": [area], "strength": strength,
+                               "mission": m.id if m else None, "expected": expected, "new_tracks": new})
+        # the first alert about a group there waits for the rest of it (assemble.py)
+        if not hold_first(dom, c, new, bool(new)):
+            dom.ea.post(c)
 
     def observe(self, t: float, ch: Changes) -> None:
         if not ch.tracks and not self._stale and not ch.rescan:

@@ -13,6 +13,7 @@ from ea_agent.core.alert import Candidate
 from ea_agent.core.geo import bearing_name
 
 from ..render import km
+from .assemble import hold_first
 from .base import Changes, Detector
 
 ADVERSARIAL = "adversarial-activity"
@@ -108,6 +109,7 @@ class ThreatEnvelopes(Detector):
             if not near:
                 if prev0:
                     self.env_prev[u] = (empty, math.inf, 0)
+                dom.assembly.drop_key(("threat", u, "contact"))   # gone before its group assembled
                 continue
             ids = frozenset(tids[k] for k, _ in near)
             prev = self.env_prev.get(u, (empty, math.inf, 0))
@@ -131,14 +133,18 @@ class ThreatEnvelopes(Detector):
             # A contact is told when a threat enters an empty envelope; while the envelope
             # stays occupied the story goes on and the user is not told it again (touch);
             # after the expiry with none near, a threat back is a new contact.
+            # A contact waits for the rest of its group (assemble.py): while it is held, every
+            # re-evaluation offers it again, counting what is near now.
             remembered = voa.enabled and voa.last(ckey, t) is not None
             if remembered:
                 voa.touch(ckey, t)
-            elif new or not voa.enabled:   # VOA off (the naive baseline): every re-evaluation
+            elif new or not voa.enabled or dom.assembly.holds(ckey):   # VOA off (naive): every re-evaluation
                 p = m.red_alert_priority("contact", fs, strength, nearest, danger)
-                cands.append(Candidate(t, "contact", p, subj, f"Contact: {strength} hostile entities {where}",
-                                       key=ckey, friendly=False, merge_group=group, also=rec,
-                                       details={**base, "new_tracks": sorted(new)}))
+                c = Candidate(t, "contact", p, subj, f"Contact: {strength} hostile entities {where}",
+                              key=ckey, friendly=False, merge_group=group, also=rec, count=strength,
+                              details={**base, "new_tracks": sorted(new)})
+                if not hold_first(dom, c, new or ids, bool(new)):
+                    cands.append(c)
             if remembered or not voa.enabled:
                 # Propose on every re-evaluation; VOA compares with what the user was last told.
                 if not new:
@@ -150,4 +156,4 @@ class ThreatEnvelopes(Detector):
                                            f"Threat near {dom.name(u)} stronger: {strength} hostile entities, "
                                            f"nearest {where}",
                                            key=("threat", u, "strength"), measure=float(strength), friendly=False,
-                                           merge_group=group, details=dict(base)))
+                                           merge_group=group, count=strength, details=dict(base)))
