@@ -74,28 +74,27 @@ def mixture(mu: np.ndarray, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray,
 def ct(x: np.ndarray, P: np.ndarray, q: np.ndarray, q_turn: float, max_turn: float, dt: float
        ) -> tuple[np.ndarray, np.ndarray]:
     """Coordinated turn at each state's estimated rate w (extended Kalman filter), w a
-    random walk: n x 5 states, n x 5 x 5 covariances, n process noises."""
-    px, py, vx, vy, w = x.T
-    w = np.clip(w, -max_turn, max_turn)
-    wt = w * dt
-    small = np.abs(wt) < 1e-4          # the limit w -> 0, to second order
-    ws = np.where(small, 1.0, w)
-    sn, cs = np.sin(wt), np.cos(wt)
-    s_w = np.where(small, dt - w * w * dt ** 3 / 6.0, sn / ws)
-    c_w = np.where(small, w * dt * dt / 2.0, (1.0 - cs) / ws)
-    ds = np.where(small, -w * dt ** 3 / 3.0, (wt * cs - sn) / (ws * ws))
-    dc = np.where(small, dt * dt / 2.0, (wt * sn - 1.0 + cs) / (ws * ws))
-    nvx, nvy = cs * vx - sn * vy, sn * vx + cs * vy
-    nx = np.stack([px + s_w * vx - c_w * vy, py + c_w * vx + s_w * vy, nvx, nvy, w], axis=1)
-    F = np.zeros((len(x), 5, 5))
-    F[:, 0, 0] = F[:, 1, 1] = F[:, 4, 4] = 1.0
-    F[:, 0, 2], F[:, 0, 3], F[:, 0, 4] = s_w, -c_w, ds * vx - dc * vy
-    F[:, 1, 2], F[:, 1, 3], F[:, 1, 4] = c_w, s_w, dc * vx + ds * vy
-    F[:, 2, 2], F[:, 2, 3], F[:, 2, 4] = cs, -sn, -dt * nvy
-    F[:, 3, 2], F[:, 3, 3], F[:, 3, 4] = sn, cs, dt * nvx
+    random walk: n x 5 states, n x 5 x 5 covariances, n process noises. The few turning
+    models of a scan get their Jacobians in plain floats, then one batched product."""
+    rows, Fs = [], []
+    for px, py, vx, vy, w in x.tolist():
+        w = min(max(w, -max_turn), max_turn)
+        wt = w * dt
+        sn, cs = math.sin(wt), math.cos(wt)
+        if abs(wt) < 1e-4:   # the limit w -> 0, to second order
+            s_w, c_w = dt - w * w * dt ** 3 / 6.0, w * dt * dt / 2.0
+            ds, dc = -w * dt ** 3 / 3.0, dt * dt / 2.0
+        else:
+            s_w, c_w = sn / w, (1.0 - cs) / w
+            ds, dc = (wt * cs - sn) / (w * w), (wt * sn - 1.0 + cs) / (w * w)
+        nvx, nvy = cs * vx - sn * vy, sn * vx + cs * vy
+        rows.append((px + s_w * vx - c_w * vy, py + c_w * vx + s_w * vy, nvx, nvy, w))
+        Fs.append(((1.0, 0.0, s_w, -c_w, ds * vx - dc * vy), (0.0, 1.0, c_w, s_w, dc * vx + ds * vy),
+                   (0.0, 0.0, cs, -sn, -dt * nvy), (0.0, 0.0, sn, cs, dt * nvx), (0.0, 0.0, 0.0, 0.0, 1.0)))
+    F = np.array(Fs)
     Q = q[:, None, None] * q4(1.0, dt)
     Q[:, 4, 4] = q_turn * dt
-    return nx, F @ P @ F.transpose(0, 2, 1) + Q
+    return np.array(rows), F @ P @ F.transpose(0, 2, 1) + Q
 
 
 def arc(px: float, py: float, vx: float, vy: float, w: float, dt: float) -> tuple[float, float]:
@@ -112,7 +111,8 @@ def arc(px: float, py: float, vx: float, vy: float, w: float, dt: float) -> tupl
 def kf_update(xs: np.ndarray, Ps: np.ndarray, z: np.ndarray, R: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each track's models updated by its position measurement z (tracks x 2, noise R per
-    track, isotropic): (states, covariances, each model's log-likelihood of z)."""
+    track, isotropic): (states, covariances, each model's log-likelihood of z). The
+    innovation covariance is 2 x 2: its inverse is written out."""
     r = R[:, None]
     a, b, d = Ps[:, :, 0, 0] + r, Ps[:, :, 0, 1], Ps[:, :, 1, 1] + r
     det = a * d - b * b
