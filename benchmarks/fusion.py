@@ -234,7 +234,8 @@ def main(argv=None) -> int:
                 "speed_ratio": round(k["hits_per_s"] / max(1, s_["hits_per_s"]), 1)}
         out["data_sets"][ds.name] = row
         print(ds.name, json.dumps({k: v for k, v in row.items() if k != "window"}), flush=True)
-    out["note"] = ("errors are to the true object's centre (a battalion hostile is a group); Kalman reports are "
+    out["note"] = ("hits_per_s: hits per CPU second of each tracker's loop; errors are to the true object's "
+                   "centre (a battalion hostile is a group); Kalman reports are "
                    "dead-reckoned (sent when the receivers' extrapolation, now or 2.5 s ahead, errs by more than the "
                    "track's threshold: k x its own position sigma + 0.1 s of its speed, k = 3 on the ground with a "
                    "40 m floor, 4 in the air; or on a strength or domain change, or every 60 s): rmse_m is the "

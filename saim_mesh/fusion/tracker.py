@@ -304,7 +304,8 @@ class KalmanTracker:
             mine = [j for j in range(n) if label[j] == lab]
             m = len(mine)
             cx, cy = sum(z[j][0] for j in mine) / m, sum(z[j][1] for j in mine) / m
-            ext = max(sum((z[j][0] - cx) ** 2 + (z[j][1] - cy) ** 2 for j in mine) / m / 2.0 - r2, 0.0) if m > 1 else 0.0
+            spread = sum((z[j][0] - cx) ** 2 + (z[j][1] - cy) ** 2 for j in mine) / m / 2.0
+            ext = max(spread - r2, 0.0) if m > 1 else 0.0
             pv = r2 + ext
             self.seq += 1
             x = np.array([cx, cy, 0.0, 0.0, 0.0])
