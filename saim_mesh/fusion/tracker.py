@@ -38,7 +38,10 @@ and their spread its extent (which widens the gate for its members, not for othe
 Association per scan, confirmed tracks before tentative ones: one hit per track
 (nearest by Mahalanobis distance first), then further hits of the scan join the track
 whose gate, widened by its extent, holds them; what is left starts tentative tracks (hits within `birth_m` of each
-other: one new track). numpy throughout; the tracks of one node are few."""
+other: one new track). The tracks of one node are few and so are a scan's hits: the
+filter arithmetic is batched over a scan's tracks (motion.py), the association and the
+bookkeeping around it are plain Python on lists (a numpy call per track and hit costs
+more than the sums it does)."""
 from __future__ import annotations
 
 import math
@@ -47,9 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-I3, I5 = np.eye(3), np.eye(5)
-H = np.eye(2, 5)
-W0 = 1e-6   # the steady model's turn-rate variance (rad^2/s^2): it does not turn
+from .motion import I3, W0, arc, ct, cv_matrix, imm_mix, kf_update, mixing, mixture, q4
 
 
 @dataclass
@@ -88,16 +89,6 @@ class Report:
     domain: str = "ground"
 
 
-def _q4(q: float, dt: float) -> np.ndarray:
-    """White-acceleration process noise (spectral density q) on position and velocity, 5 x 5."""
-    d3, d2, d1 = q * dt ** 3 / 3, q * dt ** 2 / 2, q * dt
-    Q = np.zeros((5, 5))
-    Q[0, 0] = Q[1, 1] = d3
-    Q[0, 2] = Q[2, 0] = Q[1, 3] = Q[3, 1] = d2
-    Q[2, 2] = Q[3, 3] = d1
-    return Q
-
-
 class KalmanTracker:
     def __init__(self, name: str = "K", sigma: dict[str, float] | float = 30.0, q: float = 0.1,
                  q_fast: float = 40.0, fast_mps: float = 40.0, gate: float = 16.0, birth_m: float = 250.0,
@@ -123,6 +114,8 @@ class KalmanTracker:
         self.motion = {"ground": (("cv", q), ("cv", q), ("cv", q_man)),
                        "air": (("cv", q_air), ("ct", q_air_ct), ("cv", q_air_man)),
                        "tentative": (("cv", q_fast),) * 3}
+        self._qs = {k: np.array([q for _, q in m]) for k, m in self.motion.items()}
+        self._turns = {k: [j for j, (how, _) in enumerate(m) if how == "ct"] for k, m in self.motion.items()}
         # the models' Markov chain: each is left at 1 / its mean sojourn, for either other one alike
         out = np.array([1.0 / steady_s, 1.0 / turn_s, 1.0 / man_s])
         self.rates = (np.ones((3, 3)) - I3) * (out / 2.0)[:, None] - np.diag(out)
@@ -155,42 +148,45 @@ class KalmanTracker:
         k = len(z)
         if k == 0:
             return
-        owner = -np.ones(k, dtype=int)
+        zl = np.asarray(z, dtype=float).tolist()
+        al = None if alt is None else np.asarray(alt, dtype=float).tolist()
+        owner = [-1] * k
         if self.tracks:
-            d2 = self._d2(z, r2, with_ext=False)
-            d2g = self._d2(z, r2, with_ext=True)
-            taken: set[int] = set()
+            d2, d2g = self._d2(z, r2)
+            gate, taken = self.gate, []
             for tier in (True, False):   # confirmed tracks and their members first, then tentative ones
-                mine = np.array([tr.confirmed is tier for tr in self.tracks])
-                i, j = np.nonzero((d2 <= self.gate) & mine[:, None] & (owner < 0)[None, :])
+                pairs = sorted((d, i, j) for i, tr in enumerate(self.tracks) if tr.confirmed is tier
+                               for j, d in enumerate(d2[i]) if d <= gate and owner[j] < 0)
                 now: list[int] = []
-                for o in np.argsort(d2[i, j], kind="stable"):   # one hit per track, nearest first
-                    ti, hj = int(i[o]), int(j[o])
-                    if ti in taken or owner[hj] >= 0:
-                        continue
-                    taken.add(ti)
-                    now.append(ti)
-                    owner[hj] = ti
-                if now and (owner < 0).any():   # the groups' other members join them
-                    free = np.nonzero(owner < 0)[0]
-                    g = d2g[np.ix_(now, free)]
-                    best = g.argmin(axis=0)
-                    ok = g[best, np.arange(len(free))] <= self.gate
-                    owner[free[ok]] = np.array(now)[best[ok]]
-            for ti in sorted(taken):
-                self._update(self.tracks[ti], z[owner == ti], r2, t)
-                self._height(self.tracks[ti], alt, owner == ti)
-        free = owner < 0
-        self._birth(z[free], None if alt is None else alt[free], r2, t)
+                for _, i, j in pairs:   # one hit per track, nearest first
+                    if owner[j] < 0 and i not in now:
+                        now.append(i)
+                        owner[j] = i
+                if now:   # the groups' other members join them
+                    for j in range(k):
+                        if owner[j] < 0:
+                            best = min(now, key=lambda i: d2g[i][j])
+                            if d2g[best][j] <= gate:
+                                owner[j] = best
+                taken += now
+            if taken:
+                taken.sort()
+                groups = [[j for j in range(k) if owner[j] == i] for i in taken]
+                trs = [self.tracks[i] for i in taken]
+                self._update(trs, [[zl[j] for j in g] for g in groups], r2, t)
+                if al is not None:
+                    for tr, g in zip(trs, groups):
+                        self._height(tr, [al[j] for j in g])
+        free = [j for j in range(k) if owner[j] < 0]
+        if free:
+            self._birth([zl[j] for j in free], None if al is None else [al[j] for j in free], r2, t)
 
     @staticmethod
-    def _height(tr: Track, alt: np.ndarray | None, mine: np.ndarray) -> None:
-        if alt is None:
-            return
-        a = alt[mine]
-        a = a[np.isfinite(a)]
-        if len(a):
-            m = float(a.mean())
+    def _height(tr: Track, alts: list[float] | None) -> None:
+        """The track's height: its hits' mean (NaN: not measured), smoothed."""
+        a = [h for h in alts or () if math.isfinite(h)]
+        if a:
+            m = sum(a) / len(a)
             tr.alt = m if tr.alt is None else 0.5 * tr.alt + 0.5 * m
 
     # -- motion models ------------------------------------------------------------------
@@ -205,62 +201,12 @@ class KalmanTracker:
         fast = math.hypot(tr.x_upd[2], tr.x_upd[3]) > self.fast
         return "air" if fast or (tr.alt is not None and tr.alt > self.air_agl_m) else "ground"
 
-    def _mixing(self, dt: float) -> np.ndarray:
-        """P(model j at t + dt | model i at t) = expm(rates x dt), by scaling and squaring."""
-        A = self.rates * dt
-        k = max(0, int(math.ceil(math.log2(max(np.abs(A).sum(axis=1).max(), 1e-12)))) + 1)
-        A = A / 2.0 ** k
-        E, term = I3.copy(), I3.copy()
-        for i in range(1, 8):
-            term = term @ A / i
-            E = E + term
-        for _ in range(k):
-            E = E @ E
-        return E
-
-    @staticmethod
-    def _cv(x: np.ndarray, P: np.ndarray, q: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Constant velocity; the turn rate is reset to 0 (this model does not turn)."""
-        F = I5.copy()
-        F[0, 2] = F[1, 3] = dt
-        F[4, 4] = 0.0
-        Q = _q4(q, dt)
-        Q[4, 4] = W0
-        return F @ x, F @ P @ F.T + Q
-
-    def _ct(self, x: np.ndarray, P: np.ndarray, q: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Coordinated turn at the estimated rate w (extended Kalman filter); w a random walk."""
-        px, py, vx, vy, w = x
-        w = min(max(w, -self.max_turn), self.max_turn)
-        wt = w * dt
-        if abs(wt) < 1e-4:   # the limit w -> 0, to second order
-            s_w, c_w = dt - w * w * dt ** 3 / 6.0, w * dt * dt / 2.0
-            ds, dc = -w * dt ** 3 / 3.0, dt * dt / 2.0
-        else:
-            sn, cs = math.sin(wt), math.cos(wt)
-            s_w, c_w = sn / w, (1.0 - cs) / w
-            ds, dc = (wt * cs - sn) / (w * w), (wt * sn - 1.0 + cs) / (w * w)
-        sn, cs = math.sin(wt), math.cos(wt)
-        nx = np.array([px + s_w * vx - c_w * vy, py + c_w * vx + s_w * vy,
-                       cs * vx - sn * vy, sn * vx + cs * vy, w])
-        F = np.array([[1, 0, s_w, -c_w, ds * vx - dc * vy],
-                      [0, 1, c_w, s_w, dc * vx + ds * vy],
-                      [0, 0, cs, -sn, -dt * (sn * vx + cs * vy)],
-                      [0, 0, sn, cs, dt * (cs * vx - sn * vy)],
-                      [0, 0, 0, 0, 1.0]])
-        Q = _q4(q, dt)
-        Q[4, 4] = self.q_turn * dt
-        return nx, F @ P @ F.T + Q
-
     def _step(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(the models' mixing matrix, the constant-velocity F, unit process noise) for `dt`:
         the same for every track of a scan, so kept for the last few dts."""
         got = self._steps.get(dt)
         if got is None:
-            F = I5.copy()
-            F[0, 2] = F[1, 3] = dt
-            F[4, 4] = 0.0
-            got = (self._mixing(dt), F, _q4(1.0, dt))
+            got = (mixing(self.rates, dt), cv_matrix(dt), q4(1.0, dt))
             if len(self._steps) > 64:
                 self._steps.clear()
             self._steps[dt] = got
@@ -276,108 +222,101 @@ class KalmanTracker:
                 by.setdefault(t - tr.t, []).append(tr)
         for dt, trs in by.items():
             Pi, F, Q1 = self._step(dt)
-            mu = np.array([tr.mu for tr in trs])                    # tracks x models
-            xs = np.array([tr.xs for tr in trs])                    # tracks x models x 5
-            Ps = np.array([tr.Ps for tr in trs])
-            c = mu @ Pi                                             # predicted model probabilities
-            w = mu[:, :, None] * Pi[None] / c[:, None, :]           # w[., i, j]: P(was i | is j)
-            x0 = np.einsum("tij,tik->tjk", w, xs)
-            dx = xs[:, :, None, :] - x0[:, None, :, :]
-            P0 = np.einsum("tij,tikl->tjkl", w, Ps) + np.einsum("tij,tijk,tijl->tjkl", w, dx, dx)
-            models = [self.motion[self.mover(tr)] for tr in trs]
-            qs = np.array([[q for _, q in m] for m in models])
+            c, x0, P0 = imm_mix(np.array([tr.mu for tr in trs]), Pi,
+                                np.array([tr.xs for tr in trs]), np.array([tr.Ps for tr in trs]))
+            kinds = [self.mover(tr) for tr in trs]
+            qs = np.array([self._qs[k] for k in kinds])
             nx = x0 @ F.T                                           # every model as constant velocity first
             nP = F @ P0 @ F.T + qs[:, :, None, None] * Q1
             nP[:, :, 4, 4] += W0
-            X = np.einsum("tj,tjk->tk", c, nx)                      # the mixture, for gating and reports
-            d = nx - X[:, None, :]
-            P = np.einsum("tj,tjkl->tkl", c, nP) + np.einsum("tj,tjk,tjl->tkl", c, d, d)
+            turns = [(i, j) for i, k in enumerate(kinds) for j in self._turns[k]]
+            if turns:                                               # then the turning ones as they turn
+                ti, tj = np.array(turns).T
+                nx[ti, tj], nP[ti, tj] = ct(x0[ti, tj], P0[ti, tj], qs[ti, tj], self.q_turn, self.max_turn, dt)
+            X, P = mixture(c, nx, nP)
             for i, tr in enumerate(trs):
                 tr.xs, tr.Ps, tr.mu, tr.x, tr.P, tr.t = nx[i], nP[i], c[i], X[i], P[i], t
-                ct = [j for j, (how, _) in enumerate(models[i]) if how == "ct"]
-                for j in ct:
-                    tr.xs[j], tr.Ps[j] = self._ct(x0[i, j], P0[i, j], models[i][j][1], dt)
-                if ct:
-                    self._combine(tr)
 
-    @staticmethod
-    def _combine(tr: Track) -> None:
-        tr.x = tr.mu @ tr.xs
-        dx = tr.xs - tr.x
-        tr.P = np.einsum("j,jkl->kl", tr.mu, tr.Ps) + np.einsum("j,jk,jl->kl", tr.mu, dx, dx)
+    def _d2(self, z: np.ndarray, r2: float) -> tuple[list[list[float]], list[list[float]]]:
+        """Squared Mahalanobis distance of every hit to every track's predicted position,
+        the least over its motion models (a hit a manoeuvre explains is in the gate): plain,
+        and with the gate widened by the track's extent (for a group's other members)."""
+        xs = np.array([tr.xs for tr in self.tracks])[:, :, :2]           # T x 3 x 2
+        Ps = np.array([tr.Ps for tr in self.tracks])
+        s00, s01, s11 = Ps[:, :, 0, 0] + r2, Ps[:, :, 0, 1], Ps[:, :, 1, 1] + r2
+        v = np.asarray(z, dtype=float)[None, None] - xs[:, :, None, :]   # T x 3 x hits x 2
+        vx2, vxy, vy2 = v[..., 0] ** 2, 2.0 * v[..., 0] * v[..., 1], v[..., 1] ** 2
 
-    def _d2(self, z: np.ndarray, r2: float, with_ext: bool) -> np.ndarray:
-        """Squared Mahalanobis distance of every hit to every track's predicted position:
-        the least over its motion models (a hit a manoeuvre explains is in the gate)."""
-        X = np.concatenate([tr.xs[:, :2] for tr in self.tracks])             # 3T x 2
-        S = np.concatenate([tr.Ps[:, :2, :2] for tr in self.tracks]).copy()
-        add = r2 + (np.repeat([tr.ext for tr in self.tracks], 3) if with_ext else 0.0)
-        S[:, 0, 0] += add
-        S[:, 1, 1] += add
-        det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-        v = z[None, :, :] - X[:, None, :]                      # 3T x hits x 2
-        a, b, c = S[:, 1, 1, None], -S[:, 0, 1, None], S[:, 0, 0, None]
-        d2 = (a * v[..., 0] ** 2 + 2 * b * v[..., 0] * v[..., 1] + c * v[..., 1] ** 2) / det[:, None]
-        return d2.reshape(len(self.tracks), 3, len(z)).min(axis=1)
+        def d2(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> list[list[float]]:
+            det = (a * c - b * b)[..., None]
+            return ((c[..., None] * vx2 - b[..., None] * vxy + a[..., None] * vy2) / det).min(axis=1).tolist()
+        plain = d2(s00, s01, s11)
+        ext = np.array([tr.ext for tr in self.tracks])
+        if not ext.any():
+            return plain, plain
+        e = ext[:, None]
+        return plain, d2(s00 + e, s01, s11 + e)
 
-    def _update(self, tr: Track, zs: np.ndarray, r2: float, t: float) -> None:
-        n = len(zs)
-        zc = zs.mean(axis=0)
-        if n >= 2:   # the members' spread, beyond the sensor's noise
-            spread = float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0)
-            tr.ext = 0.7 * tr.ext + 0.3 * max(spread - r2, 0.0)
-        R = (r2 + tr.ext) / n
-        P = tr.Ps                                            # every model at once
-        a, b, d = P[:, 0, 0] + R, P[:, 0, 1], P[:, 1, 1] + R
-        det = a * d - b * b
-        Si = np.empty((len(P), 2, 2))
-        Si[:, 0, 0], Si[:, 0, 1], Si[:, 1, 0], Si[:, 1, 1] = d / det, -b / det, -b / det, a / det
-        nu = zc[None, :] - tr.xs[:, :2]
-        K = P[:, :, :2] @ Si                                 # models x 5 x 2
-        tr.xs = tr.xs + (K @ nu[:, :, None])[:, :, 0]
-        P = P - K @ P[:, :2, :]
-        tr.Ps = (P + P.transpose(0, 2, 1)) / 2.0
-        ll = -0.5 * np.einsum("mi,mij,mj->m", nu, Si, nu) - 0.5 * np.log(det)
-        mu = tr.mu * np.exp(ll - ll.max())
-        tr.mu = np.clip(mu / mu.sum(), 1e-6, 1.0)
-        tr.mu /= tr.mu.sum()
-        self._combine(tr)
-        tr.Ps_upd = tr.Ps.copy()
-        tr.t = tr.t_upd = t
-        tr.x_upd = tr.x.copy()
-        tr.counts.append(n)
-        tr.trail.append((t, float(tr.x[0]), float(tr.x[1])))
-        tr.hit_window = True
+    def _update(self, trs: list[Track], zs: list[list[list[float]]], r2: float, t: float) -> None:
+        """Each track by the hits of this scan it took (`zs`, one list per track): their mean
+        is one measurement of it, its noise the sensor's and the group's extent over their count."""
+        zc, R = [], []
+        for tr, g in zip(trs, zs):
+            n = len(g)
+            if n == 1:
+                cx, cy = g[0]
+            else:   # the members' spread, beyond the sensor's noise
+                cx, cy = sum(p[0] for p in g) / n, sum(p[1] for p in g) / n
+                spread = sum((x - cx) ** 2 + (y - cy) ** 2 for x, y in g) / n / 2.0
+                tr.ext = 0.7 * tr.ext + 0.3 * max(spread - r2, 0.0)
+            zc.append((cx, cy))
+            R.append((r2 + tr.ext) / n)
+        xs, Ps, ll = kf_update(np.array([tr.xs for tr in trs]), np.array([tr.Ps for tr in trs]),
+                               np.array(zc), np.array(R))
+        mu = np.array([tr.mu for tr in trs]) * np.exp(ll - ll.max(axis=1, keepdims=True))
+        mu = np.clip(mu / mu.sum(axis=1, keepdims=True), 1e-6, 1.0)
+        mu /= mu.sum(axis=1, keepdims=True)
+        X, P = mixture(mu, xs, Ps)
+        for i, (tr, g) in enumerate(zip(trs, zs)):
+            tr.xs, tr.Ps, tr.mu, tr.x, tr.P = xs[i], Ps[i], mu[i], X[i], P[i]
+            tr.Ps_upd, tr.x_upd = tr.Ps, tr.x     # fresh arrays, never changed in place
+            tr.t = tr.t_upd = t
+            tr.counts.append(len(g))
+            tr.trail.append((t, float(X[i, 0]), float(X[i, 1])))
+            tr.hit_window = True
 
-    def _birth(self, z: np.ndarray, alt: np.ndarray | None, r2: float, t: float) -> None:
-        if not len(z):
-            return
-        d = np.hypot(z[:, None, 0] - z[None, :, 0], z[:, None, 1] - z[None, :, 1])
-        label = -np.ones(len(z), dtype=int)
-        for s in range(len(z)):                    # connected components within birth_m
+    def _birth(self, z: list[list[float]], alt: list[float] | None, r2: float, t: float) -> None:
+        """New tentative tracks from the hits no track took: one per cluster of hits within
+        `birth_m` of each other."""
+        n = len(z)
+        label = [-1] * n
+        for s in range(n):                    # connected components within birth_m
             if label[s] >= 0:
                 continue
             label[s], stack = s, [s]
             while stack:
-                i = stack.pop()
-                for j in np.nonzero((d[i] <= self.birth_m) & (label < 0))[0]:
-                    label[j] = s
-                    stack.append(int(j))
-        for lab in np.unique(label):
-            mine = label == lab
-            zs = z[mine]
-            zc = zs.mean(axis=0)
-            ext = max(float(((zs - zc) ** 2).sum(axis=1).mean() / 2.0) - r2, 0.0) if len(zs) > 1 else 0.0
+                xi, yi = z[stack.pop()]
+                for j in range(n):
+                    if label[j] < 0 and math.hypot(z[j][0] - xi, z[j][1] - yi) <= self.birth_m:
+                        label[j] = s
+                        stack.append(j)
+        for lab in sorted(set(label)):
+            mine = [j for j in range(n) if label[j] == lab]
+            m = len(mine)
+            cx, cy = sum(z[j][0] for j in mine) / m, sum(z[j][1] for j in mine) / m
+            spread = sum((z[j][0] - cx) ** 2 + (z[j][1] - cy) ** 2 for j in mine) / m / 2.0
+            ext = max(spread - r2, 0.0) if m > 1 else 0.0
             pv = r2 + ext
             self.seq += 1
-            x = np.array([zc[0], zc[1], 0.0, 0.0, 0.0])
+            x = np.array([cx, cy, 0.0, 0.0, 0.0])
             P = np.diag([pv, pv, self.v0 ** 2, self.v0 ** 2, W0])
             tr = Track(f"{self.name}-{self.seq}", x, P, t, t, x.copy(), ext)
             tr.xs, tr.Ps = np.stack([x, x, x]), np.stack([P, P, P])
             tr.mu, tr.Ps_upd = self.mu0.copy(), tr.Ps.copy()
-            tr.counts.append(len(zs))
+            tr.counts.append(m)
             tr.hit_window = True
-            self._height(tr, alt, mine)
+            if alt is not None:
+                self._height(tr, [alt[j] for j in mine])
             self.tracks.append(tr)
 
     # -- window close: confirmation, deletion, reports -----------------------------------
@@ -433,11 +372,14 @@ class KalmanTracker:
         dt = t - tr.t
         if dt <= 0:
             return float(tr.x[0]), float(tr.x[1])
-        zero = np.zeros((5, 5))
-        pos = [(self._ct if how == "ct" else self._cv)(tr.xs[j], zero, 0.0, dt)[0][:2]
-               for j, (how, _) in enumerate(self.motion[self.mover(tr)])]
-        x = tr.mu @ np.array(pos)
-        return float(x[0]), float(x[1])
+        px = py = 0.0
+        for (how, _), m, (x, y, vx, vy, w) in zip(self.motion[self.mover(tr)], tr.mu.tolist(), tr.xs.tolist()):
+            if how == "ct":
+                x, y = arc(x, y, vx, vy, min(max(w, -self.max_turn), self.max_turn), dt)
+            else:
+                x, y = x + vx * dt, y + vy * dt
+            px, py = px + m * x, py + m * y
+        return px, py
 
     def dr_threshold(self, tr: Track) -> float:
         """How far the receivers' extrapolation may be off before a report is news: k x the
