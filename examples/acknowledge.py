@@ -4,10 +4,11 @@
     python examples/acknowledge.py --connect tcp/127.0.0.1:7447 --unit A2 --alert A2/330.c850
 
 Prints the EA's answer (JSON); exit 0 when it took the acknowledgement, else 2."""
-import argparse
 import json
 
-from saim_mesh.api import Commander, MeshError
+from saim_mesh.api import Commander
+
+import common
 
 
 def main(a) -> int:
@@ -18,14 +19,6 @@ def main(a) -> int:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser()
-    p.add_argument("--scenario", default="scenarios/small")
-    p.add_argument("--mesh", metavar="OUT", help="the output folder of `saim-mesh mesh up` (routers, root, pki)")
-    p.add_argument("--connect", nargs="+", help="or an EA peer's endpoints (no routers, not secure)")
-    p.add_argument("--root")
-    p.add_argument("--unit", default="A2")
+    p = common.parser("A2")
     p.add_argument("--alert", required=True)
-    try:
-        raise SystemExit(main(p.parse_args()))
-    except MeshError as e:
-        raise SystemExit(f"acknowledge: {e}")
+    common.run("acknowledge", main, p.parse_args())

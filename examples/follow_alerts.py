@@ -2,9 +2,10 @@
 
     python examples/follow_alerts.py --mesh out/mesh --unit A2 --count 3     # beside `saim-mesh mesh up`
     python examples/follow_alerts.py --connect tcp/127.0.0.1:7447 --unit A2  # a lone EA peer"""
-import argparse
 
-from saim_mesh.api import Alerts, MeshError
+from saim_mesh.api import Alerts
+
+import common
 
 
 def main(a) -> None:
@@ -19,16 +20,8 @@ def main(a) -> None:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser()
-    p.add_argument("--scenario", default="scenarios/small")
-    p.add_argument("--mesh", metavar="OUT", help="the output folder of `saim-mesh mesh up` (routers, root, pki)")
-    p.add_argument("--connect", nargs="+", help="or an EA peer's endpoints (no routers, not secure)")
-    p.add_argument("--root")
-    p.add_argument("--unit", default="A2")
+    p = common.parser("A2")
     p.add_argument("--priority", nargs="*", default=None, help="only these priorities")
     p.add_argument("--count", type=int, default=3)
     p.add_argument("--timeout", type=float, default=120.0)
-    try:
-        main(p.parse_args())
-    except MeshError as e:
-        raise SystemExit(f"follow_alerts: {e}")
+    common.run("follow_alerts", main, p.parse_args())

@@ -5,10 +5,11 @@ subtree takes the order at the same event time, after the facts before it, and a
     python examples/order_subtree.py --connect tcp/127.0.0.1:7447 --unit A --at 600 --expect A2
 
 Prints each EA's answer (JSON); exit 0 when every EA named in --expect took it."""
-import argparse
 import json
 
-from saim_mesh.api import Commander, MeshError
+from saim_mesh.api import Commander
+
+import common
 
 
 def main(a) -> int:
@@ -21,12 +22,7 @@ def main(a) -> int:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser()
-    p.add_argument("--scenario", default="scenarios/small")
-    p.add_argument("--mesh", metavar="OUT", help="the output folder of `saim-mesh mesh up` (routers, root, pki)")
-    p.add_argument("--connect", nargs="+", help="or an EA peer's endpoints (no routers, not secure)")
-    p.add_argument("--root")
-    p.add_argument("--unit", default="A")
+    p = common.parser("A")
     p.add_argument("--action", default="abort-plan",
                    choices=["execute-plan", "abort-plan", "start-mission", "end-mission"])
     p.add_argument("--plan", default="")
@@ -34,7 +30,4 @@ if __name__ == "__main__":
     p.add_argument("--at", type=float, required=True, help="event time it takes effect (seconds)")
     p.add_argument("--expect", nargs="*", default=[])
     p.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the answers")
-    try:
-        raise SystemExit(main(p.parse_args()))
-    except MeshError as e:
-        raise SystemExit(f"order_subtree: {e}")
+    common.run("order_subtree", main, p.parse_args())

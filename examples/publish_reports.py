@@ -7,11 +7,12 @@ Reads the platoon's positions from the scenario (a real reporter would read its 
 publishes them in event time, with a watermark every 2 s of it: an EA that depends on this
 source (`saim-mesh peer --sources NAME`) advances exactly as far as these watermarks promise.
 On a secure mesh the certificates know the command posts' sources: name it cp.<UNIT>."""
-import argparse
 import math
 
-from saim_mesh.api import LocationReport, MeshError, Source
+from saim_mesh.api import LocationReport, Source
 from saim_mesh.scenario import load
+
+import common
 
 
 def main(a) -> None:
@@ -26,14 +27,6 @@ def main(a) -> None:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser()
-    p.add_argument("--scenario", default="scenarios/small")
-    p.add_argument("--mesh", metavar="OUT", help="the output folder of `saim-mesh mesh up` (routers, root, pki)")
-    p.add_argument("--connect", nargs="+", help="or an EA peer's endpoints (no routers, not secure)")
-    p.add_argument("--root")
-    p.add_argument("--unit", default="A2")
+    p = common.parser("A2")
     p.add_argument("--name", default="reporter")
-    try:
-        main(p.parse_args())
-    except MeshError as e:
-        raise SystemExit(f"publish_reports: {e}")
+    common.run("publish_reports", main, p.parse_args())
