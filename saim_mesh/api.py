@@ -156,13 +156,19 @@ class Source(_Session):
     """A source of facts (a unit's reporter, a command post): its own stream of reports and
     watermarks (`saim_mesh.live`). Event times must increase past each watermark given.
     Secure (`pki`): identity `source.<name>`, which the access-control rules know for the
-    command posts' sources `cp.<UNIT>` (`security.acl.source_names`)."""
+    command posts' sources `cp.<UNIT>` (`security.acl.source_names`). On leaving, it stays
+    `linger_s`, and as long as its journal (`state_dir`) was asked within `linger_s`, at
+    most `linger_max_s` in all."""
 
     def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None,
-                 routers=None, mesh=None):
+                 routers=None, mesh=None, linger_s: float = 1.0, linger_max_s: float = 30.0):
         super().__init__(scenario, f"source.{name}", connect, listen, root, pki, routers, mesh,
                          near=name.removeprefix("cp."))
+        if not (linger_s >= 0 and linger_max_s >= 0):   # also refuses NaN
+            raise ValueError(f"Source {name}: linger_s and linger_max_s must be seconds >= 0, "
+                             f"not {linger_s!r}, {linger_max_s!r}")
         self.name, self.state_dir, self.src = name, state_dir, None
+        self.linger_s, self.linger_max_s = float(linger_s), float(linger_max_s)
 
     def _opened(self) -> None:
         self.src = LiveSource(self.session, self.ks, self.name, self.state_dir)
@@ -183,6 +189,9 @@ class Source(_Session):
 
     def _closing(self) -> None:
         self.src.close(end=True)   # the end of the stream: the EAs need not wait for it
+        # An EA still catching up (behind, or back after a cut) asks the journal: stay while
+        # it asks, or it is left with a gap nobody can fill.
+        self.src.linger(self.linger_s, self.linger_max_s)
         self.src.stop()
 
 

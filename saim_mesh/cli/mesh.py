@@ -1,4 +1,4 @@
-"""`saim-mesh mesh up | source | peer | fusion | router | topology | replay | tak | link`: the
+"""`saim-mesh mesh up | source | sources | peer | fusion | router | topology | replay | tak | link`: the
 mesh's processes, one command each."""
 from __future__ import annotations
 
@@ -137,6 +137,25 @@ def cmd_topology(a) -> int:
     return 0
 
 
+def cmd_sources(a) -> int:
+    """A scenario's command-post sources and the `saim-mesh source` arguments each needs:
+    what a by-hand mesh starts beside its EAs (`mesh up` starts the same)."""
+    import json
+
+    from ..live.depend import cp_shares
+    sc = S.load(a.scenario, events=False)
+    shares = cp_shares(sc)
+    to = sc.taskorg
+    if a.json:
+        print(json.dumps({n: {"args": sh.args(), "units": sorted(sh.carries(to)), "tracks": sh.tracks}
+                          for n, sh in sorted(shares.items())}, indent=1))
+        return 0
+    for n, sh in sorted(shares.items()):
+        print(f"{n:<10} saim-mesh source {a.scenario} --name {n} {' '.join(sh.args())}".rstrip()
+              + f"   # {(k := len(sh.carries(to)))} unit{'' if k == 1 else 's'}{', hostile tracks' if sh.tracks else ''}")
+    return 0
+
+
 def cmd_mesh(a) -> int:
     import signal
 
@@ -258,9 +277,9 @@ def add(sub) -> None:
                     help="the journal's answers over all askers together, at most KBIT kbit/s (default: "
                          "24 with --yield-catch-up, under half of a 64 kbit/s radio; else unpaced)")
     so.add_argument("--until", type=_seconds, default=None, metavar="T", help="end the stream at event time T")
-    so.add_argument("--linger", type=_seconds, default=0.0,
+    so.add_argument("--linger", type=_seconds, default=5.0,
                     help="seconds to stay up after the last frame, and longer while its journal is still asked "
-                         "(within that many seconds), up to --linger-max")
+                         "(within that many seconds), up to --linger-max (default 5; 0: leave at once)")
     so.add_argument("--linger-max", type=_seconds, default=600.0, metavar="S",
                     help="the longest a source stays after its end while it is still asked (default 600)")
     _zenoh_args(so)
@@ -327,6 +346,11 @@ def add(sub) -> None:
     tp.add_argument("--file", metavar="TOML", help="check and show this topology instead of the derived one")
     tp.add_argument("--out", metavar="TOML", help="write the topology as TOML")
     tp.set_defaults(fn=cmd_topology)
+
+    sr = sub.add_parser("sources", help="list a scenario's command-post sources and the `source` arguments each needs")
+    sr.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
+    sr.add_argument("--json", action="store_true", help="as JSON: name -> args, units carried, tracks")
+    sr.set_defaults(fn=cmd_sources)
 
     from ..tak.options import add_arguments as tak_arguments
     tk = sub.add_parser("tak", help="the Cursor-on-Target gateway: the mesh's picture and alerts to TAK, "
