@@ -81,11 +81,13 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _zmode(a) -> dict:
-    """--mode and the routers of --topology (a resolved topology written by `mesh up`)."""
+    """--mode and the routers: those of --topology (a resolved topology written by `mesh up`)
+    and those named by --routers (a mesh launched by hand)."""
     routers: list[str] = []
     if getattr(a, "topology", None):
         from ..net.topology import routers_of_resolved
         routers = routers_of_resolved(a.topology)
+    routers += [r for r in getattr(a, "routers", None) or () if r not in routers]
     return {"mode": getattr(a, "mode", None), "routers": routers}
 
 
@@ -119,6 +121,8 @@ def _zenoh_args(p) -> None:
                    help="Zenoh mode: client when attached to a router (mesh up --topology), peer otherwise")
     p.add_argument("--topology", metavar="JSON", help="the resolved topology `mesh up --topology` wrote "
                    "(its routers' identities are accepted as relays)")
+    p.add_argument("--routers", nargs="+", metavar="NAME", help="secure mode: the routers this process hears "
+                   "through (their identities router.NAME are accepted as relays; `saim-mesh certs --routers`)")
     p.add_argument("--pki", metavar="DIR", help="secure mode: mutual TLS with this folder's certificates "
                    "(saim-mesh certs) and the mesh's access-control rules; endpoints are then tls/...")
 

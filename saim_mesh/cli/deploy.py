@@ -29,7 +29,11 @@ def cmd_certs(a) -> int:
         return 0
     sc = S.load(a.scenario, events=False)
     out = a.out or "out/pki"
-    made = make_pki(Path(out), names_for(sc, a.units or domains.of(sc).mesh_units(sc), consoles=True))
+    bad = [r for r in a.routers or () if not r.replace("-", "").replace("_", "").isalnum()]
+    if bad:
+        raise ValueError(f"--routers: {bad[0]!r} is not a router name (letters, digits, - and _)")
+    made = make_pki(Path(out), names_for(sc, a.units or domains.of(sc).mesh_units(sc), consoles=True)
+                    + [f"router.{r}" for r in a.routers or ()])
     print(f"{len(made)} identities in {out} (CA: {Path(out) / 'ca.pem'}): {', '.join(sorted(made))}")
     return 0
 
@@ -91,6 +95,8 @@ def add(sub) -> None:
     ce.add_argument("--out", default=None, help="where the certificates go (default out/pki; with --deploy: "
                     "the file's pki)")
     ce.add_argument("--units", nargs="+", metavar="UNIT", help="EA identities (default: battalion, companies, platoons)")
+    ce.add_argument("--routers", nargs="+", metavar="NAME", help="also a router.NAME identity for each (a mesh "
+                    "launched by hand: `saim-mesh router --name NAME`)")
     ce.add_argument("--deploy", metavar="TOML", help="a deployment file: the scenario is the file's, and each host's "
                     "addresses and names go into its processes' certificates")
     ce.set_defaults(fn=cmd_certs)
