@@ -12,11 +12,8 @@ from . import commands, deploy, directives, mesh, offline
 from .args import _fail, _Parser, _seconds, _zenoh_args
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = sys.argv[1:] if argv is None else list(argv)
-    if args[:1] == ["robots"]:   # the robot team that obeys its EAs has its own subcommands
-        from ..robots.cli import main as robots_main
-        return robots_main(args[1:])
+def parser() -> _Parser:
+    """Every `saim-mesh` command and its flags (docs/cli.md is generated from it)."""
     p = _Parser(prog="saim-mesh", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
     sub.add_parser("robots", help="robots that obey their EAs over the mesh: robots team OUT | robot | ea | hub "
@@ -26,7 +23,15 @@ def main(argv: list[str] | None = None) -> int:
     deploy.add(sub)
     commands.add(sub)
     directives.add(sub, _zenoh_args, _seconds)   # order, plan: directives to a subtree (issue 33)
-    a = p.parse_args(argv)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else list(argv)
+    if args[:1] == ["robots"]:   # the robot team that obeys its EAs has its own subcommands
+        from ..robots.cli import main as robots_main
+        return robots_main(args[1:])
+    a = parser().parse_args(argv)
     from ea_agent.core.config import ConfigError
     try:
         return a.fn(a)
@@ -45,4 +50,4 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(f"{err.filename}: {err.strerror}" if err.filename and err.strerror else err)
 
 
-__all__ = ["main"]
+__all__ = ["main", "parser"]

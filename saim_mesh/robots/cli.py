@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
+    """`saim-mesh robots` and its subcommands (docs/cli.md is generated from it)."""
     ap = argparse.ArgumentParser(prog="saim-mesh robots", description="robots that obey their EAs over the mesh")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
@@ -46,7 +47,11 @@ def main(argv: list[str] | None = None) -> int:
     h.add_argument("--pki", default=None)
     h.add_argument("--scenario", default=None)
     h.add_argument("--root", default=None)
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = parser().parse_args(argv)
     if a.cmd == "team":
         from .team import run_team
         forge = dict(x.split("=", 1) for x in a.forge)
