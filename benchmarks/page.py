@@ -86,7 +86,7 @@ ROWS: dict[str, Row] = {
                    lambda d: fig(d, ("alerts on page", "alerts_page"), ("render", "render_latency_ms"),
                                  ("first paint ms", "first_paint_ms"), ("met", "met"))),
     "deployment_rates": Row("scripts/deployment_rates.py", "what each radio link of a division would carry, "
-                            "scaled from the measured battalion", "fits the links of docs/deployment.md",
+                            "scaled from the measured battalion", "fits the links of docs/history/deployment-notes.md",
                             lambda d: fig(d, ("control tick bytes", "control.tick_bytes"))),
     "ea": Row("scripts/bench_ea", "one EA in process on the battalion stream, per fact-batch size",
               ">= 100,000 events/s", lambda d: fig(d, ("events/s", "events_per_s"),

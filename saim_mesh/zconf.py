@@ -12,7 +12,7 @@ DEFAULT = Path(__file__).resolve().parents[1] / "configs" / "zenoh-peer.json5"
 # file's batch_size) takes 2 s at 64 kbit/s. Zenoh reads a batch whole within the lease:
 # at the file's 2 s lease (for leaves: a dead process is noticed at once) a router link
 # that carries full batches (a catch-up after a heal) expires though data flows. This alone
-# did not stop the brigade's router links flapping after a heal (docs/deployment.md).
+# did not stop the brigade's router links flapping after a heal (docs/history/deployment-notes.md).
 ROUTER_LEASE_MS = 10_000   # Zenoh's own default: five full batches at 64 kbit/s
 
 

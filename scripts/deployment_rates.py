@@ -1,4 +1,4 @@
-"""Traffic figures for docs/deployment.md, measured on the committed battalion scenario.
+"""Traffic figures for docs/history/deployment-notes.md, measured on the committed battalion scenario.
 
     PYTHONPATH=. .venv/bin/python scripts/deployment_rates.py [--alerts FILE] [--overhead]
         [--boundary BRIGADE_SCENARIO] [--json OUT]

@@ -98,7 +98,7 @@ class Deployment:
     def yielding(self) -> bool:
         """Sources' recoveries and catch-ups yield to live traffic (live/source.py), asked
         for across radio links between hosts; not the default: it did not stop a router's
-        links flapping after a heal (docs/deployment.md)."""
+        links flapping after a heal (docs/history/deployment-notes.md)."""
         return self.catch_up == "yield"
 
     # -- who runs where ---------------------------------------------------------------
