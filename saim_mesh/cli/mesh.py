@@ -170,14 +170,14 @@ def cmd_mesh(a) -> int:
         a.replay = True
     if not a.replay:   # the mesh with no centre: sources per command post, no replay
         from ..live.up import up as live_up
-        for bad, flag in ((a.tak or a.tak_in or a.tak_uids, "--tak (run `saim-mesh tak --sources` beside it)"),
-                          (a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
+        for bad, flag in ((a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
                           (a.window != 20.0, "--window (the sources pace themselves)")):
             if bad:
                 raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
                       live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
-                      console=a.console, console_linger=a.console_linger, max_restarts=a.restarts)
+                      console=a.console, console_linger=a.console_linger, max_restarts=a.restarts,
+                      tak=_live_tak(a))
         return 0 if len(res["peers"]) == len(res["units"]) and not res["given_up"] else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
@@ -195,12 +195,29 @@ def _link_args(a) -> dict | None:
     return {"delay_ms": a.link_delay_ms or 0.0, "loss": a.link_loss or 0.0}
 
 
+def _live_tak(a):
+    """`mesh up --tak URL... [--tak-in URL...] [--tak-uids FILE] [--tak-proto 0|1]` on the live
+    mesh: the gateway as the launcher runs it (`deploy.file.Tak`), or None."""
+    if not (a.tak or a.tak_in or a.tak_uids or a.tak_proto):
+        return None
+    if not a.tak:
+        raise ValueError("mesh up: --tak-in, --tak-uids and --tak-proto go with --tak URL ... (where CoT goes)")
+    if a.tak_in and not a.live:
+        raise ValueError("mesh up: --tak-in takes TAK users' PLI on the wall clock: give --live too (a recorded "
+                         "battle at --speed has no wall-clock event time to give them)")
+    from ..deploy.file import Tak
+    uids = str(Path(a.tak_uids).resolve()) if a.tak_uids else None
+    if uids is not None and not Path(uids).is_file():
+        raise ValueError(f"mesh up: --tak-uids {a.tak_uids}: no such file")
+    return Tak(tuple(a.tak), tuple(a.tak_in or ()), uids, "1" if a.tak_proto == "1" else "xml")
+
+
 def _tak_args(a) -> list[str] | None:
     """`mesh up --tak URL... [--tak-in URL...] [--tak-uids FILE]`: the gateway's own options."""
     if not a.tak:
         return None
     out = [x for u in a.tak for x in ("--cot-url", u)] + [x for u in a.tak_in or () for x in ("--listen-cot", u)]
-    return out + (["--uids", a.tak_uids] if a.tak_uids else [])
+    return out + (["--uids", a.tak_uids] if a.tak_uids else []) + (["--proto", "1"] if a.tak_proto == "1" else [])
 
 
 def cmd_tak(a) -> int:
@@ -322,6 +339,8 @@ def add(sub) -> None:
                          "(udp://239.2.3.1:6969 for TAK clients on the LAN, tcp://HOST:8087 for a TAK server)")
     me.add_argument("--tak-in", nargs="+", metavar="URL", help="the gateway listens for TAK PLI here (e.g. "
                     "udp://239.2.3.1:6969, tcp://127.0.0.1:PORT)")
+    me.add_argument("--tak-proto", choices=["0", "1"], default=None,
+                    help="CoT out as XML (0, the default) or TAK protocol version 1 (protobuf)")
     me.add_argument("--tak-uids", metavar="FILE", help="TAK uid -> entity map, and [units]: uid -> unit for acknowledgements "
                     "(configs/tak-uids.example.toml)")
     me.add_argument("--console-linger", type=_seconds, default=300.0, metavar="S",

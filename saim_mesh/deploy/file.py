@@ -26,7 +26,7 @@ TOP_KEYS = {"scenario", "root", "secure", "pki", "speed", "live", "start", "unti
 HOST_KEYS = {"name", "addresses", "names", "interface", "attach", "eas", "sources", "fusion", "consoles", "tak"}
 ROUTER_KEYS = {"name", "host", "cp", "port", "links"}
 CONSOLE_KEYS = {"unit", "port"}
-TAK_KEYS = {"cot", "listen_cot", "uids"}
+TAK_KEYS = {"cot", "listen_cot", "uids", "proto"}
 
 
 class DeployError(ValueError):
@@ -48,6 +48,7 @@ class Tak:
     cot: tuple[str, ...] = ()          # where CoT goes (gateway --cot-url)
     listen_cot: tuple[str, ...] = ()   # where TAK PLI come in (gateway --listen-cot)
     uids: str | None = None            # uid -> entity map (path, relative to the file)
+    proto: str = "xml"                 # CoT out as XML, or TAK protocol version 1 (protobuf)
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,10 @@ class Deployment:
         return next((h.name for h in self.hosts.values() if what in getattr(h, kind)), None)
 
     def sources(self) -> list[str]:
-        return sorted(s for h in self.hosts.values() for s in h.sources)
+        """Every live source the EAs may depend on: the command posts' and, on the wall
+        clock, the TAK gateway's PLI (`tak`)."""
+        pli = self.live and any(h.tak is not None and h.tak.listen_cot for h in self.hosts.values())
+        return sorted([*(s for h in self.hosts.values() for s in h.sources), *(["tak"] if pli else [])])
 
     def eas(self) -> list[str]:
         return [u for h in self.hosts.values() for u in h.eas]
@@ -329,9 +333,12 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
             else:
                 _unknown(t, TAK_KEYS, e, f"{where}: tak")
                 uids = _str(t.get("uids"), e, f"{where}: tak uids")
+                proto = str(t.get("proto", "xml"))
+                if proto not in ("xml", "1"):
+                    e(f"{where}: tak proto: {proto!r} is not xml or 1 (TAK protocol version 1, protobuf)")
                 tak = Tak(_strs(t.get("cot"), e, f"{where}: tak cot"), _strs(t.get("listen_cot"), e, f"{where}: tak "
                                                                                  "listen_cot"),
-                          str((base / uids).resolve()) if uids else None)
+                          str((base / uids).resolve()) if uids else None, proto)
         hosts[name] = Host(name, tuple(addrs), names, iface, _str(h.get("attach"), e, f"{where}: attach"),
                            _strs(h.get("eas"), e, f"{where}: eas"), _strs(h.get("sources"), e, f"{where}: sources"),
                            _strs(h.get("fusion"), e, f"{where}: fusion"), tuple(consoles), tak)

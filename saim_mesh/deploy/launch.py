@@ -184,6 +184,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
             tak = [x for u in h.tak.cot for x in ("--cot-url", u)] + [x for u in h.tak.listen_cot
                                                                        for x in ("--listen-cot", u)]
             tak += ["--uids", h.tak.uids] if h.tak.uids else []
+            tak += ["--proto", h.tak.proto] if h.tak.proto != "xml" else []
             sup.add(Proc("tak", [*py(), "tak", dep.scenario, "--sources", *live_args, *tak, *where(to.root),
                                  "--root", root], env=clean_env(), log_dir=logs)).wait_for("tak ready", 60)
         armed = ["--armed"] if h.consoles else []   # a console watches: urgent alerts repeat until acked

@@ -26,7 +26,7 @@ def cp_sources(sc) -> dict[str, list[str]]:
 
 def one_host(sc, scenario: str, units: list[str], out_dir: Path, speed: str = "max", live: bool = False,
              until: float | None = None, insecure: bool = False, topology: str | None = None,
-             console: int | None = None):
+             console: int | None = None, tak=None):
     """The deployment `mesh up` runs: everything on this host at 127.0.0.1 with free ports;
     one router (`hub`), or a topology's routers (a file, or "derive": one per battalion
     command post and the top); a test PKI made under OUT_DIR/pki. Returns (deployment,
@@ -46,7 +46,7 @@ def one_host(sc, scenario: str, units: list[str], out_dir: Path, speed: str = "m
         pki = out_dir / "pki"
         make_pki(pki, names_for(sc, consoles=True) + [f"router.{n}" for n in routers])
     cons = (Console(sc.taskorg.root, console),) if console is not None else ()
-    host = Host(LOCAL, ("127.0.0.1",), (), None, None, tuple(units), tuple(cp_shares(sc)), (), cons, None)
+    host = Host(LOCAL, ("127.0.0.1",), (), None, None, tuple(units), tuple(cp_shares(sc)), (), cons, tak)
     dep = Deployment(scenario, {LOCAL: host}, routers, f"saim/{sc.name}/live", not insecure, pki, speed, live,
                      None, until, 30.0, None, dict(topo.attach) if topo is not None else {})
     return dep, topo
@@ -56,7 +56,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
        echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
        start: float | None = None, insecure: bool = False, topology: str | None = None,
        link: dict | None = None, paced_start: float | None = None, console: int | None = None,
-       console_linger: float = 30.0, max_restarts: int = 10) -> dict:
+       console_linger: float = 30.0, max_restarts: int = 10, tak=None) -> dict:
     """`on_started(sup, t0)`: called once every source runs, with the wall time of event time 0 (a benchmark kills one). `start`
     (live): the wall time of event time 0 (default 20 s from now: everyone is up by then).
     `topology`: a topology file or "derive": one router per command post (`mesh up
@@ -67,7 +67,9 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     5 s after every EA is ready). `console`: the top unit's commander's console on that
     port (0: a free one), drawing the sources' frames; the EAs armed (urgent alerts are
     re-notified and escalated until acknowledged). `max_restarts`: restarts per process
-    before it is given up (the result's `given_up`).
+    before it is given up (the result's `given_up`). `tak`: a `deploy.file.Tak`, the
+    Cursor-on-Target gateway started and supervised with the rest (its PLI a live source
+    the EAs take when `live`).
 
     The one-host case of `saim-mesh deploy` (`deploy.launch.run_host`)."""
     from .. import scenario as S
@@ -78,7 +80,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     if insecure and topology is None:
         echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
              "feed this mesh positions and end its sources' streams")
-    dep, topo = one_host(sc, scenario, units, out_dir, speed, live, until, insecure, topology, console)
+    dep, topo = one_host(sc, scenario, units, out_dir, speed, live, until, insecure, topology, console, tak)
     res = run_host(dep, sc, LOCAL, out_dir, echo=echo, show=show, timeout=timeout, until_done=True,
                    on_started=on_started, start=start, paced_start=paced_start, link=link,
                    console_linger=console_linger, max_restarts=max_restarts)
