@@ -74,7 +74,7 @@ def wire_notices(eas: list[ExecutionAssistant], sinks: Iterable[Callable] = ()) 
     def route(n) -> None:
         up = by_owner.get(n.to) if n.kind == "escalate" else None
         if up is not None:
-            up.take_notice(n)
+            up.take_notice(n, budgeted=True)   # the sender asked its budget (budget_of)
     for ea in eas:
         ea.notify.budget_for = budget_of(ea)
         ea.notice_sinks.extend(sinks)

@@ -81,5 +81,13 @@ class Budget:
         self.dropped += 1
         return False
 
+    def charge(self, t: float) -> None:
+        """A notice shown to this commander without asking (an escalation from a peer on
+        the mesh, whose EA cannot see this budget): counted, so the rest give way."""
+        self.given += 1
+        if self.on:
+            bisect.insort(self.shown, t)
+            self._prune(t)
+
     def stats(self) -> dict:
         return {"given": self.given, "dropped": self.dropped, "forced": self.forced}
