@@ -192,6 +192,13 @@ def commander_view(sc, owners: list[str], model: str, plain: list, truth: dict, 
         if n.to in per:
             per[n.to] += 1
     per_hour = {o: round(k / hours, 1) for o, k in per.items()}
+    # the unwatched run: the alerts each commander is shown with nobody in the loop, against
+    # which the notice budget (ea_agent/core/budget.py) bounds what a commander is shown
+    plain_per = {o: 0 for o in owners}
+    for ea in plain:
+        plain_per[ea.owner] = sum(1 for a in ea.alerts if "silenced" not in a.details
+                                  and "inhibited_by" not in a.details)
+    ratio = {o: round(per[o] / plain_per[o], 3) if plain_per.get(o) else None for o in per}
     total = len(shown) + len(notices)
     unwanted = sc_["unwanted"] + len(bad_notices)
     same = [(a.details.get("id"), a.priority) for ea in plain for a in ea.alerts]
@@ -202,6 +209,10 @@ def commander_view(sc, owners: list[str], model: str, plain: list, truth: dict, 
         "escalations": sum(n.kind == "escalate" for n in notices),
         "shown": total, "shown_per_commander_hour": per_hour,
         "shown_per_commander_hour_worst": max(per_hour.values(), default=0.0),
+        "unwatched_per_commander_hour": {o: round(k / hours, 1) for o, k in plain_per.items()},
+        "shown_over_unwatched": ratio,
+        "shown_over_unwatched_worst": max((r for r in ratio.values() if r is not None), default=None),
+        "notices_dropped": sum(ea.notify.budget.dropped for ea in eas),
         "unwanted": unwanted, "unwanted_share": round(unwanted / total, 4) if total else 0.0,
         "unwanted_flash": sc_["unwanted_flash"] + sum(1 for n in bad_notices if prio.get(n.alert) == "flash"),
         "recall": sc_["recall"],

@@ -60,15 +60,23 @@ class Fusion:
 
 def wire_notices(eas: list[ExecutionAssistant], sinks: Iterable[Callable] = ()) -> None:
     """Each EA's notices to `sinks`, and its escalations to its superior's EA when that
-    one runs here too (on the mesh they travel on notice/<superior>/<owner>)."""
+    one runs here too (on the mesh they travel on notice/<superior>/<owner>); an
+    escalation is then held to that commander's notice budget (`ea_agent.core.budget`)."""
     by_owner = {ea.owner: ea for ea in eas}
     sinks = list(sinks)
+
+    def budget_of(ea):
+        def of(unit: str):
+            other = by_owner.get(unit)
+            return other.notify.budget if other is not None else None
+        return of
 
     def route(n) -> None:
         up = by_owner.get(n.to) if n.kind == "escalate" else None
         if up is not None:
-            up.take_notice(n)
+            up.take_notice(n, budgeted=True)   # the sender asked its budget (budget_of)
     for ea in eas:
+        ea.notify.budget_for = budget_of(ea)
         ea.notice_sinks.extend(sinks)
         ea.notice_sinks.append(route)
 

@@ -99,19 +99,22 @@ def test_a_repeat_is_wanted_only_with_a_material_change():
                                          "situations": []})["unwanted_repeats"] == 0   # another story
 
 
-def test_a_commander_in_the_loop_sees_what_the_commander_model_implies():
+def test_a_commander_in_the_loop_sees_what_the_commander_model_implies(tmp_path):
     """evaluate --commander: the EAs armed; what each commander saw, scored. Nobody
     acknowledging is told more (re-notifications, escalations) than a diligent commander,
-    who acknowledges before the first re-notification falls due; no alert changes priority."""
+    who acknowledges before the first re-notification falls due; no alert changes priority.
+    The notice budget is off: this follows the cadence (test_commander_bound the budget)."""
     from saim_mesh.evaluate import commander_view
     from saim_mesh.runner import run
     sc = S.load(SMALL)
     truth = sc.truth()
     owners = truth["owners"]
-    plain = run(sc, owners)
-    none = commander_view(sc, owners, "none", plain, truth)
-    slow = commander_view(sc, owners, "slow", plain, truth)
-    diligent = commander_view(sc, owners, "diligent", plain, truth)
+    off = tmp_path / "no-budget.toml"
+    off.write_text("[notify]\nbudget = 0.0\n")
+    plain = run(sc, owners, config_path=off)
+    none = commander_view(sc, owners, "none", plain, truth, off)
+    slow = commander_view(sc, owners, "slow", plain, truth, off)
+    diligent = commander_view(sc, owners, "diligent", plain, truth, off)
     n_plain = sum(len(ea.alerts) for ea in plain)
     for v in (none, slow, diligent):
         assert v["priorities_equal"] and v["alerts"] == n_plain   # notices, never new alerts

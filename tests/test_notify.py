@@ -22,9 +22,11 @@ def run_a2(small, actions=(), armed=True, until=None, config=None):
     reaches t (before the first event at or after t). Projections are off: these tests
     follow A2's out-of-position alerts as the paper's EA raises them, those of its move (its seize
     not on OBJ-A by its time at 3300 is another story; the projection of
-    the same story is tested in test_alert_types)."""
+    the same story is tested in test_alert_types). The notice budget is off: these tests
+    follow the cadence itself (the budget is tested in test_commander_bound)."""
     cfg = config_for(small, OWNER)
     cfg["voi"]["projection_horizon_s"] = 0.0
+    cfg["notify"]["budget"] = 0.0
     if config is not None:
         config(cfg)
     ea = make_ea(small, OWNER, cfg)

@@ -371,9 +371,11 @@ def test_atak_users_acknowledge_alerts_on_the_live_mesh(tmp_path):
                           "--period", "300", "--linger", "600"], env=clean_env(), log_dir=tmp_path)
         procs.append(gw)
         gw.wait_for("tak ready", 60)
+        off = tmp_path / "no-budget.toml"   # the cadence itself (the notice budget: test_commander_bound)
+        off.write_text("[notify]\nbudget = 0.0\n")
         for u in ("BN", "A"):
             procs.append(start_peer(sc_path, u, ep, root, tmp_path / f"{u}.jsonl", pki=pki, log_dir=tmp_path,
-                                    extra=["--armed"]))
+                                    extra=["--armed", "--config", str(off)]))
 
         # 1. BN's commander acknowledges BN/3 in All Chat Rooms; the answer comes back in GeoChat
         alert_uid(I("BN/3"))

@@ -26,7 +26,7 @@ POSITIVE = frozenset({
     "mesh.fusion_grace_s", "mesh.max_seq_ahead", "mesh.max_held_mb",
     "voi.out_of_position_m", "voi.schedule_repeat_s", "voi.unknown_position_s", "voi.weapons_range_m",
     "voi.threat_radius_m", "voi.coordination_radius_m", "voi.projection_trend_s",
-    "voa.expiry_s",
+    "voa.expiry_s", "notify.budget_window_s",
 })
 CHOICES = {"mesh.fsync": ("alert", "urgent", "never")}   # string keys with a closed set of values
 

@@ -208,10 +208,13 @@ class ExecutionAssistant:
         to = getattr(self.domain, "taskorg", None)
         return to.parent.get(self.owner) if to is not None else None
 
-    def take_notice(self, n: Notice) -> None:
+    def take_notice(self, n: Notice, budgeted: bool = False) -> None:
         """An escalation from a subordinate's EA reached this one: told to its sinks (the
-        notice log, the console), never as an alert of this EA."""
+        notice log, the console), never as an alert of this EA. Charged to this commander's
+        notice budget unless the sender already asked it (`budgeted`: run in one process)."""
         self.stats["escalations_in"] += 1
+        if not budgeted:
+            self.notify.budget.charge(n.t)
         self.received.append(n)
         for s in self.inbox_sinks:
             s(n)

@@ -13,6 +13,9 @@ run gives the same alerts and notices whatever the wall clock did:
    alert: Alertmanager's repeat_interval) every `[notify.<priority>] every_s`, at most
    `times` times, and *escalated* once to the superior's EA and console after
    `escalate_s` (PagerDuty's escalation to the next person, never a higher priority);
+ - what one commander is shown of these notices is bounded by their notice budget
+   (`budget.Budget`, `[notify] budget`): a proportion of the new alerts their own EA gave
+   them lately; a flash alert's escalation is always given;
  - an alert matching an active silence is given marked `silenced`; one an inhibition
    rule mutes is given marked `inhibited_by`: both are logged, neither is shown as new,
    re-notified or escalated;
@@ -27,6 +30,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from .alert import Alert
+from .budget import Budget
 from .config import check_setting
 from .ids import AlertIds
 from .inhibit import Inhibitor, Rule, rule as make_rule
@@ -107,6 +111,10 @@ class Notifier:
         self.cadence: dict[str, tuple[float, int]] = {
             p: (float(n.get(p, {}).get("every_s", 0.0)), int(n.get(p, {}).get("times", 0))) for p in URGENT}
         self.escalate_s = float(n.get("escalate_s", 0.0))   # 0: never escalate
+        self.budget = Budget(owner, n)   # what this EA's commander may be shown of notices
+        # the budget of the commander a notice goes to (the runner wires the superiors run
+        # in the same process; None: not known here, the notice is given)
+        self.budget_for: Callable[[str], Budget | None] = lambda u: self.budget if u == owner else None
         expiry = float(cfg.get("voa", {}).get("expiry_s", 720.0))
         self.inhibitor = Inhibitor(cfg.get("inhibit", []), expiry)
         self.story_s = expiry       # a story ends when nothing was told on it for this long
@@ -139,7 +147,10 @@ class Notifier:
             why = self.inhibitor.judge(out)
             if why is not None:
                 d["inhibited_by"] = why
-        if self.armed and "silenced" not in d and "inhibited_by" not in d and alert.priority in URGENT:
+        shown = "silenced" not in d and "inhibited_by" not in d
+        if shown:
+            self.budget.alert(alert.t)
+        if self.armed and shown and alert.priority in URGENT:
             every, times = self.cadence[alert.priority]
             self.chains[d["id"]] = Chain(out)
             if every > 0 and times > 0:
@@ -196,12 +207,21 @@ class Notifier:
                 ch.count += 1
                 if ch.count < times:
                     self._schedule(t + every, RENOTIFY, orig)
+                if not self.budget.allow(t):
+                    log.info("EA %s: re-notification %d of %s held back at t=%.1f (notice budget)", self.owner,
+                             ch.count, orig, t)
+                    continue
                 out.append(self._notice("renotify", t, a, ch.count, self.owner))
             else:
                 up = self.superior()
                 if up is None or ch.escalated:
                     continue   # the top of the chain has nobody to escalate to
                 ch.escalated = True
+                b = self.budget_for(up)
+                if b is not None and not b.allow(t, force=a.priority == "flash"):
+                    log.info("EA %s: escalation of %s to %s held back at t=%.1f (its notice budget)", self.owner,
+                             orig, up, t)
+                    continue
                 out.append(self._notice("escalate", t, a, 1, up))
         return out
 

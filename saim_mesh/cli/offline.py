@@ -93,7 +93,9 @@ def cmd_evaluate(a) -> int:
             c = res["commander"]
             print(f"commander {c['model']}: shown {c['shown']} ({c['alerts_shown']} alerts, {c['renotifications']} "
                   f"re-notifications, {c['escalations']} escalations), worst {c['shown_per_commander_hour_worst']}"
-                  f"/commander/hour, unwanted {c['unwanted_share']:.1%}, unwanted flash {c['unwanted_flash']}, "
+                  f"/commander/hour ({c['shown_over_unwatched_worst']}x the unwatched run; "
+                  f"{c['notices_dropped']} notices held back), unwanted {c['unwanted_share']:.1%}, "
+                  f"unwanted flash {c['unwanted_flash']}, "
                   f"priorities as unarmed: {c['priorities_equal']}")
         for m in res["missed"]:
             print("MISSED ", m)
