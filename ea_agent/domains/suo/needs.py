@@ -39,10 +39,14 @@ def needs(dom, radius_m: float) -> Needs:
     # the hostile tracks there (only the tracks: own and friendly reports there are not what these checks read)
     ahead = tuple(dom.overlay[a].area.buffer(LINGER_M).bounds for a in sorted(places))
     paths = {to.path(dom.owner)} | {to.path(u) for u in followed if u in to.units and u not in dom.own_units}
-    return Needs(TEMPLATES, by={"path": frozenset(paths),
-                                "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
-                                "requester": frozenset({dom.owner}),
-                                "unit": frozenset(units)},
+    by = {"path": frozenset(paths),
+          "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
+          "requester": frozenset({dom.owner}),
+          "unit": frozenset(units)}
+    fires = planned_fires(dom)
+    if fires:   # their confirmations meet the fires' windows, whoever requests them and wherever they land
+        by["cff"] = fires
+    return Needs(TEMPLATES, by=by,
                  circles=tuple(circles), boxes=boxes, whole=("org",),
                  only=((SensorTrack.KEY, ahead),) if ahead else ())
 
@@ -138,6 +142,17 @@ def planned(dom) -> tuple[frozenset[str], frozenset[str]]:
     out = frozenset(a for a in rec.places if a in dom.overlay), frozenset(rec.units)
     dom._planned_memo = (key, out)
     return out
+
+
+def planned_fires(dom) -> frozenset[str]:
+    """The calls for fire our plan's missions (not done or aborted) must see confirmed in a
+    window (detect/windows.py): heard from the plan's start, as `planned` says why."""
+    plan = dom.plan
+    if plan is None:
+        return frozenset()
+    return frozenset(f["cff"] for mid, m in dom.missions.items()
+                     if plan.state.get(mid) not in ("done", "aborted") and dom.in_plan(m)
+                     for f in m.params.get("fires") or ())
 
 
 def needs_before(dom, msg) -> Needs | None:
