@@ -1,6 +1,6 @@
 """What an SUO EA must hear, for dissemination: by command, the positions of its
 subtree, the orders of its chain of command and of its own subtree and the fires it called; by mission, the
-confirmations of every unit its plan names; by geography, what is reported near its
+confirmations of every unit its plan names and of the fires it planned; by geography, what is reported near its
 units and in the control measures it watches."""
 from __future__ import annotations
 
