@@ -241,3 +241,22 @@ def test_a_good_window_loads(tmp_path):
                 + fire_plan())
     plan = S.load(d, events=False)
     assert json.dumps(plan.plans["main"].missions[0].params["window"]) == "[300.0, 600.0]"
+
+
+def test_a_branch_whose_task_has_a_window_arms_it_when_it_fires(tmp_path):
+    task = {"partner": "B1", "point": "CP-AB", "at": 450, "window": WINDOW}
+    br = mission("A1-br", "A1", "branch", owner="A", task="link-up", task_params=task,
+                 trigger={"kind": "unit-at", "unit": "A1", "area": "CP-AB", "within_m": 5000})
+    sc = sc_of(tmp_path, [br])
+    ea = run(sc, away(10, UNTIL))
+    got = windowed(ea)
+    assert len(got) == 1 and got[0].details["mission"] == "A1-br", [a.message for a in ea.alerts]
+    assert WINDOW[1] <= got[0].t <= WINDOW[1] + EPOCH
+
+
+def test_a_peer_subscribes_to_its_planned_fires_confirmations(tmp_path):
+    from dissemination.interest import Interest
+    from dissemination.keyspace import KeySpace
+    _, ea = fires_run(tmp_path, [], until=50.0)
+    keys = Interest(KeySpace("saim"), 3000.0).of(ea.domain.needs(3000.0))
+    assert any(k.startswith("saim/cff/") and k.endswith("/F1") for k in keys), sorted(keys)

@@ -83,14 +83,14 @@ class Windows(Detector):
     def reset(self) -> None:
         # link-ups and reliefs whose window is armed and not yet met: mission -> (it, from, until)
         self.meets: dict[str, tuple[Mission, float, float]] = {}
-        self.armed: set[str] = set()   # missions whose windows are armed (once per plan execution)
+        self.armed: set[Mission] = set()   # missions whose windows are armed (once each; a branch's task is another)
 
     def start(self, m: Mission, t: float) -> None:
         """Mission `m` started at t: arm its windows (once, however often it is posted again)."""
         dom = self.dom
-        if m.id in self.armed or not dom.in_plan(m):
+        if m in self.armed or not dom.in_plan(m):
             return
-        self.armed.add(m.id)
+        self.armed.add(m)
         spec = WINDOWED.get(m.TYPE)
         if spec is not None and m.params.get(spec[0]) is not None:
             lo, hi = (float(x) for x in m.params[spec[0]])
