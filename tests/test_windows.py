@@ -138,12 +138,14 @@ BP = {"type": "Feature", "properties": {"id": "BP-A1", "kind": "battle-position"
                                                        ll(-3100, 100), ll(-3100, -100)]]}}
 
 
-def confirm(t: float, cff: str = "F1", x: float = 5000.0) -> CallForFireConfirm:
-    return CallForFireConfirm(float(t), cff, "A1", *ll(x, 0.0), 200.0)
+def confirm(t: float, cff: str = "F1", x: float = 5000.0, requester: str = "A1") -> CallForFireConfirm:
+    return CallForFireConfirm(float(t), cff, requester, *ll(x, 0.0), 200.0)
 
 
-def fires_run(tmp_path, extra: list, until: float = UNTIL):
-    sc = F.scenario(tmp_path, [CP, BP], fire_plan())
+def fires_run(tmp_path, extra: list, until: float = UNTIL, **fire):
+    plan = fire_plan()
+    plan[0]["params"]["fires"][0].update(fire)
+    sc = F.scenario(tmp_path, [CP, BP], plan)
     return sc, run(sc, [start(10, "A1-abf", "A1")] + F.stays("A1", -3000, 0, 10, until) + extra, until)
 
 
@@ -172,6 +174,22 @@ def test_a_confirmation_near_own_units_warns_them_and_meets_the_window(tmp_path)
 def test_another_fire_confirmed_does_not_meet_the_window(tmp_path):
     _, ea = fires_run(tmp_path, [confirm(400.0, cff="F2")])
     assert len(windowed(ea, "fires")) == 1
+
+
+def test_the_same_fire_confirmed_by_another_requester_does_not_meet_it(tmp_path):
+    _, ea = fires_run(tmp_path, [confirm(400.0, requester="A2")])
+    assert len(windowed(ea, "fires")) == 1
+    _, ea = fires_run(tmp_path / "b", [confirm(400.0, requester="B1")], requester="B1")
+    assert not windowed(ea, "fires")
+
+
+def test_a_planned_fire_requested_outside_the_subtree_is_followed(tmp_path):
+    """Its requester's command post is a source the EA depends on (live/depend.py): on the
+    mesh the confirmation is in order before the window's close is judged."""
+    from saim_mesh.live.depend import depends
+    sc, ea = fires_run(tmp_path, [], until=50.0, requester="B1")
+    assert "B1" in ea.domain.needs(3000.0).by["requester"]
+    assert "cp.B" in depends(sc, ea, ["cp.A", "cp.B", "cp.BN"])
 
 
 def test_what_an_ea_must_hear_includes_its_planned_fires(tmp_path):
@@ -216,6 +234,8 @@ BAD = [
      "params.fires[0].window", "missing"),
     ([mission("A1-abf", "A1", "attack-by-fire", position="BP-A1", fires=[{"cff": "F1", "window": [5, 1]}])],
      "params.fires[0].window", "not before"),
+    ([mission("A1-abf", "A1", "attack-by-fire", position="BP-A1",
+              fires=[{"cff": "F1", "window": WINDOW, "requester": "Z9"}])], "params.fires[0].requester", "unknown unit"),
     (passage(window=WINDOW), "params.window", "unknown parameter"),   # a passage's window is complete_window
 ]
 

@@ -43,9 +43,11 @@ def needs(dom, radius_m: float) -> Needs:
           "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
           "requester": frozenset({dom.owner}),
           "unit": frozenset(units)}
-    fires = planned_fires(dom)
-    if fires:   # their confirmations meet the fires' windows, whoever requests them and wherever they land
+    fires, requesters = planned_fires(dom)
+    if fires:   # their confirmations meet the fires' windows, wherever they land
         by["cff"] = fires
+        # a requester outside our subtree: followed (its command post is a source we depend on)
+        by["requester"] = by["requester"] | (requesters - dom.own_units)
     return Needs(TEMPLATES, by=by,
                  circles=tuple(circles), boxes=boxes, whole=("org",),
                  only=((SensorTrack.KEY, ahead),) if ahead else ())
@@ -144,15 +146,20 @@ def planned(dom) -> tuple[frozenset[str], frozenset[str]]:
     return out
 
 
-def planned_fires(dom) -> frozenset[str]:
+def planned_fires(dom) -> tuple[frozenset[str], frozenset[str]]:
     """The calls for fire our plan's missions (not done or aborted) must see confirmed in a
-    window (detect/windows.py): heard from the plan's start, as `planned` says why."""
+    window (detect/windows.py), and their requesters: heard from the plan's start, as
+    `planned` says why."""
     plan = dom.plan
     if plan is None:
-        return frozenset()
-    return frozenset(f["cff"] for mid, m in dom.missions.items()
-                     if plan.state.get(mid) not in ("done", "aborted") and dom.in_plan(m)
-                     for f in m.params.get("fires") or ())
+        return frozenset(), frozenset()
+    fires = [f for mid, m in dom.missions.items() if plan.state.get(mid) not in ("done", "aborted")
+             and dom.in_plan(m) for f in _fires_of(m)]
+    return frozenset(c for c, _ in fires), frozenset(r for _, r in fires)
+
+
+def _fires_of(m) -> list[tuple[str, str]]:
+    return [(f["cff"], f.get("requester") or m.unit) for f in m.params.get("fires") or ()]
 
 
 def needs_before(dom, msg) -> Needs | None:

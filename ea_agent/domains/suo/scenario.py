@@ -220,7 +220,7 @@ def _check_params(cls, params: Any, where: str, prefix: str, overlay: dict, ids:
     for k in _NUMERIC_PARAMS:
         if params.get(k) is not None:
             _number(params[k], where, prefix + k)
-    problem = cls.check_params(params, overlay) or window_problem(cls.TYPE, params)
+    problem = cls.check_params(params, overlay) or window_problem(cls.TYPE, params, ids)
     if problem:
         raise ScenarioError(f"{where}: field '{prefix}{problem[0]}': {problem[1]}")
     voi = params.get("voi")

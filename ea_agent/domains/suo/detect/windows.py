@@ -25,7 +25,8 @@ WINDOWED: dict[str, tuple[str, str]] = {
     "passage-of-lines": ("complete_window", "end"),
 }
 FIRE_KEYS = {"cff": "id of the call for fire (the `cff` of its cff-confirm event)",
-             "window": "[from, until]: the scenario times in which it must be confirmed"}
+             "window": "[from, until]: the scenario times in which it must be confirmed",
+             "requester": "optional unit that calls and confirms it (default: the mission's unit)"}
 
 
 def window_problem(w: Any) -> str | None:
@@ -38,9 +39,10 @@ def window_problem(w: Any) -> str | None:
     return None
 
 
-def param_problem(typ: str, params: dict) -> tuple[str, str] | None:
-    """(field, why) for a bad window parameter of a mission of type `typ`, or None: checked
-    on load for every mission, so a window never fails at run time."""
+def param_problem(typ: str, params: dict, units: set[str] | None = None) -> tuple[str, str] | None:
+    """(field, why) for a bad window parameter of a mission of type `typ` (`units`: the task
+    organization's, that a planned fire's requester must be one of), or None: checked on
+    load for every mission, so a window never fails at run time."""
     key = WINDOWED.get(typ, (None,))[0]
     if key is not None and params.get(key) is not None and (why := window_problem(params[key])):
         return key, why
@@ -63,6 +65,9 @@ def param_problem(typ: str, params: dict) -> tuple[str, str] | None:
         if cff in seen:
             return f"{where}.cff", f"{cff!r} planned twice in this mission"
         seen.add(cff)
+        req = f.get("requester")
+        if req is not None and (not isinstance(req, str) or units is not None and req not in units):
+            return f"{where}.requester", f"unknown unit {req!r}"
         if "window" not in f:
             return f"{where}.window", "missing (a planned fire is confirmed within a window)"
         if why := window_problem(f["window"]):
@@ -70,9 +75,10 @@ def param_problem(typ: str, params: dict) -> tuple[str, str] | None:
     return None
 
 
-def planned_fires(m: Mission) -> list[tuple[str, float, float]]:
-    """(cff, from, until) of the mission's planned fires."""
-    return [(f["cff"], float(f["window"][0]), float(f["window"][1])) for f in m.params.get("fires") or ()]
+def planned_fires(m: Mission) -> list[tuple[str, str, float, float]]:
+    """(cff, requester, from, until) of the mission's planned fires."""
+    return [(f["cff"], f.get("requester") or m.unit, float(f["window"][0]), float(f["window"][1]))
+            for f in m.params.get("fires") or ()]
 
 
 class Windows(Detector):
@@ -99,8 +105,9 @@ class Windows(Detector):
                 dom.timers.in_window(("window", m.id), lo, hi, self._failed(m, spec[0], lo, hi, t), tag=m.id)
             else:   # a passage is complete when its mission ends
                 dom.timers.in_window(("end", m.id), lo, hi, self._failed(m, spec[0], lo, hi, t), tag=m.id)
-        for cff, lo, hi in planned_fires(m):
-            dom.timers.in_window(("cff-confirm", cff), lo, hi, self._failed(m, "fires", lo, hi, t, cff), tag=m.id)
+        for cff, req, lo, hi in planned_fires(m):
+            dom.timers.in_window(("cff-confirm", cff, req), lo, hi, self._failed(m, "fires", lo, hi, t, cff),
+                                 tag=m.id)
 
     def _failed(self, m: Mission, what: str, lo: float, hi: float, armed: float, cff: str | None = None):
         def failed(tf: float, mon, how: str) -> None:
@@ -123,7 +130,7 @@ class Windows(Detector):
         return all(dom.coordination._within(point, u, radius) for u in (m.unit, m.params["partner"]))
 
     def on_fact(self, f) -> None:
-        self.dom.timers.occurred(("cff-confirm", f.cff), f.t)
+        self.dom.timers.occurred(("cff-confirm", f.cff, f.requester), f.t)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         if not self.meets or not ch.units:
