@@ -21,7 +21,7 @@ from ea_agent.core.plan import PlanSpec, PlanState, TaskOrg, TimeConstraint
 from . import render
 from .detect import (ALERT_TYPES, BASE, CATEGORY, DETECTORS, Areas, Assumptions, Bands, Changes, Checkpoints, Contingencies,
                      Coordination, Coverage, Detector, EndStates, Escapes, FireSupport, Lines, LocationMonitors,
-                     Presence, ReconProgress, ScheduleMonitors, Standoffs, Tempo, ThreatsAhead)
+                     Presence, ReconProgress, ScheduleMonitors, Standoffs, Tempo, ThreatsAhead, Windows)
 from .detect.ahead import branches_for
 from .detect.assemble import Assembly
 from .messages import CallForFire, LocationReport, MissionConfirm, Order, Reorganization, SensorTrack
@@ -94,7 +94,13 @@ class SuoDomain:
         self.recon = self._part(ReconProgress)
         self.tempo = self._part(Tempo)
         self.assume = self._part(Assumptions)
-        self._fact_handlers = {k: d.on_fact for d in self.detectors for k in d.FACTS}
+        self.windows = self._part(Windows)
+        # fact kind -> the detectors that hear it, in DETECTORS order (a confirmed call for
+        # fire warns the units near its target and meets a planned fire's window)
+        self._fact_handlers: dict[type, list[Callable]] = {}
+        for d in self.detectors:
+            for k in d.FACTS:
+                self._fact_handlers.setdefault(k, []).append(d.on_fact)
         # per-epoch hooks, bound once and only where a detector has one
         self._observers = [d.observe for d in self.detectors if type(d).observe is not Detector.observe]
         self._detectors = [d.detect for d in self.detectors if type(d).detect is not Detector.detect]
@@ -229,6 +235,7 @@ class SuoDomain:
                 m.post_execution_constraints(self)
                 if st == "active":   # already running: judged from now, as at its start
                     m.check_initial_location(self, t)
+                    self.windows.start(m, t)
 
     def on_confirm(self, c: MissionConfirm) -> None:
         if self.plan is None:
@@ -251,6 +258,7 @@ class SuoDomain:
             if self.in_plan(m):
                 m.check_initial_location(self, c.t)
                 self._end_by_time(m)
+                self.windows.start(m, c.t)
         else:
             self.schedule.confirmed(m, "end", c.t)
             self._end(m, c.t)
@@ -509,8 +517,9 @@ class SuoDomain:
                 self.on_mission_order(f)
         elif k is Reorganization:
             self.resubordinate(f.unit, f.new_parent, f.t)
-        elif (handle := self._fact_handlers.get(k)) is not None:
-            handle(f)
+        elif (handles := self._fact_handlers.get(k)) is not None:
+            for handle in handles:
+                handle(f)
 
     def flush_quiet(self) -> None:
         """Bring the picture fully up to date with reports the watchman held back."""

@@ -1,6 +1,6 @@
 """What an SUO EA must hear, for dissemination: by command, the positions of its
 subtree, the orders of its chain of command and of its own subtree and the fires it called; by mission, the
-confirmations of every unit its plan names; by geography, what is reported near its
+confirmations of every unit its plan names and of the fires it planned; by geography, what is reported near its
 units and in the control measures it watches."""
 from __future__ import annotations
 
@@ -39,10 +39,16 @@ def needs(dom, radius_m: float) -> Needs:
     # the hostile tracks there (only the tracks: own and friendly reports there are not what these checks read)
     ahead = tuple(dom.overlay[a].area.buffer(LINGER_M).bounds for a in sorted(places))
     paths = {to.path(dom.owner)} | {to.path(u) for u in followed if u in to.units and u not in dom.own_units}
-    return Needs(TEMPLATES, by={"path": frozenset(paths),
-                                "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
-                                "requester": frozenset({dom.owner}),
-                                "unit": frozenset(units)},
+    by = {"path": frozenset(paths),
+          "issuer": frozenset([*dom.own_units, *to.ancestors(dom.owner)]),   # ours, and orders within our subtree
+          "requester": frozenset({dom.owner}),
+          "unit": frozenset(units)}
+    fires, requesters = planned_fires(dom)
+    if fires:   # their confirmations meet the fires' windows, wherever they land
+        by["cff"] = fires
+        # a requester outside our subtree: followed (its command post is a source we depend on)
+        by["requester"] = by["requester"] | (requesters - dom.own_units)
+    return Needs(TEMPLATES, by=by,
                  circles=tuple(circles), boxes=boxes, whole=("org",),
                  only=((SensorTrack.KEY, ahead),) if ahead else ())
 
@@ -138,6 +144,22 @@ def planned(dom) -> tuple[frozenset[str], frozenset[str]]:
     out = frozenset(a for a in rec.places if a in dom.overlay), frozenset(rec.units)
     dom._planned_memo = (key, out)
     return out
+
+
+def planned_fires(dom) -> tuple[frozenset[str], frozenset[str]]:
+    """The calls for fire our plan's missions (not done or aborted) must see confirmed in a
+    window (detect/windows.py), and their requesters: heard from the plan's start, as
+    `planned` says why."""
+    plan = dom.plan
+    if plan is None:
+        return frozenset(), frozenset()
+    fires = [f for mid, m in dom.missions.items() if plan.state.get(mid) not in ("done", "aborted")
+             and dom.in_plan(m) for f in _fires_of(m)]
+    return frozenset(c for c, _ in fires), frozenset(r for _, r in fires)
+
+
+def _fires_of(m) -> list[tuple[str, str]]:
+    return [(f["cff"], f.get("requester") or m.unit) for f in m.params.get("fires") or ()]
 
 
 def needs_before(dom, msg) -> Needs | None:

@@ -25,6 +25,7 @@ from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError,
                                     number as _number, read_events, read_json as _read_json)
 
 from . import messages as M
+from .detect.windows import param_problem as window_problem
 from .missions import REGISTRY, ContingentMission, ReorganizationMission
 
 ECHELONS = ("brigade", "battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
@@ -219,7 +220,7 @@ def _check_params(cls, params: Any, where: str, prefix: str, overlay: dict, ids:
     for k in _NUMERIC_PARAMS:
         if params.get(k) is not None:
             _number(params[k], where, prefix + k)
-    problem = cls.check_params(params, overlay)
+    problem = cls.check_params(params, overlay) or window_problem(cls.TYPE, params, ids)
     if problem:
         raise ScenarioError(f"{where}: field '{prefix}{problem[0]}': {problem[1]}")
     voi = params.get("voi")

@@ -33,6 +33,7 @@ from .support import FireSupport
 from .tempo import Tempo
 from .threats import ThreatEnvelopes
 from .unknown import UnknownPositions
+from .windows import Windows
 
 DETECTORS: tuple[type[Detector], ...] = (
     Fratricide, CallsForFire, LocationMonitors, Coordination, ScheduleMonitors, UnknownPositions,
@@ -40,6 +41,7 @@ DETECTORS: tuple[type[Detector], ...] = (
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
     Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs,
     FireSupport, Presence, ReconProgress, Tempo, Assumptions,
+    Windows,   # doctrinal time windows (link-up, passage of lines, planned fires): in-window timers
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -49,4 +51,4 @@ ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fi
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Assumptions", "Bands", "CallsForFire",
            "Checkpoints", "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide",
            "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ReconProgress", "ScheduleMonitors", "Standoffs",
-           "Tempo", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
+           "Tempo", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions", "Windows"]

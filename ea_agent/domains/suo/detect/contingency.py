@@ -52,6 +52,7 @@ class Contingencies(Detector):
         dom.timers.occurred(("start", m.id), t)
         if dom.in_plan(task):
             task.check_initial_location(dom, t)
+            dom.windows.start(task, t)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         self.fired = set()

@@ -29,7 +29,8 @@ class Coordination(Detector):
             if dom.in_plan(m):
                 dom.ea.post(self.candidate(m, partner, point, tf))
             return None
-        dom.timers.not_later_than(("coord", m.id), at + fuzz, failed, tag=m.id)
+        if m.params.get("window") is None:   # a link-up's or relief's window is its time (detect/windows.py)
+            dom.timers.not_later_than(("coord", m.id), at + fuzz, failed, tag=m.id)
 
     def candidate(self, m: Mission, partner: str, point: str, t: float) -> Candidate:
         dom = self.dom

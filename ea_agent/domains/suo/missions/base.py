@@ -35,6 +35,8 @@ class Mission(CoreMission):
     (a unit that never moves is judged too); the EA re-checks them on scenario time."""
     PARAMS = {
         "voi": "optional per-mission VOI overrides, e.g. {out_of_position_m: 100, schedule_s: 10}",
+        "fires": "optional planned fires [{cff, window: [from, until], requester?}]: each confirmed in its "
+                 "window (fire-support; detect/windows.py)",
     }
     GEOMETRY_PARAMS: ClassVar[tuple[str, ...]] = ()   # params that name overlay features
     LINE_PARAMS = ("route", "axis", "rear_line", "line", "obstacle", "line_of_departure")

@@ -23,6 +23,8 @@ class CoordinationMission(Mission):
 class LinkUp(CoordinationMission):
     """The coordination family as it is: both units meet at the point in time."""
     TYPE = "link-up"
+    PARAMS = {"window": "optional [from, until]: the link-up made at the point in it, in place of at + fuzz_s "
+                        "(coordination; detect/windows.py)"}
 
 
 @mission
@@ -30,6 +32,8 @@ class ReliefInPlace(CoordinationMission):
     """The unit relieves `partner` at `point`: besides meeting there, no gap (the partner
     does not leave before the unit is in)."""
     TYPE = "relief-in-place"
+    PARAMS = {"window": "optional [from, until]: both units at the point in it, in place of at + fuzz_s "
+                        "(coordination; detect/windows.py)"}
     CHECKS = CoordinationMission.CHECKS + ("no gap: the relieved unit stays until the relieving one is in (presence)",)
 
     def location_constraints(self, ctx):
@@ -42,7 +46,9 @@ class PassageOfLines(CoordinationMission):
     """The unit passes through `partner`'s position at `point`: its elements there keep to
     the optional `lane`."""
     TYPE = "passage-of-lines"
-    PARAMS = {"lane": "optional overlay area: the passing unit's elements at the point keep inside it"}
+    PARAMS = {"lane": "optional overlay area: the passing unit's elements at the point keep inside it",
+              "complete_window": "optional [from, until]: the passage complete (its end) in it "
+                                 "(coordination; detect/windows.py)"}
     GEOMETRY_PARAMS = ("point", "lane")
     CHECKS = CoordinationMission.CHECKS + ("its elements at the point inside its lane (presence)",)
 
