@@ -341,8 +341,12 @@ class SuoDomain:
     def post_held(self, m: Mission, position: str) -> None:
         self.coverage.post_held(m, position)
 
-    def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
-        self.bands.post(m, other, lo, hi)
+    def post_band(self, m: Mission, other: str, lo: float, hi: float, since: float | None = None,
+                  behind: str | None = None) -> None:
+        self.bands.post(m, other, lo, hi, since, behind)
+
+    def check_joined(self, m: Mission, unit: str, other: str, within_m: float, when: float) -> None:
+        self.bands.check_once(m, unit, other, within_m, when)
 
     def post_line(self, m: Mission, line: str, what: str, when: float | None = None,
                   toward: str | None = None) -> None:

@@ -30,9 +30,14 @@ class OffensiveMission(Mission):
         else:
             ctx.post_corridor(self, self.params["objective"])
         if self.params.get("line_of_departure"):
-            ctx.post_line(self, self.params["line_of_departure"], "depart", toward=self.params["objective"])
+            ctx.post_line(self, self.params["line_of_departure"], "depart", self.departure_by(),
+                          toward=self.params["objective"])
         if self.ESCAPE:
             ctx.post_escape(self, self.params["objective"])
+
+    def departure_by(self) -> float | None:
+        """When its line of departure must be crossed (None: whenever it starts)."""
+        return None
 
     def respond_to_threat_ahead(self, ctx, t, tracks, strength):
         """An attack expects the enemy: go on when strong enough for it (DESIRED_STRENGTH_RATIO), else abort."""
@@ -48,8 +53,21 @@ class OffensiveMission(Mission):
 
 @mission
 class Attack(OffensiveMission):
-    """The offensive family as it is: all members on the objective at the end."""
+    """A deliberate attack (FM 3-90): all members on the objective at the end, and launched at
+    its time: with `h_hour`, the unit across its line of departure by then, or the attack the
+    plan synchronized (fires, adjacent units) has not begun (line, check `depart`)."""
     TYPE = "attack"
+    PARAMS = {"h_hour": "optional scenario time by which it crosses its line_of_departure (needs one)"}
+    CHECKS = OffensiveMission.CHECKS + ("across its line of departure by its H-hour (line)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if params.get("h_hour") is not None and params.get("line_of_departure") is None:
+            return "line_of_departure", "an H-hour needs the line of departure crossed at it"
+        return _time_problem(params, "h_hour") or super().check_params(params, overlay)
+
+    def departure_by(self):
+        return float(self.params["h_hour"]) if self.params.get("h_hour") is not None else None
 
 
 @mission

@@ -63,9 +63,8 @@ class Observe(SecurityMission):
 class ReconnaissanceMission(SecurityMission):
     """Reconnaissance of a zone or an area, finished by `by` (or the mission's END-NLT/END-AT
     time); hostiles found in it are what it looks for, and are reported at once as in the
-    security family. How its progress is measured is its class's (PROGRESS)."""
+    security family. How its progress is measured is its class's (`post_progress`)."""
     PARAMS = {"by": "optional scenario time by which all of it must be seen (default: its end time)"}
-    PROGRESS: ClassVar[str] = "coverage"   # coverage (area) | depth (zone)
 
     def by(self) -> float | None:
         if self.params.get("by") is not None:
@@ -82,7 +81,11 @@ class ReconnaissanceMission(SecurityMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
-        ctx.post_recon(self, self.params["area"], self.by(), self.PROGRESS)
+        self.post_progress(ctx)
+
+    def post_progress(self, ctx) -> None:
+        """How its progress through its area is measured: its class's."""
+        raise NotImplementedError
 
     def check_initial_location(self, ctx, t):
         super().check_initial_location(ctx, t)
@@ -101,6 +104,9 @@ class AreaReconnaissance(ReconnaissanceMission):
         "coverage: the share of the area seen against the share of its time gone, and most of it seen at "
         "its end (recon-progress)",)
 
+    def post_progress(self, ctx):
+        ctx.post_recon(self, self.params["area"], self.by(), "coverage")
+
 
 @mission
 class ZoneReconnaissance(ReconnaissanceMission):
@@ -108,7 +114,9 @@ class ZoneReconnaissance(ReconnaissanceMission):
     the zone passed (every band across it seen, from the side the unit starts on), against the
     share of its time gone; a gap left behind holds the depth there."""
     TYPE = "zone-reconnaissance"
-    PROGRESS = "depth"
     CHECKS = SecurityMission.CHECKS + (
         "progress front to rear: the depth of the zone passed (each band across it seen) against the share "
         "of its time gone, and most of its depth passed at its end (recon-progress)",)
+
+    def post_progress(self, ctx):
+        ctx.post_recon(self, self.params["area"], self.by(), "depth")
