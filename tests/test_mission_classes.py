@@ -395,3 +395,251 @@ def test_a_branch_is_offered_in_place_of_a_move_meeting_hostiles_and_a_sequel_is
     ta = of(play(sc, msgs, 300), "threat-ahead")
     assert len(ta) == 1
     assert ("execute:A-next" in ta[0].details["decision"]["options"]) is offered
+
+
+# ================================ each class its own meaning: an alert its family's base does not raise
+HOOKS = ("location_constraints", "check_initial_location", "check_final_location", "contingency_satisfied",
+         "execute_mission", "respond_to_threat_ahead", "post_execution_constraints", "plan_constraints",
+         "departure_by", "post_follow_band", "post_progress", "recheck_on_scan")
+
+
+def as_base(monkeypatch, typ: str) -> None:
+    """The leaf class of `typ` monitors as its parent does: its own hooks removed (its
+    parameters are still accepted, so the same plan loads)."""
+    cls = REGISTRY[typ]
+    own = [n for n in HOOKS if n in vars(cls)]
+    assert own, f"{typ} has no monitoring hook of its own"
+    for n in own:
+        monkeypatch.delattr(cls, n)
+
+
+def checked(ea, typ: str, check: str) -> list:
+    return [a for a in alerts_of(ea, typ) if a.details.get("check") == check]
+
+
+def _east(v: float, x0: float = 0.0, t0: float = 100.0, y: float = 0.0):
+    return lambda t: (x0 + v * max(0.0, t - t0), y)
+
+
+def _move_by(tmp_path):
+    """A1 east at 5 m/s from t=100 to DEST-FAR (its edge at 5800: there at t=1260); due there by 600."""
+    sc = scenario(tmp_path, [DEST_FAR], [mission("A1-move", "A1", "move", destination="DEST-FAR", by=600)])
+    return play(sc, path("A1", 10, 800, _east(5.0)) + stays("A2", 0, -3000, 10, 800) + [start(100, "A1-move", "A1")],
+                800)
+
+
+def test_move_means_being_at_its_destination_by_its_time(tmp_path, monkeypatch):
+    oop = checked(_move_by(tmp_path / "move"), "out-of-position", "by")
+    assert len(oop) == 1 and near(oop[0].t, 600.0), [(a.t, a.message) for a in oop]
+    assert oop[0].details["control_measure"] == "DEST-FAR"
+    as_base(monkeypatch, "move")
+    assert not checked(_move_by(tmp_path / "base"), "out-of-position", "by")
+
+
+def _march(tmp_path, ahead_x: float):
+    """A1 marches east at 5 m/s with A2 the serial ahead, `ahead_x` m in front of it; interval 100-500 m."""
+    sc = scenario(tmp_path, [RTE_1, DEST_FAR], [mission("A1-march", "A1", "tactical-road-march", route="RTE-1",
+                                                        destination="DEST-FAR", ahead="A2", interval_m=[100, 500])])
+    msgs = (path("A1", 10, 600, _east(5.0)) + path("A2", 10, 600, _east(5.0, ahead_x))
+            + [start(100, "A1-march", "A1")])
+    return play(sc, msgs, 600)
+
+
+def test_a_tactical_road_march_means_keeping_its_march_interval(tmp_path, monkeypatch):
+    band = alerts_of(_march(tmp_path / "gap", 2000.0), "band")
+    assert band and band[0].subjects == ("A1", "A2") and "too far" in band[0].message, [a.message for a in band]
+    assert band[0].details["band_m"] == [100.0, 500.0]
+    assert not alerts_of(_march(tmp_path / "kept", 300.0), "band")
+    as_base(monkeypatch, "tactical-road-march")
+    assert not alerts_of(_march(tmp_path / "base", 2000.0), "band")
+
+
+LOA = line("PL-LOA", "phase-line", (1000, -2000), (1000, 2000))
+
+
+def _contact(tmp_path):
+    """A1 east at 5 m/s from t=100: across PL-LOA (x=1000), its limit of advance, at t=300."""
+    sc = scenario(tmp_path, [RTE_1, DEST_FAR, LOA], [mission("A1-mtc", "A1", "movement-to-contact", route="RTE-1",
+                                                             destination="DEST-FAR", limit="PL-LOA")])
+    return play(sc, path("A1", 10, 500, _east(5.0)) + stays("A2", 0, -3000, 10, 500) + [start(100, "A1-mtc", "A1")],
+                500)
+
+
+def test_a_movement_to_contact_means_not_going_past_its_limit_of_advance(tmp_path, monkeypatch):
+    ln = checked(_contact(tmp_path / "mtc"), "line", "limit")
+    assert ln and 300 <= ln[0].t <= 300 + REPORT_S + 2 * EPOCH, [(a.t, a.message) for a in ln]
+    assert ln[0].details["line"] == "PL-LOA" and "limit of advance" in ln[0].message
+    as_base(monkeypatch, "movement-to-contact")
+    assert not alerts_of(_contact(tmp_path / "base"), "line")
+
+
+def _supporting(tmp_path):
+    """A1 halts at x=1500 from t=400 on its way to DEST-FAR; A2, following it to DEST-BEHIND,
+    goes on past it (at 5 m/s, 500 m behind it until then)."""
+    ms = [mission("A1-move", "A1", "move", destination="DEST-FAR"),
+          mission("A2-follow", "A2", "follow-and-support", supported="A1", destination="DEST-BEHIND",
+                  toward="DEST-FAR", band_m=[0, 3000])]
+    sc = scenario(tmp_path, [DEST_FAR, DEST_BEHIND], ms)
+    msgs = (path("A1", 10, 900, _halts_at_400) + path("A2", 10, 900, _east(5.0, -500.0))
+            + [start(100, "A1-move", "A1"), start(100, "A2-follow", "A2")])
+    return play(sc, msgs, 900)
+
+
+def test_follow_and_support_means_not_passing_the_unit_it_supports(tmp_path, monkeypatch):
+    ahead = checked(_supporting(tmp_path / "fs"), "band", "ahead")
+    # A2 at x=1500 at t=500: more than out_of_position_m past A1 some 30 s later
+    assert ahead and 500 < ahead[0].t <= 560, [(a.t, a.message) for a in ahead]
+    assert ahead[0].subjects == ("A2", "A1") and ahead[0].details["place"] == "DEST-FAR"
+    as_base(monkeypatch, "follow-and-support")
+    assert not checked(_supporting(tmp_path / "base"), "band", "ahead")
+
+
+RTE_R = line("RTE-R", "route", (0, 0), (4000, 0))
+DEST_R = box("DEST-R", "assembly-area", 3900, -200, 4300, 200)
+
+
+def _route_recon(tmp_path):
+    """A1 reconnoitres RTE-R by 900 but halts halfway along it (x=2000 from t=500)."""
+    sc = scenario(tmp_path, [RTE_R, DEST_R], [mission("A1-rr", "A1", "route-reconnaissance",
+                                                      {"type": "START-AT", "t": 100}, {"type": "END-NLT", "t": 900},
+                                                      route="RTE-R", destination="DEST-R")])
+    msgs = (path("A1", 10, 900, lambda t: (min(2000.0, 5.0 * max(0.0, t - 100.0)), 0.0))
+            + stays("A2", 0, -3000, 10, 900) + [start(100, "A1-rr", "A1"), end(880, "A1-rr", "A1")])
+    return play(sc, msgs, 900)
+
+
+def test_a_route_reconnaissance_means_every_section_of_its_route_seen(tmp_path, monkeypatch):
+    rp = alerts_of(_route_recon(tmp_path / "rr"), "recon-progress")
+    assert rp and rp[0].details["area"] == "RTE-R", [(a.t, a.message) for a in rp]
+    assert {a.details["check"] for a in rp} <= {"behind", "incomplete"}
+    assert any(a.details["check"] == "incomplete" and a.details["seen"] < 0.7 for a in rp)
+    as_base(monkeypatch, "route-reconnaissance")
+    assert not alerts_of(_route_recon(tmp_path / "base"), "recon-progress")
+
+
+LD = line("LD-1", "phase-line", (500, -2000), (500, 2000))
+
+
+def _attack(tmp_path, h_hour):
+    """A1 waits at x=0 until t=400, then east at 10 m/s: across LD-1 (x=500) at t=450."""
+    sc = scenario(tmp_path, [OBJ_MID, LD], [mission("A1-atk", "A1", "attack", objective="OBJ-MID",
+                                                    line_of_departure="LD-1", h_hour=h_hour)])
+    return play(sc, path("A1", 10, 600, _east(10.0, 0.0, 400.0)) + stays("A2", 0, -3000, 10, 600), 600)
+
+
+def test_an_attack_means_crossing_its_line_of_departure_at_h_hour(tmp_path, monkeypatch):
+    ln = checked(_attack(tmp_path / "late", 200), "line", "depart")
+    assert len(ln) == 1 and near(ln[0].t, 200.0), [(a.t, a.message) for a in ln]
+    assert ln[0].details["line"] == "LD-1" and "line of departure" in ln[0].message
+    ea = _attack(tmp_path / "on-time", 500)
+    assert not checked(ea, "line", "depart") and ea.domain.plan.state["A1-atk"] == "active"
+    as_base(monkeypatch, "attack")
+    assert not alerts_of(_attack(tmp_path / "base", 200), "line")
+
+
+def _occupying(tmp_path):
+    """A1 from x=-1000 east at 2 m/s from t=100 into BP-HOME (x from -200): all in by t=520; due by 300."""
+    sc = scenario(tmp_path, [BP_HOME], [mission("A1-occ", "A1", "occupy", position="BP-HOME", by=300)])
+    msgs = path("A1", 10, 700, lambda t: (min(0.0, -1000.0 + 2.0 * max(0.0, t - 100.0)), 0.0)) + \
+        stays("A2", 0, -3000, 10, 700) + [start(100, "A1-occ", "A1")]
+    return play(sc, msgs, 700)
+
+
+def test_occupy_means_every_element_in_its_position_by_its_time(tmp_path, monkeypatch):
+    oop = checked(_occupying(tmp_path / "occ"), "out-of-position", "by")
+    assert len(oop) == 1 and near(oop[0].t, 300.0) and oop[0].details["rule"] == "all", [a.message for a in oop]
+    as_base(monkeypatch, "occupy")
+    assert not checked(_occupying(tmp_path / "base"), "out-of-position", "by")
+
+
+PL_ABF = line("PL-ABF", "phase-line", (500, -2000), (500, 2000))
+
+
+def _by_fire(tmp_path, closes: bool, target="TGT-NEAR"):
+    """A1 in BP-HOME firing on `target`; if `closes`, it moves east from t=300 at 5 m/s (across
+    PL-ABF, x=500, at t=400) towards it."""
+    sc = scenario(tmp_path, [BP_HOME, TGT_NEAR, TGT_FAR, PL_ABF],
+                  [mission("A1-abf", "A1", "attack-by-fire", position="BP-HOME", target=target, limit="PL-ABF")])
+    where = _east(5.0, 0.0, 300.0) if closes else (lambda t: (0.0, 0.0))
+    return play(sc, path("A1", 10, 600, where) + stays("A2", 0, -3000, 10, 600) + [start(100, "A1-abf", "A1")], 600)
+
+
+def test_an_attack_by_fire_means_not_closing_with_its_target(tmp_path, monkeypatch):
+    ln = checked(_by_fire(tmp_path / "closes", True), "line", "limit")
+    assert ln and 400 <= ln[0].t <= 400 + REPORT_S + 2 * EPOCH, [(a.t, a.message) for a in ln]
+    assert not alerts_of(_by_fire(tmp_path / "stays", False), "line")
+    fe = alerts_of(_by_fire(tmp_path / "far", False, "TGT-FAR"), "friendly-expected")
+    assert fe and "TGT-FAR" in fe[0].message, [a.message for a in fe]
+    assert not alerts_of(_by_fire(tmp_path / "near", False), "friendly-expected")
+    as_base(monkeypatch, "attack-by-fire")
+    assert not alerts_of(_by_fire(tmp_path / "base", True), "line")
+    assert not alerts_of(_by_fire(tmp_path / "base-far", False, "TGT-FAR"), "friendly-expected")
+
+
+CP_LINK = box("CP-LINK", "checkpoint", 900, -100, 1100, 100)
+
+
+def _linking(tmp_path):
+    """A1 and A2 both at CP-LINK from t=100 (link-up at 300); A1 leaves east at 5 m/s from t=400."""
+    sc = scenario(tmp_path, [CP_LINK], [mission("A1-link", "A1", "link-up", partner="A2", point="CP-LINK", at=300,
+                                                join_m=300)])
+    msgs = (path("A1", 10, 800, _east(5.0, 1000.0, 400.0)) + stays("A2", 1000, 0, 10, 800)
+            + [start(100, "A1-link", "A1")])
+    return play(sc, msgs, 800)
+
+
+def test_a_link_up_means_the_forces_stay_joined_after_they_meet(tmp_path, monkeypatch):
+    ea = _linking(tmp_path / "lu")
+    band = alerts_of(ea, "band")
+    # 300 m + out_of_position_m (150) apart at t=490
+    assert band and 490 <= band[0].t <= 490 + REPORT_S + 2 * EPOCH, [(a.t, a.message) for a in band]
+    assert band[0].subjects == ("A1", "A2") and not alerts_of(ea, "coordination")
+    as_base(monkeypatch, "link-up")
+    assert not alerts_of(_linking(tmp_path / "base"), "band")
+
+
+def _following_on(tmp_path):
+    """A sequel (occupy BP-2) after A1's move, triggered by hostiles in NAI-N (from t=150); the move ends at 400."""
+    ms = [mission("A1-move", "A1", "move", destination="DEST-FAR"),
+          mission("A-next", "A1", "sequel", trigger={"kind": "hostile-in-area", "area": "NAI-N"}, task="occupy",
+                  task_params={"position": "BP-2"}, owner="A", follows="A1-move")]
+    sc = scenario(tmp_path, [NAI_N, BP_2, DEST_FAR], ms)
+    msgs = (path("A1", 10, 600, _east(5.0)) + stays("A2", 0, -3000, 10, 600)
+            + [start(100, "A1-move", "A1"), end(400, "A1-move", "A1")] + track_path("H1", 150, 600, lambda t: (0.0, 3300.0)))
+    return play(sc, msgs, 600)
+
+
+def test_a_sequel_means_not_before_the_mission_it_follows_is_done(tmp_path, monkeypatch):
+    c = alerts_of(_following_on(tmp_path / "seq"), "contingency")
+    assert len(c) == 1 and 400 <= c[0].t <= 400 + REPORT_S + 2 * EPOCH, [(a.t, a.message) for a in c]
+    as_base(monkeypatch, "sequel")
+    c = alerts_of(_following_on(tmp_path / "base"), "contingency")
+    assert len(c) == 1 and c[0].t < 200, [(a.t, a.message) for a in c]
+
+
+def _reorganizing(tmp_path, b1_x: float):
+    """A2 (at 0, -3000) goes under B at t=200 and must be within 500 m of B's own by 400 (B1 at b1_x, -3000)."""
+    sc = scenario(tmp_path, [], [mission("BN-reorg", "BN", "reorganize", {"type": "START-AT", "t": 200},
+                                         subject="A2", new_parent="B", join_m=500, by=400)])
+    msgs = stays("A1", 0, 0, 10, 600) + stays("A2", 0, -3000, 10, 600) + stays("B1", b1_x, -3000, 10, 600)
+    return play(sc, msgs, 600, owner="BN")
+
+
+def test_a_reorganization_means_the_unit_joined_to_its_new_superior_by_its_time(tmp_path, monkeypatch):
+    ea = _reorganizing(tmp_path / "apart", 3000.0)
+    band = checked(ea, "band", "joined")
+    assert len(band) == 1 and near(band[0].t, 400.0) and band[0].subjects == ("A2", "B"), [a.message for a in band]
+    assert 2950 < band[0].details["distance_m"] < 3050
+    assert ea.domain.taskorg.parent["A2"] == "B"
+    assert not checked(_reorganizing(tmp_path / "together", 300.0), "band", "joined")
+    as_base(monkeypatch, "reorganize")
+    assert not alerts_of(_reorganizing(tmp_path / "base", 3000.0), "band")
+
+
+def test_an_area_reconnaissance_means_its_area_covered(tmp_path, monkeypatch):
+    """A unit that never enters the area: behind, and incomplete at its end; the recon family
+    measures nothing of its own."""
+    rp = of(_recon(tmp_path / "area", "area-reconnaissance", lambda t: (1000.0, -900.0)), "recon-progress")
+    assert rp and rp[0].details["progress"] == "coverage", [a.message for a in rp]
+    as_base(monkeypatch, "area-reconnaissance")
+    assert not of(_recon(tmp_path / "base", "area-reconnaissance", lambda t: (1000.0, -900.0)), "recon-progress")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import shapely
 
 from ea_agent.core.alert import Candidate
@@ -35,15 +36,21 @@ class Bands(Detector):
             self.behind[m.id] = behind
 
     def check_once(self, m: Mission, unit: str, other: str, hi: float, when: float) -> None:
-        """At `when`, `unit` within `hi` of `other` (whatever `m`'s state then)."""
+        """At `when`, `unit` within `hi` of the rest of `other` (its other members: the unit may
+        already be one of them), whatever `m`'s state then."""
         dom = self.dom
 
         def due(tf, mon, how):
             if not dom.in_plan(m):
                 return None
-            a, b = dom.pic.centroid(unit), dom.pic.centroid(other)
-            if a is None or b is None:
+            pic = dom.pic
+            a = pic.centroid(unit)
+            rest = np.setdiff1d(pic.members[other], pic.members[unit])   # the superior without the unit joining it
+            pts = pic.xy[rest]
+            pts = pts[~np.isnan(pts[:, 0])]
+            if a is None or not len(pts):
                 return None
+            b = pts.mean(axis=0).tolist()
             d = math.hypot(a[0] - b[0], a[1] - b[1])
             thr = dom.voi(m, "out_of_position_m")
             if d - hi > thr:

@@ -33,6 +33,10 @@ class ContingentMission(Mission):
     def contingency_satisfied(self, ctx):
         return ctx.evaluate_trigger(self.params["trigger"])
 
+    def recheck_on_scan(self) -> bool:
+        """Its trigger judged again on every periodic scan, not only when what it watches changes."""
+        return False
+
     def post_execution_constraints(self, ctx):
         ctx.post_contingency(self)
 
@@ -49,18 +53,22 @@ class Branch(ContingentMission):
 @mission
 class Sequel(ContingentMission):
     """What follows the current operation once its trigger holds (FM 3-0): never offered in
-    place of the course of action running, and with `after` (the mission it follows) not begun
+    place of the course of action running, and with `follows` (the mission it follows) not begun
     before that mission is done: its trigger holding while it runs is not yet the sequel's time
     (contingency)."""
     TYPE = "sequel"
-    PARAMS = {"after": "optional id of the mission it follows: not executed until that one is done"}
+    PARAMS = {"follows": "optional id of the mission it follows: not executed until that one is done"}
     CHECKS = ContingentMission.CHECKS + ("not executed before the mission it follows is done (contingency)",)
 
     def contingency_satisfied(self, ctx):
-        after = self.params.get("after")
+        after = self.params.get("follows")
         if after is not None and (ctx.plan is None or ctx.plan.state.get(after) != "done"):
             return False
         return super().contingency_satisfied(ctx)
+
+    def recheck_on_scan(self):
+        """The mission it follows ends without a report in its trigger area: judged on each scan."""
+        return self.params.get("follows") is not None
 
 
 class ReorganizationMission(Mission):

@@ -84,8 +84,8 @@ class ReconnaissanceMission(SecurityMission):
         self.post_progress(ctx)
 
     def post_progress(self, ctx) -> None:
-        """How its progress through its area is measured: its class's."""
-        raise NotImplementedError
+        """How its progress through its area is measured: the family has no measure of its
+        own (coverage is an area's, depth a zone's); its leaves give theirs."""
 
     def check_initial_location(self, ctx, t):
         super().check_initial_location(ctx, t)
