@@ -329,8 +329,8 @@ class SuoDomain:
     def post_penetration(self, m: Mission, area: str) -> None:
         self.areas.post_red_monitor(m, area, expected=False, kind="penetration")
 
-    def post_escape(self, m: Mission, area: str) -> None:
-        self.escape.post(m, area)
+    def post_escape(self, m: Mission, area: str, until: float | None = None) -> None:
+        self.escape.post(m, area, until)
 
     def check_end_state(self, m: Mission, area: str, t: float) -> None:
         self.end_state.check(m, area, t)
@@ -367,8 +367,8 @@ class SuoDomain:
     def post_presence(self, m: Mission, partner: str, point: str, lane: str | None = None) -> None:
         self.presence.post(m, partner, point, lane)
 
-    def post_standoff(self, m: Mission) -> None:
-        self.standoff.post(m)
+    def post_standoff(self, m: Mission, bypassed: str | None = None) -> None:
+        self.standoff.post(m, bypassed)
 
     def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
         self.checkpoints.post(m, table)

@@ -27,11 +27,14 @@ class ContingentMission(Mission):
     }
     REQUIRED = ("trigger", "task", "owner")
     UNIT_PARAMS = ("owner",)
-    ALTERNATIVE: ClassVar[bool] = False   # offered to the commander in place of the course of action running
     CHECKS = ("its trigger (contingency); once triggered, its task as a monitored mission from then",)
 
     def contingency_satisfied(self, ctx):
         return ctx.evaluate_trigger(self.params["trigger"])
+
+    def offered_in_place(self) -> bool:
+        """Offered to the commander in place of the course of action running (threat-ahead)."""
+        return False
 
     def recheck_on_scan(self) -> bool:
         """Its trigger judged again on every periodic scan, not only when what it watches changes."""
@@ -46,8 +49,10 @@ class Branch(ContingentMission):
     """An alternative course of action (FM 3-0): besides its trigger, offered to the commander in
     place of a move when its unit meets hostiles ahead."""
     TYPE = "branch"
-    ALTERNATIVE = True
     CHECKS = ContingentMission.CHECKS + ("offered in place of its unit's move when hostiles are ahead (threat-ahead)",)
+
+    def offered_in_place(self):
+        return True
 
 
 @mission

@@ -193,8 +193,11 @@ class Withdraw(MovementMission):
     """Breaking contact: keeps its standoff; accepts 1:2 before a threat is IMMEDIATE."""
     TYPE = "withdraw"
     DESIRED_STRENGTH_RATIO = 0.5
-    STANDOFF = True
     CHECKS = MovementMission.CHECKS + (_STANDOFF,)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_standoff(self)
 
 
 @mission
@@ -205,7 +208,6 @@ class Delay(MovementMission):
     PARAMS = {"line": "optional overlay line the unit holds forward of ...", "until": "... until this time"}
     GEOMETRY_PARAMS = ("route", "destination", "line")
     DESIRED_STRENGTH_RATIO = 0.33
-    STANDOFF = True
     CHECKS = MovementMission.CHECKS + ("forward of its line until its time (line)", _STANDOFF)
 
     @classmethod
@@ -216,16 +218,24 @@ class Delay(MovementMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
+        ctx.post_standoff(self)
         if self.params.get("line"):
             ctx.post_line(self, self.params["line"], "hold", float(self.params["until"]))
 
 
 @mission
 class Bypass(MovementMission):
-    """Moves around the enemy: keeps its standoff."""
+    """Moves around an obstacle, position or enemy force to keep its momentum (FM 3-90): keeps
+    its standoff, and stays out of the `bypassed` area (in it, it is not bypassing but going
+    through: standoff, check `bypassed`)."""
     TYPE = "bypass"
-    STANDOFF = True
-    CHECKS = MovementMission.CHECKS + (_STANDOFF,)
+    PARAMS = {"bypassed": "optional overlay area (the obstacle or enemy position) the unit goes around"}
+    GEOMETRY_PARAMS = ("route", "destination", "bypassed")
+    CHECKS = MovementMission.CHECKS + (_STANDOFF, "its centroid never inside the area it bypasses (standoff)")
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_standoff(self, self.params.get("bypassed"))
 
 
 @mission

@@ -19,7 +19,6 @@ class PositionMission(Mission):
     REQUIRED = ("position",)
     GEOMETRY_PARAMS = ("position", "engagement_area")
     DESIRED_STRENGTH_RATIO = 0.33  # prepared defenders accept 1:3
-    PENETRATION: ClassVar[bool] = False   # a hostile entering the position is a penetration
     CHECKS = _checks("in its position while it runs and at the end (out-of-position)",
                      "its position holds some friendly element while it runs (friendly-expected)",
                      "its engagement area within weapons range of the position (friendly-expected)",
@@ -31,8 +30,6 @@ class PositionMission(Mission):
         ea_ = self.params.get("engagement_area")
         if ea_:
             ctx.post_red_monitor(self, ea_, expected=True, expect_by=self.params.get("expect_hostile_by"))
-        if self.PENETRATION:
-            ctx.post_penetration(self, self.params["position"])
 
     def check_initial_location(self, ctx, t):
         super().check_initial_location(ctx, t)
@@ -83,8 +80,11 @@ class Occupy(PositionMission):
 class Retain(PositionMission):
     """Keep the enemy out of the position: a hostile in it is a penetration."""
     TYPE = "retain"
-    PENETRATION = True
     CHECKS = PositionMission.CHECKS + ("no hostile enters the position (penetration, projected before)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_penetration(self, self.params["position"])
 
 
 @mission

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-from typing import ClassVar
 
 from .base import Mission, _STANDOFF, _checks, mission
 
@@ -16,16 +15,16 @@ class SecurityMission(Mission):
     LOCATION_RULE = "any"
     DESIRED_STRENGTH_RATIO = 0.5
     PRIORITY = {"monitored": "immediate"}
-    RED_KIND: ClassVar[str] = "monitored"
     CHECKS = _checks("an element on station while it runs and at the end (out-of-position)",
                      "hostiles in the watched area: unexpected activity (monitored)")
 
     def location_constraints(self, ctx):
         ctx.post_location_monitor(self, self.params["position"], self.LOCATION_RULE, "position")
-        if self.RED_KIND == "penetration":
-            ctx.post_penetration(self, self.params["area"])
-        else:
-            ctx.post_red_monitor(self, self.params["area"], expected=False)
+        self.watch_area(ctx)
+
+    def watch_area(self, ctx) -> None:
+        """Hostiles in the watched area are unexpected activity, told at once."""
+        ctx.post_red_monitor(self, self.params["area"], expected=False)
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["position"], self.LOCATION_RULE, t, "position")
@@ -35,8 +34,11 @@ class SecurityMission(Mission):
 class Screen(SecurityMission):
     """Early warning without decisive engagement: keeps its standoff."""
     TYPE = "screen"
-    STANDOFF = True
     CHECKS = SecurityMission.CHECKS + (_STANDOFF,)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_standoff(self)
 
 
 @mission
@@ -44,9 +46,12 @@ class Guard(SecurityMission):
     """Protects the main body: a hostile in the guarded area is a penetration; 1:1 wanted."""
     TYPE = "guard"
     DESIRED_STRENGTH_RATIO = 1.0
-    RED_KIND = "penetration"
     CHECKS = _checks("an element on station while it runs and at the end (out-of-position)",
                      "no hostile enters the guarded area (penetration, projected before)")
+
+    def watch_area(self, ctx):
+        """The guarded area is the main body's: a hostile in it has got past the guard."""
+        ctx.post_penetration(self, self.params["area"])
 
 
 @mission
