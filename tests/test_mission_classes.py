@@ -1,8 +1,9 @@
-"""Every leaf mission class its own behaviour (issue 34.2): no two leaf classes resolve to
-the same monitoring methods, class constants and parameters; and for each class that used
-to be another under a new name (suppress, disrupt, secure, seize, clear, follow-and-assume,
-zone and area reconnaissance, branch and sequel) the condition its doctrine (FM 3-90) names
-raises its alert, and the condition absent gives none.
+"""Every leaf mission class its own behaviour (issues 34.2 and 53.3): each checks what its
+task means (FM 3-90) in monitoring hooks of its own, not by a constant its family's methods
+read; no two leaf classes resolve to the same monitoring methods (two that differ only by
+class attributes, a number, a priority table or a flag, are caught); and for each class the
+condition its doctrine names raises its alert, while the same facts with the class's own hooks
+removed (its family's base) do not.
 
 Small synthetic scenarios on scenario time, with the builders of tests/synthetic.py
 (geometry in local metres east/north of the generator's origin)."""
@@ -13,8 +14,9 @@ import itertools
 
 import pytest
 
+from ea_agent.core.mission import Mission as CoreMission
 from ea_agent.domains.suo.messages import LocationReport
-from ea_agent.domains.suo.missions import REGISTRY, Occupy
+from ea_agent.domains.suo.missions import REGISTRY, Isolate, Occupy
 from saim_mesh import cli
 
 from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, box, end, feed, line, ll, mission, near, play, start, track,
@@ -32,37 +34,68 @@ def of(ea, typ: str, check: str | None = None) -> list:
     return [a for a in alerts_of(ea, typ) if check is None or a.details.get("check") == check]
 
 
-# ============================================================ no two leaf classes the same
-def behaviour(cls) -> tuple:
-    """What a mission class does: every method it resolves (by the function object its
-    hierarchy gives it), every class constant but its name and description, and its parameters."""
-    methods = []
+# ============================================ no class only a constant away from another or its base
+# the methods the EA calls to monitor a mission (paper 6.5), and the hooks they call
+HOOKS = ("location_constraints", "check_initial_location", "check_final_location", "contingency_satisfied",
+         "execute_mission", "respond_to_threat_ahead", "post_execution_constraints", "plan_constraints",
+         "red_alert_priority", "respond_to_monitored_red_activity", "desired_strength_ratio",
+         "departure_by", "post_follow_band", "post_progress", "recheck_on_scan", "watch_area", "offered_in_place")
+
+
+def methods(cls) -> tuple:
+    """What a mission class does: every method it resolves, by the function object its
+    hierarchy gives it. Class attributes (numbers, priority tables, flags) are not in it."""
+    out = []
     for name in dir(cls):
         if name.startswith("__"):
             continue
         v = inspect.getattr_static(cls, name)
         if isinstance(v, (classmethod, staticmethod)):
             v = v.__func__
-        if callable(v) or isinstance(v, property):
-            methods.append((name, id(v)))
-    consts = [(n, repr(getattr(cls, n))) for n in dir(cls) if n.isupper() and n not in ("TYPE", "CHECKS")]
-    return tuple(sorted(methods)), tuple(sorted(consts)), tuple(sorted(cls.all_params()))
+        if (callable(v) and not isinstance(v, type)) or isinstance(v, property):
+            out.append((name, id(v)))
+    return tuple(sorted(out))
 
 
-def same_behaviour(classes) -> list[tuple[str, str]]:
-    sig = {c.TYPE: behaviour(c) for c in classes}
+def only_attributes_apart(classes) -> list[tuple[str, str]]:
+    """Pairs of classes that resolve to the same methods: whatever their constants, they differ
+    only by class attributes."""
+    sig = {c.TYPE: methods(c) for c in classes}
     return [(a, b) for a, b in itertools.combinations(sorted(sig), 2) if sig[a] == sig[b]]
 
 
-def test_no_two_leaf_mission_classes_behave_the_same():
-    assert same_behaviour(REGISTRY.values()) == []
+def without_own_hooks(classes) -> list[str]:
+    """Classes with no monitoring hook of their own: their family's base under a new name, or
+    it with other constants."""
+    return sorted(c.TYPE for c in classes if not any(n in vars(c) for n in HOOKS))
+
+
+def test_no_two_leaf_mission_classes_differ_only_by_class_attributes():
+    assert only_attributes_apart(REGISTRY.values()) == []
+
+
+def test_every_leaf_mission_class_has_a_monitoring_hook_of_its_own():
+    assert without_own_hooks(REGISTRY.values()) == []
+    assert all(issubclass(c, CoreMission) for c in REGISTRY.values())
 
 
 def test_a_class_that_only_renames_its_parent_is_caught():
     class Renamed(Occupy):
         """A new name, nothing of its own."""
         TYPE = "renamed-occupy"
-    assert same_behaviour([*REGISTRY.values(), Renamed]) == [("occupy", "renamed-occupy")]
+    assert only_attributes_apart([*REGISTRY.values(), Renamed]) == [("occupy", "renamed-occupy")]
+    assert without_own_hooks([Renamed]) == ["renamed-occupy"]
+
+
+def test_a_class_that_only_changes_a_number_a_priority_table_or_a_flag_is_caught():
+    class Stronger(Isolate):
+        """Isolate wanting 4:1, its schedule alerts FLASH, all its elements on the objective."""
+        TYPE = "stronger-isolate"
+        DESIRED_STRENGTH_RATIO = 4.0
+        PRIORITY = {"schedule": "flash"}
+        FINAL_RULE = "all"
+    assert only_attributes_apart([*REGISTRY.values(), Stronger]) == [("isolate", "stronger-isolate")]
+    assert without_own_hooks([Stronger]) == ["stronger-isolate"]
 
 
 def test_saim_mesh_missions_shows_what_each_class_checks(capsys):
@@ -398,11 +431,6 @@ def test_a_branch_is_offered_in_place_of_a_move_meeting_hostiles_and_a_sequel_is
 
 
 # ================================ each class its own meaning: an alert its family's base does not raise
-HOOKS = ("location_constraints", "check_initial_location", "check_final_location", "contingency_satisfied",
-         "execute_mission", "respond_to_threat_ahead", "post_execution_constraints", "plan_constraints",
-         "departure_by", "post_follow_band", "post_progress", "recheck_on_scan")
-
-
 def as_base(monkeypatch, typ: str) -> None:
     """The leaf class of `typ` monitors as its parent does: its own hooks removed (its
     parameters are still accepted, so the same plan loads)."""
@@ -643,3 +671,66 @@ def test_an_area_reconnaissance_means_its_area_covered(tmp_path, monkeypatch):
     assert rp and rp[0].details["progress"] == "coverage", [a.message for a in rp]
     as_base(monkeypatch, "area-reconnaissance")
     assert not of(_recon(tmp_path / "base", "area-reconnaissance", lambda t: (1000.0, -900.0)), "recon-progress")
+
+
+def test_a_hasty_attack_means_on_its_objective_soon_after_its_start(tmp_path, monkeypatch):
+    """A1 reaches OBJ-MID's edge at t=180 (centroid on it): due within 50 s of its start (100)."""
+    oop = checked(_taking(tmp_path / "hasty", "hasty-attack", [], within_s=50), "out-of-position", "by")
+    assert len(oop) == 1 and near(oop[0].t, 150.0) and oop[0].details["rule"] == "centroid", [a.t for a in oop]
+    assert not checked(_taking(tmp_path / "in-time", "hasty-attack", [], within_s=150), "out-of-position", "by")
+    as_base(monkeypatch, "hasty-attack")
+    assert not checked(_taking(tmp_path / "base", "hasty-attack", [], within_s=50), "out-of-position", "by")
+
+
+# out of the objective from t=250 (x 1500 -> 2600 at 10 m/s from 200)
+LEAVES = [track(120, "H1", 1500, 0), track(180, "H1", 1500, 0)] + \
+    track_path("H1", 200, 400, lambda t: (1500.0 + 10.0 * (t - 200.0), 0.0))
+
+
+def test_a_fix_means_the_enemy_held_for_its_period_only(tmp_path, monkeypatch):
+    assert of(_taking(tmp_path / "while", "fix", LEAVES), "escape")
+    assert not of(_taking(tmp_path / "until", "fix", LEAVES, until=220), "escape")
+    as_base(monkeypatch, "fix")
+    assert not of(_taking(tmp_path / "base", "fix", LEAVES), "escape")
+
+
+def test_isolate_and_destroy_mean_none_escapes_and_attack_does_not(tmp_path, monkeypatch):
+    for typ in ("isolate", "destroy"):
+        assert of(_taking(tmp_path / typ, typ, LEAVES), "escape"), typ
+    assert not of(_taking(tmp_path / "attack", "attack", LEAVES), "escape")
+    as_base(monkeypatch, "isolate")
+    assert not of(_taking(tmp_path / "base", "isolate", LEAVES), "escape")
+
+
+def test_clear_means_no_hostile_left_and_its_base_asks_nothing(tmp_path, monkeypatch):
+    assert of(_taking(tmp_path / "clear", "clear", HOSTILE_LEFT), "end-state")
+    as_base(monkeypatch, "clear")
+    assert not of(_taking(tmp_path / "base", "clear", HOSTILE_LEFT), "end-state")
+
+
+BYPASSED = box("OBJ-BYP", "objective", 1000, -500, 2000, 500)
+
+
+def _bypassing(tmp_path, y: float):
+    """A1 east at 5 m/s at y (through OBJ-BYP, x 1000..2000, if |y| < 500) to DEST-FAR."""
+    sc = scenario(tmp_path, [BYPASSED, DEST_FAR], [mission("A1-byp", "A1", "bypass", destination="DEST-FAR",
+                                                           bypassed="OBJ-BYP")])
+    return play(sc, path("A1", 10, 600, _east(5.0, 0.0, 100.0, y)) + stays("A2", 0, -3000, 10, 600) +
+                [start(100, "A1-byp", "A1")], 600)
+
+
+def test_a_bypass_means_going_around_what_it_bypasses(tmp_path, monkeypatch):
+    through = checked(_bypassing(tmp_path / "through", 0.0), "standoff", "bypassed")
+    # 150 m (out_of_position_m) inside the west edge at x=1150: t=330
+    assert through and 330 <= through[0].t <= 330 + REPORT_S + 2 * EPOCH, [(a.t, a.message) for a in through]
+    assert through[0].details["place"] == "OBJ-BYP"
+    as_base(monkeypatch, "bypass")
+    assert not of(_bypassing(tmp_path / "base", 0.0), "standoff")
+
+
+def test_a_branch_is_offered_and_its_base_is_not(tmp_path, monkeypatch):
+    """The family's base (a contingency) is never offered in place of the move."""
+    test_a_branch_is_offered_in_place_of_a_move_meeting_hostiles_and_a_sequel_is_not(tmp_path / "b", "branch", True)
+    as_base(monkeypatch, "branch")
+    test_a_branch_is_offered_in_place_of_a_move_meeting_hostiles_and_a_sequel_is_not(tmp_path / "base", "branch",
+                                                                                     False)
