@@ -734,3 +734,22 @@ def test_a_branch_is_offered_and_its_base_is_not(tmp_path, monkeypatch):
     as_base(monkeypatch, "branch")
     test_a_branch_is_offered_in_place_of_a_move_meeting_hostiles_and_a_sequel_is_not(tmp_path / "base", "branch",
                                                                                      False)
+
+
+@pytest.mark.parametrize("typ, params, field", [
+    ("tactical-road-march", {"destination": "DEST-FAR", "ahead": "A2"}, "interval_m"),
+    ("tactical-road-march", {"destination": "DEST-FAR", "ahead": "A2", "interval_m": [500, 100]}, "interval_m"),
+    ("attack", {"objective": "OBJ-MID", "h_hour": 200}, "line_of_departure"),
+    ("move", {"destination": "DEST-FAR", "by": -1}, "by"),
+    ("occupy", {"position": "BP-HOME", "by": "soon"}, "by"),
+    ("link-up", {"partner": "A2", "point": "CP-LINK", "at": 300, "join_m": 0}, "join_m"),
+    ("reorganize", {"subject": "A2", "new_parent": "B", "join_m": 500}, "by"),
+    ("hasty-attack", {"objective": "OBJ-MID", "within_s": -5}, "within_s"),
+    ("fix", {"objective": "OBJ-MID", "until": -5}, "until"),
+    ("movement-to-contact", {"destination": "DEST-FAR", "limit": "OBJ-MID"}, "limit"),
+], ids=lambda v: v if isinstance(v, str) else None)
+def test_a_new_parameter_given_wrong_is_refused_naming_it(tmp_path, typ, params, field):
+    from saim_mesh import scenario as S
+    with pytest.raises(S.ScenarioError) as e:
+        scenario(tmp_path, [DEST_FAR, OBJ_MID, BP_HOME, CP_LINK], [mission("A1-x", "A1", typ, **params)])
+    assert "A1-x" in str(e.value) and f"params.{field}" in str(e.value), str(e.value)
