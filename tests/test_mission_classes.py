@@ -633,7 +633,8 @@ def _following_on(tmp_path):
                   task_params={"position": "BP-2"}, owner="A", follows="A1-move")]
     sc = scenario(tmp_path, [NAI_N, BP_2, DEST_FAR], ms)
     msgs = (path("A1", 10, 600, _east(5.0)) + stays("A2", 0, -3000, 10, 600)
-            + [start(100, "A1-move", "A1"), end(400, "A1-move", "A1")] + track_path("H1", 150, 600, lambda t: (0.0, 3300.0)))
+            + [start(100, "A1-move", "A1"), end(400, "A1-move", "A1")]
+            + track_path("H1", 150, 600, lambda t: (0.0, 3300.0)))   # standing in NAI-N: no track change after 400
     return play(sc, msgs, 600)
 
 

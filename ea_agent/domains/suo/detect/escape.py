@@ -1,6 +1,6 @@
 """Escape: a hostile must not leave an area the mission holds it in (fix, isolate,
-destroy: the objective; contain: the engagement area), a fix only until its time if it has one. A track seen inside while the
-mission runs that is later beyond the area's edge band (not only flickering at the
+destroy: the objective; contain: the engagement area), a fix only until its time if it
+has one. A track seen inside while the mission runs that is later beyond the area's edge band (not only flickering at the
 edge with its reports' noise) has escaped; one that is lost is not told as escaped.
 One story per area: two missions holding the same objective tell one escape."""
 from __future__ import annotations
