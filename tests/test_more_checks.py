@@ -776,13 +776,21 @@ def test_a_march_table_through_the_same_point_twice_is_refused_naming_the_entry(
     assert "\n" not in str(e.value)
 
 
-def test_the_out_and_back_walk_keeps_its_outbound_table(tmp_path):
-    """The outbound checkpoints alone are judged on the way out and say nothing on the way back."""
-    outbound = [{"point": "CP-1", "t": 200}, {"point": "CP-2", "t": 400}]
+def _out_and_back_ea(tmp_path, cp2_t: float):
+    outbound = [{"point": "CP-1", "t": 200}, {"point": "CP-2", "t": cp2_t}]
     sc = scenario(tmp_path, CP_FEATURES, [mission("A1-recon", "A1", "route-reconnaissance", route="RTE-1",
                                                   destination="AA-E", checkpoints=outbound)])
-    ea = play(sc, path("A1", 10, 800, _out_and_back) + [start(100, "A1-recon", "A1")], 800)
+    return play(sc, path("A1", 10, 800, _out_and_back) + [start(100, "A1-recon", "A1")], 800)
+
+
+def test_the_out_and_back_walk_keeps_its_outbound_table(tmp_path):
+    """The plan the loader accepts (the outbound checkpoints alone) is judged by the EA on the
+    way out and says nothing on the way back: on time, silent (CP-1 passed again at t=640 is
+    no second arrival); CP-2 due at 300 but reached at 390, late once."""
+    ea = _out_and_back_ea(tmp_path / "on-time", 400)
     assert not of(ea, "checkpoint"), table(*of(ea, "checkpoint"))
+    cp = of(_out_and_back_ea(tmp_path / "late", 300), "checkpoint")
+    assert [(a.details["point"], a.details["how"]) for a in cp] == [("CP-2", "late")], table(*cp)
 
 
 def test_a_missions_own_line_margin_is_used(tmp_path):

@@ -337,8 +337,8 @@ class SuoDomain:
     def post_penetration(self, m: Mission, area: str) -> None:
         self.areas.post_red_monitor(m, area, expected=False, kind="penetration")
 
-    def post_escape(self, m: Mission, area: str) -> None:
-        self.escape.post(m, area)
+    def post_escape(self, m: Mission, area: str, until: float | None = None) -> None:
+        self.escape.post(m, area, until)
 
     def check_end_state(self, m: Mission, area: str, t: float) -> None:
         self.end_state.check(m, area, t)
@@ -349,8 +349,12 @@ class SuoDomain:
     def post_held(self, m: Mission, position: str) -> None:
         self.coverage.post_held(m, position)
 
-    def post_band(self, m: Mission, other: str, lo: float, hi: float) -> None:
-        self.bands.post(m, other, lo, hi)
+    def post_band(self, m: Mission, other: str, lo: float, hi: float, since: float | None = None,
+                  behind: str | None = None) -> None:
+        self.bands.post(m, other, lo, hi, since, behind)
+
+    def check_joined(self, m: Mission, unit: str, other: str, within_m: float, when: float) -> None:
+        self.bands.check_once(m, unit, other, within_m, when)
 
     def post_line(self, m: Mission, line: str, what: str, when: float | None = None,
                   toward: str | None = None) -> None:
@@ -371,8 +375,8 @@ class SuoDomain:
     def post_presence(self, m: Mission, partner: str, point: str, lane: str | None = None) -> None:
         self.presence.post(m, partner, point, lane)
 
-    def post_standoff(self, m: Mission) -> None:
-        self.standoff.post(m)
+    def post_standoff(self, m: Mission, bypassed: str | None = None) -> None:
+        self.standoff.post(m, bypassed)
 
     def post_checkpoints(self, m: Mission, table: list[dict]) -> None:
         self.checkpoints.post(m, table)

@@ -206,5 +206,5 @@ class ThreatsAhead(Detector):
 def branches_for(dom, m: Mission) -> list[str]:
     """Dormant contingencies of our plan that the unit would execute in place of its move (the
     decision's other options): those whose class is an alternative (branches, not sequels)."""
-    return sorted(c.id for c in dom.missions.values() if isinstance(c, ContingentMission) and c.ALTERNATIVE
+    return sorted(c.id for c in dom.missions.values() if isinstance(c, ContingentMission) and c.offered_in_place()
                   and c.unit == m.unit and dom.in_plan(c) and dom.plan.state.get(c.id) == "dormant")

@@ -56,13 +56,15 @@ class Contingencies(Detector):
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         self.fired = set()
-        if not self.pending or not (ch.tracks or ch.leaves):
+        if not self.pending or not (ch.tracks or ch.leaves or ch.rescan):
             return
         dom = self.dom
         strength = dom.areas.strength
         for mid, m in list(self.pending.items()):
             tr = m.params["trigger"]
-            if tr["kind"] == "unit-at":
+            if ch.rescan and m.recheck_on_scan():
+                pass   # what it waits on besides its trigger (the plan) changes without a report
+            elif tr["kind"] == "unit-at":
                 if tr["unit"] not in ch.units:   # no moved leaf under it (ch.units: those leaves and superiors)
                     continue
             elif not ch.tracks.intersection(dom.areas.tracks.get(tr["area"], ())):

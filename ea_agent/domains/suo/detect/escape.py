@@ -1,6 +1,6 @@
 """Escape: a hostile must not leave an area the mission holds it in (fix, isolate,
-destroy: the objective; contain: the engagement area). A track seen inside while the
-mission runs that is later beyond the area's edge band (not only flickering at the
+destroy: the objective; contain: the engagement area), a fix only until its time if it
+has one. A track seen inside while the mission runs that is later beyond the area's edge band (not only flickering at the
 edge with its reports' noise) has escaped; one that is lost is not told as escaped.
 One story per area: two missions holding the same objective tell one escape."""
 from __future__ import annotations
@@ -20,9 +20,12 @@ class Escapes(Detector):
     def reset(self) -> None:
         self.watch: dict[str, list[Mission]] = defaultdict(list)   # area -> missions holding hostiles in it
         self.held: dict[str, set[str]] = {}                          # mission -> tracks seen inside
+        self.until: dict[str, float] = {}                            # mission -> held there until then
 
-    def post(self, m: Mission, area: str) -> None:
+    def post(self, m: Mission, area: str, until: float | None = None) -> None:
         self.watch[area].append(m)
+        if until is not None:
+            self.until[m.id] = until
         self.dom.areas.reindex()
 
     def areas(self) -> set[str]:
@@ -33,6 +36,7 @@ class Escapes(Detector):
         for a in list(self.watch):
             self.watch[a] = [m for m in self.watch[a] if m.id != mid]
         self.held.pop(mid, None)
+        self.until.pop(mid, None)
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
         dom = self.dom
@@ -45,7 +49,7 @@ class Escapes(Detector):
             gone: set[str] = set()
             holders: list[Mission] = []
             for m in ms:
-                if dom.plan.state.get(m.id) != "active" or not dom.in_plan(m):
+                if dom.plan.state.get(m.id) != "active" or not dom.in_plan(m) or t > self.until.get(m.id, t):
                     continue
                 held = self.held.setdefault(m.id, set())
                 held |= inside

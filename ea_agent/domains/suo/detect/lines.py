@@ -1,6 +1,7 @@
 """Friendly lines and times: a delay stays forward of its line until a time, a breach is
-past its obstacle by a time, and an attack's crossing of its line of departure is its
-start. The side a unit is on is judged from its reported centroid against
+past its obstacle by a time, an attack's crossing of its line of departure is its
+start (and, with an H-hour, is due by then), and a movement to contact does not cross its
+limit of advance. The side a unit is on is judged from its reported centroid against
 the line; "across" means more than `line_margin_m` beyond it, so report noise does not
 flicker a unit standing on the line."""
 from __future__ import annotations
@@ -56,19 +57,20 @@ class Lines(Detector):
 
     def post(self, m: Mission, line: str, what: str, when: float | None, toward: str | None = None) -> None:
         """Watch `m`'s unit against `line`: "hold" (not across before `when`; its own side is
-        where it is), "pass" (across by `when`) or "depart" (across is the mission's start);
+        where it is), "limit" (never across while it runs; its own side is where it is),
+        "pass" (across by `when`) or "depart" (across is the mission's start; by `when` if given);
         for these two its own side is the one away from `toward` (its objective)."""
         start = None
         if toward is not None:
             c = self.dom.overlay[toward].area.centroid
             start = -1.0 if side(self.dom.overlay[line].geom, (c.x, c.y)) > 0 else 1.0
         self.watch.setdefault(m.id, []).append([m, line, what, when, start])
-        if what == "pass" and when is not None:
+        if what in ("pass", "depart") and when is not None:
             dom = self.dom
 
             def late(tf, mon, how):
                 if dom.in_plan(m):
-                    dom.ea.post(self._cand(m, line, "pass", tf, when))
+                    dom.ea.post(self._cand(m, line, what, tf, when))
                 return None
             dom.timers.not_later_than(("across", m.id, line), when, late, tag=m.id)
 
@@ -102,15 +104,22 @@ class Lines(Detector):
                 it[4] = -start   # across: from now the other side is its own
                 if what == "hold" and when is not None and t < when:
                     cands.append(self._cand(m, lid, "hold", t, when))
+                elif what == "limit":
+                    cands.append(self._cand(m, lid, "limit", t, t))
                 elif what == "pass":
                     dom.timers.occurred(("across", mid, lid), t)
-                elif what == "depart" and state == "ready":
-                    dom.start_by_crossing(m, t)
+                elif what == "depart":
+                    if when is not None:
+                        dom.timers.occurred(("across", mid, lid), t)
+                    if state == "ready":
+                        dom.start_by_crossing(m, t)
 
     def _cand(self, m: Mission, line: str, what: str, t: float, when: float) -> Candidate:
         who = self.dom.name(m.unit)
         text = (f"{who} across {line} {when - t:.0f} s before {hms(when)} ({m.TYPE}: hold forward of it until then)"
-                if what == "hold" else f"{who} not past {line} by {hms(when)} ({m.TYPE})")
+                if what == "hold" else f"{who} across {line}, its limit of advance ({m.TYPE})" if what == "limit"
+                else f"{who} not across its line of departure {line} by {hms(when)} ({m.TYPE})" if what == "depart"
+                else f"{who} not past {line} by {hms(when)} ({m.TYPE})")
         return Candidate(t, "line", m.compute_priority("line"), (m.unit,), text,
                          key=("line", m.id, line), measure=abs(when - t),
                          details={"mission": m.id, "line": line, "check": what, "planned_t": when,

@@ -1,6 +1,6 @@
 """Reconnaissance progress through a zone or an area: the share of it the unit's
 elements have come within sight of, against the share of the mission's time gone.
-A route reconnaissance reports progress by its checkpoints; a zone or area has no
+A route reconnaissance's cells are points along its route (the sections of it seen); a zone or area has no
 order to its points, so what is seen is counted on a grid of cells (`recon_cell_m`),
 a cell seen once an element reported within `recon_sight_m` of its centre. An area
 reconnaissance's progress is the share of its cells seen (coverage, in any order); a zone
@@ -47,6 +47,14 @@ class _Recon:
         return float(np.argmin(ok)) / n if not ok.all() else 1.0
 
 
+def along(line, step: float) -> np.ndarray:
+    """Points every `step` along a route, both ends included: the sections a route
+    reconnaissance must see."""
+    n = max(1, math.ceil(line.length / step))
+    pts = [line.interpolate(i * line.length / n) for i in range(n + 1)]
+    return np.array([[p.x, p.y] for p in pts])
+
+
 def grid_cells(area, step: float) -> np.ndarray:
     """Centres of a `step` grid inside `area` (its representative point if it is smaller)."""
     x0, y0, x1, y1 = area.bounds
@@ -67,7 +75,9 @@ class ReconProgress(Detector):
 
     def post(self, m: Mission, area: str, by: float | None, progress: str = "coverage") -> None:
         dom = self.dom
-        cells = grid_cells(dom.overlay[area].area, dom.voi(m, "recon_cell_m"))
+        f = dom.overlay[area]
+        step = dom.voi(m, "recon_cell_m")
+        cells = along(f.geom, step) if f.geom.geom_type == "LineString" else grid_cells(f.area, step)
         self.watch[m.id] = w = _Recon(m, area, cells, np.zeros(len(cells), dtype=bool), by, progress)
         self._look(w)   # what it sees from where it starts
 

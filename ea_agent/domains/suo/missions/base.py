@@ -42,15 +42,9 @@ class Mission(CoreMission):
     LINE_PARAMS = ("route", "axis", "rear_line", "line", "obstacle", "line_of_departure")
     LOCATION_RULE: ClassVar[str] = "centroid"         # centroid | any | all members
     DESIRED_STRENGTH_RATIO: ClassVar[float] = 1.0     # friendly:hostile combat power wanted
-    STANDOFF: ClassVar[bool] = False                  # keeps `standoff_m` from hostiles (screen, withdraw, ...)
     DEFAULT_PRIORITY = DEFAULT_PRIORITY
     CHECKS = ("start/end time constraints (Fig. 6); ON-ORDER against the superior's order",
               "place constraints judged at start, on every move and every scan (stationary units too)")
-
-    def post_execution_constraints(self, ctx) -> None:
-        super().post_execution_constraints(ctx)
-        if self.STANDOFF:
-            ctx.post_standoff(self)
 
     def plan_constraints(self, ctx: "SuoDomain") -> None:
         """Constraints that hold from the start of the plan, whatever the mission's own state."""

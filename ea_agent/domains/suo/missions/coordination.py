@@ -1,7 +1,7 @@
 """Coordination missions: two units at one place around one time."""
 from __future__ import annotations
 
-from .base import Mission, mission
+from .base import Mission, _positive_problem, mission
 
 
 class CoordinationMission(Mission):
@@ -21,10 +21,28 @@ class CoordinationMission(Mission):
 
 @mission
 class LinkUp(CoordinationMission):
-    """The coordination family as it is: both units meet at the point in time."""
+    """Two forces meet (FM 3-90): both at the link-up point in time and, with `join_m`, joined
+    from then: after the link-up the unit stays within `join_m` of its partner while it runs,
+    or the forces that met have come apart again (band)."""
     TYPE = "link-up"
     PARAMS = {"window": "optional [from, until]: the link-up made at the point in it, in place of at + fuzz_s "
-                        "(coordination; detect/windows.py)"}
+                        "(coordination; detect/windows.py)",
+              "join_m": "optional: from the link-up (at + fuzz, or the window's close) the unit stays within "
+                        "this of its partner"}
+    CHECKS = CoordinationMission.CHECKS + ("joined to its partner after the link-up (band)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _positive_problem(params, "join_m", "expected a distance > 0 in metres") or \
+            super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("join_m") is not None:
+            w = self.params.get("window")
+            since = float(w[1]) if w is not None else \
+                float(self.params["at"]) + float(self.params.get("fuzz_s", ctx.voi(self, "schedule_s")))
+            ctx.post_band(self, self.params["partner"], 0.0, float(self.params["join_m"]), since=since)
 
 
 @mission

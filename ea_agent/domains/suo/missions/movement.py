@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-from .base import Mission, _positive_problem, _STANDOFF, _band_problem, _checks, mission
+from .base import Mission, _positive_problem, _STANDOFF, _band_problem, _checks, _time_problem, mission
 
 
 class MovementMission(Mission):
@@ -67,23 +67,69 @@ class MovementMission(Mission):
 
 @mission
 class Move(MovementMission):
-    """The movement family as it is."""
+    """Go from one place to another (FM 3-90's movement): the point of it is being there when
+    the plan needs the unit, so with `by` the unit is at its destination by then, not only at
+    its end (out-of-position, check `by`)."""
     TYPE = "move"
+    PARAMS = {"by": "optional scenario time by which the unit is at its destination (default: its end)"}
+    CHECKS = MovementMission.CHECKS + ("at its destination by its `by` time (out-of-position)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _time_problem(params, "by") or super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("by") is not None:
+            ctx.post_deadline(self, float(self.params["by"]), self.params["destination"], self.LOCATION_RULE)
 
 
 @mission
 class TacticalRoadMarch(MovementMission):
-    """March tables (its `checkpoints`: start point, checkpoints, release point) are tightly
-    timed: schedule and checkpoint alerts are IMMEDIATE."""
+    """A march in column (FM 3-90): march tables (its `checkpoints`: start point, checkpoints,
+    release point) are tightly timed, so schedule and checkpoint alerts are IMMEDIATE; and the
+    column keeps its march interval to the serial ahead (`ahead`, `interval_m` [min, max]):
+    closing up or falling back breaks the march table of every serial behind (band)."""
     TYPE = "tactical-road-march"
+    PARAMS = {"ahead": "optional march unit (serial) ahead of it in the column",
+              "interval_m": "optional [min, max] distance to the serial ahead (needs ahead)"}
+    UNIT_PARAMS = ("ahead",)
     PRIORITY = {"schedule": "immediate", "checkpoint": "immediate"}
+    CHECKS = MovementMission.CHECKS + ("its march interval to the serial ahead kept (band)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if (params.get("ahead") is None) != (params.get("interval_m") is None):
+            return ("ahead" if params.get("ahead") is None else "interval_m",
+                    "a march interval needs both ahead and interval_m")
+        problem = _band_problem({"band_m": params.get("interval_m")})
+        if problem:
+            return "interval_m", problem[1]
+        return super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("ahead"):
+            lo, hi = self.params["interval_m"]
+            ctx.post_band(self, self.params["ahead"], float(lo), float(hi))
 
 
 @mission
 class MovementToContact(MovementMission):
-    """Expects to meet the enemy: wants 2:1 before a threat is only PRIORITY."""
+    """Develops the situation and gains contact (FM 3-90): it expects the enemy (2:1 wanted
+    before a threat is only PRIORITY), and it stops at its `limit` of advance: across it, the
+    unit has gone beyond where the plan lets it look for contact (line, check `limit`)."""
     TYPE = "movement-to-contact"
+    PARAMS = {"limit": "optional overlay line: its limit of advance, not crossed while it runs"}
+    GEOMETRY_PARAMS = ("route", "destination", "limit")
+    LINE_PARAMS = Mission.LINE_PARAMS + ("limit",)
     DESIRED_STRENGTH_RATIO = 2.0
+    CHECKS = MovementMission.CHECKS + ("not across its limit of advance (line)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("limit"):
+            ctx.post_line(self, self.params["limit"], "limit")
 
 
 class FollowMission(MovementMission):
@@ -101,13 +147,24 @@ class FollowMission(MovementMission):
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
         lo, hi = self.params.get("band_m") or (0.0, ctx.voi(self, "follow_max_m"))
-        ctx.post_band(self, self.params["supported"], float(lo), float(hi))
+        self.post_follow_band(ctx, float(lo), float(hi))
+
+    def post_follow_band(self, ctx, lo: float, hi: float) -> None:
+        ctx.post_band(self, self.params["supported"], lo, hi)
 
 
 @mission
 class FollowAndSupport(FollowMission):
-    """The follow family as it is: behind the supported unit, within its band."""
+    """Follows a committed unit to support it (FM 3-90): within its band of it, and behind it:
+    with `toward` (the place the supported unit attacks or moves to), nearer that place than the
+    supported unit is, it has passed the unit it supports (band, check `ahead`)."""
     TYPE = "follow-and-support"
+    PARAMS = {"toward": "optional overlay feature the supported unit goes to: the follower stays farther from it"}
+    GEOMETRY_PARAMS = ("route", "destination", "toward")
+    CHECKS = FollowMission.CHECKS + ("not ahead of the supported unit towards where it goes (band)",)
+
+    def post_follow_band(self, ctx, lo, hi):
+        ctx.post_band(self, self.params["supported"], lo, hi, behind=self.params.get("toward"))
 
 
 @mission
@@ -136,8 +193,11 @@ class Withdraw(MovementMission):
     """Breaking contact: keeps its standoff; accepts 1:2 before a threat is IMMEDIATE."""
     TYPE = "withdraw"
     DESIRED_STRENGTH_RATIO = 0.5
-    STANDOFF = True
     CHECKS = MovementMission.CHECKS + (_STANDOFF,)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_standoff(self)
 
 
 @mission
@@ -148,7 +208,6 @@ class Delay(MovementMission):
     PARAMS = {"line": "optional overlay line the unit holds forward of ...", "until": "... until this time"}
     GEOMETRY_PARAMS = ("route", "destination", "line")
     DESIRED_STRENGTH_RATIO = 0.33
-    STANDOFF = True
     CHECKS = MovementMission.CHECKS + ("forward of its line until its time (line)", _STANDOFF)
 
     @classmethod
@@ -159,20 +218,57 @@ class Delay(MovementMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
+        ctx.post_standoff(self)
         if self.params.get("line"):
             ctx.post_line(self, self.params["line"], "hold", float(self.params["until"]))
 
 
 @mission
 class Bypass(MovementMission):
-    """Moves around the enemy: keeps its standoff."""
+    """Moves around an obstacle, position or enemy force to keep its momentum (FM 3-90): keeps
+    its standoff, and stays out of the `bypassed` area (in it, it is not bypassing but going
+    through: standoff, check `bypassed`)."""
     TYPE = "bypass"
-    STANDOFF = True
-    CHECKS = MovementMission.CHECKS + (_STANDOFF,)
+    PARAMS = {"bypassed": "optional overlay area (the obstacle or enemy position) the unit goes around"}
+    GEOMETRY_PARAMS = ("route", "destination", "bypassed")
+    CHECKS = MovementMission.CHECKS + (_STANDOFF, "its centroid never inside the area it bypasses (standoff)")
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_standoff(self, self.params.get("bypassed"))
 
 
 @mission
 class RouteReconnaissance(MovementMission):
-    """One element on the route is enough; its `checkpoints` say how far along it should be when."""
+    """Information on a route (FM 3-90): one element on it is enough, its `checkpoints` say how
+    far along it should be when, and every section of its `route` must be seen by `by` (or its
+    END-NLT/END-AT time): a section left unseen is progress behind, or incomplete at its end
+    (recon-progress)."""
     TYPE = "route-reconnaissance"
+    PARAMS = {"by": "optional scenario time by which all of its route must be seen (default: its end time)"}
     LOCATION_RULE = "any"
+    CHECKS = MovementMission.CHECKS + (
+        "every section of its route seen: behind its time, or incomplete at its end (recon-progress)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _time_problem(params, "by") or super().check_params(params, overlay)
+
+    def by(self) -> float | None:
+        if self.params.get("by") is not None:
+            return float(self.params["by"])
+        end = self.spec.end
+        return float(end.t) if end.type in ("END-NLT", "END-AT") and end.t is not None else None
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("route"):
+            ctx.post_recon(self, self.params["route"], self.by())
+
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        ctx.start_recon(self)
+
+    def check_final_location(self, ctx, t):
+        super().check_final_location(ctx, t)
+        ctx.check_recon(self, t)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _checks, _time_problem, mission
+from .base import Mission, _checks, _positive_problem, _time_problem, mission
 
 
 class OffensiveMission(Mission):
@@ -21,8 +21,6 @@ class OffensiveMission(Mission):
                      "crossing its line of departure is its start (no confirmation needed)",
                      "hostiles on the axis ahead: go on if strong enough, else abort (threat-ahead, a decision)",
                      "on the objective at the end (Check-Final-Location)")
-    END_STATE: ClassVar[bool] = False   # no hostile left in the objective at the end
-    ESCAPE: ClassVar[bool] = False      # no hostile leaves the objective while it runs
 
     def location_constraints(self, ctx):
         if self.params.get("axis"):
@@ -30,9 +28,12 @@ class OffensiveMission(Mission):
         else:
             ctx.post_corridor(self, self.params["objective"])
         if self.params.get("line_of_departure"):
-            ctx.post_line(self, self.params["line_of_departure"], "depart", toward=self.params["objective"])
-        if self.ESCAPE:
-            ctx.post_escape(self, self.params["objective"])
+            ctx.post_line(self, self.params["line_of_departure"], "depart", self.departure_by(),
+                          toward=self.params["objective"])
+
+    def departure_by(self) -> float | None:
+        """When its line of departure must be crossed (None: whenever it starts)."""
+        return None
 
     def respond_to_threat_ahead(self, ctx, t, tracks, strength):
         """An attack expects the enemy: go on when strong enough for it (DESIRED_STRENGTH_RATIO), else abort."""
@@ -42,21 +43,46 @@ class OffensiveMission(Mission):
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["objective"], self.FINAL_RULE, t, "objective")
-        if self.END_STATE:
-            ctx.check_end_state(self, self.params["objective"], t)
 
 
 @mission
 class Attack(OffensiveMission):
-    """The offensive family as it is: all members on the objective at the end."""
+    """A deliberate attack (FM 3-90): all members on the objective at the end, and launched at
+    its time: with `h_hour`, the unit across its line of departure by then, or the attack the
+    plan synchronized (fires, adjacent units) has not begun (line, check `depart`)."""
     TYPE = "attack"
+    PARAMS = {"h_hour": "optional scenario time by which it crosses its line_of_departure (needs one)"}
+    CHECKS = OffensiveMission.CHECKS + ("across its line of departure by its H-hour (line)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        if params.get("h_hour") is not None and params.get("line_of_departure") is None:
+            return "line_of_departure", "an H-hour needs the line of departure crossed at it"
+        return _time_problem(params, "h_hour") or super().check_params(params, overlay)
+
+    def departure_by(self):
+        return float(self.params["h_hour"]) if self.params.get("h_hour") is not None else None
 
 
 @mission
 class HastyAttack(OffensiveMission):
-    """Quick and partial: its centroid on the objective is enough."""
+    """Trades preparation for speed to exploit an opportunity (FM 3-90): partial, so its
+    centroid on the objective is enough; and quick: with `within_s`, on the objective that long
+    after its start, or the opportunity it was launched for is gone (out-of-position, check `by`)."""
     TYPE = "hasty-attack"
+    PARAMS = {"within_s": "optional: on the objective this long after its start"}
     FINAL_RULE = "centroid"
+    CHECKS = OffensiveMission.CHECKS + ("on the objective within its time from its start (out-of-position)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _positive_problem(params, "within_s", "expected a time > 0 in seconds") or \
+            super().check_params(params, overlay)
+
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        if self.params.get("within_s") is not None:
+            ctx.post_deadline(self, t + float(self.params["within_s"]), self.params["objective"], self.FINAL_RULE)
 
 
 @mission
@@ -94,8 +120,11 @@ class Secure(OffensiveMission):
 class Clear(OffensiveMission):
     """Remove all resistance: no hostile left on the objective at the end (end-state)."""
     TYPE = "clear"
-    END_STATE = True
     CHECKS = OffensiveMission.CHECKS + ("no hostile on the objective at the end (end-state)",)
+
+    def check_final_location(self, ctx, t):
+        super().check_final_location(ctx, t)
+        ctx.check_end_state(self, self.params["objective"], t)
 
 
 @mission
@@ -103,9 +132,15 @@ class Destroy(OffensiveMission):
     """Render the enemy ineffective: none escapes the objective, none is left at the end."""
     TYPE = "destroy"
     FINAL_RULE = "centroid"
-    END_STATE = True
-    ESCAPE = True
     CHECKS = Clear.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_escape(self, self.params["objective"])
+
+    def check_final_location(self, ctx, t):
+        super().check_final_location(ctx, t)
+        ctx.check_end_state(self, self.params["objective"], t)
 
 
 @mission
@@ -135,15 +170,29 @@ class Isolate(OffensiveMission):
     """Seal the enemy off: no hostile leaves the objective while it runs (escape)."""
     TYPE = "isolate"
     FINAL_RULE = "centroid"
-    ESCAPE = True
     CHECKS = OffensiveMission.CHECKS + ("no hostile leaves the objective while it runs (escape)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_escape(self, self.params["objective"])
 
 
 @mission
 class Fix(OffensiveMission):
-    """Keep the enemy where it is: none escapes the objective; 1:1 is enough."""
+    """Keep the enemy from moving from a place for a period (FM 3-90): none escapes the
+    objective, until its `until` if given (after it, the enemy may go: no escape told); 1:1 is
+    enough."""
     TYPE = "fix"
+    PARAMS = {"until": "optional scenario time the enemy is held there until (default: while it runs)"}
     FINAL_RULE = "centroid"
     DESIRED_STRENGTH_RATIO = 1.0
-    ESCAPE = True
-    CHECKS = Isolate.CHECKS
+    CHECKS = OffensiveMission.CHECKS + ("no hostile leaves the objective while it runs, until its time (escape)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _time_problem(params, "until") or super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        until = self.params.get("until")
+        ctx.post_escape(self, self.params["objective"], float(until) if until is not None else None)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _positive_problem, _band_problem, _checks, _window_problem, mission
+from .base import Mission, _positive_problem, _band_problem, _checks, _time_problem, _window_problem, mission
 
 
 class PositionMission(Mission):
@@ -19,7 +19,6 @@ class PositionMission(Mission):
     REQUIRED = ("position",)
     GEOMETRY_PARAMS = ("position", "engagement_area")
     DESIRED_STRENGTH_RATIO = 0.33  # prepared defenders accept 1:3
-    PENETRATION: ClassVar[bool] = False   # a hostile entering the position is a penetration
     CHECKS = _checks("in its position while it runs and at the end (out-of-position)",
                      "its position holds some friendly element while it runs (friendly-expected)",
                      "its engagement area within weapons range of the position (friendly-expected)",
@@ -31,8 +30,6 @@ class PositionMission(Mission):
         ea_ = self.params.get("engagement_area")
         if ea_:
             ctx.post_red_monitor(self, ea_, expected=True, expect_by=self.params.get("expect_hostile_by"))
-        if self.PENETRATION:
-            ctx.post_penetration(self, self.params["position"])
 
     def check_initial_location(self, ctx, t):
         super().check_initial_location(ctx, t)
@@ -63,16 +60,31 @@ class Defend(PositionMission):
 
 @mission
 class Occupy(PositionMission):
-    """The position family as it is."""
+    """Move into an area to control it (FM 3-90): both the move to it and its occupation are the
+    task, so with `by` every element is in the position by then (out-of-position, check `by`)."""
     TYPE = "occupy"
+    PARAMS = {"by": "optional scenario time by which all its elements are in the position"}
+    CHECKS = PositionMission.CHECKS + ("all its elements in the position by its `by` time (out-of-position)",)
+
+    @classmethod
+    def check_params(cls, params, overlay):
+        return _time_problem(params, "by") or super().check_params(params, overlay)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("by") is not None:
+            ctx.post_deadline(self, float(self.params["by"]), self.params["position"], "all")
 
 
 @mission
 class Retain(PositionMission):
     """Keep the enemy out of the position: a hostile in it is a penetration."""
     TYPE = "retain"
-    PENETRATION = True
     CHECKS = PositionMission.CHECKS + ("no hostile enters the position (penetration, projected before)",)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_penetration(self, self.params["position"])
 
 
 @mission
@@ -110,9 +122,28 @@ class Block(PositionMission):
 
 @mission
 class AttackByFire(PositionMission):
-    """Fires from a position: 1:1 wanted."""
+    """Direct fires on the enemy without closing with it (FM 3-90): 1:1 wanted; its `target`
+    within its weapons range of the position (friendly-expected, at its start), and it does not
+    cross its `limit` (the line short of the target): beyond it, it is assaulting, not attacking
+    by fire (line, check `limit`)."""
     TYPE = "attack-by-fire"
+    PARAMS = {"target": "optional overlay area its fires land on",
+              "limit": "optional overlay line between the position and the target, not crossed while it runs"}
+    GEOMETRY_PARAMS = ("position", "engagement_area", "target", "limit")
+    LINE_PARAMS = Mission.LINE_PARAMS + ("limit",)
     DESIRED_STRENGTH_RATIO = 1.0
+    CHECKS = PositionMission.CHECKS + ("its target within weapons range of the position (friendly-expected)",
+                                       "not across its limit towards the target: no closing with it (line)")
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        if self.params.get("limit"):
+            ctx.post_line(self, self.params["limit"], "limit")
+
+    def check_initial_location(self, ctx, t):
+        super().check_initial_location(ctx, t)
+        if self.params.get("target"):
+            ctx.check_coverage(self, self.params["position"], self.params["target"], t)
 
 
 @mission

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-from typing import ClassVar
 
 from .base import Mission, _STANDOFF, _checks, mission
 
@@ -16,16 +15,16 @@ class SecurityMission(Mission):
     LOCATION_RULE = "any"
     DESIRED_STRENGTH_RATIO = 0.5
     PRIORITY = {"monitored": "immediate"}
-    RED_KIND: ClassVar[str] = "monitored"
     CHECKS = _checks("an element on station while it runs and at the end (out-of-position)",
                      "hostiles in the watched area: unexpected activity (monitored)")
 
     def location_constraints(self, ctx):
         ctx.post_location_monitor(self, self.params["position"], self.LOCATION_RULE, "position")
-        if self.RED_KIND == "penetration":
-            ctx.post_penetration(self, self.params["area"])
-        else:
-            ctx.post_red_monitor(self, self.params["area"], expected=False)
+        self.watch_area(ctx)
+
+    def watch_area(self, ctx) -> None:
+        """Hostiles in the watched area are unexpected activity, told at once."""
+        ctx.post_red_monitor(self, self.params["area"], expected=False)
 
     def check_final_location(self, ctx, t):
         ctx.check_location(self, self.params["position"], self.LOCATION_RULE, t, "position")
@@ -35,8 +34,11 @@ class SecurityMission(Mission):
 class Screen(SecurityMission):
     """Early warning without decisive engagement: keeps its standoff."""
     TYPE = "screen"
-    STANDOFF = True
     CHECKS = SecurityMission.CHECKS + (_STANDOFF,)
+
+    def location_constraints(self, ctx):
+        super().location_constraints(ctx)
+        ctx.post_standoff(self)
 
 
 @mission
@@ -44,9 +46,12 @@ class Guard(SecurityMission):
     """Protects the main body: a hostile in the guarded area is a penetration; 1:1 wanted."""
     TYPE = "guard"
     DESIRED_STRENGTH_RATIO = 1.0
-    RED_KIND = "penetration"
     CHECKS = _checks("an element on station while it runs and at the end (out-of-position)",
                      "no hostile enters the guarded area (penetration, projected before)")
+
+    def watch_area(self, ctx):
+        """The guarded area is the main body's: a hostile in it has got past the guard."""
+        ctx.post_penetration(self, self.params["area"])
 
 
 @mission
@@ -63,9 +68,8 @@ class Observe(SecurityMission):
 class ReconnaissanceMission(SecurityMission):
     """Reconnaissance of a zone or an area, finished by `by` (or the mission's END-NLT/END-AT
     time); hostiles found in it are what it looks for, and are reported at once as in the
-    security family. How its progress is measured is its class's (PROGRESS)."""
+    security family. How its progress is measured is its class's (`post_progress`)."""
     PARAMS = {"by": "optional scenario time by which all of it must be seen (default: its end time)"}
-    PROGRESS: ClassVar[str] = "coverage"   # coverage (area) | depth (zone)
 
     def by(self) -> float | None:
         if self.params.get("by") is not None:
@@ -82,7 +86,11 @@ class ReconnaissanceMission(SecurityMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
-        ctx.post_recon(self, self.params["area"], self.by(), self.PROGRESS)
+        self.post_progress(ctx)
+
+    def post_progress(self, ctx) -> None:
+        """How its progress through its area is measured: the family has no measure of its
+        own (coverage is an area's, depth a zone's); its leaves give theirs."""
 
     def check_initial_location(self, ctx, t):
         super().check_initial_location(ctx, t)
@@ -101,6 +109,9 @@ class AreaReconnaissance(ReconnaissanceMission):
         "coverage: the share of the area seen against the share of its time gone, and most of it seen at "
         "its end (recon-progress)",)
 
+    def post_progress(self, ctx):
+        ctx.post_recon(self, self.params["area"], self.by(), "coverage")
+
 
 @mission
 class ZoneReconnaissance(ReconnaissanceMission):
@@ -108,7 +119,9 @@ class ZoneReconnaissance(ReconnaissanceMission):
     the zone passed (every band across it seen, from the side the unit starts on), against the
     share of its time gone; a gap left behind holds the depth there."""
     TYPE = "zone-reconnaissance"
-    PROGRESS = "depth"
     CHECKS = SecurityMission.CHECKS + (
         "progress front to rear: the depth of the zone passed (each band across it seen) against the share "
         "of its time gone, and most of its depth passed at its end (recon-progress)",)
+
+    def post_progress(self, ctx):
+        ctx.post_recon(self, self.params["area"], self.by(), "depth")
