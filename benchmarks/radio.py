@@ -29,7 +29,7 @@ from saim_mesh.commands import _wait_matching
 from saim_mesh.live import frames as F
 from saim_mesh.live.depend import cp_shares, depends
 from saim_mesh.live.play import EPOCH_S, share
-from saim_mesh.mesh import mesh_units
+from saim_mesh.scenario import mesh_units
 from saim_mesh.net.linkemu import Link
 from saim_mesh.ondemand import ensure
 from saim_mesh.runner import config_for, make_ea

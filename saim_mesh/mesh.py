@@ -15,10 +15,7 @@ from .proc import Proc, clean_env, leaf_env, py
 from .zconf import free_port
 
 
-def mesh_units(sc) -> list[str]:
-    """The units that run an EA peer (the scenario's domain says which)."""
-    from ea_agent import domains
-    return domains.of(sc).mesh_units(sc)
+from .scenario import mesh_units  # noqa: F401  (the replay launcher's callers)
 
 
 def _sec(pki: str | Path | None) -> list[str]:

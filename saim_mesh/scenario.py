@@ -34,3 +34,8 @@ class Scenario(Protocol):
     meta: dict[str, Any]
 
     def truth(self) -> dict: ...
+
+
+def mesh_units(sc) -> list[str]:
+    """The units of a scenario that run an EA peer on a mesh (its domain says which)."""
+    return domains.of(sc).mesh_units(sc)

@@ -23,7 +23,7 @@ from . import messages as M
 from . import scenario as S
 from . import wire as W
 from .alertlog import alert_key
-from .mesh import mesh_units
+from .scenario import mesh_units
 from .proc import Proc, clean_env, py
 from .runner import run
 from .zconf import config

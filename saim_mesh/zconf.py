@@ -54,7 +54,7 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None,
     if connect is not None:
         conf.insert_json5("connect/endpoints", json.dumps(connect))
     if pki is not None:
-        from .mesh import mesh_units
+        from .scenario import mesh_units
         from .security.acl import secure_config
         groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
         conf = secure_config(conf, pki, name, root, mesh_units(sc), groups, sc.taskorg, routers)

@@ -22,7 +22,7 @@ from saim_mesh import scenario as S
 from saim_mesh import wire as W
 from saim_mesh.console.actions import CommandActions
 from saim_mesh.console.feed import MeshFeed, hook_inprocess
-from saim_mesh.mesh import mesh_units
+from saim_mesh.scenario import mesh_units
 from saim_mesh.console.server import Server, make_app
 from saim_mesh.console.state import State
 

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from saim_mesh import scenario as S
-from saim_mesh.mesh import mesh_units
+from saim_mesh.scenario import mesh_units
 from saim_mesh.security import (SecurityError, access_control, check_files, check_identity, endpoint_tls,
                                 make_pki, names_for, secure_config, tls_config)
 from saim_mesh.zconf import config, free_port

@@ -54,7 +54,7 @@ def cmd_command(a) -> int:
     from dissemination.keyspace import KeySpace
 
     from .. import commands as C
-    from ..mesh import mesh_units
+    from ..scenario import mesh_units
     from ..zconf import config
     sc = S.load(a.scenario, events=False)
     if a.unit not in sc.taskorg.units:

@@ -129,7 +129,7 @@ def cmd_topology(a) -> int:
     topo = T.load(a.file, sc.taskorg) if a.file else T.derive(sc.taskorg)
     if a.out:
         T.write(topo, a.out)
-    units = __import__("saim_mesh.mesh", fromlist=["mesh_units"]).mesh_units(sc)
+    units = S.mesh_units(sc)
     for n, r in sorted(topo.routers.items()):
         leaves = [u for u in units if topo.router_of(u, sc.taskorg) == n]
         print(f"{n:>10}  cp {r.cp:<6} links {','.join(r.links) or '-':<10} {len(leaves):>3} EA peers: "

@@ -25,7 +25,7 @@ def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, li
               file=sys.stderr, flush=True)
         return 2
     log = lambda *a, **k: print(*a, **k, file=sys.stdout)   # noqa: E731
-    from ..mesh import mesh_units
+    from ..scenario import mesh_units
     state = State(sc, unit, eligible=mesh_units(sc))   # acts for the EA peers under it, as organised now
     feed = (LiveFeed if live else MeshFeed)(sc, conf, root, state, log=log)
     stop = threading.Event()

@@ -14,7 +14,7 @@ def check(dep: Deployment, sc, host: str | None = None, where: str = "deployment
     """What is wrong with a parsed deployment against its scenario (one line each); with
     `host`, also whether this machine is that host (its addresses, its interface)."""
     from ..live.depend import cp_shares
-    from ..mesh import mesh_units
+    from ..scenario import mesh_units
     e = Errors(where)
     to = sc.taskorg
     units = set(mesh_units(sc))

@@ -55,7 +55,7 @@ def addresses_for(spec: str | None, n: int, port: int) -> list[tuple[str, int]]:
 def derive(sc, scenario: str, addresses: str | None = None, port: int = DEFAULT_PORT, consoles: bool = True,
            secure: bool = True, pki: str | None = None) -> Deployment:
     from ..live.depend import cp_shares
-    from ..mesh import mesh_units
+    from ..scenario import mesh_units
     to = sc.taskorg
     posts = command_posts(to)
     where = addresses_for(addresses, len(posts), port)

@@ -12,7 +12,7 @@ import json
 from collections import Counter
 from pathlib import Path
 
-from ..mesh import mesh_units
+from ..scenario import mesh_units
 from .depend import cp_shares
 
 LOCAL = "local"   # the one host's name in its deployment

@@ -323,7 +323,7 @@ def names_for(sc, units: list[str] | None = None, consoles: bool = False) -> lis
     every unit that gets an EA peer), fusion.<group> for each fusion group, observer,
     console and tak (the Cursor-on-Target gateway), source.cp.<U> for each command post (a live
     source); with `consoles`, console.<unit> for each unit too (a commander's console)."""
-    from saim_mesh.mesh import mesh_units
+    from saim_mesh.scenario import mesh_units
     units = list(units) if units is not None else mesh_units(sc)
     unknown = [u for u in units if u not in sc.taskorg.units]
     if unknown:
