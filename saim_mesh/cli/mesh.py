@@ -170,14 +170,15 @@ def cmd_mesh(a) -> int:
         a.replay = True
     if not a.replay:   # the mesh with no centre: sources per command post, no replay
         from ..live.up import up as live_up
-        for bad, flag in ((a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
-                          (a.window != 20.0, "--window (the sources pace themselves)")):
+        if a.pki and a.insecure:
+            raise ValueError("mesh up: --pki and --insecure: certificates are for a secure mesh; give one of them")
+        for bad, flag in ((a.window != 20.0, "--window (the sources pace themselves)"),):
             if bad:
                 raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
                       live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
                       console=a.console, console_linger=a.console_linger, max_restarts=a.restarts,
-                      tak=_live_tak(a))
+                      tak=_live_tak(a), pki=Path(a.pki) if a.pki else None, root=a.root)
         return 0 if len(res["peers"]) == len(res["units"]) and not res["given_up"] else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
@@ -326,12 +327,13 @@ def add(sub) -> None:
                     help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
     me.add_argument("--insecure", action="store_true",
                     help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
-    me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
+    me.add_argument("--pki", metavar="DIR", help="the mesh's certificates (saim-mesh certs SCENARIO --out DIR --routers "
+                    "hub; with --topology its routers' names); default: a test PKI made under OUT_DIR/pki")
     me.add_argument("--restarts", type=_count, default=10, metavar="N",
                     help="restart each process that dies (EA peer, source, router, console; with --replay the "
                          "replay, fusion nodes, EA peers, routers, TAK gateway) up to N times (default 10), then "
                          "give up on it with one line and go on without it (0: never restart)")
-    me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
+    me.add_argument("--root", help="key-expression root (default saim/<scenario>/live; --replay: saim/<scenario>/<pid>)")
     me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
                     help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
     me.add_argument("--tak", nargs="+", metavar="URL",
