@@ -163,11 +163,6 @@ def cmd_mesh(a) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     if a.replay and (a.live or a.sources_per_cp):
         raise ValueError("mesh up: --replay is the older mesh; --live and --sources-per-cp are the mesh with no centre")
-    from ea_agent import domains
-    if not a.replay and not (a.live or a.sources_per_cp) and domains.of(S.load(a.scenario, events=False)).NAME == "uv":
-        print("mesh up: the robot team's mesh with no centre is `saim-mesh robots team OUT` (robots obeying their "
-              "EAs); running the older replay mesh for this scenario (as --replay)", flush=True)
-        a.replay = True
     if not a.replay:   # the mesh with no centre: sources per command post, no replay
         from ..live.up import up as live_up
         if a.pki and a.insecure:

@@ -10,7 +10,9 @@ subtree, its chain of command's orders, its calls for fire) or by mission (units
 names), or carries the tracks while the EA watches places (threats near its units, the
 areas of its control measures), or carries units the domain calls neighbours (under
 another boundary near ours: the fratricide rule pairs them with ours). Friends passing
-near for other reasons are not a dependency (positions around a call for fire's target);
+near for other reasons are not a dependency (positions around a call for fire's target).
+In a domain whose units report their own places (the robot team: states and sightings by
+place, `PLACED_BY_EVERY_SOURCE`), watching places depends on every source.
 `test_depend` checks the result against an EA that hears everything.
 """
 from __future__ import annotations
@@ -60,7 +62,7 @@ def followed(dom) -> tuple[set[str], bool]:
         owner = path.rsplit("/", 1)[-1]
         if owner in to.units:
             units |= set(to.subtree(owner))
-    return units, bool(n.circles or n.boxes or any(bs for _, bs in n.only))
+    return units, bool(n.circles or n.boxes or n.whole or any(bs for _, bs in n.only))
 
 
 def depends(sc, ea, sources: list[str], shares: dict[str, Share] | None = None) -> list[str]:
@@ -68,10 +70,11 @@ def depends(sc, ea, sources: list[str], shares: dict[str, Share] | None = None) 
     (not one of the command posts' sources) is always depended on."""
     shares = cp_shares(sc) if shares is None else shares
     units, places = followed(ea.domain)
+    everywhere = getattr(ea.domain, "PLACED_BY_EVERY_SOURCE", False)   # robots report their own places
     to = sc.taskorg
     out = []
     for s in sources:
         sh = shares.get(s)
-        if sh is None or sh.tracks and places or units & sh.carries(to):
+        if sh is None or (sh.tracks or everywhere) and places or units & sh.carries(to):
             out.append(s)
     return sorted(out)

@@ -26,8 +26,11 @@ def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Ite
     only with `tracks` (a command post that runs its sensors' fusion: where the scenario
     has fusion groups, the sensors' hits go through the same fusion nodes as in process,
     flushed on every event's time as there, and the tracks they give are published)."""
+    from ea_agent import domains
+
     from ..runner import Fusion
     to = sc.taskorg
+    source_of = getattr(domains.of(sc), "source_of", None)   # a robot's own radio sends its state
     mine = set().union(*(to.subtree(u) for u in units)) if units else set(to.units)
     for u in but:
         mine -= set(to.subtree(u))
@@ -56,6 +59,8 @@ def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Ite
         elif k is M.Reorganization:
             if units is None or ev.new_parent in mine:
                 yield ev
+        elif source_of is not None and source_of(ev) in mine:
+            yield ev
     if fusion is not None:   # windows that close after the last event
         yield from fusion.flush(sc.duration_s)
 
