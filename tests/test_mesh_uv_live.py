@@ -28,7 +28,7 @@ def test_mesh_up_runs_the_robot_team_live_and_its_alerts_are_the_in_process_runs
     assert "replay" not in r.stdout.lower()
     sc = S.load(UV)
     shares = cp_shares(sc)
-    streams = {n: list(play.share(sc, sh.units, sh.tracks, sh.but)) for n, sh in shares.items()}
+    streams = {n: list(play.of_share(sc, sh)) for n, sh in shares.items()}
     robots = [u for u in sc.taskorg.units if u != sc.taskorg.root]
     assert all(streams[f"cp.{u}"] for u in robots)            # each robot's own radio carries its reports
     total = 0

@@ -46,7 +46,12 @@ def cmd_source(a) -> int:
         if not a.speed:
             raise ValueError("--start without --live paces the stream: give --speed FACTOR too")
         paced = _instant(a.start)
-    if a.file is None:
+    if a.fusion:
+        if a.file is not None or a.units or a.but or a.tracks:
+            raise ValueError("source --fusion: a fusion node publishes its tracks only (no --file, --units, "
+                             "--but or --tracks)")
+        msgs = play.fused(sc, a.fusion)
+    elif a.file is None:
         msgs = play.share(sc, a.units, a.tracks, a.but or ())
     else:
         f = sys.stdin if a.file == "-" else open(a.file, encoding="utf-8")
@@ -151,8 +156,10 @@ def cmd_sources(a) -> int:
                           for n, sh in sorted(shares.items())}, indent=1))
         return 0
     for n, sh in sorted(shares.items()):
-        print(f"{n:<10} saim-mesh source {a.scenario} --name {n} {' '.join(sh.args())}".rstrip()
-              + f"   # {(k := len(sh.carries(to)))} unit{'' if k == 1 else 's'}{', hostile tracks' if sh.tracks else ''}")
+        k = len(sh.carries(to))
+        said = (f"fusion node of sensor group {sh.fusion}: its tracks" if sh.fusion else
+                f"{k} unit{'' if k == 1 else 's'}{', hostile tracks' if sh.tracks else ''}")
+        print(f"{n:<10} saim-mesh source {a.scenario} --name {n} {' '.join(sh.args())}   # {said}")
     return 0
 
 
@@ -281,6 +288,9 @@ def add(sub) -> None:
     so.add_argument("--cache", type=int, default=None, metavar="N",
                     help="frames the publisher keeps in memory for recovery and late joiners (default 100000; "
                     "4 with --yield-catch-up and --state: its journal gives the rest, paced)")
+    so.add_argument("--fusion", nargs="+", metavar="GROUP",
+                    help="a sensor group's fusion node: the tracks it fuses from its sensors' hits (raw hits "
+                         "stay in this process; `saim-mesh sources` names it fusion.GROUP)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
     so.add_argument("--yield-catch-up", action="store_true",
                     help="recoveries and journal catch-ups yield to live traffic (DROP, lower priority): "

@@ -26,14 +26,19 @@ class Share:
     units: tuple[str, ...] | None   # subtrees published (None: every unit)
     but: tuple[str, ...] = ()       # subtrees left to other sources
     tracks: bool = False            # the hostile tracks
+    fusion: str | None = None       # a sensor group's fusion node: its tracks only, no unit
 
     def args(self) -> list[str]:
         """As `saim-mesh source` arguments."""
+        if self.fusion is not None:
+            return ["--fusion", self.fusion]
         out = ["--units", *self.units] if self.units else []
         out += ["--but", *self.but] if self.but else []
         return out + (["--tracks"] if self.tracks else [])
 
     def carries(self, taskorg) -> set[str]:
+        if self.fusion is not None:
+            return set()
         mine = set().union(*(taskorg.subtree(u) for u in self.units)) if self.units else set(taskorg.units)
         for u in self.but:
             mine -= set(taskorg.subtree(u))
@@ -41,14 +46,35 @@ class Share:
 
 
 def cp_shares(sc) -> dict[str, Share]:
-    """One source per child of the top unit (its subtree) and one for the top's own
-    command post (everything else, with the tracks)."""
+    """One source per child of the top unit (its subtree), one for the top's own command
+    post (everything else, with the tracks the scenario gives), and one per sensor group:
+    its fusion node beside its sensors, publishing the tracks it fuses from their hits."""
     to = sc.taskorg
     top = to.root
     kids = tuple(sorted(u for u, p in to.parent.items() if p == top))
     out = {f"cp.{k}": Share((k,)) for k in kids}
     out[f"cp.{top}"] = Share(None, kids, tracks=True)
+    for g in sorted(sc.meta.get("fusion", {}).get("groups", {})):
+        out[f"fusion.{g}"] = Share((), tracks=True, fusion=g)
     return out
+
+
+def home_of(sc, source: str) -> str | None:
+    """The unit whose command post a source runs at: `cp.<U>`'s U; a fusion node's, the
+    nearest command post over every sensor of its group (fusion near its sensors)."""
+    if source.startswith("cp."):
+        return source[3:]
+    if not source.startswith("fusion."):
+        return None
+    g = source[len("fusion."):]
+    owners = {s["owner"] for s in sc.meta.get("fusion", {}).get("sensors", ()) if s.get("group") == g
+              and s.get("owner") in sc.taskorg.units}
+    if not owners:
+        return sc.taskorg.root
+    to = sc.taskorg
+    chains = [[u, *to.ancestors(u)] for u in sorted(owners)]
+    common = set(chains[0]).intersection(*chains[1:])
+    return next(u for u in chains[0] if u in common)
 
 
 def followed(dom) -> tuple[set[str], bool]:
