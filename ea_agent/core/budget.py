@@ -10,7 +10,8 @@ time (a storm of notices cannot spend at once what quiet hours earned), and sinc
 start (windows overlap: the window alone would let a run's notices exceed `budget` x its
 alerts). Scenario time, never the wall clock: a run gives the same notices whatever the
 machine did. An escalation of a flash alert (a threat to life) is always given: it is
-counted, so the rest give way to it, but never held back. `budget = 0` turns it off.
+counted, so the rest give way to it, but never held back; so is a flash alert's first
+re-notification. `budget = 0` turns it off.
 """
 from __future__ import annotations
 

@@ -207,7 +207,9 @@ class Notifier:
                 ch.count += 1
                 if ch.count < times:
                     self._schedule(t + every, RENOTIFY, orig)
-                if not self.budget.allow(t):
+                # a flash alert's first reminder is always given (a threat to life is never left
+                # said once); it is counted, so the rest give way to it
+                if not self.budget.allow(t, force=a.priority == "flash" and ch.count == 1):
                     log.info("EA %s: re-notification %d of %s held back at t=%.1f (notice budget)", self.owner,
                              ch.count, orig, t)
                     continue
