@@ -63,10 +63,11 @@ def live_feed(sc, conf, root: str, state: State, log: Callable = print) -> LiveR
 
 
 def mesh_actions(feed, state: State, live: bool, timeout: float = 10.0) -> CommandActions:
-    """`feed`: a reader with its session open (`.session`, `.ks`, `.conf`). Commands on the mesh, sent as this console's unit (the EA checks it commands it);
-    their results come back on cmdlog/** to every console. Signed as this console's
-    identity in secure mode. On the live mesh, orders and confirmations are directives
-    (saim_mesh/directives.py): published once, taken by every EA they concern."""
+    """Commands on the mesh through `feed` (a reader: its `.session`, `.ks`, `.conf`), sent
+    as this console's unit (the EA checks it commands it); their results come back on
+    cmdlog/<unit> to every console. Signed as this console's identity in secure mode.
+    `live`: orders and confirmations are directives (saim_mesh/directives.py), published
+    once, taken by every EA they concern."""
     from ..security.sign import signer_for
     signer = signer_for(feed.conf)
 

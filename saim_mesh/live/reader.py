@@ -102,9 +102,9 @@ class Feed:
         self.thread = threading.Thread(target=self._loop, name=f"{name}-feed", daemon=True)
 
     def subscribe(self, session, keys: list[str]) -> None:
-        put = self.q.put
-        for k in keys:
-            self.subs.append(session.declare_subscriber(k, lambda smp: put((str(smp.key_expr), smp.payload.to_bytes()))))
+        def put(smp) -> None:
+            self.q.put((str(smp.key_expr), smp.payload.to_bytes()))
+        self.subs += [session.declare_subscriber(k, put) for k in keys]
         self.thread.start()
 
     def stop(self) -> None:

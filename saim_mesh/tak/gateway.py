@@ -240,7 +240,8 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
                   hello=picture.presence_event())
     every = None if opts.no_overlay else opts.overlay_every
     if getattr(opts, "sources", False):   # the live mesh: frames and watermarks, PLI as the `tak` source
-        feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log, live_start=getattr(opts, "live_start", None))
+        feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log,
+                           live_start=getattr(opts, "live_start", None))
     else:   # the replay mesh (going with it): its reader is never imported on the live path
         from ..reader import TakFeed
         feed = TakFeed(sc, conf, root, picture, net.send, every, log=log)
