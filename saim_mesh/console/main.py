@@ -8,7 +8,7 @@ import threading
 import time
 from typing import Callable
 
-from .feed import ConsoleView, live_feed, mesh_actions, serve_inprocess
+from .feed import live_feed, mesh_actions, serve_inprocess
 from .server import Server, make_app
 from .state import State
 
@@ -30,9 +30,8 @@ def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, li
     if live:
         feed = live_feed(sc, conf, root, state, log=log)
     else:   # the replay mesh (going with it): its reader is never imported on the live path
-        from ..reader import MeshReader
-        from .feed import classes_of
-        feed = MeshReader(sc, conf, root, classes_of(sc), ConsoleView(state), "console", log)
+        from ..reader import console_feed
+        feed = console_feed(sc, conf, root, state, log=log)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
