@@ -21,7 +21,8 @@ from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
 from saim_mesh.console.actions import CommandActions
-from saim_mesh.console.feed import MeshFeed, hook_inprocess
+from saim_mesh.console.feed import hook_inprocess, live_feed
+from saim_mesh.reader import console_feed
 from saim_mesh.scenario import mesh_units
 from saim_mesh.console.server import Server, make_app
 from saim_mesh.console.state import State
@@ -303,7 +304,7 @@ def test_sse_delivers_alerts_and_batched_positions(small):
 
 def test_feed_checks_every_payload(small):
     st = State(small)
-    feed = MeshFeed(small, None, "saim", st, log=lambda *a, **k: None)
+    feed = console_feed(small, None, "saim", st, log=lambda *a, **k: None)
     a = alert("A", 1)
     feed.take("saim/alert/A/out-of-position", M.encode(a))
     feed.take("saim/alert/B/out-of-position", M.encode(a))        # owner differs from the key
@@ -455,8 +456,8 @@ def test_notices_are_events_one_each_and_kept_bounded(small):
 
 def test_the_feed_takes_notices_that_fit_their_key(small):
     st = State(small)
-    feed = MeshFeed(small, None, "saim", st, log=lambda *a, **k: None)
-    assert "saim/notice/**" in feed.keys()
+    feed = console_feed(small, None, "saim", st, log=lambda *a, **k: None)
+    assert "saim/notice/*/*" in feed.keys()
 
     def payload(**kw):
         d = {**notice(), **kw}

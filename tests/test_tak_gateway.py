@@ -28,7 +28,7 @@ from saim_mesh.proc import clean_env
 from saim_mesh.runner import config_for, make_ea
 from saim_mesh.tak import cot as C
 from saim_mesh.tak import types as T
-from saim_mesh.tak.gateway import TakFeed
+from saim_mesh.reader import TakFeed
 from saim_mesh.tak.picture import Options, Picture
 from saim_mesh.tak.pli import PliIn, UidMap, load_uids
 from saim_mesh.tak.transports import Network
@@ -107,7 +107,7 @@ def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
                      {"id": "A/5", "inhibited_by": {"rule": "r", "source": "A/4"}})]
     for a in (flash, other, *quiet):
         feed.take(f"saim/alert/A/{a.type}", M.encode(a))
-    assert feed.alerts == 4 and feed.quiet == 2
+    assert feed.view.alerts == 4 and feed.view.quiet == 2
 
     def notice(alert, owner="A", kind="renotify", to="A"):
         return W.encode(W.make(W.Notice, kind=kind, t=220.0, owner=owner, alert=alert, story=alert, type="fratricide",
@@ -116,7 +116,8 @@ def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
     feed.take("saim/notice/A/A", notice("A/1"))
     feed.take("saim/notice/A/A", notice("A/99"))            # never seen: nothing to re-send
     feed.take("saim/notice/B/A", notice("A/1", kind="escalate", to="B"))   # for the superior's console
-    feed.take("saim/notice/A/B", notice("A/1", owner="A"))  # not B's alert
+    feed.take("saim/notice/A/B", notice("A/1", owner="A"))  # not B's alert: refused, counted (as the console does)
+    assert feed.gate.rejects.total == 1
     uids = [C.parse(b).uid for b in sent]
     assert [C.parse(b).type for b in sent] == [T.EMERGENCY, T.MARKER, T.EMERGENCY] and uids[2] == uids[0]
     ack = lambda ref, ok=True, unit="A": W.encode(W.make(W.CmdResult, req="r", kind="ack", ok=ok, t=140.0,  # noqa: E731
@@ -124,7 +125,7 @@ def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
     for payload, key in [(ack("A/1", ok=False), "saim/cmdlog/A"), (ack("A/3"), "saim/cmdlog/A"),
                          (ack("A/1"), "saim/cmdlog/B"), (b"\x00junk", "saim/cmdlog/A")]:
         feed.take(key, payload)
-    assert len(sent) == 3 and feed.gate.rejects.total == 2   # another EA's alert; junk
+    assert len(sent) == 3 and feed.gate.rejects.total == 3   # + another EA's alert; junk
     feed.take("saim/cmdlog/A", ack("A/1"))
     cancels = [C.parse(b) for b in sent[3:]]
     assert [c.type for c in cancels] == [T.CANCEL] and [c.uid for c in cancels] == uids[:1]

@@ -8,7 +8,7 @@ import threading
 import time
 from typing import Callable
 
-from .feed import LiveFeed, MeshFeed, mesh_actions, serve_inprocess
+from .feed import live_feed, mesh_actions, serve_inprocess
 from .server import Server, make_app
 from .state import State
 
@@ -27,12 +27,16 @@ def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, li
     log = lambda *a, **k: print(*a, **k, file=sys.stdout)   # noqa: E731
     from ..scenario import mesh_units
     state = State(sc, unit, eligible=mesh_units(sc))   # acts for the EA peers under it, as organised now
-    feed = (LiveFeed if live else MeshFeed)(sc, conf, root, state, log=log)
+    if live:
+        feed = live_feed(sc, conf, root, state, log=log)
+    else:   # the replay mesh (going with it): its reader is never imported on the live path
+        from ..reader import console_feed
+        feed = console_feed(sc, conf, root, state, log=log)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
     feed.open()
-    server = Server(make_app(state, mesh_actions(feed)), port)
+    server = Server(make_app(state, mesh_actions(feed, state, live)), port)
     try:
         server.start()
         ended_at = None

@@ -1,15 +1,17 @@
 """`saim-mesh tak`: the Cursor-on-Target gateway as a Zenoh peer (identity `tak`).
 
-Out: subscribes to the clock, alerts, friendly positions, tracks and reorganizations
-(as the console does: one queue, one thread, every payload through `gate.Gate` and
-checked against its key), keeps the picture (`picture.Picture`) and sends CoT through
+Out: reads the live mesh (`live.reader.LiveReader`: the sources' frames, alerts,
+notices, command results, every payload through `gate.Gate` and checked against its
+key), keeps the picture (`picture.Picture`, through `TakView`) and sends CoT through
 `transports.Network`. In: CoT PLI heard on the listen URLs becomes a LocationReport
-(`pli.PliIn`) published on `<root>/ingest/tak`; the replay sequences it into the mesh.
-Acknowledgements from ATAK users (GeoChat `ack BN/12`, a `y-a-w` reply to an alert's CoT)
-go to the alert owner's EA as `ack` commands for the user's mapped unit (`acks.AckIn`,
-`acks.AckSender`); the EA's answer goes back to the user in GeoChat.
+(`pli.PliIn`) put into the gateway's own live source `tak` (with --live). On the
+replay mesh (`reader.TakFeed`, imported only then, going with it) PLI go out on
+`<root>/ingest/tak` instead. Acknowledgements from ATAK users (GeoChat `ack BN/12`, a
+`y-a-w` reply to an alert's CoT) go to the alert owner's EA as `ack` commands for the
+user's mapped unit (`acks.AckIn`, `acks.AckSender`); the EA's answer goes back to the
+user in GeoChat.
 
-No liveliness token, for the console's reason: the replay's pacer would wait for it."""
+No liveliness token: the gateway is no EA, nothing waits for it."""
 from __future__ import annotations
 
 import argparse
@@ -24,7 +26,7 @@ from ea_agent import domains
 
 from .. import messages as M
 from .. import wire as W
-from ..reader import MeshReader
+from ..live.reader import LiveReader
 from .acks import AckIn, AckSender, chat_event
 from .picture import Options, Picture
 from .pli import PliIn, load_uids
@@ -36,106 +38,67 @@ CLASSES = {"suo": (M.LocationReport, M.SensorTrack, M.Reorganization),
            "uv": (M.UvState, M.UvSighting)}
 
 
-class TakFeed(MeshReader):
-    """The mesh side (a `MeshReader`): each payload checked by the gate, then into the
-    picture; the events it yields go to the network. PLI go out on ingest/tak."""
-    NAME = "tak"
+class TakView:
+    """What a reader checked, into the picture (a `live.reader.View`); the events it
+    yields go to the network. One lock over the picture: the CoT listener's thread reads
+    it too (acknowledgements)."""
 
-    def __init__(self, sc, conf, root: str, picture: Picture, send: Callable[[bytes], None],
-                 overlay_every: float | None = 300.0, log: Callable = print):
-        super().__init__(sc, conf, root, CLASSES.get(domains.of(sc).NAME, ()), log)
-        self.picture, self.send = picture, send
+    def __init__(self, sc, picture: Picture, send: Callable[[bytes], None], overlay_every: float | None = 300.0):
+        self.sc, self.picture, self.send = sc, picture, send
         self.overlay_every = overlay_every
         self._overlay_next = 0.0
         self.alerts = 0
         self.quiet = 0   # silenced or inhibited alerts, not sent
         self.lock = threading.Lock()
-        self.publisher = None
-
-    def keys(self) -> list[str]:
-        data = sorted({self.ks.data(c) for c in self.classes})
-        return [self.ks.clock(), f"{self.ks.root}/alert/**", self.ks.cmdlog("*"), self.ks.notice("*", "*"), *data]
-
-    def opened(self, session) -> None:
-        import zenoh
-        self.publisher = session.declare_publisher(self.ks.ingest(IDENTITY),
-                                                   congestion_control=zenoh.CongestionControl.BLOCK)
-
-    def closing(self) -> None:
-        if self.publisher is not None:
-            self.publisher.undeclare()
-            self.publisher = None
-
-    def publish(self, rep) -> None:
-        """A checked LocationReport from a TAK client into the mesh (any thread)."""
-        if self.publisher is not None:
-            self.publisher.put(M.encode(rep))
 
     def _emit(self, events: list[bytes]) -> None:
         for b in events:
             self.send(b)
 
-    def take(self, key: str, payload: bytes) -> None:
-        """One payload from the mesh, checked, into the picture; what is due goes out."""
-        ks, gate, pic = self.ks, self.gate, self.picture
-        fam = ks.family(key)
-        if fam == "clock":
-            tick = gate.control(W.Tick, payload, key)
-            if tick is None or (tick.end and tick.t < self.sc.duration_s):
-                return
-            self.first_tick()
-            with self.lock:
-                pic.clock(tick.t, tick.end)
-                if self.overlay_every is not None and pic.t >= self._overlay_next:
-                    self._overlay_next = pic.t + self.overlay_every
-                    self._emit(pic.overlay_events())
-                self._emit(pic.due(force=tick.end))
-            return
-        if fam == "cmdlog":   # an EA took an acknowledgement: its emergencies end on TAK too
-            res = gate.control(W.CmdResult, payload, key)
-            if res is not None and res.ok and res.kind == "ack":
-                owner = ks.last(key)[0]
-                if not res.ref.startswith(f"{owner}/"):   # an EA acknowledges only its own alerts
-                    gate.rejects.add(M.MessageError("cmdlog", "ref", f"alert {res.ref[:60]!r} is not {owner}'s"), key)
-                    return
-                with self.lock:
-                    self._emit(pic.acknowledged(res.ref, owner, res.t))
-            return
-        if fam == "notice":   # a re-notification: the same CoT uid again (escalations are for consoles)
-            n = gate.control(W.Notice, payload, key, signed=True)
-            if n is not None and n.kind == "renotify" and n.owner == ks.last(key)[0] and n.alert.startswith(f"{n.owner}/"):
-                with self.lock:
-                    self._emit(pic.renotified(n.alert))
-            return
-        m = gate.data(payload, key)
-        if m is None:
-            return
-        ok = type(m) is M.Alert if fam == "alert" else type(m) in self.classes
-        why = ks.mismatch(key, m) if ok else f"a {m.KIND} message on {fam}/ keys"
-        if why is not None:
-            gate.rejects.add(M.MessageError(m.KIND, "(key)", why), key)
-            return
+    def data(self, msgs: list) -> None:
         with self.lock:
-            if fam == "alert":
-                self.alerts += 1
-                if "silenced" in m.details or "inhibited_by" in m.details:
-                    self.quiet += 1   # logged by its EA, not pushed to TAK users as new
-                    return
-                pic.remember(m)
-                self._emit([pic.alert_event(m)])
-            else:
-                pic.message(m)
-
-    def stored(self, messages: list, t: float) -> None:
-        """Positions and tracks so far (a gateway started late)."""
-        with self.lock:
-            for m in messages:
+            for m in msgs:
                 self.picture.message(m)
 
+    def clock(self, t: float, end: bool, w: float | None = None) -> None:
+        """Time moved: the overlay when due, then the positions and tracks due (all at the end)."""
+        pic = self.picture
+        with self.lock:
+            pic.clock(t, end)
+            if self.overlay_every is not None and pic.t >= self._overlay_next:
+                self._overlay_next = pic.t + self.overlay_every
+                self._emit(pic.overlay_events())
+            self._emit(pic.due(force=end))
 
-class LiveTakFeed(TakFeed):
-    """The gateway on the live mesh (no replay): the picture from the sources' frames, its
-    clock the event time every source it heard has promised. PLI in (only with `live_start`,
+    def alert(self, m: M.Alert) -> None:
+        with self.lock:
+            self.alerts += 1
+            if "silenced" in m.details or "inhibited_by" in m.details:
+                self.quiet += 1   # logged by its EA, not pushed to TAK users as new
+                return
+            self.picture.remember(m)
+            self._emit([self.picture.alert_event(m)])
+
+    def result(self, res: W.CmdResult, owner: str) -> str | None:
+        """An EA took an acknowledgement: its emergencies end on TAK too."""
+        if not (res.ok and res.kind == "ack"):
+            return None
+        if not res.ref.startswith(f"{owner}/"):   # an EA acknowledges only its own alerts
+            return f"alert {res.ref[:60]!r} is not {owner}'s"
+        with self.lock:
+            self._emit(self.picture.acknowledged(res.ref, owner, res.t))
+        return None
+
+    def notice(self, n: W.Notice) -> None:
+        """A re-notification: the same CoT uid again (escalations are for consoles)."""
+        if n.kind == "renotify" and n.alert.startswith(f"{n.owner}/"):
+            with self.lock:
+                self._emit(self.picture.renotified(n.alert))
+
+
+class LiveTakFeed:
+    """The gateway on the live mesh (no replay): a `LiveReader` into the picture, its clock
+    the event time every source it heard has promised. PLI in (only with `live_start`,
     event time = wall clock from it) go out as the gateway's own live source `tak`, with a
     watermark every epoch of wall time so that it holds no EA back; an EA takes them when
     `tak` is among its --sources."""
@@ -144,25 +107,29 @@ class LiveTakFeed(TakFeed):
 
     def __init__(self, sc, conf, root: str, picture: Picture, send: Callable[[bytes], None],
                  overlay_every: float | None = 300.0, log: Callable = print, live_start: float | None = None):
-        super().__init__(sc, conf, root, picture, send, overlay_every, log)
-        self.caught_up = True   # nothing to catch up from: the sources' caches serve history
-        from ..live.frames import FrameReader
-        self.frames = FrameReader(self.ks, self.gate, sc.duration_s, log)
+        self.view = TakView(sc, picture, send, overlay_every)
+        self.reader = LiveReader(sc, conf, root, CLASSES.get(domains.of(sc).NAME, ()), self.view, self.NAME, log)
+        self.ks, self.gate, self.log = self.reader.ks, self.reader.gate, log
         self.live_start = live_start
         self.src = None
         self.src_lock = threading.Lock()
         self.pli_refused = 0
         self._stop = threading.Event()
 
-    def keys(self) -> list[str]:
-        r = self.ks.root
-        return [f"{r}/alert/**", self.ks.cmdlog("*"), self.ks.notice("*", "*"), self.ks.src("*")]
+    @property
+    def session(self):
+        return self.reader.session
 
-    def opened(self, session) -> None:
+    def take(self, key: str, payload: bytes) -> None:
+        self.reader.take(key, payload)
+
+    def open(self) -> None:
+        self.reader.open()
         if self.live_start is None:
             return
         from ..live.source import LiveSource
-        self.src = LiveSource(session, self.ks, IDENTITY, None)
+        with self.src_lock:
+            self.src = LiveSource(self.reader.session, self.ks, IDENTITY, None)
         threading.Thread(target=self._promise, name="tak-watermarks", daemon=True).start()
 
     def _promise(self) -> None:
@@ -173,13 +140,14 @@ class LiveTakFeed(TakFeed):
                 if self.src is not None:
                     self.src.watermark(now - now % self.EPOCH_S)
 
-    def closing(self) -> None:
+    def close(self) -> None:
         self._stop.set()
         with self.src_lock:
             if self.src is not None:
                 self.src.close(end=True)
                 self.src.stop()
                 self.src = None
+        self.reader.close()
 
     def publish(self, rep) -> None:
         """A checked LocationReport from a TAK client: into the `tak` source at the wall
@@ -198,24 +166,6 @@ class LiveTakFeed(TakFeed):
                 self.src.put(replace(rep, t=t))
             except (ValueError, M.MessageError) as e:
                 self.gate.rejects.add(M.MessageError("pli", "(source)", str(e)[:160]), self.ks.src(IDENTITY))
-
-    def take(self, key: str, payload: bytes) -> None:
-        if self.ks.family(key) != "src":
-            return super().take(key, payload)
-        msgs = self.frames.read(key, payload)
-        if msgs is None:
-            return
-        pic = self.picture
-        with self.lock:
-            for m in msgs:
-                if type(m) in self.classes:
-                    pic.message(m)
-            t, end = self.frames.clock()
-            pic.clock(t, end)
-            if self.overlay_every is not None and pic.t >= self._overlay_next:
-                self._overlay_next = pic.t + self.overlay_every
-                self._emit(pic.overlay_events())
-            self._emit(pic.due(force=end))
 
 
 def picture_options(sc, opts) -> Options:
@@ -245,7 +195,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
     except Exception as e:
         print(f"saim-mesh tak: {e}", file=sys.stderr, flush=True)
         return 2
-    feed_box: list[TakFeed] = []
+    feed_box: list = []   # LiveTakFeed, or the replay's reader.TakFeed
     gw_uid, gw_callsign = picture.uid("gateway", "cot"), f"SAIM {sc.name}"
     ack_timeout = float(getattr(opts, "ack_timeout", 10.0))
 
@@ -273,7 +223,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
         if ack_in is not None and ack_in.wants(ev):
             if not feed_box:
                 return
-            with feed_box[0].lock:   # the task organization and the alerts sent, as the feed has them now
+            with feed_box[0].view.lock:   # the task organization and the alerts sent, as the feed has them now
                 acks, replies = ack_in.take(ev)
             for r in replies:
                 reply(r.to, r.text)
@@ -290,8 +240,10 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
                   hello=picture.presence_event())
     every = None if opts.no_overlay else opts.overlay_every
     if getattr(opts, "sources", False):   # the live mesh: frames and watermarks, PLI as the `tak` source
-        feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log, live_start=getattr(opts, "live_start", None))
-    else:
+        feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log,
+                           live_start=getattr(opts, "live_start", None))
+    else:   # the replay mesh (going with it): its reader is never imported on the live path
+        from ..reader import TakFeed
         feed = TakFeed(sc, conf, root, picture, net.send, every, log=log)
     feed_box.append(feed)
     stop = threading.Event()
@@ -336,7 +288,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
         acks = (f" acks={ack_in.asked}{counts(ack_out.outcomes)}"
                 f" ack_refused={sum(refused.values())}{counts(refused)}")
     log(f"tak done t={picture.t:.0f} events={made} ({by_kind}) sent={sent} dropped={dropped} "
-        f"alerts={feed.alerts} pli={pli.accepted} rejects={feed.gate.rejects.total} cot_rejects={cot_rejects}"
+        f"alerts={feed.view.alerts} pli={pli.accepted} rejects={feed.gate.rejects.total} cot_rejects={cot_rejects}"
         + (f" ({', '.join(f'{k} {v}' for k, v in sorted(pli.rejects.items()))})" if pli.rejects else "") + acks,
         flush=True)
     return 0
