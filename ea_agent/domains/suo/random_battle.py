@@ -94,6 +94,7 @@ def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
                   "confirmed": sim.cffs[-1]["kind"] == "cff-confirm"})
     sim.cffs.sort(key=lambda c: (c["t"], c["cff"]))
     _draw_tasks(sim, np.random.default_rng([sim.seed, 13]))
+    _draw_opportunities(sim, np.random.default_rng([sim.seed, 17]))
 
 
 def _draw_tasks(sim: Sim, rng: np.random.Generator) -> None:
@@ -120,3 +121,34 @@ def _draw_tasks(sim: Sim, rng: np.random.Generator) -> None:
                   "arrive": arrive, "strength": sim.hostiles["H20"].strength, "crosses": "PL-B1-BLOCK"})
     d.append({"kind": "tasks", "B1_blocks": "PL-B1-BLOCK" if sim.block_line else "BP-B1",
               "R_recon": "area-reconnaissance" if sim.area_recon else "zone-reconnaissance"})
+
+
+def _draw_opportunities(sim: Sim, rng: np.random.Generator) -> None:
+    """New opportunities (issue 53), from a stream of their own: a group holding OBJ-A or
+    OBJ-B that withdraws north before the company takes it (objective-clear), and a group
+    in EA-A or EA-B while A2 or B2 defends it that withdraws north out of it
+    (enemy-withdrawn), each in the other company's lane when both are drawn. Each group
+    vanishes once well clear (the sensors lose it), short of the recon screen and DP2."""
+    d = sim.drawn
+    u = lambda a, b: float(round(rng.uniform(a, b)))   # noqa: E731
+    used = None
+    for kind, p in (("objective-clear", 0.65), ("enemy-withdrawn", 0.65)):
+        if rng.random() >= p:
+            continue
+        co = str(rng.choice(["A", "B"])) if used is None else ("B" if used == "A" else "A")
+        used = co
+        x = LANE_X[f"{co}2"] + u(-300, 300)
+        if kind == "objective-clear":   # on the objective from before the attack, gone as the company nears
+            y, appear, leave, top = u(10700, 11300), u(1500, 2300), u(2950, 3200), u(13000, 13400)
+        else:                           # in the engagement area as the defence begins, then north out of it
+            y, appear, leave, top = u(13100, 13600), u(3450, 3650), u(3850, 4000), u(14800, 15000)
+        speed = float(rng.uniform(3.5, 5.5))
+        arrive = leave + round((top - y) / speed)
+        x1 = x + u(-200, 200)
+        vanish = arrive + u(30, 90)
+        hid = f"H{31 if kind == 'objective-clear' else 32}"
+        sim.hostiles[hid] = Hostile(hid, [appear, leave, arrive], [x, x, x1], [y, y, top], int(rng.integers(2, 6)),
+                                    appear, vanish)
+        d.append({"kind": "hostile", "id": hid, "opportunity": kind, "from": [x, y], "to": [x1, top],
+                  "appear": appear, "leave": leave, "arrive": arrive, "vanish": vanish,
+                  "strength": sim.hostiles[hid].strength})

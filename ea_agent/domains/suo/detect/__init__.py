@@ -23,6 +23,7 @@ from .fires import CallsForFire
 from .fratricide import Fratricide
 from .lines import Lines
 from .location import LocationMonitors
+from .opportunity import Opportunities
 from .penetration import ProjectedPenetrations
 from .presence import Presence
 from .projection import Projections
@@ -40,6 +41,8 @@ DETECTORS: tuple[type[Detector], ...] = (
     # the check families the mission classes compose beyond Fig. 4 (issue 13)
     Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs,
     FireSupport, Presence, ReconProgress, Tempo, Assumptions,
+    # new opportunities (Fig. 1, issue 53): what favours the plan
+    Opportunities,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -48,5 +51,5 @@ ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fi
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Assumptions", "Bands", "CallsForFire",
            "Checkpoints", "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide",
-           "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ReconProgress", "ScheduleMonitors", "Standoffs",
+           "Lines", "LocationMonitors", "Opportunities", "Presence", "ProjectedPenetrations", "ReconProgress", "ScheduleMonitors", "Standoffs",
            "Tempo", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions"]
