@@ -149,6 +149,7 @@ def _draw_opportunities(sim: Sim, rng: np.random.Generator) -> None:
         hid = f"H{31 if kind == 'objective-clear' else 32}"
         sim.hostiles[hid] = Hostile(hid, [appear, leave, arrive], [x, x, x1], [y, y, top], int(rng.integers(2, 6)),
                                     appear, vanish)
+        sim.apart.add(hid)   # sensed apart: the sensors' view of the battle's other groups stays as it was
         d.append({"kind": "hostile", "id": hid, "opportunity": kind, "from": [x, y], "to": [x1, top],
                   "appear": appear, "leave": leave, "arrive": arrive, "vanish": vanish,
                   "strength": sim.hostiles[hid].strength})
