@@ -2,6 +2,8 @@
 alert score is measured on battles nobody tuned for (`scripts/evaluate_seeds`)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .generator import DURATION, LANE_X, WITHDRAW_Y, Hostile, Sim
@@ -128,7 +130,7 @@ def _draw_opportunities(sim: Sim, rng: np.random.Generator) -> None:
     OBJ-B that withdraws north before the company takes it (objective-clear), and a group
     in EA-A or EA-B while A2 or B2 defends it that withdraws north out of it
     (enemy-withdrawn), each in the other company's lane when both are drawn. Each group
-    vanishes once well clear (the sensors lose it), short of the recon screen and DP2."""
+    stops short of DP2 and vanishes there (the sensors lose it) once no other group is near."""
     d = sim.drawn
     u = lambda a, b: float(round(rng.uniform(a, b)))   # noqa: E731
     used = None
@@ -137,19 +139,28 @@ def _draw_opportunities(sim: Sim, rng: np.random.Generator) -> None:
             continue
         co = str(rng.choice(["A", "B"])) if used is None else ("B" if used == "A" else "A")
         used = co
-        x = LANE_X[f"{co}2"] + u(-300, 300)
-        if kind == "objective-clear":   # on the objective from before the attack, gone as the company nears
-            y, appear, leave, top = u(10700, 11300), u(1500, 2300), u(2950, 3200), u(13000, 13400)
+        x = LANE_X[f"{co}2"] + u(-150, 150)
+        if kind == "objective-clear":   # on the objective from before the attack, gone as the company nears:
+            y, appear, top = u(10700, 11300), u(1500, 2300), u(13000, 13400)
+            # once the platoon whose vehicle sensor sees it (A2, B2) is within 2.3 km (it may halt)
+            near = next((t for t in range(2900, 3250, 10)
+                         if math.hypot(*np.subtract(sim.platoon_center(f"{co}2", t), (x, y))) <= 2300.0), 3250)
+            leave = near + u(20, 100)
         else:                           # in the engagement area as the defence begins, then north out of it
             y, appear, leave, top = u(13100, 13600), u(3450, 3650), u(3850, 4000), u(14800, 15000)
         speed = float(rng.uniform(3.5, 5.5))
         arrive = leave + round((top - y) / speed)
-        x1 = x + u(-200, 200)
-        vanish = arrive + u(30, 90)
+        x1 = x   # straight north: away from every platoon of the company
+        # vanishes once clear, where no other group is near: a track the sensors lose beside
+        # another group would be continued on that group's detections (the fusion's call, not ours)
+        lone = (t for t in range(int(arrive) + 30, int(arrive) + 900, 10)
+                if all(math.hypot(p[0] - x1, p[1] - top) > 1500.0 for h in sim.hostiles.values()
+                       if (p := h.pos(float(t))) is not None))
+        vanish = float(next(lone, DURATION + 1))
         hid = f"H{31 if kind == 'objective-clear' else 32}"
         sim.hostiles[hid] = Hostile(hid, [appear, leave, arrive], [x, x, x1], [y, y, top], int(rng.integers(2, 6)),
                                     appear, vanish)
         sim.apart.add(hid)   # sensed apart: the sensors' view of the battle's other groups stays as it was
         d.append({"kind": "hostile", "id": hid, "opportunity": kind, "from": [x, y], "to": [x1, top],
-                  "appear": appear, "leave": leave, "arrive": arrive, "vanish": vanish,
+                  "appear": appear, "leave": leave, "arrive": arrive, "vanish": vanish if vanish <= DURATION else None,
                   "strength": sim.hostiles[hid].strength})
