@@ -40,9 +40,24 @@ class Opportunities(Detector):
     def reset(self) -> None:
         # (type, area) -> tracks seen inside while watched: track -> last (x, y) inside
         self.held: dict[tuple[str, str], dict[str, tuple[float, float]]] = {}
+        self._key: tuple = ()
+        self._cached: dict[tuple[str, str], list[Mission]] = {}
 
     def _watches(self) -> dict[tuple[str, str], list[Mission]]:
-        """(type, area) -> the missions of our plan, ready or running, that watch it."""
+        """(type, area) -> the missions of our plan, ready or running, that watch it: derived
+        again only when a plan state or our units changed (asked at every track change)."""
+        dom = self.dom
+        plan = dom.plan
+        states = plan.state if plan is not None else None
+        key = (plan, states, getattr(states, "version", None), dom.own_units)
+        old = self._key
+        if old and old[0] is plan and old[1] is states and old[2] == key[2] and old[3] is key[3]:
+            return self._cached
+        self._key = key
+        self._cached = out = self._derive()
+        return out
+
+    def _derive(self) -> dict[tuple[str, str], list[Mission]]:
         dom = self.dom
         plan = dom.plan
         out: dict[tuple[str, str], list[Mission]] = {}
@@ -61,8 +76,8 @@ class Opportunities(Detector):
         return out
 
     def detect(self, t: float, ch: Changes, cands: list[Candidate]) -> None:
-        if not (ch.tracks or ch.rescan or self.held):
-            return
+        if not (ch.tracks or ch.rescan):
+            return   # nothing it judges moved: whether a place is clear changes only with its tracks
         dom = self.dom
         watches = self._watches()
         for k in [k for k in self.held if k not in watches]:
