@@ -5,7 +5,8 @@ and the naive detector (VOA off) scored against it. Writes the per-seed rows and
 summary (mean and worst recall, unwanted share, unwanted flash, detection delay p95,
 reduction against the naive detector) as JSON, and with a commander in the loop (each
 model of `evaluate.COMMANDERS`: what they saw, re-notifications and escalations included)
-under `summary.armed`."""
+under `summary.armed`, and every type scored apart under `summary.by_type` (with the Fig. 1
+new-opportunity category as one key of its own)."""
 from __future__ import annotations
 
 import argparse
