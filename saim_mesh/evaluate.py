@@ -160,7 +160,22 @@ def score(alerts: list[Alert], truth: dict) -> dict:
         "missed": missed,
         "unwanted_alerts": [a.to_json_dict() for a in unwanted],
         "by_type": dict(sorted(Counter(a.type for a in alerts).items())),
+        "per_type": _per_type(incidents, missed, alerts, unwanted),
     }
+
+
+def _per_type(incidents: list[dict], missed: list[dict], alerts: list[Alert], unwanted: list[Alert]) -> dict:
+    """Per type: the incidents of that type and how many were missed, the alerts of that
+    type and how many were unwanted (an incident's type and the alert that tells it may
+    differ: a contact told merged as proximity), so a new family is judged on its own."""
+    out: dict[str, dict] = {}
+    for key, items in (("incidents", incidents), ("missed", missed)):
+        for i in items:
+            out.setdefault(i["type"], {"incidents": 0, "missed": 0, "alerts": 0, "unwanted": 0})[key] += 1
+    for key, items in (("alerts", alerts), ("unwanted", unwanted)):
+        for a in items:
+            out.setdefault(a.type, {"incidents": 0, "missed": 0, "alerts": 0, "unwanted": 0})[key] += 1
+    return dict(sorted(out.items()))
 
 
 # A commander model (issue 30): how long after an urgent alert the commander acknowledges

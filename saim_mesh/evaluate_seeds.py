@@ -5,7 +5,8 @@ and the naive detector (VOA off) scored against it. Writes the per-seed rows and
 summary (mean and worst recall, unwanted share, unwanted flash, detection delay p95,
 reduction against the naive detector) as JSON, and with a commander in the loop (each
 model of `evaluate.COMMANDERS`: what they saw, re-notifications and escalations included)
-under `summary.armed`."""
+under `summary.armed`, and every type scored apart under `summary.by_type` (with the Fig. 1
+new-opportunity category as one key of its own)."""
 from __future__ import annotations
 
 import argparse
@@ -54,12 +55,52 @@ def one(args: tuple) -> dict:
            "events": gen["events"], "wall_s": round(time.perf_counter() - t0, 1),
            "projections": {**{k: res["projections"][k] for k in ("alerts", "false", "after_the_fact", "lead_s")},
                            "by_type": res["projections_by_type"]},
+           "per_type": res["per_type"],
            "missed": [f"{m['owner']} {m['type']} {m['subjects']} t={m['at']}: {m['label']}" for m in res["missed"]],
            "unwanted_alerts": [f"{a['owner']} t={a['t']} {a['priority']} {a['type']} {a['subjects']}"
                                for a in res["unwanted_alerts"]], **({"armed": armed} if armed else {})}
     print(json.dumps({k: row[k] for k in ("seed", "recall", "incidents", "alerts", "unwanted_share", "unwanted_flash",
                                           "delay_s_p95", "reduction", "wall_s")}), flush=True)
     return row
+
+
+OPPORTUNITY = "new-opportunity"   # Fig. 1's category, scored over all its types together too
+
+
+def _figures(b: dict, recalls: list[float], shares: list[float]) -> dict:
+    return {"incidents": b["incidents"], "missed": b["missed"],
+            "recall": round(1 - b["missed"] / b["incidents"], 4) if b["incidents"] else None,
+            "recall_worst": min(recalls) if recalls else None,
+            "alerts": b["alerts"], "unwanted": b["unwanted"],
+            "unwanted_share": round(b["unwanted"] / b["alerts"], 4) if b["alerts"] else 0.0,
+            "unwanted_share_worst": max(shares) if shares else 0.0}
+
+
+def by_type_summary(rows: list[dict]) -> dict:
+    """Per alert or incident type over every seed (pooled recall and unwanted share, and the
+    worst seed's), and the new-opportunity category as one more key: its types together."""
+    from ea_agent.domains.suo.detect import CATEGORY
+    groups: dict[str, list[str]] = {}
+    for r in rows:
+        for typ in r.get("per_type", {}):
+            groups.setdefault(typ, [typ])
+    groups[OPPORTUNITY] = sorted(t for t, c in CATEGORY.items() if c == OPPORTUNITY)
+    out = {}
+    for key, types in sorted(groups.items()):
+        tot = {"incidents": 0, "missed": 0, "alerts": 0, "unwanted": 0}
+        recalls, shares = [], []
+        for r in rows:
+            seed = {k: sum(r.get("per_type", {}).get(t, {}).get(k, 0) for t in types) for k in tot}
+            for k in tot:
+                tot[k] += seed[k]
+            if seed["incidents"]:
+                recalls.append(round(1 - seed["missed"] / seed["incidents"], 4))
+            if seed["alerts"]:
+                shares.append(round(seed["unwanted"] / seed["alerts"], 4))
+        out[key] = _figures(tot, recalls, shares)
+        if key == OPPORTUNITY:
+            out[key]["types"] = types
+    return out
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -98,6 +139,7 @@ def summarize(rows: list[dict]) -> dict:
         ls = sorted(b.pop("lead_s"))
         s["projections_by_type"][typ] = {**b, "lead_s_median": ls[len(ls) // 2] if ls else None,
                                          "lead_s_min": ls[0] if ls else None}
+    s["by_type"] = by_type_summary(rows)
     models = sorted({m for r in rows for m in r.get("armed", {})})
     if models:   # what each modelled commander saw, over every seed
         s["armed"] = {}
@@ -123,6 +165,9 @@ def summarize(rows: list[dict]) -> dict:
                 "after_the_fact": s["after_the_fact_total"] == TARGETS["after_the_fact"],
                 "projection_lead": (s["projection_lead_s_median"] is not None
                                     and s["projection_lead_s_median"] >= TARGETS["projection_lead_s_median_min"])}
+    opp = s["by_type"].get(OPPORTUNITY)
+    s["met"]["new_opportunity"] = (opp is not None and opp["incidents"] > 0 and opp["recall"] >= TARGETS["recall"]
+                                   and opp["unwanted_share"] <= TARGETS["unwanted_share_max"])
     for m, v in s.get("armed", {}).items():
         s["met"][f"armed_{m}"] = (v["unwanted_share_worst"] <= ARMED_TARGETS["unwanted_share_worst"]
                                   and v["unwanted_flash_total"] == ARMED_TARGETS["unwanted_flash_total"]

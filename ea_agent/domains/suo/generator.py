@@ -125,6 +125,7 @@ class Sim:
     sensors: list[tuple[str, float]] = field(default_factory=list)      # (id, range m) when hostiles are sensed
     block_line: bool = False   # B1 blocks PL-B1-BLOCK (a line) instead of its battle position (an area)
     area_recon: bool = False   # R reconnoitres ZONE-R as an area (coverage) instead of a zone (depth)
+    apart: set[str] = field(default_factory=set)   # hostiles sensed from a stream of their own (hits)
 
     # -- friendly movement ---------------------------------------------------------
     def platoon_y_path(self, p: str):
@@ -328,9 +329,15 @@ def sensor_pos(sim: "Sim", sid: str, t: float) -> tuple[float, float]:
 
 
 def hits(sim: "Sim", proj: Projection, ox: float, oy: float) -> list[tuple[float, int, dict]]:
-    """Raw detections of hostile entities (and false alarms) by every sensor, from the true state."""
+    """Raw detections of hostile entities (and false alarms) by every sensor, from the true state.
+    The groups in `sim.apart` are sensed from a stream of their own, after the others in each
+    scan: adding them leaves what the sensors make of every other group as it was."""
     rng = np.random.default_rng(sim.seed + 2)
-    offs = {h: rng.uniform(-60, 60, (sim.hostiles[h].strength, 2)) for h in sorted(sim.hostiles)}
+    own = np.random.default_rng([sim.seed, 2, 17])
+    main = [h for h in sorted(sim.hostiles) if h not in sim.apart]
+    apart = [h for h in sorted(sim.hostiles) if h in sim.apart]
+    offs = {h: rng.uniform(-60, 60, (sim.hostiles[h].strength, 2)) for h in main}
+    offs.update({h: own.uniform(-60, 60, (sim.hostiles[h].strength, 2)) for h in apart})
     out = []
     for sid, group, owner, kind, rng_m, pd, sigma, fa in SENSORS:
         phase = float(rng.uniform(0, SENSOR_PERIOD))
@@ -338,7 +345,7 @@ def hits(sim: "Sim", proj: Projection, ox: float, oy: float) -> list[tuple[float
         while t < DURATION:
             sx, sy = sensor_pos(sim, sid, t)
             pts = []
-            for h in sorted(sim.hostiles):
+            for h in main:
                 p = sim.hostiles[h].pos(t)
                 if p is None:
                     continue
@@ -350,6 +357,15 @@ def hits(sim: "Sim", proj: Projection, ox: float, oy: float) -> list[tuple[float
             for _ in range(rng.poisson(fa)):
                 r, a = rng_m * math.sqrt(rng.random()), rng.uniform(0, 2 * math.pi)
                 pts.append((sx + r * math.cos(a), sy + r * math.sin(a)))
+            for h in apart:
+                p = sim.hostiles[h].pos(t)
+                if p is None:
+                    continue
+                for ex, ey in offs[h]:
+                    x, y = p[0] + ex, p[1] + ey
+                    if math.hypot(x - sx, y - sy) <= rng_m and own.random() < pd:
+                        nx, ny = own.normal(0, sigma, 2)
+                        pts.append((x + nx, y + ny))
             for x, y in pts:
                 lon, lat = proj.to_lonlat(x + ox, y + oy)
                 out.append((round(t, 2), {"kind": "hit", "t": round(t, 2), "sensor": sid,

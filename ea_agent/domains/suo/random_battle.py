@@ -2,6 +2,8 @@
 alert score is measured on battles nobody tuned for (`scripts/evaluate_seeds`)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .generator import DURATION, LANE_X, WITHDRAW_Y, Hostile, Sim
@@ -94,6 +96,7 @@ def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
                   "confirmed": sim.cffs[-1]["kind"] == "cff-confirm"})
     sim.cffs.sort(key=lambda c: (c["t"], c["cff"]))
     _draw_tasks(sim, np.random.default_rng([sim.seed, 13]))
+    _draw_opportunities(sim, np.random.default_rng([sim.seed, 17]))
 
 
 def _draw_tasks(sim: Sim, rng: np.random.Generator) -> None:
@@ -120,3 +123,44 @@ def _draw_tasks(sim: Sim, rng: np.random.Generator) -> None:
                   "arrive": arrive, "strength": sim.hostiles["H20"].strength, "crosses": "PL-B1-BLOCK"})
     d.append({"kind": "tasks", "B1_blocks": "PL-B1-BLOCK" if sim.block_line else "BP-B1",
               "R_recon": "area-reconnaissance" if sim.area_recon else "zone-reconnaissance"})
+
+
+def _draw_opportunities(sim: Sim, rng: np.random.Generator) -> None:
+    """New opportunities (issue 53), from a stream of their own: a group holding OBJ-A or
+    OBJ-B that withdraws north before the company takes it (objective-clear), and a group
+    in EA-A or EA-B while A2 or B2 defends it that withdraws north out of it
+    (enemy-withdrawn), each in the other company's lane when both are drawn. Each group
+    stops short of DP2 and vanishes there (the sensors lose it) once no other group is near."""
+    d = sim.drawn
+    u = lambda a, b: float(round(rng.uniform(a, b)))   # noqa: E731
+    used = None
+    for kind, p in (("objective-clear", 0.65), ("enemy-withdrawn", 0.65)):
+        if rng.random() >= p:
+            continue
+        co = str(rng.choice(["A", "B"])) if used is None else ("B" if used == "A" else "A")
+        used = co
+        x = LANE_X[f"{co}2"] + u(-150, 150)
+        if kind == "objective-clear":   # on the objective from before the attack, gone as the company nears:
+            y, appear, top = u(10700, 11300), u(1500, 2300), u(13000, 13400)
+            # once the platoon whose vehicle sensor sees it (A2, B2) is within 2.3 km (it may halt)
+            near = next((t for t in range(2900, 3250, 10)
+                         if math.hypot(*np.subtract(sim.platoon_center(f"{co}2", t), (x, y))) <= 2300.0), 3250)
+            leave = near + u(20, 100)
+        else:                           # in the engagement area as the defence begins, then north out of it
+            y, appear, leave, top = u(13100, 13600), u(3450, 3650), u(3850, 4000), u(14800, 15000)
+        speed = float(rng.uniform(3.5, 5.5))
+        arrive = leave + round((top - y) / speed)
+        x1 = x   # straight north: away from every platoon of the company
+        # vanishes once clear, where no other group is near: a track the sensors lose beside
+        # another group would be continued on that group's detections (the fusion's call, not ours)
+        lone = (t for t in range(int(arrive) + 30, int(arrive) + 900, 10)
+                if all(math.hypot(p[0] - x1, p[1] - top) > 1500.0 for h in sim.hostiles.values()
+                       if (p := h.pos(float(t))) is not None))
+        vanish = float(next(lone, DURATION + 1))
+        hid = f"H{31 if kind == 'objective-clear' else 32}"
+        sim.hostiles[hid] = Hostile(hid, [appear, leave, arrive], [x, x, x1], [y, y, top], int(rng.integers(2, 6)),
+                                    appear, vanish)
+        sim.apart.add(hid)   # sensed apart: the sensors' view of the battle's other groups stays as it was
+        d.append({"kind": "hostile", "id": hid, "opportunity": kind, "from": [x, y], "to": [x1, top],
+                  "appear": appear, "leave": leave, "arrive": arrive, "vanish": vanish if vanish <= DURATION else None,
+                  "strength": sim.hostiles[hid].strength})

@@ -23,6 +23,7 @@ from .fires import CallsForFire
 from .fratricide import Fratricide
 from .lines import Lines
 from .location import LocationMonitors
+from .opportunity import Opportunities
 from .penetration import ProjectedPenetrations
 from .presence import Presence
 from .projection import Projections
@@ -42,6 +43,8 @@ DETECTORS: tuple[type[Detector], ...] = (
     Escapes, EndStates, Coverage, Bands, ProjectedPenetrations, ThreatsAhead, Checkpoints, Lines, Standoffs,
     FireSupport, Presence, ReconProgress, Tempo, Assumptions,
     Windows,   # doctrinal time windows (link-up, passage of lines, planned fires): in-window timers
+    # new opportunities (Fig. 1, issue 53): what favours the plan
+    Opportunities,
 )
 
 CATEGORY: dict[str, str] = {typ: cat for d in DETECTORS for typ, cat in d.TYPES.items()}
@@ -50,5 +53,5 @@ ALERT_TYPES = tuple(k for k in CATEGORY if k != "call-for-fire")  # the 13 of Fi
 
 __all__ = ["DETECTORS", "CATEGORY", "ALERT_TYPES", "BASE", "Changes", "Detector", "Areas", "Assumptions", "Bands", "CallsForFire",
            "Checkpoints", "Contingencies", "Coordination", "Coverage", "EndStates", "Escapes", "FireSupport", "Fratricide",
-           "Lines", "LocationMonitors", "Presence", "ProjectedPenetrations", "ReconProgress", "ScheduleMonitors", "Standoffs",
-           "Tempo", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions", "Windows"]
+           "Lines", "LocationMonitors", "Opportunities", "Presence", "ProjectedPenetrations", "ReconProgress",
+           "ScheduleMonitors", "Standoffs", "Tempo", "ThreatEnvelopes", "ThreatsAhead", "UnknownPositions", "Windows"]

@@ -17,6 +17,7 @@ severity steps of its own (CLOSER, STRONGER, EPISODE_S), not by the EA's repeat 
 from __future__ import annotations
 
 from .base import TruthBase
+from .opportunities import Opportunities
 from .places import Places
 from .spec import *  # noqa: F401,F403  (the constants are part of the oracle's interface)
 from .spec import TICK
@@ -24,7 +25,7 @@ from .tasks import Tasks
 from .threats import Threats
 
 
-class Truth(Places, Threats, Tasks, TruthBase):
+class Truth(Places, Threats, Tasks, Opportunities, TruthBase):
     """The whole truth of one battle: each part adds the incidents of its alert families."""
 
 
@@ -33,7 +34,8 @@ def ground_truth(sim, feats: list[dict], plan: dict, owners: list[str]) -> dict:
     tr.contingency()
     tr.assume()   # a follower that takes over a halted unit's mission: judged as its own from then
     for step in (tr.out_of_position, tr.fratricide, tr.unknown_position, tr.schedule, tr.coordination,
-                 tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families, tr.presence):
+                 tr.areas, tr.proximity, tr.calls_for_fire, tr.check_families, tr.presence,
+                 tr.opportunities):
         step()
     key = lambda d: (d["owner"], d["t0"], d.get("type", ""), d["subjects"])
     # what would happen after the battle's end (a deadline past it) is nobody's to tell
