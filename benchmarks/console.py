@@ -37,8 +37,8 @@ import time
 from pathlib import Path
 
 from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh import results
-from saim_mesh.stats import percentiles
+from . import results
+from .stats import percentiles
 
 from . import ROOT
 

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh import results
+from . import results
 
 from . import RESULTS
 

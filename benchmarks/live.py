@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from saim_mesh.stats import percentiles
+from .stats import percentiles
 
 
 def main(argv=None) -> int:

@@ -37,7 +37,7 @@ from saim_mesh import gate as G
 from saim_mesh import wire as W
 from saim_mesh import zygote
 from .ea import feed
-from saim_mesh.procstat import Sampler
+from .procstat import Sampler
 from saim_mesh.mesh import Proc, mesh_units, start_peer, up
 from saim_mesh.proc import leaf_env
 from saim_mesh.runner import config_for, make_ea, run

@@ -28,7 +28,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from saim_mesh.stats import percentiles
+from .stats import percentiles
 
 from . import ROOT
 

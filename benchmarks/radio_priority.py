@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from saim_mesh.proc import wait_line
-from saim_mesh.stats import percentiles
+from .stats import percentiles
 
 from . import RESULTS, ROOT
 

@@ -31,7 +31,7 @@ from saim_mesh.net import routed
 from saim_mesh.net import topology as T
 from saim_mesh.mesh import Supervisor, mesh_units, start_replay, up
 from saim_mesh.proc import Proc, clean_env
-from saim_mesh.procstat import Sampler
+from .procstat import Sampler
 
 from . import ROOT
 

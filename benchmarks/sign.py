@@ -18,7 +18,7 @@ from dissemination.keyspace import KeySpace
 from saim_mesh import messages as M
 from saim_mesh.gate import Gate
 from saim_mesh.security import sign as G
-from saim_mesh import results
+from . import results
 
 from . import ROOT
 

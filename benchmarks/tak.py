@@ -20,7 +20,7 @@ from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.tak import cot as C
 from saim_mesh.tak.picture import Options, Picture
-from saim_mesh import results
+from . import results
 
 from . import ROOT
 

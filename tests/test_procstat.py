@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from saim_mesh import procstat
+from benchmarks import procstat
 
 
 def _sleeper() -> subprocess.Popen:
