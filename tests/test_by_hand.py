@@ -45,7 +45,7 @@ def test_the_by_hand_recipe_runs_several_eas_a_router_and_the_sources(tmp_path, 
             os.killpg(p.pid, signal.SIGKILL)
             p.wait()
     assert p.returncode == 0, said
-    streams = {n: list(play.share(sc, sh.units, sh.tracks, sh.but)) for n, sh in cp_shares(sc).items()}
+    streams = {n: list(play.of_share(sc, sh)) for n, sh in cp_shares(sc).items()}
     for u in UNITS:
         assert f"{u}: " in said
         want = plan_alerts(in_process(sc, u, streams))

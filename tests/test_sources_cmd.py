@@ -18,7 +18,7 @@ from saim_mesh.security.acl import source_names
 from saim_mesh.security.pki import names_for
 
 ROOT = Path(__file__).resolve().parent.parent
-SCENARIOS = ("small", "battalion", "uv-team")
+SCENARIOS = ("small", "battalion", "uv-team", "battalion-sensors")
 
 
 def _run(*args: str) -> subprocess.CompletedProcess:
@@ -35,7 +35,9 @@ def test_sources_lists_each_command_post_once_and_they_carry_every_unit_once(nam
     assert set(got) == set(cp_shares(sc))
     carried = [u for s in got.values() for u in s["units"]]
     assert sorted(carried) == sorted(sc.taskorg.units)    # a partition: nobody twice, nobody left out
-    assert [n for n, s in got.items() if s["tracks"]] == [f"cp.{sc.taskorg.root}"]
+    groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
+    assert [n for n, s in got.items() if s["tracks"]] == sorted([f"cp.{sc.taskorg.root}", *(f"fusion.{g}"
+                                                                                            for g in groups)])
     ids = set(names_for(sc))
     assert {f"source.{n}" for n in got} <= ids             # each has a certificate
 

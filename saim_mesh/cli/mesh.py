@@ -46,7 +46,12 @@ def cmd_source(a) -> int:
         if not a.speed:
             raise ValueError("--start without --live paces the stream: give --speed FACTOR too")
         paced = _instant(a.start)
-    if a.file is None:
+    if a.fusion:
+        if a.file is not None or a.units or a.but or a.tracks:
+            raise ValueError("source --fusion: a fusion node publishes its tracks only (no --file, --units, "
+                             "--but or --tracks)")
+        msgs = play.fused(sc, a.fusion)
+    elif a.file is None:
         msgs = play.share(sc, a.units, a.tracks, a.but or ())
     else:
         f = sys.stdin if a.file == "-" else open(a.file, encoding="utf-8")
@@ -151,8 +156,10 @@ def cmd_sources(a) -> int:
                           for n, sh in sorted(shares.items())}, indent=1))
         return 0
     for n, sh in sorted(shares.items()):
-        print(f"{n:<10} saim-mesh source {a.scenario} --name {n} {' '.join(sh.args())}".rstrip()
-              + f"   # {(k := len(sh.carries(to)))} unit{'' if k == 1 else 's'}{', hostile tracks' if sh.tracks else ''}")
+        k = len(sh.carries(to))
+        said = (f"fusion node of sensor group {sh.fusion}: its tracks" if sh.fusion else
+                f"{k} unit{'' if k == 1 else 's'}{', hostile tracks' if sh.tracks else ''}")
+        print(f"{n:<10} saim-mesh source {a.scenario} --name {n} {' '.join(sh.args())}   # {said}")
     return 0
 
 
@@ -163,21 +170,17 @@ def cmd_mesh(a) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     if a.replay and (a.live or a.sources_per_cp):
         raise ValueError("mesh up: --replay is the older mesh; --live and --sources-per-cp are the mesh with no centre")
-    from ea_agent import domains
-    if not a.replay and not (a.live or a.sources_per_cp) and domains.of(S.load(a.scenario, events=False)).NAME == "uv":
-        print("mesh up: the robot team's mesh with no centre is `saim-mesh robots team OUT` (robots obeying their "
-              "EAs); running the older replay mesh for this scenario (as --replay)", flush=True)
-        a.replay = True
     if not a.replay:   # the mesh with no centre: sources per command post, no replay
         from ..live.up import up as live_up
-        for bad, flag in ((a.pki, "--pki (it makes its own test PKI)"), (a.root, "--root"),
-                          (a.window != 20.0, "--window (the sources pace themselves)")):
+        if a.pki and a.insecure:
+            raise ValueError("mesh up: --pki and --insecure: certificates are for a secure mesh; give one of them")
+        for bad, flag in ((a.window != 20.0, "--window (the sources pace themselves)"),):
             if bad:
                 raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
         res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
                       live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
                       console=a.console, console_linger=a.console_linger, max_restarts=a.restarts,
-                      tak=_live_tak(a))
+                      tak=_live_tak(a), pki=Path(a.pki) if a.pki else None, root=a.root)
         return 0 if len(res["peers"]) == len(res["units"]) and not res["given_up"] else 1
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
              insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
@@ -285,6 +288,9 @@ def add(sub) -> None:
     so.add_argument("--cache", type=int, default=None, metavar="N",
                     help="frames the publisher keeps in memory for recovery and late joiners (default 100000; "
                     "4 with --yield-catch-up and --state: its journal gives the rest, paced)")
+    so.add_argument("--fusion", nargs="+", metavar="GROUP",
+                    help="a sensor group's fusion node: the tracks it fuses from its sensors' hits (raw hits "
+                         "stay in this process; `saim-mesh sources` names it fusion.GROUP)")
     so.add_argument("--keep-open", action="store_true", help="do not send the end-of-stream mark at the end")
     so.add_argument("--yield-catch-up", action="store_true",
                     help="recoveries and journal catch-ups yield to live traffic (DROP, lower priority): "
@@ -326,12 +332,13 @@ def add(sub) -> None:
                     help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
     me.add_argument("--insecure", action="store_true",
                     help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
-    me.add_argument("--pki", metavar="DIR", help="certificates (default OUT_DIR/pki, made if absent)")
+    me.add_argument("--pki", metavar="DIR", help="the mesh's certificates (saim-mesh certs SCENARIO --out DIR --routers "
+                    "hub; with --topology its routers' names); default: a test PKI made under OUT_DIR/pki")
     me.add_argument("--restarts", type=_count, default=10, metavar="N",
                     help="restart each process that dies (EA peer, source, router, console; with --replay the "
                          "replay, fusion nodes, EA peers, routers, TAK gateway) up to N times (default 10), then "
                          "give up on it with one line and go on without it (0: never restart)")
-    me.add_argument("--root", help="key-expression root (default saim/<scenario>/<pid>)")
+    me.add_argument("--root", help="key-expression root (default saim/<scenario>/live; --replay: saim/<scenario>/<pid>)")
     me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
                     help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
     me.add_argument("--tak", nargs="+", metavar="URL",

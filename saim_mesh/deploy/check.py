@@ -24,7 +24,7 @@ def check(dep: Deployment, sc, host: str | None = None, where: str = "deployment
     for h in dep.hosts.values():
         w = f"host {h.name!r}"
         for kind, known, what in (("eas", units, "a unit that runs an EA peer"),
-                                  ("sources", shares, "a command post's source")):
+                                  ("sources", shares, "a command post's or a fusion node's source")):
             for x in getattr(h, kind):
                 if kind == "eas" and x not in to.units:
                     e(f"{w}: eas: {x!r} is not a unit of {sc.name}'s task organization")
@@ -36,8 +36,8 @@ def check(dep: Deployment, sc, host: str | None = None, where: str = "deployment
                       f"{w}: {kind}: {x} named twice")
                 seen.setdefault((kind, x), h.name)
         for g in h.fusion:
-            e(f"{w}: fusion: {g!r}: " + ("fusion nodes are not built for the live mesh yet (its sources carry no "
-                                         "sensor hits): leave fusion out" if g in groups else
+            e(f"{w}: fusion: {g!r}: " + (f"on the live mesh a fusion node is a source: put fusion.{g} in this "
+                                         "host's sources instead" if g in groups else
                                          f"no such fusion group in {sc.name} ({', '.join(sorted(groups)) or 'none'})"))
         ports: set[int] = set()
         for c in h.consoles:

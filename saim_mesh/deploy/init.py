@@ -54,7 +54,7 @@ def addresses_for(spec: str | None, n: int, port: int) -> list[tuple[str, int]]:
 
 def derive(sc, scenario: str, addresses: str | None = None, port: int = DEFAULT_PORT, consoles: bool = True,
            secure: bool = True, pki: str | None = None) -> Deployment:
-    from ..live.depend import cp_shares
+    from ..live.depend import cp_shares, home_of
     from ..scenario import mesh_units
     to = sc.taskorg
     posts = command_posts(to)
@@ -64,7 +64,7 @@ def derive(sc, scenario: str, addresses: str | None = None, port: int = DEFAULT_
     shared = len({a for a, _ in where}) < len(where)   # hosts on one machine: one console port each
     for i, (cp, (addr, p)) in enumerate(zip(posts, where)):
         eas = tuple(u for u in units if _post_of(u, posts, to) == cp)
-        srcs = tuple(sorted(s for s in cp_shares(sc) if _post_of(s.removeprefix("cp."), posts, to) == cp))
+        srcs = tuple(sorted(s for s in cp_shares(sc) if _post_of(home_of(sc, s), posts, to) == cp))
         cons = (Console(cp, CONSOLE_PORT + i * shared),) if consoles and cp in units else ()
         hosts[cp] = Host(cp, (addr,), (), None, None, eas, srcs, (), cons, None)
         rn = f"r-{cp}"

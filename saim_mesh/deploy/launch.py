@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import zygote
+from ..live.depend import home_of
 from ..mesh import Supervisor
 from ..proc import Proc, clean_env, leaf_env, py
 from ..zconf import free_port
@@ -210,7 +211,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
         share = _share_args(sc)
         for name in h.sources:
             sup.add(Proc(name, [*py(), "source", dep.scenario, "--name", name, *share[name],
-                                *where(name.removeprefix("cp.")), "--root", root, "--speed", dep.speed,
+                                *where(home_of(sc, name) or name), "--root", root, "--speed", dep.speed,
                                 "--state", str(out_dir / "sources"), "--linger", f"{dep.source_linger:g}",
                                 *(["--yield-catch-up"] if dep.yielding() else []),
                                 *(["--catch-up-kbit", f"{dep.catch_up_kbit:g}"] if dep.catch_up_kbit else []),

@@ -102,7 +102,10 @@ class LivePeer:
         self.ids = AlertIds(unit)   # every alert id issued, kept across rebuilds: never rewound
         self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
         self.ea.notify.ids = self.ids
-        self.ea.domain.inferred.append(self._confirm_up)
+        from ea_agent import domains
+        # what a source's frame may carry: the picture's facts and the domain's own reports
+        self.data_kinds = DATA | frozenset(getattr(domains.of(sc), "SOURCE_KINDS", ()))
+        self._tell_inferred(self.ea)
         self.confirmed_up: set[tuple[str, str]] = set()   # (mission, phase) published up the chain
         self.armed = armed
         if armed:
@@ -176,6 +179,13 @@ class LivePeer:
     def _notice(self, n) -> None:
         if not self.restoring:   # re-notifications and escalations of the past are not sent again
             self.out.notice(n)
+
+    def _tell_inferred(self, ea) -> None:
+        """Missions its EA infers started go up the chain as confirmations (a domain
+        that infers none, the robot team's, has nothing to tell)."""
+        inferred = getattr(ea.domain, "inferred", None)
+        if inferred is not None:
+            inferred.append(self._confirm_up)
 
     def _confirm_up(self, c) -> None:
         """Its EA inferred that one of its own unit's missions started (the unit crossed its
@@ -285,12 +295,12 @@ class LivePeer:
             self.back(f.source)
         items = self.gate.data_many(f.msgs, key or f"src/{f.source}")
         kinds = {type(m) for m in items}
-        if not kinds <= DATA:
+        if not kinds <= self.data_kinds:
             for m in items:
-                if type(m) not in DATA:
+                if type(m) not in self.data_kinds:
                     self.gate.rejects.add(M.MessageError(m.KIND, "(kind)", f"a {m.KIND} message in a source's "
                                                                            "frame"), key)
-            items = [m for m in items if type(m) in DATA]
+            items = [m for m in items if type(m) in self.data_kinds]
         reported = self.reports.get(f.source)
         if reported is None:
             reported = self.reports[f.source] = set()
@@ -337,7 +347,7 @@ class LivePeer:
             self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
             self.ea.notify.ids = self.ids
             self.ea.notice_sinks.append(self._notice)
-            self.ea.domain.inferred.append(self._confirm_up)
+            self._tell_inferred(self.ea)
             if self.armed:
                 self.ea.arm()
             self.ea.start(0.0)

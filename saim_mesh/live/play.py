@@ -19,24 +19,44 @@ from .source import LiveSource
 EPOCH_S = 2.0
 
 
+def of_share(sc, sh) -> Iterator[M.Message]:
+    """What one of a scenario's sources publishes (`depend.cp_shares`)."""
+    if sh.fusion is not None:
+        return fused(sc, [sh.fusion])
+    return share(sc, list(sh.units) if sh.units is not None else None, sh.tracks, list(sh.but))
+
+
+def fused(sc, names: list[str]) -> Iterator[M.Message]:
+    """The tracks the named sensor groups' fusion nodes give from their sensors' hits:
+    the nodes as in process (`runner.Fusion`), flushed on every event's time as there."""
+    from ..runner import Fusion
+    groups = sc.meta.get("fusion", {}).get("groups", {})
+    for g in names:
+        if g not in groups:
+            raise KeyError(f"unknown fusion group {g!r}: not in {sc.name}'s scenario.json "
+                           f"({', '.join(sorted(groups)) or 'none'})")
+    fusion = Fusion(sc, {g: groups[g] for g in names})
+    for ev in sc.events:
+        yield from fusion.feed(ev)
+    yield from fusion.flush(sc.duration_s)   # windows that close after the last event
+
+
 def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Iterator[M.Message]:
     """The scenario's events that originate in `units`' subtrees (every unit when None)
     except `but`'s subtrees (another command post publishes those): their members'
     positions, their confirmations, calls for fire and orders they issue; hostile tracks
-    only with `tracks` (a command post that runs its sensors' fusion: where the scenario
-    has fusion groups, the sensors' hits go through the same fusion nodes as in process,
-    flushed on every event's time as there, and the tracks they give are published)."""
-    from ..runner import Fusion
+    only with `tracks` (the tracks the scenario gives; where it has sensor groups, each
+    group's fusion node is its own source: `fused`)."""
+    from ea_agent import domains
+
     to = sc.taskorg
+    source_of = getattr(domains.of(sc), "source_of", None)   # a robot's own radio sends its state
     mine = set().union(*(to.subtree(u) for u in units)) if units else set(to.units)
     for u in but:
         mine -= set(to.subtree(u))
-    fusion = Fusion.of(sc) if tracks else None
     for ev in sc.events:
         k = type(ev)
-        if fusion is not None:
-            yield from fusion.feed(ev)
-        if k is M.SensorHit:
+        if k is M.SensorHit:   # raw hits never leave: each group's fusion node is its own source
             continue
         if k is M.LocationReport:
             if to.entity_unit.get(ev.entity) in mine:
@@ -56,8 +76,8 @@ def share(sc, units: list[str] | None, tracks: bool, but: list[str] = ()) -> Ite
         elif k is M.Reorganization:
             if units is None or ev.new_parent in mine:
                 yield ev
-    if fusion is not None:   # windows that close after the last event
-        yield from fusion.flush(sc.duration_s)
+        elif source_of is not None and source_of(ev) in mine:
+            yield ev
 
 
 def read_lines(f: IO[str], fmt: str, entity: str | None, start: float | None) -> Iterator[M.Message]:

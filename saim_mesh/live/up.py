@@ -26,7 +26,7 @@ def cp_sources(sc) -> dict[str, list[str]]:
 
 def one_host(sc, scenario: str, units: list[str], out_dir: Path, speed: str = "max", live: bool = False,
              until: float | None = None, insecure: bool = False, topology: str | None = None,
-             console: int | None = None, tak=None):
+             console: int | None = None, tak=None, pki: Path | None = None, root: str | None = None):
     """The deployment `mesh up` runs: everything on this host at 127.0.0.1 with free ports;
     one router (`hub`), or a topology's routers (a file, or "derive": one per battalion
     command post and the top); a test PKI made under OUT_DIR/pki. Returns (deployment,
@@ -40,14 +40,23 @@ def one_host(sc, scenario: str, units: list[str], out_dir: Path, speed: str = "m
     else:   # one Zenoh router for this host; every EA and source a client of it (since Zenoh 1.9
         # peers do not relay for each other: ../shared/notes/live-mesh.md)
         routers = {"hub": RouterSpec("hub", LOCAL, sc.taskorg.root, 0, ())}
-    pki = None
-    if not insecure:   # mTLS and access control; each router a relay every client's rules accept
+    if insecure:
+        pki = None
+    elif pki is not None:   # the operator's own certificates: every identity this host runs must be there
+        from ..security.pki import SecurityError, check_identity, names_for
+        for ident in [*names_for(sc, units), *(f"router.{n}" for n in routers)]:
+            try:
+                check_identity(pki, ident)
+            except SecurityError as e:
+                raise SecurityError(f"mesh up --pki {pki}: {e} (make them with saim-mesh certs {scenario} --out "
+                                    f"{pki} --routers {' '.join(routers)})") from None
+    else:   # mTLS and access control; each router a relay every client's rules accept
         from ..security.pki import make_pki, names_for
         pki = out_dir / "pki"
         make_pki(pki, names_for(sc, consoles=True) + [f"router.{n}" for n in routers])
     cons = (Console(sc.taskorg.root, console),) if console is not None else ()
     host = Host(LOCAL, ("127.0.0.1",), (), None, None, tuple(units), tuple(cp_shares(sc)), (), cons, tak)
-    dep = Deployment(scenario, {LOCAL: host}, routers, f"saim/{sc.name}/live", not insecure, pki, speed, live,
+    dep = Deployment(scenario, {LOCAL: host}, routers, root or f"saim/{sc.name}/live", not insecure, pki, speed, live,
                      None, until, 30.0, None, dict(topo.attach) if topo is not None else {})
     return dep, topo
 
@@ -56,7 +65,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
        echo=print, live: bool = False, show: bool = True, until: float | None = None, on_started=None,
        start: float | None = None, insecure: bool = False, topology: str | None = None,
        link: dict | None = None, paced_start: float | None = None, console: int | None = None,
-       console_linger: float = 30.0, max_restarts: int = 10, tak=None) -> dict:
+       console_linger: float = 30.0, max_restarts: int = 10, tak=None, pki: Path | None = None,
+       root: str | None = None) -> dict:
     """`on_started(sup, t0)`: called once every source runs, with the wall time of event time 0 (a benchmark kills one). `start`
     (live): the wall time of event time 0 (default 20 s from now: everyone is up by then).
     `topology`: a topology file or "derive": one router per command post (`mesh up
@@ -69,7 +79,8 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     re-notified and escalated until acknowledged). `max_restarts`: restarts per process
     before it is given up (the result's `given_up`). `tak`: a `deploy.file.Tak`, the
     Cursor-on-Target gateway started and supervised with the rest (its PLI a live source
-    the EAs take when `live`).
+    the EAs take when `live`). `pki`: certificates the operator made (default: a test PKI
+    made under OUT_DIR/pki); `root`: the key-expression root.
 
     The one-host case of `saim-mesh deploy` (`deploy.launch.run_host`)."""
     from .. import scenario as S
@@ -80,7 +91,7 @@ def up(scenario: str, units: list[str] | None, out_dir: Path, speed: str = "max"
     if insecure and topology is None:
         echo("WARNING: insecure mesh: no authentication, no access control; anyone on the network can "
              "feed this mesh positions and end its sources' streams")
-    dep, topo = one_host(sc, scenario, units, out_dir, speed, live, until, insecure, topology, console, tak)
+    dep, topo = one_host(sc, scenario, units, out_dir, speed, live, until, insecure, topology, console, tak, pki, root)
     res = run_host(dep, sc, LOCAL, out_dir, echo=echo, show=show, timeout=timeout, until_done=True,
                    on_started=on_started, start=start, paced_start=paced_start, link=link,
                    console_linger=console_linger, max_restarts=max_restarts)

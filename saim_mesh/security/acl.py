@@ -77,18 +77,19 @@ def identities(units, groups, taskorg=None, routers=()) -> list[str]:
     `router.<R>` per router of the topology."""
     consoles = [f"console.{u}" for u in units] if taskorg is not None else []
     return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, "tak",
-            *consoles, *(f"router.{r}" for r in routers), *(f"source.{n}" for n in source_names(units, taskorg))]
+            *consoles, *(f"router.{r}" for r in routers), *(f"source.{n}" for n in source_names(units, taskorg, groups))]
 
 
-def source_names(units, taskorg=None) -> list[str]:
+def source_names(units, taskorg=None, groups=()) -> list[str]:
     """The live sources the rules know (issue 31): `cp.<U>` for each command post, i.e.
     each unit of the mesh, each unit with subordinates and each unit directly under the top
-    (the live mesh's sources per command post: saim_mesh/live/up.py)."""
+    (the live mesh's sources per command post: saim_mesh/live/up.py), and `fusion.<G>` for
+    each sensor group (its fusion node, a live source of tracks beside its sensors)."""
     cps = set(units)
     if taskorg is not None:   # every unit with subordinates, and every unit directly under the top
         cps |= {p for p in taskorg.parent.values() if p}
         cps |= {u for u, p in taskorg.parent.items() if p == taskorg.root}
-    return [f"cp.{u}" for u in sorted(cps)]
+    return [f"cp.{u}" for u in sorted(cps)] + [f"fusion.{g}" for g in sorted(groups)]
 
 
 def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
@@ -144,7 +145,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                             rule(f"ea.{u}.dirj", ["declare_queryable", "reply"], [f"{r}/dirj/{u}"]),
                             rule(f"ea.{u}.dirq", ["query"], [f"{r}/dirj/*"]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
-    for n in source_names(units, taskorg):
+    for n in source_names(units, taskorg, groups):
         mine = [ks.src(n), f"{r}/src/{n}/@adv/**", ks.srcj(n)]
         # ... and the acks of the EAs that depend on it (live/pace.py: a max-speed source's pace)
         subject(f"source.{n}", [out, rule(f"source.{n}.read", READ, [f"{r}/src/**", adv, ks.ack("*", n)]),

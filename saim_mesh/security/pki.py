@@ -332,7 +332,7 @@ def names_for(sc, units: list[str] | None = None, consoles: bool = False) -> lis
     from .acl import source_names
     return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), "observer", "console", "tak",
             *(f"console.{u}" for u in units if consoles),
-            *(f"source.{n}" for n in source_names(units, sc.taskorg))]
+            *(f"source.{n}" for n in source_names(units, sc.taskorg, groups))]
 
 
 def main(argv: list[str] | None = None) -> int:

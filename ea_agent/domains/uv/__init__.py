@@ -11,6 +11,7 @@ from .domain import ALERT_TYPES, CATEGORY, UvDomain
 from .messages import UvAgent, UvSighting, UvState
 
 NAME = "uv"
+SOURCE_KINDS = (UvState, UvSighting, UvAgent)   # what the robots' own radios put on the live mesh
 CONFIG_PATH = Path(__file__).resolve().parents[3] / "configs" / "uv.toml"
 
 

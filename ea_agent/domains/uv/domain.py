@@ -31,6 +31,8 @@ LIVE = ("active", "ready", "suspended")
 
 
 class UvDomain:
+    PLACED_BY_EVERY_SOURCE = True   # each robot's radio sends its own states and sightings
+
     def __init__(self, owner: str, taskorg: TaskOrg, plans: dict[str, PlanSpec], initial_plan: str,
                  world: dict, proj: Projection, cfg: dict):
         if owner not in taskorg.units:
