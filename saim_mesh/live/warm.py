@@ -1,8 +1,8 @@
-"""The live peer warmed up with no Zenoh session: the first minutes of a recorded
-scenario as its command posts' sources publish them (`play.share` and `play.publish`, the
-frames cut and encoded by `LiveSource` itself), taken by a `LivePeer` through the
-path a frame off the wire takes (`receive`: decoding, its source's sequence, the gate,
-the event-time order, the EA, the alert log and the input journal).
+"""The live peer warmed up with no Zenoh session: the first half hour of a recorded
+scenario as its sources publish it (`play.of_share` and `play.publish`, the frames cut
+and encoded by `LiveSource` itself), taken by a `LivePeer` through the path a frame off
+the wire takes (`receive`: decoding, its source's sequence, the gate, the event-time
+order, the EA, the alert log and the input journal).
 
 The zygote runs it before it forks (saim_mesh/zygote.py): what this code builds on first
 use (msgspec's per-type codecs, the interpreter's specialised bytecode, the EA's
@@ -60,14 +60,13 @@ class _Frames(LiveSource):
 
 
 def source_frames(sc, root: str, until: float = WARM_S) -> list[tuple[str, bytes]]:
-    """Every command post's frames up to event time `until`, as (key, payload), merged
-    across sources by watermark (then name): the order they would roughly arrive in."""
+    """Every source's frames (`depend.cp_shares`) up to event time `until`, as (key,
+    payload), merged across sources by watermark (then name): roughly as they arrive."""
     ks = KeySpace.of(sc, root)
     per: list[list[tuple[float, str, int, str, bytes]]] = []
     for name, sh in cp_shares(sc).items():
         src = _Frames(ks, name)
-        play.publish(src, play.share(sc, list(sh.units) if sh.units else None, sh.tracks, list(sh.but)),
-                     until=until, log=lambda *a, **k: None)
+        play.publish(src, play.of_share(sc, sh), until=until, log=lambda *a, **k: None)
         # the watermark each frame carries, read back as a receiver reads it
         per.append([(F.decode(b, 1 << 30).wm, name, i, ks.src(name), b) for i, b in enumerate(src.pub.out)])
     return [(key, b) for _, _, _, key, b in heapq.merge(*per)]
