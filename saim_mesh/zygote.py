@@ -5,8 +5,7 @@ that what the code builds on first use exists too (`live.warm`: codecs, speciali
 bytecode, the EA's detectors), freezes it all out of the garbage collector's reach, and
 forks each peer from itself, so the peers of a host share those pages copy-on-write
 instead of each holding a copy. Only the live mesh's code is loaded here: the replay
-mesh's processes (its replay, fusion nodes and peers) still fork from it, and import
-their own modules in the child.
+mesh's EA peers still fork from it, and import their own modules in the child.
 
 Zenoh is imported but never opened here (a fork after `zenoh.open` hangs); each
 child opens its own session. The launcher talks to the zygote over its stdin and
