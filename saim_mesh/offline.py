@@ -2,8 +2,8 @@
 batches and singles routed to its coarse subscriptions by key expression, a replay's
 situation store answering its catch-ups), tick by tick, on scenario time.
 
-`bench_intake` times it against the in-process EA; the zygote runs two minutes of it
-before it forks (`warm`), so what the peer's code builds on first use is built once."""
+`bench_intake` times it against the in-process EA. (The zygote warms the live peer
+instead: saim_mesh/live/warm.py.)"""
 from __future__ import annotations
 
 import collections
@@ -157,13 +157,3 @@ def run(sc, unit: str, chunks) -> tuple[Peer, dict[str, float]]:
         cpu["interest"] += k3 - k2
     return p, cpu
 
-
-def warm(scenario: str | Path, ticks: int = 60) -> int:
-    """The first `ticks` (two minutes of scenario time) of the top unit's peer on a small
-    scenario: msgspec's per-type codecs, the interpreter's specialised bytecode, shapely's
-    and the domain's first-use state come to exist here. In a fork server that is once
-    for every child, shared, instead of once in each. Returns the messages it took in."""
-    from . import scenario as S
-    sc = S.load(scenario)
-    p, _ = run(sc, sc.taskorg.root, stream(sc)[:ticks])
-    return p.ea.n_in

@@ -1,9 +1,11 @@
-"""A fork server for mesh processes: it imports the heavy modules once (numpy,
-shapely, pyproj, zenoh, the EA and its domains: ~30 MB of private heap in every
-peer), runs two minutes of a small scenario's peer so that what the code builds on
-first use exists too (`offline.warm`: about 4 MB less PSS in every child),
-freezes it all out of the garbage collector's reach, and forks each peer from
-itself, so 15 peers share those pages copy-on-write instead of holding 15 copies.
+"""A fork server for the EA peers: it imports the heavy modules once (numpy, shapely,
+pyproj, zenoh, the EA and its domains: each peer would otherwise hold its own private
+copy of all of them), warms a live peer up on a small scenario with no Zenoh session so
+that what the code builds on first use exists too (`live.warm`: codecs, specialised
+bytecode, the EA's detectors), freezes it all out of the garbage collector's reach, and
+forks each peer from itself, so the peers of a host share those pages copy-on-write
+instead of each holding a copy. Only the live mesh's code is loaded here: the replay
+mesh's EA peers still fork from it, and import their own modules in the child.
 
 Zenoh is imported but never opened here (a fork after `zenoh.open` hangs); each
 child opens its own session. The launcher talks to the zygote over its stdin and
@@ -28,9 +30,8 @@ from pathlib import Path
 
 from .proc import clean_env, die_with_parent
 
-PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "msgspec", "msgpack",
-           "saim_mesh.cli", "saim_mesh.peer", "saim_mesh.replay", "saim_mesh.fusion.peer", "saim_mesh.live.peer",
-           "zenoh.ext",
+PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "zenoh.ext", "msgspec", "msgpack",
+           "saim_mesh.cli", "saim_mesh.zconf", "saim_mesh.live.peer", "saim_mesh.live.serve",
            "ea_agent.domains.suo.domain", "ea_agent.domains.uv.domain")
 WARM_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "small"
 
@@ -86,16 +87,16 @@ def _die_with_launcher() -> None:
 
 
 def warm_up(scenario: Path = WARM_SCENARIO) -> str | None:
-    """Run the first two minutes of a small scenario's peer here, before any fork (`offline.warm`).
-    A problem is returned, not raised: a zygote that could not warm up still forks.
-    `SAIM_ZYGOTE_WARM`: 0 for none, or another scenario's directory."""
+    """Run a live peer through the first half hour of a small scenario's sources here,
+    before any fork (`live.warm`). A problem is returned, not raised: a zygote that could
+    not warm up still forks. `SAIM_ZYGOTE_WARM`: 0 for none, or another scenario's directory."""
     choice = os.environ.get("SAIM_ZYGOTE_WARM", "1")
     if choice == "0":
         return None
     if choice not in ("", "1"):
         scenario = Path(choice)
     try:
-        from .offline import warm
+        from .live.warm import warm
         with contextlib.redirect_stdout(sys.stderr):   # stdout is the launcher's channel
             warm(scenario)
     except Exception as e:   # noqa: BLE001 -- whatever it was: named, and no warm-up
@@ -208,8 +209,7 @@ class Zygote:
         env = dict(env or os.environ)   # as clean_env takes it: none (or empty) is ours
         # glibc reads MALLOC_ARENA_MAX at start: here, for every EA peer. One arena, not two:
         # Zenoh's threads and the EA then share one heap's free memory instead of each arena
-        # keeping its own (the brigade live: peak PSS 40.26 -> 39.17 MB for BDE, mean 36.5 ->
-        # 35.3, 16.4x -> 18.8x real time in the same hour, one run each)
+        # keeping its own pages (less PSS per peer, and no slower: a brigade live run)
         env.setdefault("MALLOC_ARENA_MAX", "1")
         env = clean_env(env)
         env.setdefault("OPENBLAS_NUM_THREADS", "1")   # no thread pool to fork under

@@ -93,3 +93,18 @@ def test_benchmarks_find_the_repository():
         assert "__file__" not in p.read_text(), f"{p.name}: finds its own root; use benchmarks.ROOT"
         mod = importlib.import_module(f"benchmarks.{p.stem}")
         assert getattr(mod, "ROOT", benchmarks.ROOT) is benchmarks.ROOT, p.name
+
+# the replay mesh's modules (issue 51: to be deleted): the live mesh must not need them
+REPLAY_MESH = [f"saim_mesh.{m}" for m in ("peer", "replay", "offline", "intake", "tickwait", "store", "storeq",
+                                          "batch", "keyfacts", "radios", "script", "inbox", "pacer")]
+
+
+def test_the_live_mesh_and_its_zygote_import_nothing_of_the_replay_mesh():
+    """saim_mesh/live/ and the zygote its EA peers fork from (what it preloads and warms
+    up: tests/test_zygote.py runs them) name none of the replay mesh's modules."""
+    bad = offenders("saim_mesh/live", REPLAY_MESH)
+    bad += [f"saim_mesh/zygote.py imports {m}" for m in sorted(imports(ROOT / "saim_mesh" / "zygote.py"))
+            if any(m == x or m.startswith(x + ".") for x in REPLAY_MESH)]
+    from saim_mesh import zygote
+    bad += [f"zygote.PRELOAD has {m}" for m in zygote.PRELOAD if m in REPLAY_MESH or m == "saim_mesh.fusion.peer"]
+    assert bad == []

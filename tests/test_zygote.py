@@ -60,28 +60,67 @@ def test_a_killed_launcher_leaves_no_orphan_peers(tmp_path):
 
 WARM = r"""
 import importlib, json, os, sys
-from saim_mesh import offline, zygote
+from saim_mesh import zygote
+from saim_mesh.live import warm
 for m in zygote.PRELOAD:
     importlib.import_module(m)
 tasks = sorted(os.listdir("/proc/self/task"))
 fresh = "ea_agent.domains.suo.needs" in sys.modules
-n = offline.warm(zygote.WARM_SCENARIO)
-print(json.dumps({"n": n, "tasks_before": tasks, "tasks_after": sorted(os.listdir("/proc/self/task")),
-                  "needs_before": fresh, "needs_after": "ea_agent.domains.suo.needs" in sys.modules}))
+n = warm.warm(zygote.WARM_SCENARIO)
+again = warm.warm(zygote.WARM_SCENARIO)
+problem = zygote.warm_up()   # what `serve` runs
+print(json.dumps({"n": n, "again": again, "problem": problem, "tasks_before": tasks,
+                  "tasks_after": sorted(os.listdir("/proc/self/task")), "needs_before": fresh,
+                  "needs_after": "ea_agent.domains.suo.needs" in sys.modules, "modules": sorted(sys.modules)}))
 """
+# the replay mesh's modules (issue 51): nothing on the live path may need them
+REPLAY = tuple(f"saim_mesh.{m}" for m in ("peer", "replay", "offline", "intake", "tickwait", "store", "storeq",
+                                          "batch", "keyfacts", "radios", "script", "inbox", "pacer"))
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/self/task is Linux's")
 @pytest.mark.timeout(120)
-def test_the_warm_up_runs_a_peer_and_leaves_no_thread_to_fork_under():
+def test_the_warm_up_runs_a_live_peer_and_leaves_no_thread_to_fork_under():
     """The zygote forks after its warm-up: a thread started there (Zenoh's runtime, a
-    pool) would be missing in every child, holding whatever lock it held."""
+    pool) would be missing in every child, holding whatever lock it held. The warm-up is
+    the live peer's (no replay mesh loaded), the same every time."""
     out = subprocess.run([sys.executable, "-c", WARM], capture_output=True, text=True, timeout=100)
     assert out.returncode == 0, out.stderr
     res = json.loads(out.stdout.strip().splitlines()[-1])
-    assert res["n"] > 100   # two minutes of the small scenario went through the peer
+    assert res["n"] > 1000 and res["again"] == res["n"]   # the sources' first half hour went through the peer
+    assert res["problem"] is None
     assert res["tasks_after"] == res["tasks_before"]
     assert not res["needs_before"] and res["needs_after"]   # code a peer imports on first use is in
+    assert "saim_mesh.live.peer" in res["modules"] and "saim_mesh.live.order" in res["modules"]
+    assert [m for m in REPLAY if m in res["modules"]] == []
+
+
+LIVE_PEER = r"""
+import importlib, json, sys
+from saim_mesh import zygote
+for m in zygote.PRELOAD:
+    importlib.import_module(m)
+zygote.warm_up()
+from saim_mesh.live import serve
+serve.serve = lambda peer, *a, **k: {}   # on the mesh: only Zenoh's wiring (imported above)
+from saim_mesh.cli import main
+code = main(["peer", "--scenario", str(zygote.WARM_SCENARIO), "--unit", "A", "--sources", "cp.A", "cp.BN",
+             "--out", sys.argv[1]])
+print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
+"""
+
+
+@pytest.mark.timeout(120)
+def test_a_live_peer_forked_from_the_zygote_loads_nothing_of_the_replay_mesh(tmp_path):
+    """What a forked EA peer of the live mesh runs (the zygote's imports and warm-up, then
+    `saim-mesh peer --sources`, up to its session) imports none of the replay mesh."""
+    out = subprocess.run([sys.executable, "-c", LIVE_PEER, str(tmp_path / "A.jsonl")], capture_output=True,
+                         text=True, timeout=100)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["code"] == 0
+    assert "saim_mesh.live.peer" in res["modules"]
+    assert [m for m in REPLAY if m in res["modules"]] == []
 
 
 def test_a_warm_up_that_fails_is_named_and_the_zygote_goes_on(tmp_path):

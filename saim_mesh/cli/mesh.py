@@ -80,7 +80,6 @@ def cmd_source(a) -> int:
 
 
 def cmd_peer(a) -> int:
-    from ..peer import main_peer
     from ..zconf import config
     sc = S.load(a.scenario, events=False)
     if a.unit not in sc.taskorg.units:
@@ -100,6 +99,7 @@ def cmd_peer(a) -> int:
             where = next((n for n, ep in eps.items() if ep in (a.connect or [])), "no router of the topology")
             misplaced = (f"EA of {sc.taskorg.units[a.unit].name} is attached to {where}, not to its command post's "
                          f"router {own}: its traffic crosses radio links it should not")
+    from ..peer import main_peer   # the replay mesh's peer: the live one never imports it
     return main_peer(sc, a.unit, conf, root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed, misplaced)
 
 
