@@ -754,3 +754,37 @@ def test_a_new_parameter_given_wrong_is_refused_naming_it(tmp_path, typ, params,
     with pytest.raises(S.ScenarioError) as e:
         scenario(tmp_path, [DEST_FAR, OBJ_MID, BP_HOME, CP_LINK], [mission("A1-x", "A1", typ, **params)])
     assert "A1-x" in str(e.value) and f"params.{field}" in str(e.value), str(e.value)
+
+
+def _post(tmp_path, leaves: bool):
+    """A1 holds the observation post BP-HOME; if `leaves`, it goes east at 5 m/s from t=300."""
+    watched = box("NAI-1", "area", 2000, -500, 3000, 500)
+    sc = scenario(tmp_path, [BP_HOME, watched], [mission("A1-op", "A1", "observe", position="BP-HOME",
+                                                         area="NAI-1")])
+    where = _east(5.0, 0.0, 300.0) if leaves else (lambda t: (0.0, 0.0))
+    return play(sc, path("A1", 10, 700, where) + stays("A2", 0, -3000, 10, 700) + [start(100, "A1-op", "A1")], 700)
+
+
+def test_observe_means_its_post_never_left_empty(tmp_path, monkeypatch):
+    fe = alerts_of(_post(tmp_path / "leaves", True), "friendly-expected")
+    assert fe and fe[0].t > 300 and "BP-HOME" in fe[0].message, [(a.t, a.message) for a in fe]
+    assert not alerts_of(_post(tmp_path / "holds", False), "friendly-expected")
+    as_base(monkeypatch, "observe")
+    assert not alerts_of(_post(tmp_path / "base", True), "friendly-expected")
+
+
+def _overwatching(tmp_path, v: float):
+    """A1 in BP-HOME overwatches A2, which moves east from x=0 at `v` m/s from t=100; band 0-1000 m."""
+    sc = scenario(tmp_path, [BP_HOME], [mission("A1-ow", "A1", "overwatch", position="BP-HOME", supported="A2",
+                                                band_m=[0, 1000])])
+    msgs = stays("A1", 0, 0, 10, 700) + path("A2", 10, 700, _east(v, 0.0, 100.0, -300.0)) + \
+        [start(100, "A1-ow", "A1")]
+    return play(sc, msgs, 700)
+
+
+def test_overwatch_means_the_overwatched_unit_kept_within_its_fires(tmp_path, monkeypatch):
+    band = alerts_of(_overwatching(tmp_path / "away", 5.0), "band")
+    assert band and band[0].subjects == ("A1", "A2") and band[0].t >= 280, [(a.t, a.message) for a in band]
+    assert not alerts_of(_overwatching(tmp_path / "near", 0.5), "band")
+    as_base(monkeypatch, "overwatch")
+    assert not alerts_of(_overwatching(tmp_path / "base", 5.0), "band")
