@@ -107,6 +107,13 @@ def _time_problem(params: dict, key: str) -> tuple[str, str] | None:
     return None
 
 
+def _post_by(mission, ctx, place: str, rule: str) -> None:
+    """With an optional `by` time, the unit is at `place` (by `rule`) by then: what a move, a
+    seize and an occupy are for (being there when the plan needs it), not only at the end."""
+    if mission.params.get("by") is not None:
+        ctx.post_deadline(mission, float(mission.params["by"]), mission.params[place], rule)
+
+
 def _positive_problem(params: dict, key: str, expected: str) -> tuple[str, str] | None:
     """What is wrong with an optional parameter `key` that must be a number > 0, if anything."""
     v = params.get(key)

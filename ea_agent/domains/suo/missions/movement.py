@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-from .base import Mission, _positive_problem, _STANDOFF, _band_problem, _checks, _time_problem, mission
+from .base import Mission, _positive_problem, _post_by, _STANDOFF, _band_problem, _checks, _time_problem, mission
 
 
 class MovementMission(Mission):
@@ -80,8 +80,7 @@ class Move(MovementMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
-        if self.params.get("by") is not None:
-            ctx.post_deadline(self, float(self.params["by"]), self.params["destination"], self.LOCATION_RULE)
+        _post_by(self, ctx, "destination", self.LOCATION_RULE)
 
 
 @mission

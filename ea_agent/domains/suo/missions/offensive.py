@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _checks, _positive_problem, _time_problem, mission
+from .base import Mission, _checks, _positive_problem, _post_by, _time_problem, mission
 
 
 class OffensiveMission(Mission):
@@ -100,8 +100,7 @@ class Seize(OffensiveMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
-        if self.params.get("by") is not None:
-            ctx.post_deadline(self, float(self.params["by"]), self.params["objective"], self.FINAL_RULE)
+        _post_by(self, ctx, "objective", self.FINAL_RULE)
 
 
 @mission

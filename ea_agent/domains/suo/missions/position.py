@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .base import Mission, _positive_problem, _band_problem, _checks, _time_problem, _window_problem, mission
+from .base import Mission, _positive_problem, _post_by, _band_problem, _checks, _time_problem, _window_problem, mission
 
 
 class PositionMission(Mission):
@@ -72,8 +72,7 @@ class Occupy(PositionMission):
 
     def location_constraints(self, ctx):
         super().location_constraints(ctx)
-        if self.params.get("by") is not None:
-            ctx.post_deadline(self, float(self.params["by"]), self.params["position"], "all")
+        _post_by(self, ctx, "position", "all")
 
 
 @mission
