@@ -80,6 +80,8 @@ ROWS: dict[str, Row] = {
                                      ("unwanted worst", "summary.unwanted_share_worst"),
                                      ("unwanted FLASH", "summary.unwanted_flash_total"),
                                      ("delay p95 worst s", "summary.delay_s_p95_worst"),
+                                     ("new-opportunity recall", "summary.by_type.new-opportunity.recall"),
+                                     ("shown/h unacknowledged worst", "summary.armed.none.shown_per_commander_hour_worst"),
                                      ("met", "summary.met"))),
     "console": Row("scripts/bench_console", "the commander's console on the battalion mesh: alerts and notices "
                    "shown, render latency, first paint", "what the EAs raised, render p99 <= 100 ms",
