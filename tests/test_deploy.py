@@ -111,7 +111,7 @@ BAD = [   # (what the file says, the one line expected)
     (BASE.replace('"A1", "A2"', '"A1", "M"'), "host 'A': eas: M runs on two hosts (BN and A)"),
     (BASE.replace('"A1", "A2"', '"A1", "A1S1"'), "'A1S1' is not a unit that runs an EA peer"),
     (BASE.replace('"cp.B", ', ''), "source cp.B runs on no host"),
-    (BASE.replace('"cp.B", ', '"cp.B", "cp.X", '), "host 'A': sources: 'cp.X' is not a command post's source"),
+    (BASE.replace('"cp.B", ', '"cp.B", "cp.X", '), "host 'A': sources: 'cp.X' is not a command post's or a fusion node's source"),
     (BASE.replace('links = ["r-BN"]', 'links = ["r-XX"]'), "router 'r-A': links to 'r-XX': no such router"),
     (BASE.replace('host = "A"', 'host = "Q"'), "router 'r-A': host 'Q' is not a host of this file"),
     (BASE.replace('cp = "A"', 'cp = "Q"'), "router 'r-A': cp 'Q' is not a unit of"),
