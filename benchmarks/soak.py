@@ -130,11 +130,12 @@ class Attackers(threading.Thread):
 
     def _session(self, name: str):
         from saim_mesh.zconf import config
-        return zenoh.open(config([], [self.ep], pki=self.pki, name=name, sc=self.sc, root=self.root, mode="client"))
+        return zenoh.open(config([], [self.ep], pki=self.pki, name=name, sc=self.sc, root=self.root, mode="client",
+                                routers=["hub"]))   # its relay: the mesh's one router
 
     def _forge(self, rnd: random.Random, signer: SG.Signer) -> tuple[str, str, bytes]:
         """(kind sent, key, payload): one forged directive of a random kind."""
-        at = min(self.sc.duration_s - 1, self.clock() + 10.0)
+        at = min(self.sc.duration_s - 1, max(0.0, self.clock()) + 10.0)
         mission = rnd.choice(self.foreign)
         k_order, k_confirm = D.key(self.root, "A2", "order"), D.key(self.root, "A2", "confirm")
         n = signer.next_n()

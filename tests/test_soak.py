@@ -1,10 +1,14 @@
 """The soak's judges (benchmarks/soak.py) on crafted alert logs: a lost alert, one shown
 twice, one extra, a late one (equal, counted late), one inhibited by a lost source (left
-out), system problems (left out); the RSS growth of a process's last run only. The real
-soak of the live mesh is `scripts/soak` (bench/results/soak.json), too long for the suite."""
+out), system problems (left out); the RSS growth of a process's last run only. Then a real
+soak of the live mesh, shortened: the small battle at 60x with a few kills (the full one is
+`scripts/soak`, bench/results/soak.json)."""
 from __future__ import annotations
 
-from benchmarks.soak import growth_mb, judge, lost_declared, plan_key
+import pytest
+
+from benchmarks import ROOT
+from benchmarks.soak import growth_mb, judge, lost_declared, plan_key, soak
 
 
 def alert(t: float, id_: str, cat: str = "plan", **details) -> dict:
@@ -51,3 +55,18 @@ def test_rss_growth_of_the_last_run_in_the_second_half():
     flat = [(t, 1, 100 * mb) for t in range(0, 50)] + [(t, 2, 20 * mb) for t in range(50, 100)]
     assert growth_mb(flat, 50) == 0.0       # a restart's smaller start is not growth
     assert growth_mb([(t, 1, mb) for t in range(60, 65)], 50) is None   # too few samples to say
+
+
+@pytest.mark.timeout(240)
+def test_a_short_soak_of_the_live_mesh(tmp_path):
+    """The small battle at 60x through `mesh up` (secure): a few EAs and sources killed and
+    restarted, cp.C kept down past its silence limit, junk and forged directives; every
+    alert raised once and equal to the fault-free run's. `up` stops every child it started,
+    on failure too."""
+    res = soak(str(ROOT / "scenarios" / "small"), tmp_path / "mesh", 60.0, kills=3, every_s=6.0, hold="cp.C",
+               hold_at=1500.0, hold_s=None)
+    assert res["restarts"] >= 3 and res["held_down"]["eas_declaring_lost"] == res["held_down"]["eas_depending"]
+    assert res["rejects_by_kind"].get("directive") and res["rejects_by_kind"].get("signed"), res["rejects_by_kind"]
+    assert res["attacker_error"] is None and res["given_up"] == []
+    assert (res["alerts_lost"], res["duplicates"], res["alerts_extra"]) == (0, 0, 0), res["unequal_peers"]
+    assert res["alerts_equal_fault_free"]
