@@ -90,10 +90,10 @@ def lost_declared(got: dict[str, list[dict]], source: str) -> dict[str, float]:
     """EA -> wall time it declared `source` lost (its system-problem alert)."""
     out = {}
     for u, alerts in got.items():
-        w = [a["details"].get("declared_wall") for a in alerts if a["category"] == "system-problem"
+        w = [a["details"].get("declared_wall", 0.0) for a in alerts if a["category"] == "system-problem"
              and a["details"].get("event") == "source-lost" and a["subjects"][:1] == [source]]
         if w:
-            out[u] = min(x for x in w if x is not None) if any(x is not None for x in w) else 0.0
+            out[u] = min(w)
     return out
 
 
@@ -302,6 +302,7 @@ def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float,
     depends_on_hold = sorted(u for u, p in peers.items() if hold in p.get("depends", []))
     out = {
         "mesh": "live", "scenario": Path(scenario).name, "speed": speed, "peers": len(units), "sources": sources,
+        # 0: every EA peer said its summary and nothing was given up (up() runs in this process)
         "mesh_exit_code": 0 if len(peers) == len(units) and not res["given_up"] else 1, "secure": res["secure"],
         "wall_s": round(time.monotonic() - t_wall0, 1),
         "messages_sent": dict(sorted(att.sent.items())), "attacker_error": att.error,
