@@ -8,6 +8,9 @@ EA peer per unit advancing on its sources' watermarks), the recorded battle pace
   what fell due meanwhile marked late;
 - a junk publisher (identity `ea.C`, valid certificate) puts random bytes and garbage on
   the keys it may use that the peers hear (`dir/C/confirm`, `bye/C`, ...);
+- the radio link between company `--cut`'s router and the battalion's is cut for
+  `--cut-s` wall seconds (SIGUSR1 to its emulated link, SIGUSR2 heals): the EAs on each side
+  declare the sources across it lost, then catch up at the heal;
 - a forged-directive publisher (identity `console.A2`, valid certificate) orders and
   confirms missions of units A2 does not command, and signs directives as someone else
   or for keys it may not sign: every peer must refuse and count them.
@@ -20,9 +23,9 @@ subjects, message, priority and id; late ones count as equal and are counted in
 `late_alerts`); memory flat: `rss_second_half_growth_mb` (per process, over the second half
 of its last run) at most `RSS_GROWTH_MB`.
 
-The cut radio link is not exercised here: it needs routers per battalion command post
-(the brigade), which `scripts/bench_partition` runs. Not part of CI's default run:
-`scripts/soak`."""
+The mesh runs with two routers (the battalion's and company `--cut`'s, linked through an
+emulated link: `mesh up --topology FILE`); `--cut none` gives the one router of `mesh up`.
+Not part of CI's default run: `scripts/soak`."""
 from __future__ import annotations
 
 import argparse
@@ -119,8 +122,9 @@ class Attackers(threading.Thread):
     """Junk as `ea.C` on the keys it may put that peers hear, and forged directives as
     `console.A2`, until stopped. `clock()`: the mesh's event time now."""
 
-    def __init__(self, sc, pki: Path, root: str, endpoint: str, clock, rate_hz: float = 100.0):
+    def __init__(self, sc, pki: Path, root: str, endpoint: str, clock, router: str, rate_hz: float = 100.0):
         super().__init__(daemon=True)
+        self.router = router
         self.sc, self.pki, self.root, self.ep, self.clock, self.rate = sc, pki, root, endpoint, clock, rate_hz
         self.stop_ev = threading.Event()
         self.sent = Counter()
@@ -131,7 +135,7 @@ class Attackers(threading.Thread):
     def _session(self, name: str):
         from saim_mesh.zconf import config
         return zenoh.open(config([], [self.ep], pki=self.pki, name=name, sc=self.sc, root=self.root, mode="client",
-                                routers=["hub"]))   # its relay: the mesh's one router
+                                routers=[self.router]))   # its relay
 
     def _forge(self, rnd: random.Random, signer: SG.Signer) -> tuple[str, str, bytes]:
         """(kind sent, key, payload): one forged directive of a random kind."""
@@ -223,6 +227,29 @@ class Chaos(threading.Thread):
                 print(f"soak: killed {name}", flush=True)
 
 
+class Cut(threading.Thread):
+    """Cut the emulated link `name` at event time `at_t` for `for_s` wall seconds, then heal it."""
+
+    def __init__(self, sup, name: str, clock, at_t: float, for_s: float):
+        super().__init__(daemon=True)
+        self.sup, self.name, self.clock, self.at_t, self.for_s = sup, name, clock, at_t, for_s
+        self.stop_ev = threading.Event()
+        self.done: dict = {}
+
+    def run(self) -> None:
+        while self.clock() < self.at_t:
+            if self.stop_ev.wait(0.2):
+                return
+        pid = self.sup.procs[self.name].p.pid
+        os.kill(pid, signal.SIGUSR1)
+        self.done = {"link": self.name, "event_t": round(self.clock()), "cut_s": self.for_s, "healed": False}
+        print(f"soak: cut {self.name}", flush=True)
+        self.stop_ev.wait(self.for_s)
+        os.kill(pid, signal.SIGUSR2)
+        self.done["healed"] = True
+        print(f"soak: healed {self.name}", flush=True)
+
+
 class Sampler(threading.Thread):
     """Every process's RSS once a second: (wall, pid, kB) per name."""
 
@@ -247,14 +274,15 @@ def _rss_kb(pid: int) -> int:
     return 0
 
 
-def _endpoint(sup) -> str:
-    args = sup.procs["hub"].args
+def _endpoint(sup, router: str) -> str:
+    args = sup.procs[router].args
     return args[args.index("--listen") + 1]
 
 
 # ------------------------------------------------------------------------------- the run
 def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float, hold: str, hold_at: float,
-         hold_s: float | None, seed: int = 11, restarts: int = 10, timeout: float | None = None) -> dict:
+         hold_s: float | None, seed: int = 11, restarts: int = 10, timeout: float | None = None,
+         cut: str | None = None, cut_at: float = 3000.0, cut_s: float = 30.0) -> dict:
     """One soak of the live mesh; returns the result written to soak.json."""
     from saim_mesh import scenario as S
     from saim_mesh.live.up import cp_sources, up
@@ -269,19 +297,32 @@ def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float,
         raise ValueError(f"hold {hold}: not one of the sources {', '.join(sources)}")
     t_wall0 = time.monotonic()
     parts: dict = {}
+    top = sc.taskorg.root
+    hub, topology, link = "hub", None, None
+    if cut is not None:   # the battalion's router and company `cut`'s, linked through an emulated link
+        if sc.taskorg.parent.get(cut) != top:
+            raise ValueError(f"cut {cut}: not a unit directly under {top}")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        topology = out_dir / "soak-topology.toml"
+        topology.write_text(f'[[router]]\nname = "r-{top}"\ncp = "{top}"\n\n'
+                            f'[[router]]\nname = "r-{cut}"\ncp = "{cut}"\nlinks = ["r-{top}"]\n')
+        hub, link = f"r-{top}", {"delay_ms": 0.0}
 
     def on_started(sup, t0) -> None:
         clock = lambda: (time.time() - t0) * speed   # noqa: E731  the sources' shared event time
-        parts["attackers"] = Attackers(sc, out_dir / "pki", f"saim/{sc.name}/live", _endpoint(sup), clock)
+        parts["attackers"] = Attackers(sc, out_dir / "pki", f"saim/{sc.name}/live", _endpoint(sup, hub), clock, hub)
         parts["chaos"] = Chaos(sup, [*units, *sources], kills, every_s, random.Random(seed), clock, sc.duration_s,
                                hold, hold_at, hold_s)
         parts["sampler"] = Sampler(sup)
+        if cut is not None:
+            parts["cut"] = Cut(sup, f"link-r-{cut}-r-{top}", clock, cut_at, cut_s)
         for th in parts.values():
             th.start()
 
     try:
         res = up(scenario, None, out_dir, speed=f"{speed:g}", show=False, on_started=on_started,
-                 timeout=timeout or sc.duration_s / speed + 600, max_restarts=restarts)
+                 timeout=timeout or sc.duration_s / speed + 600, max_restarts=restarts,
+                 topology=str(topology) if topology else None, link=link)
     finally:
         for th in parts.values():
             th.stop_ev.set()
@@ -316,6 +357,7 @@ def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float,
                       "source_silence_s": silence, "eas_depending": depends_on_hold,
                       "eas_declaring_lost": sorted(declared),
                       "declared_after_s_max": round(max(declared.values()) - down, 2) if declared and down else None},
+        "cut": parts["cut"].done if cut is not None else None,
         "rebuilds": sum(p.get("rebuilds", 0) for p in peers.values()),
         **verdict,
         "peak_rss_mb": {n: round(max(k for *_, k in s) / 1024, 1) for n, s in sorted(sampler.samples.items()) if s},
@@ -344,11 +386,15 @@ def main(argv=None) -> int:
     ap.add_argument("--hold", default="cp.C", help="the source kept down past its silence limit")
     ap.add_argument("--hold-at", type=float, default=1800.0, help="event second it goes down")
     ap.add_argument("--hold-s", type=float, help="wall seconds it stays down (default: source_silence_s + 15)")
+    ap.add_argument("--cut", default="C", help="the company whose router's link is cut (none: one router)")
+    ap.add_argument("--cut-at", type=float, default=3000.0, help="event second the link is cut")
+    ap.add_argument("--cut-s", type=float, default=30.0, help="wall seconds it stays cut")
     ap.add_argument("--out-dir", default=str(ROOT / "out" / "soak"))
     ap.add_argument("--result", default=str(RESULTS / "soak.json"))
     ap.add_argument("--seed", type=int, default=11)
     a = ap.parse_args(argv)
-    res = soak(a.scenario, Path(a.out_dir), a.speed, a.kills, a.every, a.hold, a.hold_at, a.hold_s, a.seed)
+    res = soak(a.scenario, Path(a.out_dir), a.speed, a.kills, a.every, a.hold, a.hold_at, a.hold_s, a.seed,
+               cut=None if a.cut == "none" else a.cut, cut_at=a.cut_at, cut_s=a.cut_s)
     Path(a.result).parent.mkdir(parents=True, exist_ok=True)
     Path(a.result).write_text(json.dumps(res, indent=1) + "\n")
     print(json.dumps({k: v for k, v in res.items() if k not in ("killed", "peak_rss_mb")}, indent=1))
