@@ -60,13 +60,13 @@ def test_rss_growth_of_the_last_run_in_the_second_half():
 @pytest.mark.timeout(240)
 def test_a_short_soak_of_the_live_mesh(tmp_path):
     """The small battle at 60x through `mesh up` (secure): a few EAs and sources killed and
-    restarted, cp.C kept down past its silence limit, junk and forged directives; every
-    alert raised once and equal to the fault-free run's. `up` stops every child it started,
-    on failure too."""
+    restarted, cp.C kept down past its silence limit, company C's router link cut and
+    healed, junk and forged directives; every alert raised once and equal to the fault-free
+    run's. `up` stops every child it started, on failure too."""
     res = soak(str(ROOT / "scenarios" / "small"), tmp_path / "mesh", 60.0, kills=3, every_s=6.0, hold="cp.C",
-               hold_at=1500.0, hold_s=None)
+               hold_at=1500.0, hold_s=None, cut="C", cut_at=3000.0, cut_s=12.0)
     assert res["restarts"] >= 3 and res["held_down"]["eas_declaring_lost"] == res["held_down"]["eas_depending"]
     assert res["rejects_by_kind"].get("directive") and res["rejects_by_kind"].get("signed"), res["rejects_by_kind"]
-    assert res["attacker_error"] is None and res["given_up"] == []
+    assert res["attacker_error"] is None and res["given_up"] == [] and res["cut"]["healed"]
     assert (res["alerts_lost"], res["duplicates"], res["alerts_extra"]) == (0, 0, 0), res["unequal_peers"]
     assert res["alerts_equal_fault_free"]
