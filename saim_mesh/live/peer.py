@@ -528,7 +528,7 @@ class LivePeer:
             while True:
                 dt = self.dirs.pending[0][1].t if self.dirs.pending else math.inf
                 ct = self.held_cmds[0][0] if self.held_cmds else math.inf
-                if min(dt, ct) > lim:
+                if min(dt, ct) > lim or dt == ct == math.inf:   # nothing held is due (the bound may be inf)
                     break
                 if dt <= ct:   # a directive takes effect after the facts before its `at`, before those at it
                     tk = self.dirs.due(lim)
