@@ -131,9 +131,9 @@ ROWS: dict[str, Row] = {
     "sign": Row("scripts/bench_sign", "Ed25519 signing and verification per message, and the gate's cost",
                 "signed orders cheap beside the EA", lambda d: fig(d, ("sign us", "sign_cost_us"),
                                                                    ("verify us", "verify_cost_us"))),
-    "soak": Row("scripts/soak", "the mesh under crashes, junk and forged publishers",
+    "soak": Row("scripts/soak", "the live mesh under crashes, a source held down, junk and forged directives",
                 "no alert lost or twice, equal to the fault-free run, memory flat",
-                lambda d: fig(d, ("lost", "alerts_lost"), ("extra", "alerts_extra"),
+                lambda d: fig(d, ("lost", "alerts_lost"), ("twice", "duplicates"),
                               ("equal fault-free", "alerts_equal_fault_free"), ("restarts", "restarts"))),
     "tak": Row("scripts/bench_tak", "Cursor-on-Target encoding of the picture and alerts", "faster than the mesh "
                "produces them", lambda d: fig(d, ("alerts CoT/s", "alerts.events_per_s"))),

@@ -56,6 +56,7 @@ ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded r
 DATA = frozenset((M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
                   M.Reorganization))
 LOCATION = M.LocationReport
+TRACK = M.SensorTrack
 
 
 @dataclass
@@ -308,6 +309,8 @@ class LivePeer:
             unit_of = self.sc.taskorg.entity_unit.get
             reported.update(u for e in {m.entity for m in items if type(m) is LOCATION}
                             if (u := unit_of(e)) is not None)
+        if TRACK in kinds:   # a lost source's hostile tracks stand still where it last saw them
+            reported.update(m.track for m in items if type(m) is TRACK)
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             if not retrying:
@@ -503,8 +506,9 @@ class LivePeer:
         self.before_loss[source] = BeforeLoss(n, ea, order, pending, cmds)
 
     def _inhibit_unknown(self, source: str) -> None:
-        """While the loss stands, what the EA concludes about the units the source reported
-        (silent, late, off their route) rests on a picture it knows to be partial, as the
+        """While the loss stands, what the EA concludes about the units and hostile tracks
+        the source reported (silent, late, off their route; a contact with a track that
+        moved on) rests on a picture it knows to be partial, as the
         system problem says: those alerts are inhibited by it (logged, marked, not shown as
         new; docs/console.md). When the source is back the rebuilt EA raises what really
         fell due, shown, marked late. Rules of at most 64 units."""
@@ -534,7 +538,7 @@ class LivePeer:
             while True:
                 dt = self.dirs.pending[0][1].t if self.dirs.pending else math.inf
                 ct = self.held_cmds[0][0] if self.held_cmds else math.inf
-                if min(dt, ct) > lim:
+                if min(dt, ct) > lim or dt == ct == math.inf:   # nothing held is due (the bound may be inf)
                     break
                 if dt <= ct:   # a directive takes effect after the facts before its `at`, before those at it
                     tk = self.dirs.due(lim)
