@@ -216,11 +216,11 @@ CASES = [
     # trigger keys its kind does not read, overlay properties the loader reads elsewhere or misspelt
     ("block-unknown-param", plan(lambda p: mission(p, "B1-defend")["params"].update(rear_line="PL-BLUE-B")),
      ["plan.json: plans.main[11] (B1-defend)", "field 'params.rear_line'", "unknown parameter of block",
-      "block knows area, engagement_area, expect_hostile_by, line, position, voi"]),
+      "block knows area, engagement_area, expect_hostile_by, fires, line, position, voi"]),
     ("move-param-typo", plan(lambda p: mission(p, "A1-move")["params"].update(routee=mission(p, "A1-move")
                                                                                ["params"].pop("route"))),
      ["(A1-move)", "field 'params.routee'", "unknown parameter of move", "did you mean 'route'?",
-      "checkpoints, destination, route, voi"]),
+      "by, checkpoints, destination, fires, route, voi"]),
     ("required-param-typo", plan(lambda p: mission(p, "A1-attack")["params"].update(
         objectiv=mission(p, "A1-attack")["params"].pop("objective"))),
      ["(A1-attack)", "field 'params.objectiv'", "unknown parameter of attack", "did you mean 'objective'?"]),
