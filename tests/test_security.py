@@ -254,8 +254,14 @@ def test_access_control_for_any_task_organization(units, groups):
     ids = [r["id"] for r in acl["rules"]]
     assert len(ids) == len(set(ids))
     cns = [cn for s in acl["subjects"] for cn in s["cert_common_names"]]
-    # replay, observer, console, tak; an EA and a live source (cp.<unit>) per unit
-    assert len(cns) == len(set(cns)) == 2 * len(units) + len(groups) + 4
+    # replay, observer, console, tak; an EA and a live source (cp.<unit>) per unit; a fusion
+    # node and its live source (fusion.<group>) per sensor group
+    assert len(cns) == len(set(cns)) == 2 * len(units) + 2 * len(groups) + 4
+    for g in groups:   # a fusion node's source puts its own stream, and no one else's
+        assert allowed(acl, f"source.fusion.{g}", "ingress", "put", f"saim/h/src/fusion.{g}")
+        assert all(not allowed(acl, f"source.fusion.{h}", "ingress", "put", f"saim/h/src/fusion.{g}")
+                   for h in groups - {g})
+        assert all(not allowed(acl, f"source.cp.{u}", "ingress", "put", f"saim/h/src/fusion.{g}") for u in units)
     for u in units:   # each EA puts its own alerts, and no one else's; each source its own stream
         assert allowed(acl, f"ea.{u}", "ingress", "put", f"saim/h/alert/{u}/t")
         assert all(not allowed(acl, f"ea.{v}", "ingress", "put", f"saim/h/alert/{u}/t") for v in units - {u})
