@@ -88,7 +88,8 @@ EA_FILES = (".jsonl", ".input", ".notify.jsonl", ".cmdlog")   # an EA's alert lo
 def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show: bool = True,
              timeout: float | None = 1800.0, until_done: bool = True, on_started=None, start: float | None = None,
              paced_start: float | None = None, link: dict | None = None, console_linger: float = 30.0,
-             max_restarts: int = 10, fresh: bool | None = True) -> dict:
+             max_restarts: int = 10, fresh: bool | None = True,
+             pki_said: tuple[str, str] | None = None) -> dict:
     """Start `host`'s processes and supervise them (see the module's docstring).
 
     `start` (live): the wall time of event time 0 (default: the file's, else the one
@@ -99,7 +100,8 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     (delay_ms, loss; processes link-<lower>-<upper>: SIGUSR1 cuts, SIGUSR2 heals).
     `fresh`: True deletes what an earlier run left in `out_dir` (EA logs and journals,
     the sources' state); None keeps it when it belongs to this deployment (a restart:
-    `restart_state`), else deletes it."""
+    `restart_state`), else deletes it. `pki_said`: (who, how) for the one line that names a
+    missing certificate (`mesh up --pki`: its own command to make them)."""
     from ..live.up import show_alerts, table
     from ..net import routed
     from ..net import topology as T
@@ -118,7 +120,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     colours = COLOURS if sys.stdout.isatty() else None
     secure = ["--pki", str(dep.pki)] if dep.secure else []
     if dep.secure:
-        _check_pki(dep, host)
+        _check_pki(dep, host, *(pki_said or ()))
     topo = dep.topology()
     topo.top = dep._top(to)
     resolved = out_dir / "topology.json"
@@ -322,16 +324,17 @@ def _share_args(sc) -> dict[str, list[str]]:
     return {n: s.args() for n, s in cp_shares(sc).items()}
 
 
-def _check_pki(dep: Deployment, host: str) -> None:
+def _check_pki(dep: Deployment, host: str, who: str | None = None,
+               how: str = "make the certificates with saim-mesh certs --deploy FILE") -> None:
     """Every identity this host runs has its certificate (Zenoh's connecting side would
-    retry forever in silence: ../shared/notes/zenoh-security.md)."""
+    retry forever in silence: ../shared/notes/zenoh-security.md). `who` and `how` say, in
+    the one line, who asked and how to make what is missing (`mesh up --pki` says its own)."""
     from ..security.pki import SecurityError, check_identity
     for ident in identities(dep, host):
         try:
             check_identity(dep.pki, ident)
         except SecurityError as e:
-            raise SecurityError(f"host {host}: {e} (make the certificates with saim-mesh certs --deploy FILE)") \
-                from None
+            raise SecurityError(f"{who or f'host {host}'}: {e} ({how})") from None
 
 
 def identities(dep: Deployment, host: str) -> list[str]:
