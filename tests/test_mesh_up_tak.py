@@ -14,7 +14,7 @@ from saim_mesh.tak import cot as C
 from saim_mesh.zconf import free_port
 
 from .conftest import SMALL
-from .test_tak_gateway import GROUP, Receivers, cot_alert, ea_alert
+from .test_tak_gateway import GROUP, Receivers, ea_alert, tcp_plan_alerts
 
 pytestmark = pytest.mark.timeout(400)
 UNITS = ["A", "A2"]
@@ -36,8 +36,7 @@ def test_mesh_up_tak_sends_every_alert_as_cot(tmp_path, proto):
         assert len(want) >= 5
 
         def alerts():
-            return sorted((a for s, d in rx.got if s == "tcp" for a in [cot_alert(d)] if a is not None
-                           and a["id"] and "/w" not in a["id"]), key=json.dumps)
+            return tcp_plan_alerts(rx.got)
         assert rx.wait(lambda g: len(alerts()) >= len(want), 30), (len(alerts()), len(want))
         assert alerts() == want
         raw = [d for s, d in rx.got if s == "tcp"]

@@ -59,6 +59,13 @@ def cot_alert(b: bytes) -> dict | None:
             "t": round(float(s["t"]), 3)}
 
 
+def tcp_plan_alerts(got) -> list[dict]:
+    """The plan's alerts a TAK server took over TCP (not the wall clock's `/w` ones), sorted
+    as `ea_alert`s are, to compare with the EAs' own logs."""
+    return sorted((a for s, d in got if s == "tcp" for a in [cot_alert(d)] if a is not None
+                   and a["id"] and "/w" not in a["id"]), key=json.dumps)
+
+
 def ea_alert(a: dict) -> dict:
     return {"id": a["details"].get("id", ""), "owner": a["owner"], "type": a["type"], "priority": a["priority"],
             "category": a["category"], "subjects": list(a["subjects"]), "message": a["message"],

@@ -332,13 +332,15 @@ def add(sub) -> None:
                     help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
     me.add_argument("--insecure", action="store_true",
                     help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
-    me.add_argument("--pki", metavar="DIR", help="the mesh's certificates (saim-mesh certs SCENARIO --out DIR --routers "
-                    "hub; with --topology its routers' names); default: a test PKI made under OUT_DIR/pki")
+    me.add_argument("--pki", metavar="DIR",
+                    help="the mesh's certificates (saim-mesh certs SCENARIO --out DIR --routers hub; with --topology "
+                         "its routers' names); default: a test PKI made under OUT_DIR/pki")
     me.add_argument("--restarts", type=_count, default=10, metavar="N",
                     help="restart each process that dies (EA peer, source, router, console; with --replay the "
                          "replay, fusion nodes, EA peers, routers, TAK gateway) up to N times (default 10), then "
                          "give up on it with one line and go on without it (0: never restart)")
-    me.add_argument("--root", help="key-expression root (default saim/<scenario>/live; --replay: saim/<scenario>/<pid>)")
+    me.add_argument("--root",
+                    help="key-expression root (default saim/<scenario>/live; --replay: saim/<scenario>/<pid>)")
     me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
                     help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
     me.add_argument("--tak", nargs="+", metavar="URL",
