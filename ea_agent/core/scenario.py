@@ -19,7 +19,7 @@ from shapely.geometry import shape
 
 from . import messages as M
 from .geo import Projection
-from .plan import PlanSpec, TaskOrg
+from .plan import PlanSpec, TaskOrg, TimeConstraint
 
 _NOT_IN_CHUNK = re.compile(r"[/*#?$\s]")
 MAX_DURATION_S = 7 * 86400.0   # a week of scenario time: far more than an operation, bounded so nothing spins
@@ -62,6 +62,19 @@ def number(v: Any, where: str, name: str, positive: bool = False) -> float:
     if v < 0 or positive and v == 0:
         raise ScenarioError(f"{where}: field '{name}': must be {'> 0' if positive else '>= 0'} (got {v})")
     return float(v)
+
+
+def time_constraint(d: Any, where: str, allowed: tuple[str, ...]) -> TimeConstraint:
+    """A mission's start or end constraint (`{"type": ..., "t": ...}`; None: unconstrained),
+    read the same way by every domain."""
+    if d is None:
+        return TimeConstraint()
+    typ = need(d, "type", where, str)
+    if typ not in allowed:
+        raise ScenarioError(f"{where}: field 'type': {typ!r} not one of {', '.join(allowed)}")
+    if typ in ("ASAP", "ON-ORDER"):
+        return TimeConstraint(typ)
+    return TimeConstraint(typ, number(need(d, "t", where, (int, float)), where, "t"))
 
 
 def read_json(p: Path) -> Any:

@@ -16,13 +16,12 @@ import numpy as np
 import shapely
 
 from ea_agent.core.config import ConfigError
-from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg,
-                                TimeConstraint, Unit)
+from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit)
 
 from ea_agent.core.alert import Alert
 from ea_agent.core.geo import Projection
 from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need as _need,  # noqa: F401
-                                    number as _number, read_events, read_json as _read_json)
+                                    number as _number, read_events, read_json as _read_json, time_constraint)
 
 from . import messages as M
 from .detect.windows import param_problem as window_problem
@@ -152,20 +151,6 @@ def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
             check_key_chunk(owner, where, "owner")
         out[fid] = ControlMeasure(fid, kind, owner, xy, area, dict(props))
     return out
-
-
-def _tc(d: Any, where: str, allowed: tuple[str, ...]) -> TimeConstraint:
-    if d is None:
-        return TimeConstraint()
-    typ = _need(d, "type", where, str)
-    if typ not in allowed:
-        raise ScenarioError(f"{where}: field 'type': {typ!r} not one of {', '.join(allowed)}")
-    if typ in ("ASAP", "ON-ORDER"):
-        return TimeConstraint(typ)
-    t = _need(d, "t", where, (int, float))
-    if not math.isfinite(t) or t < 0:
-        raise ScenarioError(f"{where}: field 't': must be a finite time >= 0")
-    return TimeConstraint(typ, float(t))
 
 
 def _unit_ref(v: Any, where: str, name: str, ids: set[str] | dict) -> str:
@@ -322,8 +307,8 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
                 raise ScenarioError(f"{where}: field 'after': expected a list of mission ids")
             if mid in after:
                 raise ScenarioError(f"{where}: field 'after': a mission cannot come after itself")
-            specs.append(MissionSpec(mid, unit, typ, _tc(m.get("start"), where + " start", START_TYPES),
-                                     _tc(m.get("end"), where + " end", END_TYPES), tuple(after), params))
+            specs.append(MissionSpec(mid, unit, typ, time_constraint(m.get("start"), where + " start", START_TYPES),
+                                     time_constraint(m.get("end"), where + " end", END_TYPES), tuple(after), params))
         for s in specs:
             for a in s.after:
                 if a not in mids:

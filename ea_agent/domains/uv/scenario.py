@@ -14,9 +14,9 @@ import numpy as np
 import shapely
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, TimeConstraint, Unit
+from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit
 from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need, number, read_events,
-                                    read_json)
+                                    read_json, time_constraint)
 
 from . import messages as M   # registers the uv-* message kinds with the core codec
 from .missions import REGISTRY
@@ -93,17 +93,6 @@ def load_world(p: Path, proj: Projection) -> dict[str, Place]:
         shapely.prepare(xy)
         out[fid] = Place(fid, kind, xy, dict(props))
     return out
-
-
-def _tc(d: Any, where: str, allowed: tuple[str, ...]) -> TimeConstraint:
-    if d is None:
-        return TimeConstraint()
-    typ = need(d, "type", where, str)
-    if typ not in allowed:
-        raise ScenarioError(f"{where}: field 'type': {typ!r} not one of {', '.join(allowed)}")
-    if typ in ("ASAP", "ON-ORDER"):
-        return TimeConstraint(typ)
-    return TimeConstraint(typ, number(need(d, "t", where, (int, float)), where, "t"))
 
 
 def _units(doc: dict, p: Path) -> TaskOrg:
@@ -208,8 +197,8 @@ def load_plan(p: Path, world: dict[str, Place], targets: set[str] | None) -> tup
                 raise ScenarioError(f"{where}: field 'after': expected a list of mission ids")
             if mid in after:
                 raise ScenarioError(f"{where}: field 'after': a mission cannot come after itself")
-            specs.append(MissionSpec(mid, unit, typ, _tc(m.get("start"), where + " start", START_TYPES),
-                                     _tc(m.get("end"), where + " end", END_TYPES), tuple(after), params))
+            specs.append(MissionSpec(mid, unit, typ, time_constraint(m.get("start"), where + " start", START_TYPES),
+                                     time_constraint(m.get("end"), where + " end", END_TYPES), tuple(after), params))
         mids = {s.id for s in specs}
         for s in specs:
             for a in s.after:
