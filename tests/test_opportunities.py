@@ -10,7 +10,8 @@ import pytest
 
 from ea_agent.domains.suo import generator as G
 from ea_agent.domains.suo.detect import CATEGORY
-from ea_agent.domains.suo.generator import DURATION, Hostile
+from ea_agent.domains.suo.battle_plan import DURATION
+from ea_agent.domains.suo.sim import Hostile
 from saim_mesh import scenario as S
 from saim_mesh.evaluate import score
 from saim_mesh.evaluate_seeds import by_type_summary

@@ -15,7 +15,8 @@ from ea_agent.core.alert import Alert
 from ea_agent.core.geo import Projection
 from ea_agent.domains.suo import generator as G
 from ea_agent.domains.suo import oracle as O
-from ea_agent.domains.suo.generator import Hostile
+from ea_agent.domains.suo.battle_plan import LANE_X, WITHDRAW_Y
+from ea_agent.domains.suo.sim import Hostile, sensor_pos
 from saim_mesh.evaluate import _no_news
 from saim_mesh.fusion import KalmanNode, make_node
 from saim_mesh.fusion.tracker import KalmanTracker
@@ -49,7 +50,7 @@ def test_a_far_group_is_absent_only_where_hostiles_are_sensed(base):
     far = Hostile("HF", [0.0, 5400.0], [-20000.0, -20000.0], [40000.0, 40000.0], 5, 0.0)
     for t in (500.0, 2000.0, 4000.0):
         for sid, r in ALL_SENSORS:   # really out of every sensor's reach
-            sx, sy = G.sensor_pos(base[0], sid, t)
+            sx, sy = sensor_pos(base[0], sid, t)
             assert math.hypot(sx + 20000.0, sy - 40000.0) > r + O.REACH_M
     sensed, unsensed = truth(base, [far], ALL_SENSORS), truth(base, [far])
     for t in (500.0, 2000.0, 4000.0):
@@ -234,7 +235,7 @@ def test_an_ordered_battle_switches_plans_in_its_events(battles):
     missions = [e for e in ev if e["kind"] == "mission"]
     assert missions and not [e for e in missions if e["mission"] in main and e["t"] > t]
     assert any(e["mission"] in main for e in missions)
-    assert sorted(sim.withdraw) == sorted(G.LANE_X)
+    assert sorted(sim.withdraw) == sorted(LANE_X)
     for p, (leave, arrive) in sim.withdraw.items():
         assert t < leave < arrive
         starts = [e for e in missions if e["mission"] == f"{p}-withdraw" and e["phase"] == "start"]
@@ -250,7 +251,7 @@ def test_an_early_order_drops_the_main_plans_later_confirmations(monkeypatch):
     def draw(sim, rng):
         draw_battle(sim, rng)
         sim.order = {"t": 3000.0, "plan": "withdrawal", "issuer": "BN"}
-        sim.withdraw = {p: (3050.0, 3850.0) for p in G.LANE_X}
+        sim.withdraw = {p: (3050.0, 3850.0) for p in LANE_X}
     draw_battle = random_battle.draw_battle
     monkeypatch.setattr(random_battle, "draw_battle", draw)
     ordered = G.build_sim(small=True, seed=3, incidents="random")
@@ -260,7 +261,7 @@ def test_an_early_order_drops_the_main_plans_later_confirmations(monkeypatch):
     main = {m["id"] for m in G.plan_doc(ordered)["plans"]["main"]}
     before = [c for c in plain.confirmations if c[0] <= 3000.0]
     assert [c for c in ordered.confirmations if c[1] in main] == before
-    withdraw = [(t, f"{p}-withdraw", p, ph) for p in G.LANE_X for t, ph in ((3050.0, "start"), (3850.0, "end"))]
+    withdraw = [(t, f"{p}-withdraw", p, ph) for p in LANE_X for t, ph in ((3050.0, "start"), (3850.0, "end"))]
     assert [c for c in ordered.confirmations if c[1] not in main] == sorted(withdraw)
 
 
@@ -296,8 +297,8 @@ def test_platoons_fall_back_to_phase_line_blue_after_leaving(battles):
         y_leave = float(np.interp(leave, ts, ys))
         assert sim.platoon_center(p, leave)[1] == pytest.approx(y_leave)
         assert sim.platoon_center(p, leave - 50.0)[1] == pytest.approx(float(np.interp(leave - 50.0, ts, ys)))
-        assert y_leave > G.WITHDRAW_Y
+        assert y_leave > WITHDRAW_Y
         walk = [sim.platoon_center(p, t)[1] for t in np.linspace(leave, arrive, 9)]
         assert all(a > b for a, b in zip(walk, walk[1:]))
-        assert walk[-1] == pytest.approx(G.WITHDRAW_Y)
-        assert sim.platoon_center(p, arrive + 100.0)[1] == pytest.approx(G.WITHDRAW_Y)
+        assert walk[-1] == pytest.approx(WITHDRAW_Y)
+        assert sim.platoon_center(p, arrive + 100.0)[1] == pytest.approx(WITHDRAW_Y)

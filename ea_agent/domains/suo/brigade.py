@@ -22,7 +22,11 @@ import numpy as np
 
 from ea_agent.core.geo import Projection
 
-from . import generator as G
+from .battle_plan import DURATION, EPSG, ORIGIN_LONLAT, SQUAD_DX, SQUAD_DY, overlay_features
+from .battle_plan import plan_doc as battalion_plan
+from .generator import events as battalion_events
+from .generator import lonlat_features, write_events
+from .sim import INCIDENTS, Hostile, Sim, build_sim, place_entities
 
 BATTALIONS = ("1", "2", "3")              # id prefixes: 1BN, 2BN, 3BN
 ORDINAL = {"1": "1st", "2": "2nd", "3": "3rd"}
@@ -47,7 +51,7 @@ def battalion_seeds(seed: int) -> list[int]:
 
 
 @dataclass
-class TroopSim(G.Sim):
+class TroopSim(Sim):
     """The brigade troops and HQ: leaves that hold their positions all battle long."""
     centers: dict[str, tuple[float, float]] = field(default_factory=dict)
 
@@ -63,7 +67,7 @@ class Part:
     """One battalion's battle (or the troops) placed in the brigade: `dx` east, ids prefixed."""
     prefix: str
     dx: float
-    sim: G.Sim
+    sim: Sim
 
     def gid(self, local: str) -> str:
         return self.prefix + local
@@ -101,8 +105,8 @@ def _troops(small: bool, seed: int, duration: float) -> tuple[TroopSim, list[dic
             for s in (1, 2, 3, 4):
                 u.append({"id": f"{p}S{s}", "name": f"{s} SQD, {i} PLT, {name}", "echelon": "squad",
                           "parent": p, "n": per_squad})
-                sim.centers[f"{p}S{s}"] = (x + G.SQUAD_DX[s - 1], y + G.SQUAD_DY[s - 1])
-    G.place_entities(sim, u, np.random.default_rng([seed, 14, 99]))
+                sim.centers[f"{p}S{s}"] = (x + SQUAD_DX[s - 1], y + SQUAD_DY[s - 1])
+    place_entities(sim, u, np.random.default_rng([seed, 14, 99]))
     sim.confirmations = sorted((0.0, m["id"], m["unit"], "start") for m in missions)
     return sim, feats, missions
 
@@ -136,7 +140,7 @@ class BrigadeSim:
     entity_leaf: dict[str, str] = field(default_factory=dict)
     entity_off: dict[str, tuple[float, float]] = field(default_factory=dict)
     report_phase: dict[str, float] = field(default_factory=dict)
-    hostiles: dict[str, G.Hostile] = field(default_factory=dict)
+    hostiles: dict[str, Hostile] = field(default_factory=dict)
     confirmations: list[tuple[float, str, str, str]] = field(default_factory=list)
     cffs: list[dict] = field(default_factory=list)
     mission_orders: list[dict] = field(default_factory=list)   # ON-ORDER missions ordered to start or end
@@ -166,11 +170,11 @@ class BrigadeSim:
 
 def build(small: bool = False, seed: int = 7) -> BrigadeSim:
     """The brigade's true battle (no events yet: cheap enough to count entities)."""
-    duration = SMALL_DURATION if small else G.DURATION
+    duration = SMALL_DURATION if small else DURATION
     troops, _f, _m = _troops(small, seed, duration)
     parts = [Part("", 0.0, troops)]   # first: BDE heads the task organization
     for k, (pre, s) in enumerate(zip(BATTALIONS, battalion_seeds(seed))):
-        sim = G.build_sim(small, s, "scripted" if k == 0 else "random", mult=1 if small else MULT,
+        sim = build_sim(small, s, "scripted" if k == 0 else "random", mult=1 if small else MULT,
                           plan_switch=False, report_s=REPORT_S)
         sim.duration = duration   # the small variant ends early: nothing after its end happens
         sim.confirmations = [c for c in sim.confirmations if c[0] <= duration]
@@ -196,7 +200,7 @@ def build(small: bool = False, seed: int = 7) -> BrigadeSim:
             b.report_phase[g] = part.sim.report_phase[e]
             b._where[g] = (part, e)
         for h in part.sim.hostiles.values():
-            b.hostiles[part.gid(h.id)] = G.Hostile(part.gid(h.id), h.ts, [x + part.dx for x in h.xs], h.ys,
+            b.hostiles[part.gid(h.id)] = Hostile(part.gid(h.id), h.ts, [x + part.dx for x in h.xs], h.ys,
                                                    h.strength, h.appear, h.vanish)
         b.confirmations += [(t, part.gid(m), part.gid(u), ph) for t, m, u, ph in part.sim.confirmations]
         b.mission_orders += [dict(o, mission=part.gid(o["mission"]), issuer=part.gid(o["issuer"]))
@@ -229,7 +233,7 @@ def overlay(b: BrigadeSim) -> list[dict]:
     """Every battalion's control measures (renamed, shifted), the troops' and the brigade's."""
     feats = []
     for part in b.battalions:
-        for f in G.overlay_features():
+        for f in overlay_features():
             p = dict(f["properties"], id=part.fid(f["properties"]["id"]))
             if "owner" in p:
                 p["owner"] = part.gid(p["owner"])
@@ -258,9 +262,9 @@ def plan_doc(b: BrigadeSim) -> dict:
     for d in to:
         d["entities"] = sorted(ents.get(d["id"], []))
     plans: dict[str, list] = {"main": [], "withdrawal": []}
-    fids = {f["properties"]["id"] for f in G.overlay_features()}
+    fids = {f["properties"]["id"] for f in overlay_features()}
     for part in b.battalions:
-        doc = G.plan_doc(part.sim)
+        doc = battalion_plan(part.sim)
         ids = {u["id"] for u in part.sim.units} | {m["id"] for pl in doc["plans"].values() for m in pl}
         rn = _renamer(part, fids, ids)
         for name, ms in doc["plans"].items():
@@ -273,7 +277,7 @@ def events(b: BrigadeSim, proj: Projection, ox: float, oy: float):
     """Every part's events (the battalion generator's), renamed, merged in time order."""
     streams = []
     for part in b.parts:
-        evs = G.events(part.sim, proj, ox + part.dx, oy)
+        evs = battalion_events(part.sim, proj, ox + part.dx, oy)
         if part.prefix:
             for e in evs:
                 for k in RENAMED_KEYS:
@@ -287,17 +291,17 @@ def write(out: Path, small: bool = False, seed: int = 7) -> dict:
     """Generate the brigade scenario folder `out`; returns a summary."""
     from . import oracle
     out.mkdir(parents=True, exist_ok=True)
-    proj = Projection(G.EPSG)
-    ox, oy = proj.to_xy(*G.ORIGIN_LONLAT)
+    proj = Projection(EPSG)
+    ox, oy = proj.to_xy(*ORIGIN_LONLAT)
     b = build(small, seed)
     feats = overlay(b)
-    meta = {"name": "brigade-small" if small else "brigade", "epsg": G.EPSG, "duration_s": b.duration,
+    meta = {"name": "brigade-small" if small else "brigade", "epsg": EPSG, "duration_s": b.duration,
             "generator": {"seed": seed, "small": small, "brigade": True}, "default_eas": DEFAULT_EAS,
             "description": "1st BDE: 1st, 2nd and 3rd BN side by side move to PL BLUE, attack and defend; "
                            "brigade troops hold the rear (Fort Irwin, UTM 11N)"}
     (out / "scenario.json").write_text(json.dumps(meta, indent=1) + "\n")
     (out / "overlay.geojson").write_text(json.dumps({"type": "FeatureCollection",
-                                                     "features": G.lonlat_features(feats, proj, ox, oy)}) + "\n")
+                                                     "features": lonlat_features(feats, proj, ox, oy)}) + "\n")
     plan = plan_doc(b)
     (out / "plan.json").write_text(json.dumps(plan, indent=1) + "\n")
     n = [0]
@@ -306,10 +310,10 @@ def write(out: Path, small: bool = False, seed: int = 7) -> dict:
         for e in evs:
             n[0] += 1
             yield e
-    G.write_events(out, counted(events(b, proj, ox, oy)))
+    write_events(out, counted(events(b, proj, ox, oy)))
     truth = oracle.ground_truth(b, feats, plan, meta["default_eas"])
     truth["incidents_injected"] = [
-        {"battalion": part.gid("BN"), "incidents": G.INCIDENTS if part.sim.incidents == "scripted" else part.sim.drawn,
+        {"battalion": part.gid("BN"), "incidents": INCIDENTS if part.sim.incidents == "scripted" else part.sim.drawn,
          "ids": f"the battalion's own: prefix {part.prefix!r} for units, missions and hostiles, "
                 f"'{part.prefix}-' for places"} for part in b.battalions]
     (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")

@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-from .generator import DURATION, LANE_X, WITHDRAW_Y, Hostile, Sim
+from .battle_plan import DURATION, LANE_X, WITHDRAW_Y
+from .sim import Hostile, Sim
 
 
 def draw_battle(sim: Sim, rng: np.random.Generator) -> None:
