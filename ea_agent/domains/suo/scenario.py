@@ -7,150 +7,29 @@ from __future__ import annotations
 
 import difflib
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import shapely
-
 from ea_agent.core.config import ConfigError
 from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit)
 
-from ea_agent.core.alert import Alert
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need as _need,  # noqa: F401
+from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, need as _need,  # noqa: F401
                                     number as _number, read_events, read_json as _read_json, time_constraint)
 
-from . import messages as M
+from .event_checks import EventContext, load_events
+from .overlay import ControlMeasure, article, load_overlay
 from .detect.windows import param_problem as window_problem
 from .missions import REGISTRY, ContingentMission, ReorganizationMission
 
+
 ECHELONS = ("brigade", "battalion", "company", "platoon", "squad")   # the SUO task organization's unit kinds
-AREA_KINDS = {"boundary", "objective", "battle-position", "assembly-area", "engagement-area", "area"}
-LINE_KINDS = {"route", "phase-line", "avenue-of-approach", "obstacle"}
-POINT_KINDS = {"decision-point", "checkpoint", "nai"}   # a Point with radius_m, or a Polygon
-KINDS = AREA_KINDS | LINE_KINDS | POINT_KINDS
-
-# The feature properties the loader reads. Any other property is the user's own description
-# (a name, a note: the console shows them all), except one spelled like these (`radius`,
-# `Width_M`, `widht_m`) or one of these where it is not read (`radius_m` on a polygon):
-# both would be silently ignored, so both are errors.
-OVERLAY_PROPS = {
-    "id": "unique id of the control measure",
-    "kind": "one of KINDS",
-    "owner": "optional unit whose plan holds it",
-    "width_m": "lines: width when used as an area (default 100; avenue-of-approach 500)",
-    "radius_m": "decision-point, nai, checkpoint given as a Point: radius (default 250)",
-}
-
-
-def _read_props(kind: str, geom_type: str) -> tuple[str, ...]:
-    """The OVERLAY_PROPS the loader reads for a feature of this kind and geometry."""
-    size = ("width_m",) if kind in LINE_KINDS else ("radius_m",) if kind in POINT_KINDS and geom_type == "Point" else ()
-    return ("id", "kind", "owner", *size)
-
-
-def _norm(key: str) -> str:
-    return re.sub(r"[^a-z0-9]", "", key.lower())
-
-
-_PROP_SPELLINGS = {**{_norm(k): k for k in OVERLAY_PROPS},   # `Width_M`, `radius-m`; `radius` (no unit)
-                   **{_norm(k[:-2]): k for k in OVERLAY_PROPS if k.endswith("_m")}}
-
-
-def _like_prop(key: str) -> str | None:
-    """The loader property `key` is a misspelling of (other case or punctuation, no unit
-    suffix, a typo), or None for a descriptive property of the user's own."""
-    hit = _PROP_SPELLINGS.get(_norm(key))
-    if hit is None and len(key) > 3:
-        close = difflib.get_close_matches(key.lower(), OVERLAY_PROPS, n=1, cutoff=0.85)
-        hit = close[0] if close else None
-    return hit
-
-
-def _a(word: str) -> str:
-    return f"{'an' if word[0] in 'aeio' else 'a'} {word}"
-
-
-def _check_props(props: dict, kind: str, geom_type: str, where: str) -> None:
-    """Nothing the loader would ignore: a property it reads only for other features, or a
-    misspelling of one (see OVERLAY_PROPS)."""
-    read = _read_props(kind, geom_type)
-    for k in props:
-        if k in read:
-            continue
-        if k in OVERLAY_PROPS:
-            raise ScenarioError(f"{where}: field '{k}': not read for {_a(kind)} {geom_type} "
-                                f"(it reads {', '.join(read)})")
-        like = _like_prop(k)
-        if like is not None:
-            raise ScenarioError(f"{where}: field '{k}': unknown property, spelled like {like!r} ({_a(kind)} "
-                                f"{geom_type} reads {', '.join(read)}; other properties are descriptive)")
-
-
-@dataclass(slots=True)
-class ControlMeasure:
-    """A named overlay feature in metres; `area` is what 'inside' means for it."""
-    id: str
-    kind: str
-    owner: str | None
-    geom: Any       # shapely geometry (projected)
-    area: Any       # polygon used for containment tests
-    props: dict = field(default_factory=dict)
 
 
 @dataclass
 class Scenario(ScenarioBase):
     overlay: dict[str, ControlMeasure] = field(default_factory=dict)
-
-
-def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
-    fc = _read_json(p)
-    feats = _need(fc, "features", p.name, list)
-    out: dict[str, ControlMeasure] = {}
-    for i, f in enumerate(feats):
-        where = f"{p.name}: feature {i}"
-        props = _need(f, "properties", where, dict)
-        fid = _need(props, "id", where, str)
-        if not fid:
-            raise ScenarioError(f"{where}: field 'id': empty")
-        where = f"{p.name}: feature {i} ({fid})"
-        kind = _need(props, "kind", where, str)
-        if kind not in KINDS:
-            raise ScenarioError(f"{where}: field 'kind': unknown kind {kind!r} (one of {', '.join(sorted(KINDS))})")
-        if fid in out:
-            raise ScenarioError(f"{where}: field 'id': duplicate id {fid!r}")
-        g = _need(f, "geometry", where, dict)
-        geom = lonlat_geometry(g, where)
-        want = {"Polygon"} if kind in AREA_KINDS else {"LineString"} if kind in LINE_KINDS else {"Point", "Polygon"}
-        if geom.geom_type not in want:
-            raise ScenarioError(f"{where}: field 'geometry': a {kind} must be {' or '.join(sorted(want))}, not {geom.geom_type}")
-        if not shapely.is_valid(geom):
-            raise ScenarioError(f"{where}: field 'geometry': invalid {geom.geom_type} "
-                                f"({shapely.is_valid_reason(geom)})")
-        _check_props(props, kind, geom.geom_type, where)
-        xy = shapely.transform(geom, lambda c: proj.to_xy_array(c))
-        if not np.isfinite(shapely.get_coordinates(xy)).all():
-            raise ScenarioError(f"{where}: field 'geometry': cannot be projected to EPSG:{proj.epsg} "
-                                f"(too far from the scenario's area)")
-        size = {k: _number(props[k], where, k, positive=True) for k in ("width_m", "radius_m")
-                if props.get(k) is not None}
-        if kind in AREA_KINDS or xy.geom_type == "Polygon":
-            area = xy
-        elif kind == "avenue-of-approach":
-            area = xy.buffer(size.get("width_m", 500.0) / 2.0)
-        elif kind in POINT_KINDS:
-            area = xy.buffer(size.get("radius_m", 250.0))
-        else:
-            area = xy.buffer(size.get("width_m", 100.0) / 2.0)
-        shapely.prepare(area)
-        owner = props.get("owner")
-        if owner is not None:
-            check_key_chunk(owner, where, "owner")
-        out[fid] = ControlMeasure(fid, kind, owner, xy, area, dict(props))
-    return out
 
 
 def _unit_ref(v: Any, where: str, name: str, ids: set[str] | dict) -> str:
@@ -334,7 +213,7 @@ def _check_trigger(tr: Any, where: str, overlay: dict, ids: set[str]) -> None:
         raise ScenarioError(f"{where}: field 'kind': {kind!r} not {' or '.join(kinds)}")
     for k in tr:
         if k not in kinds[kind]:
-            raise ScenarioError(f"{where}: field '{k}': not read by {_a(kind)} trigger "
+            raise ScenarioError(f"{where}: field '{k}': not read by {article(kind)} trigger "
                                 f"(it reads {', '.join(kinds[kind])})")
     _area_ref(_need(tr, "area", where), where, "area", overlay)
     if kind == "unit-at":
@@ -347,119 +226,6 @@ def _check_trigger(tr: Any, where: str, overlay: dict, ids: set[str]) -> None:
         ms = tr["min_strength"]
         if isinstance(ms, bool) or not isinstance(ms, int) or ms < 0:
             raise ScenarioError(f"{where}: field 'min_strength': expected an integer >= 0, got {ms!r:.40}")
-
-
-@dataclass
-class EventContext:
-    """What the events are checked against: every event must lie in [0, duration_s] and
-    name units, missions, plans and sensors that exist."""
-    duration_s: float = math.inf
-    taskorg: TaskOrg | None = None
-    plans: dict[str, PlanSpec] = field(default_factory=dict)
-    sensors: set[str] | None = None   # sensors of the fusion groups (None: no fusion in this scenario)
-
-    def __post_init__(self):
-        self.mission_units: dict[str, set[str]] = {}
-        for pl in self.plans.values():
-            for m in pl.missions:
-                self.mission_units.setdefault(m.id, set()).add(m.unit)
-        # strings already known to be good key chunks (ids checked by the plan loader)
-        self.good: set[str] = set(self.mission_units) | set(self.plans)
-        if self.taskorg is not None:
-            self.good |= set(self.taskorg.units) | set(self.taskorg.entity_unit)
-        self.good |= self.sensors or set()
-
-
-def _check_event(m, cx: EventContext, where: str) -> None:
-    """The scenario-level checks of one decoded event (the message checks its own fields)."""
-    if m.t > cx.duration_s:
-        raise ScenarioError(f"{where}: field 't': {m.t} is after the end of the scenario "
-                            f"(scenario.json duration_s = {cx.duration_s})")
-    k = type(m)
-    good = cx.good
-    if k is M.LocationReport:   # unknown entities are fine (the EA counts and drops them); their ids must be keys
-        if m.entity not in good:
-            good.add(check_key_chunk(m.entity, where, "entity"))
-        return
-    if k is M.SensorTrack:
-        if m.track not in good:
-            good.add(check_key_chunk(m.track, where, "track"))
-        return
-    if k is M.SensorHit:
-        if m.sensor not in good:
-            good.add(check_key_chunk(m.sensor, where, "sensor"))
-        if cx.sensors is None:
-            raise ScenarioError(f"{where}: field 'sensor': a sensor hit, but scenario.json has no fusion groups")
-        if m.sensor not in cx.sensors:
-            raise ScenarioError(f"{where}: field 'sensor': {m.sensor!r} is in no fusion group of scenario.json")
-        return
-    if k is Alert:
-        raise ScenarioError(f"{where}: field 'kind': an alert is an output of the EAs, not an input event")
-    units = cx.taskorg.units if cx.taskorg is not None else None
-
-    def unit(name: str) -> str:
-        v = getattr(m, name)
-        if v not in good:
-            good.add(check_key_chunk(v, where, name))
-        if units is not None and v not in units:
-            raise ScenarioError(f"{where}: field '{name}': unknown unit {v!r}")
-        return v
-
-    if k is M.MissionConfirm:
-        u = unit("unit")
-        if m.mission not in good:
-            good.add(check_key_chunk(m.mission, where, "mission"))
-        if units is not None:
-            owners = cx.mission_units.get(m.mission)
-            if owners is None:
-                raise ScenarioError(f"{where}: field 'mission': unknown mission {m.mission!r} (in no plan)")
-            if u not in owners:
-                raise ScenarioError(f"{where}: field 'unit': mission {m.mission!r} belongs to "
-                                    f"{' or '.join(sorted(owners))}, not to {u!r}")
-    elif k is M.Order:
-        unit("issuer")
-        if m.plan not in good:
-            good.add(check_key_chunk(m.plan, where, "plan"))
-        if units is not None and m.plan not in cx.plans:
-            raise ScenarioError(f"{where}: field 'plan': no plan named {m.plan!r} in plan.json")
-        if m.mission is not None and units is not None:
-            if m.mission not in good:
-                good.add(check_key_chunk(m.mission, where, "mission"))
-            owners = cx.mission_units.get(m.mission)
-            if owners is None:
-                raise ScenarioError(f"{where}: field 'mission': unknown mission {m.mission!r} (in no plan)")
-            phase = "start" if m.action == "start-mission" else "end"
-            if not any(getattr(ms, phase).type == "ON-ORDER" for pl in cx.plans.values() for ms in pl.missions
-                       if ms.id == m.mission):
-                raise ScenarioError(f"{where}: field 'mission': {m.mission!r} does not {phase} ON-ORDER "
-                                    f"(its plan says when)")
-            if not any(m.issuer in cx.taskorg.ancestors(u) for u in owners):
-                raise ScenarioError(f"{where}: field 'issuer': {m.issuer!r} is not a superior of "
-                                    f"{' or '.join(sorted(owners))}, whose mission {m.mission!r} it orders")
-    elif k is M.CallForFire or k is M.CallForFireConfirm:
-        unit("requester")
-        if m.cff not in good:
-            good.add(check_key_chunk(m.cff, where, "cff"))
-    elif k is M.Reorganization:
-        u, parent = unit("unit"), unit("new_parent")
-        if u == parent:
-            raise ScenarioError(f"{where}: field 'new_parent': a unit cannot be put under itself")
-        if cx.taskorg is not None and u == cx.taskorg.root:
-            raise ScenarioError(f"{where}: field 'unit': the top unit {u!r} cannot be resubordinated")
-    else:
-        raise ScenarioError(f"{where}: field 'kind': {m.KIND!r} is not a small-unit operations message")
-
-
-def load_events(root: Path, context: EventContext | None = None) -> list:
-    """The event script, time-ordered; with a `context` (as `load` gives) also checked
-    against the scenario: times within duration_s, known units, missions and plans."""
-    cx = context or EventContext()
-    dur, good, loc = cx.duration_s, cx.good, M.LocationReport
-
-    def check(m, where: str) -> None:
-        if not (type(m) is loc and m.t <= dur and m.entity in good):   # the common case, checked
-            _check_event(m, cx, where)
-    return read_events(root, check)
 
 
 def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list[str]] | None]:
