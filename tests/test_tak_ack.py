@@ -30,6 +30,7 @@ import takproto
 from saim_mesh import messages as M
 from saim_mesh import wire as W
 from saim_mesh.tak import acks as A
+from saim_mesh.tak.ack_send import AckSender, chat_event
 from saim_mesh.tak import cot as C
 from saim_mesh.tak.picture import Options, Picture
 from saim_mesh.tak.pli import PliIn, UidMap, load_uids
@@ -127,7 +128,7 @@ def test_what_is_not_an_acknowledgement_is_skipped_not_answered(small):
     same = geochat(BN_USER, "BRAVO6", "ack BN/3", message_id="m-1")
     assert take(g, same)[0]
     gw = f"{PREFIX}.gateway.cot"
-    ours = A.chat_event(gw, "SAIM small", A.Conversation(A.ALL_CHAT, A.ALL_CHAT, A.ALL_CHAT), "ACK BN/3: taken",
+    ours = chat_event(gw, "SAIM small", A.Conversation(A.ALL_CHAT, A.ALL_CHAT, A.ALL_CHAT), "ACK BN/3: taken",
                         -116.6, 35.2)
     for data in [geochat(BN_USER, "BRAVO6", "moving to PL RED"),           # talk
                  geochat(BN_USER, "BRAVO6", "ack, moving"),                # talk that starts like an ack
@@ -206,9 +207,9 @@ def test_the_mapped_unit_commands_the_owner_as_organized_now(small, tmp_path):
 
 def test_answers_are_geochat_that_atak_files_in_the_conversation():
     gw = f"{PREFIX}.gateway.cot"
-    room = A.chat_event(gw, "SAIM small", A.Conversation(A.ALL_CHAT, A.ALL_CHAT, A.ALL_CHAT), "ACK BN/3: taken",
+    room = chat_event(gw, "SAIM small", A.Conversation(A.ALL_CHAT, A.ALL_CHAT, A.ALL_CHAT), "ACK BN/3: taken",
                         -116.6, 35.2)
-    dm = A.chat_event(gw, "SAIM small", A.Conversation(BN_USER, "BRAVO6", BN_USER, "BRAVO6"), "ACK BN/3: taken",
+    dm = chat_event(gw, "SAIM small", A.Conversation(BN_USER, "BRAVO6", BN_USER, "BRAVO6"), "ACK BN/3: taken",
                       -116.6, 35.2)
     for b, dest in ((room, A.ALL_CHAT), (dm, BN_USER)):
         ev = C.parse(b)
@@ -248,7 +249,7 @@ def test_the_sender_answers_every_outcome_and_never_dies():
         raise RuntimeError("boom")
     conv = A.Conversation(A.ALL_CHAT, A.ALL_CHAT, A.ALL_CHAT)
     mk = lambda aid: A.Ack(aid, "BN", "BN", BN_USER, "BRAVO6", "chat", conv)   # noqa: E731
-    s = A.AckSender(send, reply, workers=1, max_pending=2, log=lambda *a, **k: None)
+    s = AckSender(send, reply, workers=1, max_pending=2, log=lambda *a, **k: None)
     try:
         for aid in ("BN/1", "BN/2", "BN/3", "BN/4"):
             assert s.submit(mk(aid))

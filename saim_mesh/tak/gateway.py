@@ -8,7 +8,7 @@ key), keeps the picture (`picture.Picture`, through `TakView`) and sends CoT thr
 replay mesh (`reader.TakFeed`, imported only then, going with it) PLI go out on
 `<root>/ingest/tak` instead. Acknowledgements from ATAK users (GeoChat `ack BN/12`, a
 `y-a-w` reply to an alert's CoT) go to the alert owner's EA as `ack` commands for the
-user's mapped unit (`acks.AckIn`, `acks.AckSender`); the EA's answer goes back to the
+user's mapped unit (`acks.AckIn`, `ack_send.AckSender`); the EA's answer goes back to the
 user in GeoChat.
 
 No liveliness token: the gateway is no EA, nothing waits for it."""
@@ -27,7 +27,8 @@ from ea_agent import domains
 from .. import messages as M
 from .. import wire as W
 from ..live.reader import LiveReader
-from .acks import AckIn, AckSender, chat_event
+from .ack_send import AckSender, chat_event
+from .acks import AckIn
 from .picture import Options, Picture
 from .pli import PliIn, load_uids
 from .options import DEFAULT_COT_URL, epoch_of
