@@ -387,7 +387,7 @@ def add(sub) -> None:
     tak_arguments(tk)
     _zenoh_args(tk)
     tk.set_defaults(fn=cmd_tak)
-    from ..net.linkemu import add_arguments as link_arguments, cmd_link
+    from ..net.link_cli import add_arguments as link_arguments, cmd_link
     li = sub.add_parser("link", help="an emulated radio link: a TCP proxy on loopback with delay, loss, "
                                      "cut (SIGUSR1) and heal (SIGUSR2)")
     link_arguments(li)
