@@ -24,13 +24,7 @@ noisy model (it may be anything). A slow aircraft was a ground vehicle to the si
 constant-velocity filter this replaces (0.5 m^2/s^3 under 40 m/s): an orbiting UAV got
 a new track at every turn.
 
-The dead-reckoning threshold (`dr_threshold`) scales with the track's class and speed:
-k times its steady model's position sigma plus `dr_lag_s` of its motion, and for ground
-tracks at least `dr_m` (k = 3 on the ground, 4 in the air), so what receivers hold
-between reports stays within about 1.5x of the tracker's own error at 5x fewer reports
-than hits; the check also looks `dr_ahead_s` ahead along the track's own models (a turn
-is told as it begins). An aircraft's report in a turn carries the chord of its next
-`chord_s` of arc as velocity (receivers extrapolate in straight lines).
+What is told of a track, and when (dead reckoning): `dead_reckoning.py`.
 
 A track is a group of entities seen together (a hostile unit) or a lone one: the hits
 of one scan that fall in a track's gate all update it, their count is its strength,
@@ -50,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .dead_reckoning import DeadReckoning, Report
 from .motion import I3, W0, arc, ct, cv_matrix, imm_mix, kf_update, mixing, mixture, q4
 
 
@@ -73,20 +68,6 @@ class Track:
     Ps: np.ndarray | None = None     # and covariance, 3 x 5 x 5 (x and P above: their mixture)
     mu: np.ndarray | None = None     # the models' probabilities
     Ps_upd: np.ndarray | None = None  # the models' covariances at the last update (a report's own sigma)
-
-
-@dataclass
-class Report:
-    """What the tracker says of one track: its state at its last update."""
-    t: float
-    track: str
-    x: float
-    y: float
-    vx: float
-    vy: float
-    strength: int
-    alt: float | None = None
-    domain: str = "ground"
 
 
 class KalmanTracker:
@@ -126,9 +107,8 @@ class KalmanTracker:
         self.gate, self.birth_m, self.v0 = gate, birth_m, max_speed_mps / 3.0
         self.m, self.n, self.drop_s, self.window_s = m, n, drop_s, window_s
         self.air_agl_m, self.air_mps = air_agl_m, air_mps
-        self.dr_m, self.dr_k, self.heartbeat_s, self.dr_lag_s = dr_m, dr_k, heartbeat_s, dr_lag_s
-        self.dr_m_air, self.dr_k_air, self.dr_ahead_s, self.chord_s = dr_m_air, dr_k_air, dr_ahead_s, chord_s
-        self.still_m, self.still_s = still_m, still_s
+        self.reckon = DeadReckoning(dr_m, dr_k, heartbeat_s, dr_lag_s, dr_m_air, dr_k_air, dr_ahead_s, chord_s,
+                                    still_m, still_s, air_agl_m, air_mps)   # what is told, and when
         self._steps: dict[float, tuple] = {}
         self.tracks: list[Track] = []
         self.seq = 0
@@ -336,36 +316,16 @@ class KalmanTracker:
             hopeless = not tr.confirmed and len(tr.seen) >= self.n and sum(tr.seen) < self.m
             if stale or hopeless:
                 if tr.confirmed:
-                    out.append(self._report(tr, 0))
+                    out.append(self.reckon.report(tr, 0))
                 continue
             keep.append(tr)
             if tr.confirmed and hit:
-                r = self._report(tr)
-                if self._news(tr, r):
+                r = self.reckon.report(tr)
+                if self.reckon.news(tr, r, self.mover(tr) == "air", lambda h, tr=tr: self._ahead(tr, h)):
                     tr.told = r
                     out.append(r)
         self.tracks = keep
         return out
-
-    def _news(self, tr: Track, r: "Report") -> bool:
-        """Whether receivers need this report: the first one, a new strength or domain, the
-        heartbeat, or their extrapolation of the last one (position + velocity x time) off
-        by more than `dr_threshold` now or `dr_ahead_s` ahead (dead reckoning; `dr_m` None:
-        every update is sent)."""
-        last = tr.told
-        if self.dr_m is None or last is None or (r.strength, r.domain) != (last.strength, last.domain):
-            return True
-        if r.t - last.t >= self.heartbeat_s:
-            return True
-        dt = r.t - last.t
-        lim = self.dr_threshold(tr)
-        if math.hypot(last.x + last.vx * dt - r.x, last.y + last.vy * dt - r.y) > lim:
-            return True
-        if self.dr_ahead_s <= 0:
-            return False
-        h = r.t + self.dr_ahead_s   # where it will be at the next look, by its own motion models
-        px, py = self._ahead(tr, h)
-        return math.hypot(last.x + last.vx * (h - last.t) - px, last.y + last.vy * (h - last.t) - py) > lim
 
     def _ahead(self, tr: Track, t: float) -> tuple[float, float]:
         """The track's expected position at `t` (its models' predictions, by their weights)."""
@@ -382,45 +342,8 @@ class KalmanTracker:
         return px, py
 
     def dr_threshold(self, tr: Track) -> float:
-        """How far the receivers' extrapolation may be off before a report is news: k x the
-        track's own position sigma (its steady model's: its noise is no news) plus
-        `dr_lag_s` of its motion (nor is an error of where it is a moment later), k by its
-        class (`dr_k` ground, `dr_k_air` air), at least `dr_m` for ground tracks (`dr_m_air`
-        in the air). A fast jet's threshold is wider than a slow aircraft's, an aircraft's
-        follows its own error where a ground unit's has a floor in metres."""
-        air = self.mover(tr) == "air"
-        P = tr.Ps_upd[0]
-        sig = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
-        speed = math.hypot(tr.x_upd[2], tr.x_upd[3])
-        floor, k = (self.dr_m_air, self.dr_k_air) if air else (self.dr_m, self.dr_k)
-        return max(floor, k * sig + self.dr_lag_s * speed)
+        """The dead-reckoning threshold of this track (`DeadReckoning.threshold`)."""
+        return self.reckon.threshold(tr, self.mover(tr) == "air")
 
     def domain(self, tr: Track) -> str:
-        """Air when it flies (height above `air_agl_m`) or moves faster than any ground
-        vehicle (`air_mps`); else ground."""
-        fast = math.hypot(tr.x_upd[2], tr.x_upd[3]) > self.air_mps
-        return "air" if fast or (tr.alt is not None and tr.alt > self.air_agl_m) else "ground"
-
-    def _halted(self, tr: Track) -> bool:
-        """Whether the track stands still: it moved less than `still_m` over the last
-        `still_s` (a net displacement, which the velocity's scan-to-scan noise does not
-        fake); a track younger than that: its velocity within twice its own sigma."""
-        old = [(t, x, y) for t, x, y in tr.trail if tr.t_upd - t >= self.still_s]
-        if old:
-            _, x0, y0 = old[-1]
-            return math.hypot(tr.x_upd[0] - x0, tr.x_upd[1] - y0) < self.still_m
-        return math.hypot(tr.x_upd[2], tr.x_upd[3]) < 2.0 * math.sqrt(max(float(tr.P[2, 2]), float(tr.P[3, 3])))
-
-    def _report(self, tr: Track, strength: int | None = None) -> Report:
-        x = tr.x_upd
-        vx, vy = float(x[2]), float(x[3])
-        if self._halted(tr):
-            vx = vy = 0.0   # receivers must not drift a halted group by its velocity noise
-        elif self.chord_s > 0 and abs(x[4]) * self.chord_s > 1e-3:
-            th = float(x[4]) * self.chord_s / 2.0   # the chord of the next chord_s of the arc
-            f = math.sin(th) / th
-            c, s_ = math.cos(th), math.sin(th)
-            vx, vy = f * (c * vx - s_ * vy), f * (s_ * vx + c * vy)
-        return Report(tr.t_upd, tr.id, float(x[0]), float(x[1]), vx, vy,
-                      max(tr.counts) if strength is None else strength,
-                      None if tr.alt is None else round(tr.alt, 1), self.domain(tr))
+        return self.reckon.domain(tr)
