@@ -9,7 +9,7 @@ everything):
     <prefix>hub        the bridge br0; port p<i> per host (its alias is the host's name)
     <prefix><host>     eth0 (the other end of p<i>) with 198.18.0.<i+1>/24, and lo up
 
-Cuts are nftables drop rules on the hub's bridge (table `bridge saim`, chain `cuts`):
+Cuts (`cuts.py`) are nftables drop rules on the hub's bridge (table `bridge saim`, chain `cuts`):
 frames of a cut host, or between two cut-apart hosts, vanish without an error on either
 side, like radio loss, so Zenoh finds out only when its lease expires. Without `nft`, a
 host is cut by detaching its bridge port and a pair by a neighbour entry pointing at no
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import atexit
 import ipaddress
-import itertools
 import json
 import os
 import re
@@ -38,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from .cuts import Cuts
+from .cuts import setup as cut_setup
 from .namespaces import (BASE, BRIDGE, HUB, IFACE, NFT_CHAIN, NFT_TABLE, NOWHERE_MAC, SUBNET, _NAME,  # noqa: F401
                          NetnsError, _alive, _counter, _empty_namespace, _say_once, _stderr, cleanup, cleanup_stale,
                          namespaces, ns_pids, sh, stale_prefixes, unavailable)
@@ -127,7 +128,7 @@ class Hosts:
             self._ip(self.hub, "link", "set", "lo", "up", what="bringing lo up in the hub")
             for h in self.hosts.values():
                 self._add_host(h)
-            self.nft = self._setup_nft()
+            self.nft = cut_setup(self.hub, self.use_nft, self.log)
             rates = self.rate_kbit if isinstance(self.rate_kbit, Mapping) else {n: self.rate_kbit for n in self.hosts}
             for n, r in rates.items():
                 if n not in self.hosts:
@@ -158,27 +159,6 @@ class Hosts:
         self._ip(h.netns, "link", "set", IFACE, "up", what=f"bringing {h.name}'s {IFACE} up")
         for k, v in self.sysctls.items():
             sh(["ip", "netns", "exec", h.netns, "sysctl", "-q", "-w", f"{k}={v}"], f"setting {k} in host {h.name}")
-
-    def _setup_nft(self) -> bool:
-        if self.use_nft is False:
-            _say_once("nofallback", "netns: cuts by bridge-port detach / neighbour entry (nft not used)", self.log)
-            return False
-        if shutil.which("nft") is None:
-            if self.use_nft:
-                raise NetnsError("use_nft=True but no `nft` on PATH (apt-get install nftables)")
-            _say_once("nonft", "netns: no `nft` (apt-get install nftables): a host is cut by detaching its bridge "
-                      "port, a pair by a dead neighbour entry (both silent)", self.log)
-            return False
-        rules = (f"table bridge {NFT_TABLE} {{\n chain {NFT_CHAIN} {{ type filter hook forward priority 0; "
-                 f"policy accept; }}\n}}\n")
-        try:
-            sh(["ip", "netns", "exec", self.hub, "nft", "-f", "-"], "creating the cut table", input=rules)
-        except NetnsError as e:
-            if self.use_nft:
-                raise
-            _say_once("nftfail", f"netns: nft unusable ({e}); cutting by bridge-port detach instead", self.log)
-            return False
-        return True
 
     def close(self) -> None:
         """Stop every process started here, kill anything else in the namespaces, remove
@@ -294,89 +274,26 @@ class Hosts:
                          or "[]")
         return next((q["options"]["rate"] * 8 // 1000 for q in out if q.get("kind") == "tbf"), None)
 
-    def _nft(self, *args: str, what: str) -> str:
-        return sh(["ip", "netns", "exec", self.hub, "nft", *args], what)
-
-    def _rules(self) -> list[tuple[int, str]]:
-        """(handle, comment) of every cut rule."""
-        out = json.loads(self._nft("-j", "-a", "list", "chain", "bridge", NFT_TABLE, NFT_CHAIN,
-                                   what="listing cut rules"))
-        return [(r["rule"]["handle"], r["rule"].get("comment", "")) for r in out.get("nftables", []) if "rule" in r]
-
-    def _drop(self, tag: str, *matches: list[str]) -> None:
-        if any(c == tag for _, c in self._rules()):
-            return
-        for m in matches:
-            self._nft("add", "rule", "bridge", NFT_TABLE, NFT_CHAIN, *m, "drop", "comment", f'"{tag}"',
-                      what=f"adding drop rule {tag}")
-
-    def _undrop(self, tag: str) -> None:
-        for handle, c in self._rules():
-            if c == tag:
-                self._nft("delete", "rule", "bridge", NFT_TABLE, NFT_CHAIN, "handle", str(handle),
-                          what=f"removing drop rule {tag}")
-
     def cut(self, host: str) -> None:
         """Cut the host off from every other, silently (frames dropped on the bridge)."""
-        h = self[host]
-        if self.nft:
-            self._drop(f"host {host}", ["iifname", h.port], ["oifname", h.port])
-        else:
-            self._ip(self.hub, "link", "set", h.port, "nomaster", what=f"detaching {host}'s port")
+        self._cuts().cut(host)
 
     def heal(self, host: str) -> None:
-        h = self[host]
-        if self.nft:
-            self._undrop(f"host {host}")
-        else:
-            self._ip(self.hub, "link", "set", h.port, "master", BRIDGE, what=f"re-attaching {host}'s port")
-
-    def _pair(self, a: str, b: str) -> tuple[Host, Host, str]:
-        ha, hb = self[a], self[b]
-        if a == b:
-            raise ValueError(f"a link from {a} to itself")
-        x, y = sorted((a, b))
-        return ha, hb, f"link {x} {y}"
+        self._cuts().heal(host)
 
     def cut_link(self, a: str, b: str) -> None:
         """Cut only what passes between hosts a and b (both ways); each still reaches the others."""
-        ha, hb, tag = self._pair(a, b)
-        if self.nft:
-            self._drop(tag, ["iifname", ha.port, "oifname", hb.port], ["iifname", hb.port, "oifname", ha.port])
-        else:
-            for x, y in ((ha, hb), (hb, ha)):
-                self._ip(x.netns, "neigh", "replace", y.address, "lladdr", NOWHERE_MAC, "dev", IFACE,
-                         "nud", "permanent", what=f"pointing {x.name}'s neighbour {y.name} nowhere")
+        self._cuts().cut_link(a, b)
 
     def heal_link(self, a: str, b: str) -> None:
-        ha, hb, tag = self._pair(a, b)
-        if self.nft:
-            self._undrop(tag)
-        else:
-            for x, y in ((ha, hb), (hb, ha)):
-                sh(["ip", "-n", x.netns, "neigh", "del", y.address, "dev", IFACE], "restoring a neighbour",
-                   check=False)
+        self._cuts().heal_link(a, b)
 
     def cuts(self) -> dict[str, list]:
-        """What is cut now: {"hosts": [...], "links": [[a, b], ...]}, read from the system."""
-        hosts: list[str] = []
-        links: list[list[str]] = []
-        if self.nft:
-            for _, c in self._rules():
-                kind, *names = c.split()
-                if kind == "host" and names[0] not in hosts:
-                    hosts.append(names[0])
-                elif kind == "link" and names not in links:
-                    links.append(names)
-        else:
-            out = json.loads(self._ip(self.hub, "-j", "link", "show", what="listing ports") or "[]")
-            attached = {i["ifname"] for i in out if i.get("master") == BRIDGE}
-            hosts = [h.name for h in self.hosts.values() if h.port not in attached]
-            for a, b in itertools.combinations(self.hosts.values(), 2):
-                neigh = json.loads(self._ip(a.netns, "-j", "neigh", "show", b.address, what="neighbours") or "[]")
-                if any(n.get("lladdr") == NOWHERE_MAC for n in neigh):
-                    links.append(sorted([a.name, b.name]))
-        return {"hosts": sorted(hosts), "links": sorted(links)}
+        """What is cut now: {\"hosts\": [...], \"links\": [[a, b], ...]}, read from the system."""
+        return self._cuts().cuts()
+
+    def _cuts(self) -> Cuts:
+        return Cuts(self.hub, self.hosts, self.nft)
 
     def status(self) -> dict[str, Any]:
         cuts = self.cuts()
