@@ -67,7 +67,7 @@ def notices(path):
 @pytest.fixture(scope="module")
 def mesh(tmp_path_factory):
     out = tmp_path_factory.mktemp("console-mesh")
-    p = Proc("mesh-up", [*py(), "mesh", "up", str(SMALL), "--replay", "--units", "BN", "A", "A2", "--speed", str(SPEED),
+    p = Proc("mesh-up", [*py(), "mesh", "up", str(SMALL), "--units", "BN", "A", "A2", "--speed", str(SPEED),
                          "--out-dir", str(out), "--console", "0", "--console-linger", "300"],
              env=clean_env(), log_dir=out)
     try:

@@ -34,7 +34,7 @@ from pathlib import Path
 
 from .. import zygote
 from ..live.depend import home_of
-from ..mesh import Supervisor
+from ..supervise import Supervisor
 from ..proc import Proc, clean_env, leaf_env, py
 from ..zconf import free_port
 from .check import interface_addresses

@@ -32,7 +32,7 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
-from dissemination.keyspace import KeySpace, template
+from dissemination.keyspace import KeySpace
 from saim_mesh import messages as M
 from saim_mesh import wire as W
 
@@ -49,7 +49,6 @@ _DOMAIN = "saim-mesh signed v1"  # what a signature is for: never valid for anyt
 
 # what carries authority: these message kinds must come signed in secure mode, by `replay`
 AUTHORITY: tuple[type, ...] = (M.Order, M.Reorganization, M.MissionConfirm, M.UvAgent)
-AUTHORITY_FAMILIES = tuple(template(c).family for c in AUTHORITY)   # ord, org, msn, agm
 COMMAND_FAMILY = "cmd"
 NOTICE_FAMILY = "notice"
 DIRECTIVE_FAMILY = "dir"    # orders down, confirmations up (saim_mesh/directives.py)
@@ -140,14 +139,11 @@ def seal(signer: Signer | None, key: str, msg, payload: bytes, n: int) -> bytes:
 
 def rules_for(identities: Iterable[str]) -> dict[str, list[str]]:
     """Which identity may sign which keys (relative to the root), as the access control
-    lets them publish today: the replay (SAIM's stand-in) the scripted orders,
-    reorganizations, mission confirmations and task delegations; `console` any command;
+    lets them publish today: `console` any command;
     `console.U` commands sent as U's console (`cmd/<unit>/<kind>/U`). Nobody else."""
     out: dict[str, list[str]] = {}
     for name in identities:
-        if name == "replay":
-            out[name] = [f"{f}/**" for f in AUTHORITY_FAMILIES]
-        elif name == "console":
+        if name == "console":
             out[name] = [f"{COMMAND_FAMILY}/**"]
         elif name == "tak":   # an ATAK user's acknowledgement, as the console of the unit its uid maps to
             out[name] = [f"{COMMAND_FAMILY}/*/ack/*"]
