@@ -53,7 +53,7 @@ class ConsoleView:
 
 
 def live_feed(sc, conf, root: str, state: State, log: Callable = print) -> LiveReader:
-    """The console on the live mesh (no replay, no store): the data it draws comes in the
+    """The console on the mesh (no centre, no store): the data it draws comes in the
     sources' frames (`src/<name>`), each message checked as an EA checks it; its clock is
     the event time every source it has heard has promised (the minimum watermark), the
     end when every one of them has ended."""

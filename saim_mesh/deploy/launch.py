@@ -5,7 +5,7 @@ its sources. A child that dies is reported and restarted with backoff, up to
 `max_restarts` times (`--restarts`); one that dies once more is given up with one line
 naming it (also in `given_up.json` beside `pids.json`, and in `summary.json`) and the
 rest of the host goes on without it. Every child's output goes to its own log.
-`mesh up --sources-per-cp` is this with one host on 127.0.0.1, free ports, and
+`mesh up` is this with one host on 127.0.0.1, free ports, and
 optionally emulated router links (`link`).
 
 The host's run ends when each of its EA peers said its summary or was given up

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 from typing import Callable, Protocol
 
 from dissemination.keyspace import KeySpace
@@ -164,4 +165,6 @@ class LiveReader:
         if msgs is None:
             return
         self.view.data([m for m in msgs if type(m) in self.classes])
-        self.view.clock(*self.frames.clock())
+        # the wall time this reader heard the clock reach t: what the console's page measures
+        # raise-to-render latency from (a stamp for the page, never a decision)
+        self.view.clock(*self.frames.clock(), time.time())

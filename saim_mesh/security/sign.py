@@ -9,9 +9,8 @@ A `Signed` envelope, (v, by, n, key, body, sig), travels as msgpack ext type 83 
 message is a map, a control message or batch a map or an array: the first byte tells them
 apart); `sig` covers a canonical encoding of (by, n, key, body), so a signed message
 cannot be moved to another key or claimed by another signer.
-`n` is a counter strictly new per signer: the replay uses each event's place in the
-script (the same after a restart that resumes from its state file), consoles a time-based
-counter. A `Verifier` rejects, with a `MessageError` of kind "signed" naming why: an
+`n` is a counter strictly new per signer: time-based (microseconds since the epoch,
+strictly increasing), so a restarted signer never reuses one. A `Verifier` rejects, with a `MessageError` of kind "signed" naming why: an
 undecodable envelope, an unknown signer, a signer not allowed on that key family, a key
 other than the one the envelope came on, a bad signature, and an `n` it has taken before
 (or older than its window of the last `window` taken per signer).
@@ -47,7 +46,8 @@ MAX_BODY = 1 << 20               # the Gate's size bound on the whole envelope c
 WINDOW = 4096                    # counters remembered per signer
 _DOMAIN = "saim-mesh signed v1"  # what a signature is for: never valid for anything else
 
-# what carries authority: these message kinds must come signed in secure mode, by `replay`
+# what carries authority: these message kinds must come signed in secure mode (nobody signs them on
+# a data key today: orders and confirmations travel as directives, saim_mesh/directives.py)
 AUTHORITY: tuple[type, ...] = (M.Order, M.Reorganization, M.MissionConfirm, M.UvAgent)
 COMMAND_FAMILY = "cmd"
 NOTICE_FAMILY = "notice"
@@ -103,9 +103,9 @@ def _canonical(by: str, n: int, key: str, body: bytes) -> bytes:
 
 
 class Signer:
-    """Signs payloads as identity `name`. `n` is given (the replay: an event's place in
-    its script) or time-based: microseconds since the epoch, strictly increasing, so a
-    restarted console never reuses one."""
+    """Signs payloads as identity `name`. `n` is given (a directive carries the one it
+    was signed with: `next_n`) or time-based: microseconds since the epoch, strictly
+    increasing, so a restarted console never reuses one."""
 
     def __init__(self, name: str, private_key: Ed25519PrivateKey):
         if not NAME_RE.match(name) or len(name) > 128:

@@ -95,7 +95,7 @@ class TakView:
 
 
 class LiveTakFeed:
-    """The gateway on the live mesh (no replay): a `LiveReader` into the picture, its clock
+    """The gateway on the mesh: a `LiveReader` into the picture, its clock
     the event time every source it heard has promised. PLI in (only with `live_start`,
     event time = wall clock from it) go out as the gateway's own live source `tak`, with a
     watermark every epoch of wall time so that it holds no EA back; an EA takes them when
