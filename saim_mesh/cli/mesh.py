@@ -203,7 +203,7 @@ def add(sub) -> None:
                     help="seconds to keep answering commands after every source ended")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
-    so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the live mesh")
+    so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the mesh")
     so.add_argument("scenario")
     so.add_argument("--name", required=True, help="the source's name (e.g. the command post: cp.A)")
     so.add_argument("--units", nargs="+", metavar="UNIT",
