@@ -118,16 +118,16 @@ def test_nothing_imports_a_module_of_the_removed_replay_mesh():
     assert back == []
 
 
-def test_the_removed_module_check_sees_a_removed_import(tmp_path):
-    """The checker itself: a relative import of a removed module inside a function is seen."""
-    f = ROOT / "saim_mesh" / "live" / "_probe_removed.py"
-    try:
-        f.write_text("def f():\n    from ..replay import main_replay\n    from .. import storeq\n")
-        assert removed_imports([f]) == ["saim_mesh/live/_probe_removed.py imports saim_mesh.replay",
-                                        "saim_mesh/live/_probe_removed.py imports saim_mesh.replay.main_replay",
-                                        "saim_mesh/live/_probe_removed.py imports saim_mesh.storeq"]
-    finally:
-        f.unlink(missing_ok=True)
+def test_the_removed_module_check_sees_a_removed_import(tmp_path, monkeypatch):
+    """The checker itself: a relative import of a removed module inside a function is seen
+    (a probe file in a copy of the layout, never in the tree the other tests read)."""
+    monkeypatch.setitem(globals(), "ROOT", tmp_path)
+    f = tmp_path / "saim_mesh" / "live" / "probe.py"
+    f.parent.mkdir(parents=True)
+    f.write_text("def f():\n    from ..replay import main_replay\n    from .. import storeq\n")
+    assert removed_imports([f]) == ["saim_mesh/live/probe.py imports saim_mesh.replay",
+                                    "saim_mesh/live/probe.py imports saim_mesh.replay.main_replay",
+                                    "saim_mesh/live/probe.py imports saim_mesh.storeq"]
 
 
 def test_the_zygote_preloads_nothing_removed():
