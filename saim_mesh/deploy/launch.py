@@ -188,7 +188,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
                                                                        for x in ("--listen-cot", u)]
             tak += ["--uids", h.tak.uids] if h.tak.uids else []
             tak += ["--proto", h.tak.proto] if h.tak.proto != "xml" else []
-            sup.add(Proc("tak", [*py(), "tak", dep.scenario, "--sources", *live_args, *tak, *where(to.root),
+            sup.add(Proc("tak", [*py(), "tak", dep.scenario, *live_args, *tak, *where(to.root),
                                  "--root", root], env=clean_env(), log_dir=logs)).wait_for("tak ready", 60)
         armed = ["--armed"] if h.consoles else []   # a console watches: urgent alerts repeat until acked
         for u in units:
@@ -201,7 +201,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
         if units:
             echo(f"host {host}: {len(units)} EA peers ready ({' '.join(units)})", flush=True)
         for c in h.consoles:
-            p = sup.add(Proc(f"console-{c.unit}", [*py(), "console", dep.scenario, "--unit", c.unit, "--sources",
+            p = sup.add(Proc(f"console-{c.unit}", [*py(), "console", dep.scenario, "--unit", c.unit,
                                                    *where(c.unit), "--root", root, "--port", str(c.port),
                                                    "--linger", str(console_linger)], env=clean_env(), log_dir=logs))
             consoles.append(p)
