@@ -196,7 +196,7 @@ def add(sub) -> None:
                     help="a console watches: unacknowledged flash and immediate alerts are re-notified and "
                          "escalated to the superior ([notify])")
     pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",
-                    help="exit (code 3) after S seconds of wall time without a clock tick from the source")
+                    help="stop after S seconds of wall time, with its summary as at a normal end")
     pe.add_argument("--sources", nargs="+", metavar="NAME", required=True,
                     help="the sources it depends on (`saim-mesh sources`): it advances on the event time their "
                          "watermarks promise")
