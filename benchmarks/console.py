@@ -1,7 +1,7 @@
 """A commander who watches is never flooded (issues #9 and #30): the console under the
 battalion at full speed, nobody acknowledging.
 
-One run of `mesh up --console` (secure, every EA peer armed, the replay at max speed) with
+One run of `mesh up --console` (secure, every EA peer armed, the sources at max speed) with
 headless Chromium on the page from before the first alert to the end, and the same run
 without a console (peers unarmed), measured by the same invocation (`--baseline mesh`, the
 default; `--baseline inprocess` takes the unarmed in-process run of the same units
@@ -16,8 +16,8 @@ Written to bench/results/console.json:
   log (an escalation is logged by the EA that sent it and by the superior's that got it);
 - `render_latency_ms` {n, p50, p95, p99, max}: from the page receiving an alert (its
   server-sent event) to its story's row drawn (`window.__latencies()`, render_ms; target
-  p99 <= 100 ms); `raise_to_render_ms`: from the replay's tick at which the alert fell due
-  to its row drawn (it includes the EA peer's own tick-to-alert time,
+  p99 <= 100 ms); `raise_to_render_ms`: from the clock step (a source's watermark) at which the
+  alert fell due to its row drawn (it includes the EA peer's own time to the alert,
   `baseline_peer_alert_latency_p99_ms`, and the server's 100 ms batching);
 - `first_paint_ms`: a page opened on the console at the end of the run (the whole run in
   its snapshot): from navigation start to the snapshot drawn (`window.__firstPaintMs`;
@@ -96,7 +96,7 @@ def _counts(logs: dict[str, list[dict]]) -> tuple[int, int]:
 def _peers_done(out_dir: Path) -> bool:
     """Every EA peer said its summary (the run is over)."""
     logs = [p for p in (out_dir / "logs").glob("*.log")
-            if p.stem not in ("replay", "console", "tak") and not p.stem.startswith(("fusion", "router"))]
+            if p.stem not in ("console", "tak", "hub") and not p.stem.startswith(("cp.", "fusion", "router", "link"))]
     return bool(logs) and all("summary " in p.read_text(errors="replace") for p in logs)
 
 
@@ -116,7 +116,7 @@ def _summaries(out_dir: Path) -> dict[str, dict]:
 
 def _mesh_up(scenario: Path, out_dir: Path, speed: str, console: bool) -> Proc:
     extra = ["--console", "0", "--console-linger", "600"] if console else []
-    return Proc("mesh-up", [*py(), "mesh", "up", str(scenario), "--replay", "--speed", speed, "--out-dir", str(out_dir), *extra],
+    return Proc("mesh-up", [*py(), "mesh", "up", str(scenario), "--speed", speed, "--out-dir", str(out_dir), *extra],
                 env=clean_env(), log_dir=out_dir)
 
 

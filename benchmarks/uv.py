@@ -12,9 +12,9 @@ Measured in one run (written to bench/results/uv.json):
   equal the closed loop in process;
 - detection delay in scenario time on that run (the same as scenarios/uv-team): first
   matching alert minus the ground truth's onset, per incident (p50, p99, max);
-- the team of 20 on the mesh at real time (speed 1): 21 Zenoh peers (every robot and the
-  operator) and the replay; each peer's wall latency from a clock tick to the alerts it
-  raised in that tick (p50, p99).
+- the team of 20 on the mesh at real time (`--live`): 21 EA peers (every robot and the
+  operator) and a source per command post; each peer's wall latency from a report to the
+  alerts it raised (p50, p99).
 """
 from __future__ import annotations
 
@@ -165,22 +165,21 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
 
 
 def mesh_latency(n: int, duration_s: float, timeout: float = 400.0) -> dict:
-    """The team on the mesh at real time: every robot's and the operator's peer, over a
-    scenario as long as the run (peers reject an end of time before the scenario's)."""
-    from saim_mesh.mesh import up
+    """The team on the mesh at real time (`mesh up --live`: event time is the wall clock):
+    every robot's and the operator's EA peer, a source per command post, over a scenario as
+    long as the run; each peer's latency from a report to the alerts it raised."""
+    from saim_mesh.live.up import up
     folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), n, duration_s)
     sc = S.load(folder, events=False)
     out = Path(tempfile.mkdtemp(prefix="uvbench-"))
     t0 = time.monotonic()
-    res = up(str(folder), None, out, speed="1", timeout=timeout, insecure=True, echo=lambda *a, **k: None)
+    res = up(str(folder), None, out, "1", live=True, insecure=True, show=False, timeout=timeout,
+             echo=lambda *a, **k: None)
     peers = res["peers"]
     lat = [v for s in peers.values() for v in s.get("alert_latencies_ms", [])]
     return {"peers": len(peers), "expected_peers": len(sc.taskorg.units), "wall_s": round(time.monotonic() - t0, 1),
             "scenario_s": duration_s, "alerts": sum(s["alerts"] for s in peers.values()),
-            "alert_latency_ms": pct(lat),
-            "tick_latency_ms_p99_worst_peer": max((s["tick_latency_ms"].get("p99", 0) for s in peers.values()),
-                                                  default=None),
-            "peak_rss_mb_max": max((s["peak_rss_mb"] for s in peers.values()), default=None)}
+            "alert_latency_ms": pct(lat)}
 
 
 def main(argv=None) -> int:

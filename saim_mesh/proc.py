@@ -176,7 +176,7 @@ LEAF_RUNTIME = "(rx:(worker_threads:1))"
 
 
 def leaf_env() -> dict:
-    """`clean_env` for a leaf (an EA peer, the replay): one receive worker in Zenoh,
+    """`clean_env` for a leaf (an EA peer, a source): one receive worker in Zenoh,
     unless ZENOH_RUNTIME is set already."""
     env = clean_env()
     if not env.get("ZENOH_RUNTIME"):   # an empty value makes Zenoh panic: unset counts as unset

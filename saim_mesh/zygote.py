@@ -4,8 +4,7 @@ copy of all of them), warms a live peer up on a small scenario with no Zenoh ses
 that what the code builds on first use exists too (`live.warm`: codecs, specialised
 bytecode, the EA's detectors), freezes it all out of the garbage collector's reach, and
 forks each peer from itself, so the peers of a host share those pages copy-on-write
-instead of each holding a copy. Only the live mesh's code is loaded here: the replay
-mesh's EA peers still fork from it, and import their own modules in the child.
+instead of each holding a copy.
 
 Zenoh is imported but never opened here (a fork after `zenoh.open` hangs); each
 child opens its own session. The launcher talks to the zygote over its stdin and

@@ -37,9 +37,9 @@ from saim_mesh import messages as M  # noqa: E402
 from saim_mesh import scenario as S  # noqa: E402
 from saim_mesh import wire as W  # noqa: E402
 
-SIGNED = {"ord", "org", "msn", "agm"}     # sealed by the replay (docs/threat-model.md)
+SIGNED = {"ord", "org", "msn", "agm"}     # sealed by the older replay mesh (docs/history/deployment-notes.md)
 ENVELOPE = 94                             # bench/results/sign.json envelope_overhead_bytes
-ATTACHMENT = 8                            # the sequence number (replay.seq_bytes)
+ATTACHMENT = 8                            # the sequence number the older replay mesh attached
 AUTHORITY = ("ord", "org", "msn", "cff")
 
 

@@ -83,7 +83,7 @@ def args(*extra):
 # the mesh's processes with Zenoh options (issue 49.6): a garbage --connect or --listen is
 # one line naming it, before any Zenoh session opens
 COMMANDS = {
-    "peer": lambda d: ["peer", "--scenario", str(d), "--unit", "A2"],
+    "peer": lambda d: ["peer", "--scenario", str(d), "--unit", "A2", "--sources", "cp.A"],
     "source": lambda d: ["source", str(d), "--name", "cp.A"],
     "router": lambda d: ["router", "--scenario", str(d), "--name", "r"],
     "console": lambda d: ["console", str(d)],

@@ -22,7 +22,6 @@ from saim_mesh import scenario as S
 from saim_mesh import wire as W
 from saim_mesh.console.actions import CommandActions
 from saim_mesh.console.feed import hook_inprocess, live_feed
-from saim_mesh.reader import console_feed
 from saim_mesh.scenario import mesh_units
 from saim_mesh.console.server import Server, make_app
 from saim_mesh.console.state import State
@@ -302,23 +301,6 @@ def test_sse_delivers_alerts_and_batched_positions(small):
     assert not server.thread.is_alive()
 
 
-def test_feed_checks_every_payload(small):
-    st = State(small)
-    feed = console_feed(small, None, "saim", st, log=lambda *a, **k: None)
-    a = alert("A", 1)
-    feed.take("saim/alert/A/out-of-position", M.encode(a))
-    feed.take("saim/alert/B/out-of-position", M.encode(a))        # owner differs from the key
-    feed.take("saim/alert/A/out-of-position", b"\x00junk")
-    feed.take("saim/clock", b"junk")
-    feed.take("saim/clock", W.encode(W.make(W.Tick, t=10.0, n=5, seq=3)))
-    feed.take("saim/cmdlog/A", b"junk")
-    ev = next(e for e in small.events if type(e) is M.LocationReport)
-    feed.take(feed.ks.key(ev, small.taskorg, small.projection), M.encode(ev))
-    assert st.known_alert("A/1") == "A" and len(st.alerts) == 1
-    assert st.t == 10.0 and st.entity_pos
-    assert feed.gate.rejects.total >= 3
-
-
 def test_inprocess_hook_feeds_the_state(small):
     from saim_mesh.runner import config_for, make_ea
     eas = [make_ea(small, o, config_for(small, o)) for o in ("A", "A2")]
@@ -456,7 +438,7 @@ def test_notices_are_events_one_each_and_kept_bounded(small):
 
 def test_the_feed_takes_notices_that_fit_their_key(small):
     st = State(small)
-    feed = console_feed(small, None, "saim", st, log=lambda *a, **k: None)
+    feed = live_feed(small, None, "saim", st, log=lambda *a, **k: None)
     assert "saim/notice/*/*" in feed.keys()
 
     def payload(**kw):

@@ -69,7 +69,7 @@ def test_init_derives_a_host_per_command_post_with_its_units_sources_and_router(
     assert hosts["BN"]["addresses"] == ["198.18.0.1"] and hosts["C"]["addresses"] == ["198.18.0.4"]
     assert hosts["A"]["eas"] == ["A", "A1", "A2", "A3", "R"] and "M" in hosts["BN"]["eas"]
     assert sorted(u for h in hosts.values() for u in h["eas"]) == sorted(
-        __import__("saim_mesh.mesh", fromlist=["x"]).mesh_units(small))
+        __import__("saim_mesh.scenario", fromlist=["x"]).mesh_units(small))
     assert hosts["A"]["sources"] == ["cp.A"] and set(hosts["BN"]["sources"]) == {"cp.BN", "cp.BNHQ", "cp.M"}
     routers = {r["name"]: r for r in doc["router"]}
     assert routers["r-A"] == {"name": "r-A", "host": "A", "cp": "A", "port": 7447, "links": ["r-BN"]}

@@ -1,22 +1,16 @@
 """Forward fusion and adjudication."""
 from __future__ import annotations
 
-import json
 import random
-import uuid
 
 import numpy as np
-import pytest
 
 from saim_mesh import scenario as S
 from ea_agent.core.adjudication import Adjudicator, Report
 from saim_mesh.evaluate import evaluate
 from saim_mesh.fusion import FusionNode
 from ea_agent.core.geo import Projection
-from saim_mesh.mesh import start_fusion, start_peer, start_replay
 from saim_mesh.messages import SensorHit
-from saim_mesh.runner import run
-from saim_mesh.zconf import free_port
 
 from .conftest import ROOT
 from .test_evaluate import check_projections
@@ -79,70 +73,3 @@ def test_battalion_with_sensors_meets_targets():
     assert res["recall"] == 1.0, res["missed"]
     assert res["unwanted_share"] <= 0.05 and res["unwanted_flash"] == 0
     check_projections(res)
-
-
-@pytest.fixture(scope="module")
-def inproc_sensors():
-    """Alerts of the in-process run on small-sensors, as they read back from JSON."""
-    return {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
-            for ea in run(S.load(SMALL_SENSORS), ["BN", "A", "C"])}
-
-
-def plan_alerts(path) -> list[dict]:
-    """A peer's alert file without the wall-clock-driven presence notes."""
-    return [a for a in map(json.loads, open(path)) if a["category"] != "system-problem"]
-
-
-@pytest.mark.timeout(240)
-def test_two_fusion_nodes_three_peers_one_picture(tmp_path, inproc_sensors):
-    sc = str(SMALL_SENSORS)
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    root = f"test/{uuid.uuid4().hex[:8]}"
-    units = ["BN", "A", "C"]
-    procs = [start_replay(sc, ep, root, units + ["fusion-N", "fusion-F"], "max")]
-    try:
-        procs[0].wait_for("ready", 60)
-        procs += [start_fusion(sc, "N", ep, root, shuffle=1), start_fusion(sc, "F", ep, root, shuffle=2)]
-        peers = [start_peer(sc, u, ep, root, tmp_path / f"{u}.jsonl", extra=["--radius", "60000"]) for u in units]
-        procs += peers
-        summaries = [json.loads(p.wait_for("summary ", 180)[8:]) for p in peers]
-        fusion = [json.loads(p.wait_for("summary ", 60)[8:]) for p in procs[1:3]]
-    finally:
-        for p in procs:
-            p.stop()
-    pictures = [s["picture"] for s in summaries]
-    assert pictures[0] and pictures[0] == pictures[1] == pictures[2]
-    # each peer takes every track at the point of its stream where the in-process run
-    # does, so its alerts are those of the in-process run, shuffled arrival or not
-    for u in units:
-        got = plan_alerts(tmp_path / f"{u}.jsonl")
-        assert got == inproc_sensors[u] and got, u
-    assert all(f["tracks_out"] > 0 and f["hits_in"] > f["tracks_out"] for f in fusion)
-    # the two nodes overlap: some hostile is reported by both and adjudicated into one entity
-    assert any({m.split("/")[0] for m in v[3]} == {"N", "F"} for v in pictures[0].values()), pictures[0]
-
-
-@pytest.mark.timeout(240)
-def test_late_joiner_with_fusion_nodes_alerts_like_in_process(tmp_path, inproc_sensors):
-    """A peer that joins mid-run where fusion nodes make the tracks alerts, from its join
-    time on, like the in-process run (the track history it takes is applied silently)."""
-    sc = str(SMALL_SENSORS)
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    root = f"test/{uuid.uuid4().hex[:8]}"
-    procs = [start_replay(sc, ep, root, ["A", "fusion-N", "fusion-F"], "200")]
-    try:
-        procs[0].wait_for("ready", 60)
-        procs += [start_fusion(sc, "N", ep, root), start_fusion(sc, "F", ep, root),
-                  start_peer(sc, "A", ep, root, tmp_path / "A.jsonl")]
-        procs[0].wait_for("t=2500", 120)
-        procs.append(start_peer(sc, "C", ep, root, tmp_path / "C.jsonl", "C-late"))
-        joined = json.loads(procs[4].wait_for("summary ", 180)[8:])["joined_t"]
-        procs[3].wait_for("summary ", 180)
-    finally:
-        for p in procs:
-            p.stop()
-    for u, since in (("A", 0.0), ("C", joined)):
-        got = plan_alerts(tmp_path / f"{u}.jsonl")
-        want = [a for a in inproc_sensors[u] if a["t"] > since]
-        assert got == want and want, u
-    assert joined >= 2500

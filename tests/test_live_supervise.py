@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from saim_mesh.mesh import Supervisor
+from saim_mesh.supervise import Supervisor
 from saim_mesh.proc import clean_env, py, wait_line
 
 from .conftest import SMALL

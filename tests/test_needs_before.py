@@ -16,8 +16,6 @@ from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace, Template, matcher
 from ea_agent.domains.suo import make_ea
 from saim_mesh import messages as M
-from saim_mesh import wire as W
-from saim_mesh.replay import Replay
 from saim_mesh.runner import run
 
 ROOT = "t"
@@ -122,17 +120,6 @@ def test_a_template_binds_a_field_after_its_path():
     t = Template("pos/{place}/{path:entity}/{entity}")
     assert t.expr({"entity": "E1"}) == "pos/*/*/**/E1"
     assert t.expr({"path": "BN/A"}) == "pos/*/*/BN/A/**"   # unchanged: nothing after the path bound
-
-
-def test_the_store_answers_each_keys_latest_entry_before_a_seq(small):
-    rp = Replay(small, None, "r")
-    for k in ["r/pos/a/E1", "r/pos/b/E2", "r/pos/a/E1", "r/msn/A", "r/pos/a/E1", "r/pos/b/E2"]:
-        rp._add("main", k, k.encode())   # seqs 1..6
-    q = lambda **kw: [s for s, _ in rp._entries(W.make(W.StoreQuery, **kw), "main")]
-    assert q(keys=["r/pos/**"], before=5, latest=True) == [2, 3]
-    assert q(keys=["r/pos/**"], latest=True) == [5, 6]
-    assert q(keys=["r/pos/**"], since=2, before=6) == [3, 5]
-    assert q(keys=["r/pos/**"]) == [1, 2, 3, 5, 6] and q() == [1, 2, 3, 4, 5, 6]
 
 
 def test_the_watchman_drops_a_report_older_than_one_it_took(small):

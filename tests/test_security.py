@@ -1,6 +1,6 @@
 """Identities (mTLS certificates) and access-control rules generated from the scenario:
 the PKI, the generated rules, and real Zenoh sessions (one process, one session each,
-loopback, free ports) showing forged orders, clock ticks, tokens and queries dropped.
+loopback, free ports) showing forged orders, frames, tokens and journal queries dropped.
 Synchronisation is on queues, matching listeners and link events, never on sleeps."""
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def spki(pub):
 def test_names_for_scenario(small_sc):
     names = names_for(small_sc)
     plain = [n for n in names if not n.startswith("source.")]
-    assert names[0] == "replay" and plain[-3:] == ["observer", "console", "tak"]
+    assert plain[-3:] == ["observer", "console", "tak"] and "replay" not in names
     assert [n[3:] for n in names if n.startswith("ea.")] == mesh_units(small_sc)
     # a live source per command post: every mesh unit and every unit with subordinates
     to = small_sc.taskorg
@@ -65,10 +65,10 @@ def test_names_for_scenario(small_sc):
                                                                               if p == to.root}
     assert sorted(n[len("source.cp."):] for n in names if n.startswith("source.")) == sorted(cps)
     two = names_for(small_sc, ["A2", "C"])
-    assert [n for n in two if not n.startswith("source.")] == ["replay", "ea.A2", "ea.C", "observer", "console", "tak"]
+    assert [n for n in two if not n.startswith("source.")] == ["ea.A2", "ea.C", "observer", "console", "tak"]
     fused = names_for(S.load(SENSORS, events=False), ["BN"])
-    assert [n for n in fused if not n.startswith("source.")] == \
-        ["replay", "ea.BN", "fusion.F", "fusion.N", "observer", "console", "tak"]
+    assert [n for n in fused if not n.startswith("source.")] == ["ea.BN", "observer", "console", "tak"]
+    assert {"source.fusion.F", "source.fusion.N"} <= set(fused)   # a fusion node is a live source of tracks
     with pytest.raises(SecurityError, match="ZZ"):
         names_for(small_sc, ["ZZ"])
 
@@ -98,28 +98,28 @@ def test_certificates_verify_against_the_ca(pki, small_sc):
 
 
 def test_make_pki_is_idempotent_and_completes(tmp_path):
-    first = make_pki(tmp_path, ["replay", "ea.A2"])
+    first = make_pki(tmp_path, ["tak", "ea.A2"])
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     lines = []
-    again = make_pki(tmp_path, ["replay", "ea.A2", "ea.C"], echo=lines.append)
-    assert again["replay"] == first["replay"]
+    again = make_pki(tmp_path, ["tak", "ea.A2", "ea.C"], echo=lines.append)
+    assert again["tak"] == first["tak"]
     kept = {n: b for n, b in before.items() if n != "signers.json"}   # it gains ea.C's public key
     assert all((tmp_path / n).read_bytes() == b for n, b in kept.items())   # CA, leaves, signing keys kept
-    assert set(json.loads((tmp_path / "signers.json").read_text())["keys"]) == {"replay", "ea.A2", "ea.C"}
+    assert set(json.loads((tmp_path / "signers.json").read_text())["keys"]) == {"tak", "ea.A2", "ea.C"}
     assert [ln.split()[0] for ln in lines] == ["kept", "kept", "kept", "made"]
     cert(again["ea.C"][0]).verify_directly_issued_by(cert(tmp_path / "ca.pem"))
     # a damaged leaf is made again, the CA and the others stay
     again["ea.A2"][1].write_text("garbage")
-    make_pki(tmp_path, ["replay", "ea.A2", "ea.C"])
+    make_pki(tmp_path, ["tak", "ea.A2", "ea.C"])
     assert (tmp_path / "ca.pem").read_bytes() == before["ca.pem"]
     assert (tmp_path / "ea.A2.pem").read_bytes() != before["ea.A2.pem"]
-    assert (tmp_path / "replay.pem").read_bytes() == before["replay.pem"]
+    assert (tmp_path / "tak.pem").read_bytes() == before["tak.pem"]
     check_identity(tmp_path, "ea.A2")
     # a missing CA key means a new CA: every leaf is made again, signed by it
     (tmp_path / "ca.key").unlink()
-    make_pki(tmp_path, ["replay"])
+    make_pki(tmp_path, ["tak"])
     assert (tmp_path / "ca.pem").read_bytes() != before["ca.pem"]
-    cert(tmp_path / "replay.pem").verify_directly_issued_by(cert(tmp_path / "ca.pem"))
+    cert(tmp_path / "tak.pem").verify_directly_issued_by(cert(tmp_path / "ca.pem"))
     with pytest.raises(SecurityError, match="ea.C.pem: not signed by the CA"):
         check_identity(tmp_path, "ea.C")
     with pytest.raises(SecurityError, match="bad identity name"):
@@ -128,7 +128,7 @@ def test_make_pki_is_idempotent_and_completes(tmp_path):
 
 def test_check_files_names_the_bad_file(pki, tmp_path):
     d, made = pki
-    check_files([d / "ca.pem", *made["replay"]])
+    check_files([d / "ca.pem", *made["tak"]])
     with pytest.raises(SecurityError, match=r"nope\.pem: file missing"):
         check_files([d / "ca.pem", tmp_path / "nope.pem"])
     (tmp_path / "junk.pem").write_text("not a certificate\n")
@@ -142,11 +142,11 @@ def test_check_files_names_the_bad_file(pki, tmp_path):
     # a key that is not the certificate's
     other = tmp_path / "o"
     other.mkdir()
-    for f in ("ca.pem", "replay.pem"):
+    for f in ("ca.pem", "tak.pem"):
         (other / f).write_bytes((d / f).read_bytes())
-    (other / "replay.key").write_bytes((d / "observer.key").read_bytes())
+    (other / "tak.key").write_bytes((d / "observer.key").read_bytes())
     with pytest.raises(SecurityError, match="does not match"):
-        check_identity(other, "replay")
+        check_identity(other, "tak")
 
 
 # ---------------------------------------------------------------------------- ACL generation
@@ -187,41 +187,43 @@ def test_access_control_is_well_formed(small_sc, pki):
         assert "delete" not in r["messages"] and r["permission"] == "allow"
         for k in r["key_exprs"]:
             assert str(zenoh.KeyExpr(k)) == k and k.startswith(root + "/")
-    conf = {"mode": "peer", "transport": {"link": tls_config(pki[0], "replay")}, "access_control": acl}
+    conf = {"mode": "peer", "transport": {"link": tls_config(pki[0], "tak")}, "access_control": acl}
     zenoh.Config.from_json5(json.dumps(conf))
     # the rules say what the brief says
     r = root
     for cn, msg, key, ok in [
-        ("replay", "put", f"{r}/ord/BN", True), ("replay", "put", f"{r}/clock", True),
-        ("replay", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2S1/e1", True), ("replay", "put", f"{r}/alert/A2/x", False),
-        ("replay", "reply", f"{r}/store/log/main", True), ("replay", "liveliness_token", f"{r}/alive/replay/z", True),
+        ("replay", "put", f"{r}/ord/BN", False), ("replay", "put", f"{r}/clock", False),   # no such identity now
+        ("source.cp.A", "put", f"{r}/src/cp.A", True), ("source.cp.A", "put", f"{r}/src/cp.B", False),
+        ("source.cp.A", "put", f"{r}/ord/BN", False), ("source.cp.A", "put", f"{r}/clock", False),
+        ("source.cp.A", "reply", f"{r}/srcj/cp.A", True), ("source.cp.A", "reply", f"{r}/srcj/cp.B", False),
+        ("source.fusion.N", "put", f"{r}/src/fusion.N", True), ("source.fusion.N", "put", f"{r}/trk/X1Y1/x4y4/t1", False),
         ("ea.C", "put", f"{r}/ord/BN", False), ("ea.C", "put", f"{r}/clock", False),
         ("ea.C", "put", f"{r}/ord/C", True), ("ea.C", "put", f"{r}/alert/C/late", True),
         ("ea.C", "put", f"{r}/alert/A2/late", False), ("ea.C", "put", f"{r}/ack/C/zid1", True),
         ("ea.C", "put", f"{r}/ack/A2/zid1", False), ("ea.C", "put", f"{r}/msn/C/m1", True),
         ("ea.C", "put", f"{r}/bye/C", True), ("ea.C", "put", f"{r}/bye/A2", False),
         ("ea.C", "liveliness_token", f"{r}/alive/A2/x", False), ("ea.C", "liveliness_token", f"{r}/alive/C/x", True),
-        ("ea.C", "declare_queryable", f"{r}/store/log/main", False), ("ea.C", "reply", f"{r}/store/log/main", False),
-        ("ea.C", "query", f"{r}/store/log/main", True), ("ea.C", "declare_subscriber", f"{r}/**", True),
+        ("ea.C", "declare_queryable", f"{r}/srcj/cp.A", False), ("ea.C", "reply", f"{r}/srcj/cp.A", False),
+        ("ea.C", "query", f"{r}/srcj/cp.A", True), ("ea.C", "declare_subscriber", f"{r}/**", True),
+        ("ea.C", "query", f"{r}/store/log/main", False), ("ea.C", "put", f"{r}/src/cp.C", False),
         ("ea.C", "delete", f"{r}/ord/C", False), ("ea.C", "put", f"{r}/trk/X1Y1/x4y4/t1", False),
-        ("fusion.N", "put", f"{r}/trk/X1Y1/x4y4/t1", True), ("fusion.N", "put", f"{r}/fusion-tick/N", True),
-        ("fusion.N", "put", f"{r}/fusion-tick/F", False), ("fusion.N", "reply", f"{r}/store/fusion/N", True),
-        ("fusion.N", "reply", f"{r}/store/fusion/F", False), ("fusion.N", "put", f"{r}/bye/fusion-N", True),
-        ("fusion.N", "liveliness_token", f"{r}/alive/fusion-N/z", True),
+        ("fusion.N", "put", f"{r}/trk/X1Y1/x4y4/t1", False),   # the replay's fusion node: gone
         ("observer", "declare_subscriber", f"{r}/alert/**", True), ("observer", "declare_subscriber", f"{r}/**", False),
         ("observer", "declare_liveliness_subscriber", f"{r}/alive/**", True),
-        ("observer", "declare_subscriber", f"{r}/ord/**", False), ("observer", "query", f"{r}/store/log/main", False),
+        ("observer", "declare_subscriber", f"{r}/ord/**", False), ("observer", "query", f"{r}/srcj/cp.A", False),
         ("observer", "put", f"{r}/alert/A2/x", False), ("console", "put", f"{r}/cmd/A2", True),
-        ("console", "declare_subscriber", f"{r}/clock", False), ("mallory", "declare_subscriber", f"{r}/**", False),
+        ("console", "declare_subscriber", f"{r}/src/cp.A", False), ("mallory", "declare_subscriber", f"{r}/**", False),
+        ("console.A", "declare_subscriber", f"{r}/src/cp.A", True), ("console.A", "declare_subscriber", f"{r}/clock", False),
         ("ea.C", "put", f"{r}/health/C", True), ("ea.C", "put", f"{r}/health/A2", False),
-        # the TAK gateway: PLI only to the replay's ingest key, never a position or an order; of the
+        # the TAK gateway: PLI only as its own source's stream, never a position or an order; of the
         # commands only acknowledgements (an ATAK user's, as its mapped unit: the EA checks that unit)
-        ("tak", "put", f"{r}/ingest/tak", True), ("tak", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2-1", False),
+        ("tak", "put", f"{r}/src/tak", True), ("tak", "put", f"{r}/src/cp.A", False),
+        ("tak", "put", f"{r}/ingest/tak", False), ("tak", "put", f"{r}/pos/X1Y1/x4y4/BN/A/A2/A2-1", False),
         ("tak", "put", f"{r}/ord/BN", False), ("tak", "put", f"{r}/cmd/A2/ack/A2", True),
         ("tak", "put", f"{r}/cmd/A2/silence/A2", False), ("tak", "put", f"{r}/dir/A2/order", False),
-        ("tak", "put", f"{r}/alert/A2/x", False), ("tak", "declare_subscriber", f"{r}/clock", True),
-        ("ea.A2", "put", f"{r}/ingest/tak", False),
-        ("tak", "declare_subscriber", f"{r}/cmdlog/A2", True), ("tak", "put", f"{r}/cmdlog/A2", False), ("replay", "declare_subscriber", f"{r}/ingest/**", True),
+        ("tak", "put", f"{r}/alert/A2/x", False), ("tak", "declare_subscriber", f"{r}/src/cp.A", True),
+        ("ea.A2", "put", f"{r}/src/tak", False),
+        ("tak", "declare_subscriber", f"{r}/cmdlog/A2", True), ("tak", "put", f"{r}/cmdlog/A2", False),
     ]:
         assert allowed(acl, cn, "ingress", msg, key) is ok, (cn, msg, key)
     assert allowed(acl, "observer", "egress", "put", f"{r}/ord/BN")   # reads are cut on ingress
@@ -230,7 +232,8 @@ def test_access_control_is_well_formed(small_sc, pki):
 
 def test_a_console_sends_only_as_its_own_unit():
     """`console.A` may put commands to any EA but only under its own unit's chunk: the EA
-    then decides from the hierarchy of the moment (tests/test_commands.py)."""
+    then decides from the hierarchy of the moment (tests/test_signing.py: a peer takes signed
+    commands only; tests/test_directives.py: the subtree as organised now)."""
     sc = S.load(SENSORS, events=False)
     r = "saim/test"
     acl = access_control(r, mesh_units(sc), [], sc.taskorg)
@@ -246,17 +249,16 @@ _chunk = st.text(alphabet=string.ascii_letters + string.digits + "_-.", min_size
 
 
 @settings(max_examples=30, deadline=None)
-@given(units=st.sets(_chunk.filter(lambda u: u != "replay" and not u.startswith("fusion-")), min_size=1,
-                     max_size=6),
+@given(units=st.sets(_chunk, min_size=1, max_size=6),
        groups=st.sets(_chunk, max_size=3))
 def test_access_control_for_any_task_organization(units, groups):
     acl = access_control("saim/h", sorted(units), sorted(groups))
     ids = [r["id"] for r in acl["rules"]]
     assert len(ids) == len(set(ids))
     cns = [cn for s in acl["subjects"] for cn in s["cert_common_names"]]
-    # replay, observer, console, tak; an EA and a live source (cp.<unit>) per unit; a fusion
-    # node and its live source (fusion.<group>) per sensor group
-    assert len(cns) == len(set(cns)) == 2 * len(units) + 2 * len(groups) + 4
+    # observer, console, tak; an EA and a live source (cp.<unit>) per unit; a fusion node's
+    # live source (fusion.<group>) per sensor group
+    assert len(cns) == len(set(cns)) == 2 * len(units) + len(groups) + 3
     for g in groups:   # a fusion node's source puts its own stream, and no one else's
         assert allowed(acl, f"source.fusion.{g}", "ingress", "put", f"saim/h/src/fusion.{g}")
         assert all(not allowed(acl, f"source.fusion.{h}", "ingress", "put", f"saim/h/src/fusion.{g}")
@@ -288,8 +290,6 @@ def test_secure_config_checks_before_open(pki, tmp_path):
     (tmp_path / "ca.pem").write_bytes((d / "ca.pem").read_bytes())
     with pytest.raises(SecurityError, match=r"/ea\.A2\.pem: file missing"):
         secure_config(config(), tmp_path, "ea.A2", "saim/t", units, groups)
-    with pytest.raises(SecurityError, match="collides"):
-        access_control("saim/t", ["fusion-N"], ["N"])
     with pytest.raises(SecurityError, match="bad unit"):
         access_control("saim/t", ["A/B"], [])
     assert endpoint_tls(7447) == "tls/127.0.0.1:7447"
@@ -347,13 +347,13 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
 
     BLOCK = zenoh.CongestionControl.BLOCK
     report = {}
-    with zenoh.open(conf("replay", [endpoint_tls(p0)])) as replay, \
+    with zenoh.open(conf("source.cp.A", [endpoint_tls(p0)])) as src, \
             zenoh.open(conf("ea.A2", [endpoint_tls(p1)], [endpoint_tls(p0)])) as a2, \
             zenoh.open(conf("ea.C", [endpoint_tls(p2)], [endpoint_tls(p0), endpoint_tls(p1)])) as c, \
             zenoh.open(conf("observer", connect=[endpoint_tls(p) for p in (p0, p1, p2)])) as obs:
         # a full mesh of direct links (peers do not relay), each authenticated by its CN
-        for s, others in ((replay, {"ea.A2", "ea.C", "observer"}), (a2, {"replay", "ea.C", "observer"}),
-                          (c, {"replay", "ea.A2", "observer"}), (obs, {"replay", "ea.A2", "ea.C"})):
+        for s, others in ((src, {"ea.A2", "ea.C", "observer"}), (a2, {"source.cp.A", "ea.C", "observer"}),
+                          (c, {"source.cp.A", "ea.A2", "observer"}), (obs, {"source.cp.A", "ea.A2", "ea.C"})):
             assert wait_links(s, others) == others
         report["links_s"] = time.monotonic() - t_start
 
@@ -364,14 +364,14 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
         keep = [obs.declare_subscriber(f"{root}/ord/**", obs_ord),
                 obs.declare_subscriber(f"{root}/alert/**", obs_alert)]
         mark = c.declare_publisher(f"{root}/alert/C/mark", congestion_control=BLOCK)
-        probe = replay.declare_publisher(f"{root}/alert/probe")
-        forged = {k: c.declare_publisher(f"{root}/{k}", congestion_control=BLOCK) for k in ("ord/BN", "clock")}
-        legit = {k: replay.declare_publisher(f"{root}/{k}", congestion_control=BLOCK) for k in ("ord/BN", "clock")}
+        probe = src.declare_publisher(f"{root}/alert/probe")
+        forged = {k: c.declare_publisher(f"{root}/{k}", congestion_control=BLOCK) for k in ("ord/BN", "src/cp.A")}
+        legit = {k: src.declare_publisher(f"{root}/{k}", congestion_control=BLOCK) for k in ("src/cp.A",)}
         wait_matching(mark)
         wait_matching(probe)
-        assert not forged["ord/BN"].matching_status.matching and not legit["ord/BN"].matching_status.matching
+        assert not forged["ord/BN"].matching_status.matching
 
-        # --- forged order and clock tick by ea.C are dropped at A2's ingress
+        # --- a forged order and a forged frame of cp.A's stream by ea.C are dropped at A2's ingress
         a2_data = Q()
         keep.append(a2.declare_subscriber(f"{root}/**", a2_data, allowed_origin=zenoh.Locality.REMOTE))
         for p in forged.values():
@@ -385,12 +385,13 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
             wait_matching(p)
             p.put(f"legit {k}")
         got = [sample(a2_data.get())[:2] for _ in legit]
-        assert got == [(f"{root}/ord/BN", "legit ord/BN"), (f"{root}/clock", "legit clock")]
+        assert got == [(f"{root}/src/cp.A", "legit src/cp.A")]
         assert sample(obs_alert.get())[:2] == (f"{root}/alert/C/mark", "C mark")
 
-        # --- a forged store (queryable) by ea.C is never consulted
-        keep += [c.declare_queryable(f"{root}/store/log/main", lambda q: q.reply(f"{root}/store/log/main", b"forged store")),
-                 replay.declare_queryable(f"{root}/store/log/main", lambda q: q.reply(f"{root}/store/log/main", b"store"))]
+        # --- a forged journal (queryable) of cp.A by ea.C is never consulted
+        jk = f"{root}/srcj/cp.A"
+        keep += [c.declare_queryable(jk, lambda q: q.reply(jk, b"forged journal")),
+                 src.declare_queryable(jk, lambda q: q.reply(jk, b"journal"))]
 
         # --- liveliness: C's token on A2's key is dropped; A2's own is seen by the observer
         a2_alive, obs_alive = Q(), Q()
@@ -399,8 +400,7 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
         c_fake = c.liveliness().declare_token(f"{root}/alive/A2/x")
         c_own = c.liveliness().declare_token(f"{root}/alive/C/m")
         a2_own = a2.liveliness().declare_token(f"{root}/alive/A2/y")
-        rp_own = replay.liveliness().declare_token(f"{root}/alive/replay/r")
-        want_a2 = {f"{root}/alive/C/m", f"{root}/alive/replay/r"}
+        want_a2 = {f"{root}/alive/C/m"}
         want_obs = want_a2 | {f"{root}/alive/A2/y"}
         seen_a2, seen_obs = set(), set()
         while not want_a2 <= seen_a2:
@@ -422,22 +422,21 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
             pass
         assert s[2] == zenoh.SampleKind.DELETE
 
-        # --- the store: ea.A2's query answered by the replay only; the observer's dropped
+        # --- the journal: ea.A2's query answered by the source only; the observer's dropped
         t = time.monotonic()
-        qa2 = a2.declare_querier(f"{root}/store/log/main", timeout=WAIT,
-                                 consolidation=zenoh.ConsolidationMode.NONE)
+        qa2 = a2.declare_querier(jk, timeout=WAIT, consolidation=zenoh.ConsolidationMode.NONE)
         wait_matching(qa2)
         replies = [r.ok.payload.to_bytes() if r.ok else r.err for r in qa2.get()]
-        assert replies == [b"store"]
+        assert replies == [b"journal"]
         report["a2_query_s"] = time.monotonic() - t
-        qobs = obs.declare_querier(f"{root}/store/log/main", timeout=1.0)
-        wait_matching(qobs)   # the observer does see the replay's queryable ...
+        qobs = obs.declare_querier(jk, timeout=1.0)
+        wait_matching(qobs)   # the observer does see the source's queryable ...
         t = time.monotonic()
-        assert list(qobs.get()) == []   # ... but the replay drops its query
+        assert list(qobs.get()) == []   # ... but the source drops its query
         report["obs_query_s"] = time.monotonic() - t
         assert obs_ord.drain() == []
         assert [sample(s)[:2] for s in a2_data.drain()] == []
-        for tok in (c_fake, c_own, rp_own):
+        for tok in (c_fake, c_own):
             tok.undeclare()
 
         # --- a certificate from another CA cannot connect
@@ -460,7 +459,7 @@ def test_mtls_and_acl_end_to_end(pki, small_sc, tmp_path):
         with pytest.raises(zenoh.ZError):
             zenoh.open(fail_fast(config(connect=[f"tcp/127.0.0.1:{p0}"]))).close()
         report["plain_tcp_s"] = time.monotonic() - t
-        assert {ln.auth_identifier for ln in replay.info.links()} == {"ea.A2", "ea.C", "observer"}
+        assert {ln.auth_identifier for ln in src.info.links()} == {"ea.A2", "ea.C", "observer"}
     report["total_s"] = time.monotonic() - t_start
     print(json.dumps(report, indent=1))
     assert report["total_s"] < 30

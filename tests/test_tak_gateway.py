@@ -11,7 +11,6 @@ import json
 import socket
 import sys
 import threading
-import uuid
 import warnings
 from configparser import ConfigParser
 from datetime import datetime, timedelta, timezone
@@ -23,12 +22,11 @@ import takproto
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh import wire as W
-from saim_mesh.mesh import Proc, start_peer, start_replay
 from saim_mesh.proc import clean_env
 from saim_mesh.runner import config_for, make_ea
 from saim_mesh.tak import cot as C
 from saim_mesh.tak import types as T
-from saim_mesh.reader import TakFeed
+from saim_mesh.tak.gateway import LiveTakFeed
 from saim_mesh.tak.picture import Options, Picture
 from saim_mesh.tak.pli import PliIn, UidMap, load_uids
 from saim_mesh.tak.transports import Network
@@ -73,28 +71,6 @@ def ea_alert(a: dict) -> dict:
 
 
 # -- the core, in process --------------------------------------------------------------
-def test_feed_checks_every_payload_and_sends_alerts_at_once(small):
-    sent: list[bytes] = []
-    pic = Picture(small, Options(epoch=EPOCH))
-    feed = TakFeed(small, None, "saim", pic, sent.append, overlay_every=None, log=lambda *a, **k: None)
-    a = M.Alert(100.0, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A",), "A CO off",
-                {"id": "A/1"})
-    feed.take("saim/alert/A/out-of-position", M.encode(a))
-    assert len(sent) == 1 and cot_alert(sent[0])["id"] == "A/1"
-    feed.take("saim/alert/B/out-of-position", M.encode(a))          # owner differs from the key
-    feed.take("saim/alert/A/out-of-position", b"\x00junk")
-    feed.take("saim/clock", b"junk")
-    ev = next(e for e in small.events if type(e) is M.LocationReport)
-    feed.take(feed.ks.key(ev, small.taskorg, small.projection), M.encode(ev))
-    feed.take(feed.ks.key(ev, small.taskorg, small.projection), M.encode(a))   # an alert on a pos/ key
-    assert len(sent) == 1 and feed.gate.rejects.total == 4
-    feed.take("saim/clock", W.encode(W.make(W.Tick, t=10.0, n=5, seq=3)))
-    units = [C.parse(b) for b in sent[1:]]
-    unit = small.taskorg.entity_unit[ev.entity]
-    assert {u.detail["__saim"]["unit"] for u in units} == {unit, *small.taskorg.ancestors(unit)}
-    assert all(u.type == T.FRIENDLY_UNIT and (u.lat, u.lon) == (round(ev.lat, 7), round(ev.lon, 7)) for u in units)
-
-
 def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
     """A flash alert is an emergency on TAK; a re-notification (notice/A/A) sends the same
     uid again, never a new marker; once its EA takes an acknowledgement (heard on
@@ -103,7 +79,7 @@ def test_an_acknowledged_emergency_is_cancelled_on_tak(small):
     silenced or inhibited alert never reaches TAK users."""
     sent: list[bytes] = []
     pic = Picture(small, Options(epoch=EPOCH))
-    feed = TakFeed(small, None, "saim", pic, sent.append, overlay_every=None, log=lambda *a, **k: None)
+    feed = LiveTakFeed(small, None, "saim", pic, sent.append, overlay_every=None, log=lambda *a, **k: None)
     flash = M.Alert(100.0, "A", "fratricide", "friendly-activity", "flash", ("A1", "B1"), "A1 and B1 close",
                     {"id": "A/1"})
     other = M.Alert(110.0, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A2",), "A2 off",
@@ -413,99 +389,6 @@ def test_network_listens_for_pli_and_survives_bad_input():
 def _gateway_cmd() -> list[str]:
     """`saim-mesh tak`."""
     return [sys.executable, "-m", "saim_mesh", "tak"]
-
-
-@pytest.mark.timeout(300)
-def test_mesh_alerts_arrive_as_cot_on_multicast_and_tcp(tmp_path):
-    sc = str(SMALL)
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    root = f"test/{uuid.uuid4().hex[:8]}"
-    tport, mport = free_port(), free_port()
-    rx = Receivers(tport, GROUP, mport)
-    units = ["A", "A2"]
-    procs: list[Proc] = []
-    try:
-        replay = start_replay(sc, ep, root, units, "max", linger=5)
-        procs.append(replay)
-        replay.wait_for("ready", 60)
-        gw = Proc("tak", [*_gateway_cmd(), sc, "--connect", ep, "--root", root, "--epoch", "2026-05-01T06:00:00Z",
-                          "--cot-url", f"tcp://127.0.0.1:{tport}", "--cot-url", f"udp://{GROUP}:{mport}",
-                          "--proto", "1", "--mcast-if", "127.0.0.1", "--mcast-ttl", "0", "--period", "30",
-                          "--linger", "1"], env=clean_env(), log_dir=tmp_path)
-        procs.append(gw)
-        gw.wait_for("tak ready", 60)
-        for u in units:
-            procs.append(start_peer(sc, u, ep, root, tmp_path / f"{u}.jsonl", log_dir=tmp_path))
-        for p in procs[2:]:
-            p.wait_for("summary ", 240)
-        done = gw.wait_for("tak done", 120)
-        assert gw.p.wait(30) == 0
-        want = sorted((ea_alert(json.loads(x)) for u in units for x in open(tmp_path / f"{u}.jsonl")
-                       if json.loads(x)["category"] != "system-problem"), key=json.dumps)
-        assert len(want) >= 5, "the small scenario raised too few alerts"
-        assert f"alerts={len(want)}" in done or "alerts=" in done
-
-        def alerts(src):
-            return sorted((a for s, d in rx.got if s == src for a in [cot_alert(d)] if a is not None
-                           and a["id"] and "/w" not in a["id"]), key=json.dumps)
-        assert rx.wait(lambda g: len([1 for s, d in g if s == "tcp" and b"kind=\"alert\"" in d]) >= len(want), 30)
-        assert alerts("tcp") == want
-        assert rx.wait(lambda g: len(alerts("udp")) >= len(want), 30)
-        assert alerts("udp") == want
-        # and the picture: every unit with reporting entities, tracks, the overlay
-        kinds = {C.parse(d).detail.get("__saim", {}).get("kind") for _, d in rx.got}
-        assert {"unit", "track", "overlay", "alert"} <= kinds
-        assert "rejects=0" in done
-    finally:
-        for p in procs:
-            p.stop()
-        rx.close()
-    assert all(p.p.poll() is not None for p in procs)
-
-
-@pytest.mark.timeout(300)
-def test_pli_through_the_mesh_makes_the_ea_alert(tmp_path):
-    """PLI from pytak into the gateway's TCP port -> ingest/tak -> the replay -> A2's EA."""
-    sc = str(SMALL)
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    root = f"test/{uuid.uuid4().hex[:8]}"
-    lport = free_port()
-    procs: list[Proc] = []
-    try:
-        replay = start_replay(sc, ep, root, ["A2"], "max", linger=5)
-        procs.append(replay)
-        replay.wait_for("ready", 60)
-        gw = Proc("tak", [*_gateway_cmd(), sc, "--connect", ep, "--root", root, "--cot-url",
-                          f"tcp://127.0.0.1:{free_port()}", "--listen-cot", f"tcp://127.0.0.1:{lport}",
-                          "--uid-rule", "regex:^ATAK-(?P<entity>\\w+)$", "--no-overlay", "--linger", "1"],
-                  env=clean_env(), log_dir=tmp_path)
-        procs.append(gw)
-        gw.wait_for("tak ready", 60)
-        peer = start_peer(sc, "A2", ep, root, tmp_path / "A2.jsonl", log_dir=tmp_path)
-        procs.append(peer)
-        stop = threading.Event()
-
-        async def send():   # a person with ATAK, 30 km from their platoon, reporting until the end
-            q: asyncio.Queue = asyncio.Queue()
-            tx = await pytak.txworker_factory(q, _cfg(COT_URL=f"tcp://127.0.0.1:{lport}", TAK_PROTO=0))
-            while not stop.is_set():
-                await tx.send_data(pli("ATAK-A2S1E01", -116.9, 35.45, "ALPHA"))
-                await asyncio.sleep(0.02)   # the person's reporting rate, not a synchronisation
-            tx.writer.close()
-        sender = threading.Thread(target=lambda: asyncio.run(send()), daemon=True)
-        sender.start()
-        peer.wait_for("summary ", 240)
-        stop.set()
-        sender.join(20)
-        done = gw.wait_for("tak done", 120)
-        assert "pli=0" not in done
-        alerts = [json.loads(x) for x in open(tmp_path / "A2.jsonl")]
-        far = [a for a in alerts if a["type"] == "out-of-position" and a["details"].get("distance_m", 0) > 3000]
-        assert far, "the EA did not alert on the ATAK user's position"
-    finally:
-        for p in procs:
-            p.stop()
-    assert all(p.p.poll() is not None for p in procs)
 
 
 # -- through a real TAK server -----------------------------------------------------------

@@ -1,5 +1,5 @@
 """`saim-mesh` command line: run, evaluate, missions, generate, validate, report (offline.py);
-the mesh's processes (mesh up, source, peer, fusion, router, topology, replay, tak, link:
+the mesh's processes (mesh up, source, sources, peer, router, topology, tak, link:
 mesh.py); certs and deploy (deploy.py); a commander's commands and console (commands.py) and
 directives to a subtree (order, plan: directives.py). Each group registers its own
 subcommands; every command is a thin layer over the package it drives."""

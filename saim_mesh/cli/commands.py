@@ -2,6 +2,7 @@
 on a unit's EA from a script, or from the web console."""
 from __future__ import annotations
 
+import argparse
 import json
 
 from .. import scenario as S
@@ -81,7 +82,7 @@ def cmd_console(a) -> int:
         raise KeyError(f"unknown unit {unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"console.{unit}", sc, root, **_zmode(a))
-    return main_console(sc, conf, root, unit, a.port, a.linger, live=a.sources)
+    return main_console(sc, conf, root, unit, a.port, a.linger)
 
 
 def add(sub) -> None:
@@ -133,7 +134,6 @@ def add(sub) -> None:
     co.add_argument("--unit", help="whose commander (default: the top unit); acts for the unit's subtree")
     co.add_argument("--port", type=int, default=8470, help="HTTP port on 127.0.0.1 (0: a free port)")
     co.add_argument("--linger", type=_seconds, default=30.0, help="seconds to stay up after the scenario's end")
-    co.add_argument("--sources", action="store_true",
-                    help="the live mesh (no replay): draw the sources' frames, the clock from their watermarks")
+    co.add_argument("--sources", action="store_true", help=argparse.SUPPRESS)   # the only mesh now: accepted, no-op
     _zenoh_args(co)
     co.set_defaults(fn=cmd_console)

@@ -101,7 +101,7 @@ def add(sub) -> None:
                     "addresses and names go into its processes' certificates")
     ce.set_defaults(fn=cmd_certs)
 
-    de = sub.add_parser("deploy", help="the live mesh across hosts: deploy init SCENARIO | deploy FILE --check | "
+    de = sub.add_parser("deploy", help="the mesh across hosts: deploy init SCENARIO | deploy FILE --check | "
                                        "deploy FILE --host NAME (docs/deployment.md)")
     de.add_argument("file", metavar="FILE|init", help="a deployment file (TOML), or init to write one")
     de.add_argument("scenario", nargs="?", help="init: the scenario folder")

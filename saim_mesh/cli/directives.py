@@ -10,7 +10,7 @@ import sys
 
 def add(sub, zenoh_args, seconds) -> None:
     """Register the two subcommands on `sub` (the CLI's subparsers)."""
-    o = sub.add_parser("order", help="order a unit's subtree on the live mesh (execute-plan, abort-plan, "
+    o = sub.add_parser("order", help="order a unit's subtree on the mesh (execute-plan, abort-plan, "
                                      "start-mission, end-mission, reorganize, decide), effective at an event time")
     _common(o, seconds)
     o.add_argument("--action", required=True, choices=list(ACTION_ARGS))
@@ -22,7 +22,7 @@ def add(sub, zenoh_args, seconds) -> None:
     o.add_argument("--option", default="", help="decide: abort, continue or branch:<id>")
     zenoh_args(o)
     o.set_defaults(fn=cmd_order)
-    p = sub.add_parser("plan", help="publish a new plan version for a unit's subtree on the live mesh: "
+    p = sub.add_parser("plan", help="publish a new plan version for a unit's subtree on the mesh: "
                                     "validated by each EA like a plan file, executed at an event time")
     _common(p, seconds)
     p.add_argument("--name", required=True, help="the plan's name (executed as NAME.vVERSION)")

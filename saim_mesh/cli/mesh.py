@@ -1,4 +1,4 @@
-"""`saim-mesh mesh up | source | sources | peer | fusion | router | topology | replay | tak | link`: the
+"""`saim-mesh mesh up | source | sources | peer | router | topology | tak | link`: the
 mesh's processes, one command each."""
 from __future__ import annotations
 
@@ -7,22 +7,6 @@ from pathlib import Path
 
 from .. import scenario as S
 from .args import _count, _speed, _positive, _seconds, _zmode, _zenoh_args, _start_of, _instant, DEFAULT_SCENARIO
-
-
-def cmd_replay(a) -> int:
-    from ..replay import main_replay
-    from ..zconf import config
-    sc = S.load(a.scenario)
-    root = a.root or f"saim/{sc.name}"
-    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "replay", sc, root, **_zmode(a))
-    sources, topo = None, None
-    if a.topology:   # one client session per router: each unit's reports enter at its own command post
-        from ..net.topology import read_resolved
-        topo, eps = read_resolved(a.topology)
-        sources = {n: config(None, [ep], a.zenoh_config, False, a.pki, "replay", sc, root, mode="client",
-                             routers=sorted(eps)) for n, ep in eps.items()}
-    return main_replay(sc, conf, root, a.speed, a.wait_peers or [], a.linger, a.until, a.window, a.state,
-                       sources, topo)
 
 
 def cmd_source(a) -> int:
@@ -86,33 +70,18 @@ def cmd_peer(a) -> int:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"ea.{a.unit}", sc, root, **_zmode(a))
-    if a.sources:   # the live mesh: event time from the sources' own watermarks, no replay
-        from ..live.peer import main_live_peer
+    import zenoh
+
+    from ..live.peer import main_live_peer
+    try:
         return main_live_peer(sc, a.unit, conf, root, a.sources, a.out, a.config, a.deadline, _start_of(a), a.armed,
                               a.linger)
-    misplaced = None
-    if a.topology:   # attached to another command post's router: it works, but its reports cross a radio link
-        from ..net.topology import read_resolved
-        topo, eps = read_resolved(a.topology)
-        own = topo.router_of(a.unit, sc.taskorg)
-        if eps[own] not in (a.connect or []):
-            where = next((n for n, ep in eps.items() if ep in (a.connect or [])), "no router of the topology")
-            misplaced = (f"EA of {sc.taskorg.units[a.unit].name} is attached to {where}, not to its command post's "
-                         f"router {own}: its traffic crosses radio links it should not")
-    from ..peer import main_peer   # the replay mesh's peer: the live one never imports it
-    return main_peer(sc, a.unit, conf, root, a.out, a.config, a.radius, a.deadline, a.connect, a.armed, misplaced)
-
-
-def cmd_fusion(a) -> int:
-    from ..fusion.peer import main_fusion
-    from ..zconf import config
-    sc = S.load(a.scenario, events=False)
-    if a.group not in sc.meta.get("fusion", {}).get("groups", {}):
-        raise KeyError(f"unknown fusion group {a.group!r}: not in {sc.name}'s scenario.json")
-    root = a.root or f"saim/{sc.name}"
-    conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, f"fusion.{a.group}", sc, root,
-                  **_zmode(a))
-    return main_fusion(sc, a.group, conf, root, a.shuffle)
+    except zenoh.ZError as e:   # nobody at its endpoints (its router down): one line, not a traceback
+        if "Unable to connect" not in str(e):
+            raise
+        print(f"saim-mesh peer: EA of {a.unit} cannot join the mesh at {', '.join(a.connect or [])}: "
+              f"{str(e).split(' at ')[0]}", file=sys.stderr, flush=True)
+        return 4
 
 
 def cmd_router(a) -> int:
@@ -166,27 +135,18 @@ def cmd_sources(a) -> int:
 def cmd_mesh(a) -> int:
     import signal
 
-    from ..mesh import up
+    from ..live.up import up
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
-    if a.replay and (a.live or a.sources_per_cp):
-        raise ValueError("mesh up: --replay is the older mesh; --live and --sources-per-cp are the mesh with no centre")
-    if not a.replay:   # the mesh with no centre: sources per command post, no replay
-        from ..live.up import up as live_up
-        if a.pki and a.insecure:
-            raise ValueError("mesh up: --pki and --insecure: certificates are for a secure mesh; give one of them")
-        for bad, flag in ((a.window != 20.0, "--window (the sources pace themselves)"),):
-            if bad:
-                raise ValueError(f"mesh up: {flag} is only for the older mesh (--replay)")
-        res = live_up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
-                      live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
-                      console=a.console, console_linger=a.console_linger, max_restarts=a.restarts,
-                      tak=_live_tak(a), pki=Path(a.pki) if a.pki else None, root=a.root)
-        return 0 if len(res["peers"]) == len(res["units"]) and not res["given_up"] else 1
-    res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed), window=a.window,
-             insecure=a.insecure, pki=Path(a.pki) if a.pki else None, max_restarts=a.restarts, root=a.root,
-             console=a.console, console_linger=a.console_linger, tak=_tak_args(a),
-             topology=a.topology, link=_link_args(a))
-    return 0 if len(res["peers"]) == len(a.units or res["peers"]) and not res["given_up"] else 1
+    if a.pki and a.insecure:
+        raise ValueError("mesh up: --pki and --insecure: certificates are for a secure mesh; give one of them")
+    if a.live and a.sources_per_cp:
+        raise ValueError("mesh up: --live (event time is the wall clock) and --sources-per-cp (the recorded "
+                         "battle at --speed): give one of them")
+    res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
+             live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
+             console=a.console, console_linger=a.console_linger, max_restarts=a.restarts,
+             tak=_live_tak(a), pki=Path(a.pki) if a.pki else None, root=a.root)
+    return 0 if len(res["peers"]) == len(res["units"]) and not res["given_up"] else 1
 
 
 def _link_args(a) -> dict | None:
@@ -215,41 +175,19 @@ def _live_tak(a):
     return Tak(tuple(a.tak), tuple(a.tak_in or ()), uids, "1" if a.tak_proto == "1" else "xml")
 
 
-def _tak_args(a) -> list[str] | None:
-    """`mesh up --tak URL... [--tak-in URL...] [--tak-uids FILE]`: the gateway's own options."""
-    if not a.tak:
-        return None
-    out = [x for u in a.tak for x in ("--cot-url", u)] + [x for u in a.tak_in or () for x in ("--listen-cot", u)]
-    return out + (["--uids", a.tak_uids] if a.tak_uids else []) + (["--proto", "1"] if a.tak_proto == "1" else [])
-
-
 def cmd_tak(a) -> int:
     from ..tak.gateway import main_tak
     from ..zconf import config
     sc = S.load(a.scenario, events=False)
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root, **_zmode(a))
-    if a.live and not a.sources:
-        raise ValueError("tak --live: give --sources too (the live mesh; the replay mesh has its own clock)")
     a.live_start = _start_of(a)
     return main_tak(sc, conf, root, a)
 
 
 def add(sub) -> None:
     """Register the mesh's process commands on `sub`."""
-    rp = sub.add_parser("replay", help="publish a scenario's events into the mesh (stands in for SAIM)")
-    rp.add_argument("scenario")
-    rp.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
-    rp.add_argument("--wait-peers", nargs="*", metavar="UNIT",
-                    help="start when these peers are present (name a unit twice to wait for two of its peers)")
-    rp.add_argument("--linger", type=_seconds, default=30.0, help="seconds to keep serving the store at the end")
-    rp.add_argument("--window", type=_seconds, default=20.0, metavar="S",
-                    help="at max speed, stay at most S of scenario time ahead of the slowest peer (0: no pacing)")
-    rp.add_argument("--until", type=_seconds, default=None, help="stop at this scenario time")
-    rp.add_argument("--state", metavar="FILE", help="progress file: a restarted replay resumes from it")
-    _zenoh_args(rp)
-    rp.set_defaults(fn=cmd_replay)
-    pe = sub.add_parser("peer", help="run one unit's EA as a Zenoh peer")
+    pe = sub.add_parser("peer", help="run one unit's EA as a Zenoh peer on the event time of its sources")
     pe.add_argument("--scenario", required=True)
     pe.add_argument("--unit", required=True)
     pe.add_argument("--out", metavar="FILE", help="append alerts as JSON lines")
@@ -257,19 +195,18 @@ def add(sub) -> None:
     pe.add_argument("--armed", action="store_true",
                     help="a console watches: unacknowledged flash and immediate alerts are re-notified and "
                          "escalated to the superior ([notify])")
-    pe.add_argument("--radius", type=_seconds, default=None,
-                    help="geographic interest radius around our units (m); default: [dissemination] in the config")
     pe.add_argument("--deadline", type=_seconds, default=None, metavar="S",
-                    help="exit (code 3) after S seconds of wall time without a clock tick from the source")
-    pe.add_argument("--sources", nargs="+", metavar="NAME",
-                    help="the live mesh: no replay; advance on the event time these sources' watermarks promise")
-    pe.add_argument("--live", action="store_true", help="with --sources: event time is the wall clock from --start")
+                    help="stop after S seconds of wall time, with its summary as at a normal end")
+    pe.add_argument("--sources", nargs="+", metavar="NAME", required=True,
+                    help="the sources it depends on (`saim-mesh sources`): it advances on the event time their "
+                         "watermarks promise")
+    pe.add_argument("--live", action="store_true", help="event time is the wall clock from --start")
     pe.add_argument("--start", metavar="ISO8601", help="--live: the instant of event time 0 (default now)")
     pe.add_argument("--linger", type=_seconds, default=0.0,
-                    help="with --sources: seconds to keep answering commands after every source ended")
+                    help="seconds to keep answering commands after every source ended")
     _zenoh_args(pe)
     pe.set_defaults(fn=cmd_peer)
-    so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the live mesh")
+    so = sub.add_parser("source", help="publish one source's stream (reports and watermarks) into the mesh")
     so.add_argument("scenario")
     so.add_argument("--name", required=True, help="the source's name (e.g. the command post: cp.A)")
     so.add_argument("--units", nargs="+", metavar="UNIT",
@@ -307,40 +244,28 @@ def add(sub) -> None:
                     help="the longest a source stays after its end while it is still asked (default 600)")
     _zenoh_args(so)
     so.set_defaults(fn=cmd_source)
-    fu = sub.add_parser("fusion", help="run one sensor group's fusion node as a Zenoh peer")
-    fu.add_argument("--scenario", required=True)
-    fu.add_argument("--group", required=True)
-    fu.add_argument("--shuffle", type=int, default=None, help="publish each window's tracks in a seeded random order")
-    _zenoh_args(fu)
-    fu.set_defaults(fn=cmd_fusion)
     me = sub.add_parser("mesh", help="mesh up SCENARIO: one process per unit's EA, a source per command post, "
-                                     "no centre (--replay: the older mesh behind one replay process)")
+                                     "no centre")
     me.add_argument("action", choices=["up"])
     me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     me.add_argument("--live", action="store_true",
-                    help="the mesh with no centre: a source per command post, EA peers on event time, no replay; "
-                         "event time is the wall clock (use --sources-per-cp for a recorded battle at --speed)")
+                    help="event time is the wall clock (default: the sources play the recorded battle at --speed)")
     me.add_argument("--sources-per-cp", action="store_true",
-                    help="the default: the sources play the recorded battle at --speed (max: as fast as they can)")
-    me.add_argument("--replay", action="store_true",
-                    help="the older mesh: one replay process is every EA's clock and sequencer (a global tick, "
-                         "its store for late joiners); kept to compare with and for --tak, --pki, --window")
+                    help="the default, said out loud: the sources play the recorded battle at --speed")
     me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
     me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     me.add_argument("--out-dir", default="out/mesh")
-    me.add_argument("--window", type=_seconds, default=20.0, metavar="S",
-                    help="at max speed, the replay stays at most S of scenario time ahead of the slowest peer (0: off)")
     me.add_argument("--insecure", action="store_true",
                     help="no mTLS, no access control (quick experiments only: anyone can feed the mesh)")
     me.add_argument("--pki", metavar="DIR",
                     help="the mesh's certificates (saim-mesh certs SCENARIO --out DIR --routers hub; with --topology "
                          "its routers' names); default: a test PKI made under OUT_DIR/pki")
     me.add_argument("--restarts", type=_count, default=10, metavar="N",
-                    help="restart each process that dies (EA peer, source, router, console; with --replay the "
-                         "replay, fusion nodes, EA peers, routers, TAK gateway) up to N times (default 10), then "
-                         "give up on it with one line and go on without it (0: never restart)")
+                    help="restart each process that dies (EA peer, source, router, console, TAK gateway) up to N "
+                         "times (default 10), then give up on it with one line and go on without it (0: never "
+                         "restart)")
     me.add_argument("--root",
-                    help="key-expression root (default saim/<scenario>/live; --replay: saim/<scenario>/<pid>)")
+                    help="key-expression root (default saim/<scenario>/live)")
     me.add_argument("--console", type=int, nargs="?", const=8470, default=None, metavar="PORT",
                     help="also start the top unit's commander's console on 127.0.0.1:PORT (default 8470; 0: free)")
     me.add_argument("--tak", nargs="+", metavar="URL",

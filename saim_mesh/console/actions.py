@@ -235,7 +235,7 @@ class CommandActions:
                  lead_s: float = ORDER_LEAD_S):
         """`direct(unit, kind, fields)`: publish a directive (saim_mesh/directives.py) as
         `unit` on the live mesh: orders to the subtree, confirmations up the chain
-        (None: this console cannot, e.g. over the replay)."""
+        (None: an in-process console cannot)."""
         self.run, self.state, self.push, self.direct, self.lead_s = run, state, push, direct, lead_s
         self._n = itertools.count(1)
         self._tag = f"console-{os.getpid()}"
@@ -276,7 +276,7 @@ class CommandActions:
     def order(self, unit, action, plan, mission, at):
         if self.direct is None:
             return {"req": "", "kind": "order", "ok": False, "t": at, "unit": unit, "ref": action,
-                    "error": "orders to a subtree go over the live mesh (console --sources); this console cannot"}
+                    "error": "orders to a subtree go over the mesh (saim-mesh console); an in-process console cannot"}
         return self._directed(unit, "order", action=action, plan=plan, mission=mission, at=at)
 
     def _directed(self, unit: str, kind: str, **fields) -> dict:

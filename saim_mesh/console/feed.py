@@ -2,10 +2,8 @@
 read by `live.reader.LiveReader`), or the EAs of an in-process run: alerts,
 re-notifications and escalations (notices), command results, the clock and the data
 messages it draws. Every mesh payload goes through `gate.Gate` and must fit the key it
-came on; nothing received can stop the console (a bad payload is counted).
-
-The replay mesh's console (`reader.console_feed`) shares `ConsoleView`; nothing here
-imports the replay. No liveliness token: the console only listens and sends commands."""
+came on; nothing received can stop the console (a bad payload is counted). No
+liveliness token: the console only listens and sends commands."""
 from __future__ import annotations
 
 import threading
@@ -55,19 +53,19 @@ class ConsoleView:
 
 
 def live_feed(sc, conf, root: str, state: State, log: Callable = print) -> LiveReader:
-    """The console on the live mesh (no replay, no store): the data it draws comes in the
+    """The console on the mesh (no centre, no store): the data it draws comes in the
     sources' frames (`src/<name>`), each message checked as an EA checks it; its clock is
     the event time every source it has heard has promised (the minimum watermark), the
     end when every one of them has ended."""
     return LiveReader(sc, conf, root, classes_of(sc), ConsoleView(state), "console-live", log)
 
 
-def mesh_actions(feed, state: State, live: bool, timeout: float = 10.0) -> CommandActions:
+def mesh_actions(feed, state: State, timeout: float = 10.0) -> CommandActions:
     """Commands on the mesh through `feed` (a reader: its `.session`, `.ks`, `.conf`), sent
     as this console's unit (the EA checks it commands it); their results come back on
     cmdlog/<unit> to every console. Signed as this console's identity in secure mode.
-    `live`: orders and confirmations are directives (saim_mesh/directives.py), published
-    once, taken by every EA they concern."""
+    Orders and confirmations are directives (saim_mesh/directives.py), published once,
+    taken by every EA they concern."""
     from ..security.sign import signer_for
     signer = signer_for(feed.conf)
 
@@ -78,7 +76,7 @@ def mesh_actions(feed, state: State, live: bool, timeout: float = 10.0) -> Comma
     def direct(unit: str, kind: str, fields: dict) -> str:
         from .. import directives as D
         return D.publish(feed.session, feed.ks.root, signer, unit, kind, **fields).req
-    return CommandActions(run, state, push=False, direct=direct if live else None)
+    return CommandActions(run, state, push=False, direct=direct)
 
 
 def hook_inprocess(eas: list, sc, state: State) -> CommandActions:

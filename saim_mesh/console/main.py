@@ -13,12 +13,11 @@ from .server import Server, make_app
 from .state import State
 
 
-def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, linger_s: float = 30.0,
-                 live: bool = False) -> int:
-    """Serve the console for the mesh at `conf` until the replay's end tick plus `linger_s`
-    (wall seconds), SIGTERM or Ctrl-C. `conf`: a zenoh.Config (zconf.config(...,
-    name=f"console.{unit}") under --pki). `live`: the mesh with no centre (the sources'
-    frames and watermarks instead of the replay's data keys and clock). Returns the exit code."""
+def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, linger_s: float = 30.0) -> int:
+    """Serve the console for the mesh at `conf` (the sources' frames, the clock from their
+    watermarks) until every source ended plus `linger_s` (wall seconds), SIGTERM or
+    Ctrl-C. `conf`: a zenoh.Config (zconf.config(..., name=f"console.{unit}") under
+    --pki). Returns the exit code."""
     unit = unit or sc.taskorg.root
     if unit not in sc.taskorg.units:
         print(f"saim-mesh console: unknown unit {unit!r}: not in the task organization of {sc.name}",
@@ -27,16 +26,12 @@ def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, li
     log = lambda *a, **k: print(*a, **k, file=sys.stdout)   # noqa: E731
     from ..scenario import mesh_units
     state = State(sc, unit, eligible=mesh_units(sc))   # acts for the EA peers under it, as organised now
-    if live:
-        feed = live_feed(sc, conf, root, state, log=log)
-    else:   # the replay mesh (going with it): its reader is never imported on the live path
-        from ..reader import console_feed
-        feed = console_feed(sc, conf, root, state, log=log)
+    feed = live_feed(sc, conf, root, state, log=log)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
     feed.open()
-    server = Server(make_app(state, mesh_actions(feed, state, live)), port)
+    server = Server(make_app(state, mesh_actions(feed, state)), port)
     try:
         server.start()
         ended_at = None

@@ -77,8 +77,8 @@ class State:
 
     # -- inputs (any thread) ----------------------------------------------------------
     def clock(self, t: float, end: bool = False, w: float | None = None) -> None:
-        """The mesh clock reached `t`; `w`: the wall time the replay published that tick
-        (passed on to the page, which measures raise-to-render latency against it)."""
+        """The mesh clock reached `t`; `w`: the wall time the console heard it (passed on to
+        the page, which measures raise-to-render latency against it)."""
         with self.lock:
             if t > self.t:
                 self.t = t

@@ -1,5 +1,5 @@
-"""Deploying the live mesh across hosts (docs/deployment.md): one TOML file says which
+"""Deploying the mesh across hosts (docs/deployment.md): one TOML file says which
 host runs which routers, EAs, sources, consoles and TAK gateway (`file`), derived from
 the task organization by default (`init`); each host starts its share under its own
 supervisor (`launch`), with certificates naming the host's addresses (`certs`).
-`mesh up --sources-per-cp` is the one-host case of the same launcher."""
+`mesh up` is the one-host case of the same launcher."""

@@ -5,7 +5,7 @@ its sources. A child that dies is reported and restarted with backoff, up to
 `max_restarts` times (`--restarts`); one that dies once more is given up with one line
 naming it (also in `given_up.json` beside `pids.json`, and in `summary.json`) and the
 rest of the host goes on without it. Every child's output goes to its own log.
-`mesh up --sources-per-cp` is this with one host on 127.0.0.1, free ports, and
+`mesh up` is this with one host on 127.0.0.1, free ports, and
 optionally emulated router links (`link`).
 
 The host's run ends when each of its EA peers said its summary or was given up
@@ -34,7 +34,7 @@ from pathlib import Path
 
 from .. import zygote
 from ..live.depend import home_of
-from ..mesh import Supervisor
+from ..supervise import Supervisor
 from ..proc import Proc, clean_env, leaf_env, py
 from ..zconf import free_port
 from .check import interface_addresses
@@ -188,7 +188,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
                                                                        for x in ("--listen-cot", u)]
             tak += ["--uids", h.tak.uids] if h.tak.uids else []
             tak += ["--proto", h.tak.proto] if h.tak.proto != "xml" else []
-            sup.add(Proc("tak", [*py(), "tak", dep.scenario, "--sources", *live_args, *tak, *where(to.root),
+            sup.add(Proc("tak", [*py(), "tak", dep.scenario, *live_args, *tak, *where(to.root),
                                  "--root", root], env=clean_env(), log_dir=logs)).wait_for("tak ready", 60)
         armed = ["--armed"] if h.consoles else []   # a console watches: urgent alerts repeat until acked
         for u in units:
@@ -201,7 +201,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
         if units:
             echo(f"host {host}: {len(units)} EA peers ready ({' '.join(units)})", flush=True)
         for c in h.consoles:
-            p = sup.add(Proc(f"console-{c.unit}", [*py(), "console", dep.scenario, "--unit", c.unit, "--sources",
+            p = sup.add(Proc(f"console-{c.unit}", [*py(), "console", dep.scenario, "--unit", c.unit,
                                                    *where(c.unit), "--root", root, "--port", str(c.port),
                                                    "--linger", str(console_linger)], env=clean_env(), log_dir=logs))
             consoles.append(p)

@@ -8,13 +8,13 @@ objects. One queue taken by one thread, so the gate and the view see one payload
 time, in arrival order; nothing received can stop it (a bad payload, or a bug in the
 view, is counted).
 
-It needs nothing of the replay mesh (no ticks, no situation store, no batches): the
-sources' caches serve a late joiner. tests/test_live_reader.py checks that importing it,
-the console's and the gateway's live feeds loads no module of the replay."""
+No ticks, no situation store, no batches: the sources' caches and journals serve a late
+joiner."""
 from __future__ import annotations
 
 import queue
 import threading
+import time
 from typing import Callable, Protocol
 
 from dissemination.keyspace import KeySpace
@@ -43,7 +43,7 @@ class View(Protocol):
 
 class Checks:
     """alert/, cmdlog/ and notice/ payloads: checked by the gate and against their key,
-    then to the view. Shared with the replay's reader (saim_mesh/reader.py) while it lives."""
+    then to the view."""
 
     def __init__(self, ks: KeySpace, gate: G.Gate, view: View):
         self.ks, self.gate, self.view = ks, gate, view
@@ -165,4 +165,6 @@ class LiveReader:
         if msgs is None:
             return
         self.view.data([m for m in msgs if type(m) in self.classes])
-        self.view.clock(*self.frames.clock())
+        # the wall time this reader heard the clock reach t: what the console's page measures
+        # raise-to-render latency from (a stamp for the page, never a decision)
+        self.view.clock(*self.frames.clock(), time.time())

@@ -1,8 +1,8 @@
-"""`saim-mesh mesh up --live`: the mesh with no centre on one host. One source per
-command post (each company's subtree; the battalion's own units and the hostile tracks
-its sensors see), one EA peer per unit advancing on those sources' watermarks, no
-replay. Alerts are printed as the peers raise them (read from their durable logs), the
-Fig. 7 table at the end. Supervised like `mesh up --replay`: a child that dies is reported
+"""`saim-mesh mesh up`: the mesh, with no centre, on one host. One source per command
+post (each company's subtree; the battalion's own units and the hostile tracks its
+sensors see), one EA peer per unit advancing on those sources' watermarks. Alerts are
+printed as the peers raise them (read from their durable logs), the Fig. 7 table at the
+end. Supervised (saim_mesh/supervise.py): a child that dies is reported
 and restarted, up to `max_restarts` times each (`--restarts`; a restarted source takes a
 new epoch and resumes after what it published, a restarted peer replays its input
 journal), then given up with one line and the mesh goes on without it."""

@@ -8,8 +8,8 @@ The zygote runs it before it forks (saim_mesh/zygote.py): what this code builds 
 use (msgspec's per-type codecs, the interpreter's specialised bytecode, the EA's
 detectors, shapely's and the domain's first-use state, modules imported on first use)
 then exists once, in pages every EA peer shares, instead of once in each of them.
-Nothing here needs the replay mesh, and the frames are cut on event time only (every
-epoch's watermark flushes), so the same scenario warms the same way on any machine."""
+The frames are cut on event time only (every epoch's watermark flushes), so the same
+scenario warms the same way on any machine."""
 from __future__ import annotations
 
 import heapq

@@ -1,6 +1,6 @@
 """`saim-mesh router`: a Zenoh router in a Python process (no `zenohd` comes from the
-package registries). It serves one command post: its leaves (EA peers, the replay's
-source for that post, consoles) attach to it as clients, and it links to the router of
+package registries). It serves one command post: its leaves (EA peers, the
+sources of that post, consoles) attach to it as clients, and it links to the router of
 the command post above. It routes by interest, so a key crosses a router link only
 when someone beyond it subscribes (../shared/notes/zenoh-routers.md).
 

@@ -5,8 +5,8 @@ A topology file (TOML) names routers and links; by default one is derived from t
 task organization: a router at the top unit's command post and one at every battalion
 command post, each battalion router linked to the router of the nearest command post
 above it. Every other process attaches, as a Zenoh client, to the router of its unit's
-nearest command post (the replay publishes each unit's reports through that router, so
-position reports start inside their battalion). Checked before anything starts: a
+nearest command post (each command post's source publishes its units' reports through that
+router, so position reports start inside their battalion). Checked before anything starts: a
 topology naming unknown units or routers, a cycle, or a router nobody can reach is a
 `TopologyError` naming what is wrong.
 """

@@ -1,8 +1,9 @@
 """Identities (mTLS certificates, one per role) and Zenoh access-control rules
 generated from the scenario: `pki` makes the certificates, `acl` the configuration.
 
-Roles and certificate common names: `replay`, `ea.<unit>`, `fusion.<group>`,
-`observer` (read-only: alerts and presence), `console` (observer + commands). `sign`
+Roles and certificate common names: `ea.<unit>`, `source.<name>`, `observer`
+(read-only: alerts and presence), `console` (observer + commands), `console.<unit>`,
+`tak`, `router.<name>`. `sign`
 signs what carries authority with each identity's own Ed25519 key (it survives relays)."""
 from __future__ import annotations
 

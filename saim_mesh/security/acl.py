@@ -2,7 +2,7 @@
 
 Every secured process carries the same `access_control` section: each process enforces
 on its own links (ingress: what it accepts from the peer whose certificate CN is the
-subject), so a forged order, clock tick, liveliness token or store reply is dropped by
+subject), so a forged frame, order, liveliness token or journal reply is dropped by
 the receiver itself. Default deny; egress allows everything under the root (reads are
 limited on ingress, by who may declare subscribers and queries) except `delete`, which
 nobody may send or accept.
@@ -13,13 +13,11 @@ rules and the keys cannot drift apart.
 
 | subject | ingress allowed, besides reading |
 |---|---|
-| `replay` | put clock, pos/**, trk/**, hit/**, msn/**, ord/**, cff/**, org/**; queryable + reply store/log/*; query store/**; token alive/replay/* |
-| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations), dir/<U>/confirm (confirmations it infers); queryable + reply dirj/<U>, query dirj/* (directives for late joiners); token alive/<U>/*; query store/** |
-| `fusion.<G>` | put trk/**, fusion-tick/<G>, bye/fusion-<G>; queryable + reply store/fusion/<G>; token alive/fusion-<G>/*; query store/** |
+| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations), dir/<U>/confirm (confirmations it infers); queryable + reply dirj/<U>, query dirj/* (directives for late joiners); token alive/<U>/* |
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/** and notice/**, put cmd/** |
-| `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put ingest/tak (PLI for the replay to sequence); query store/** |
-| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now), dir/<U>/* (U's orders to its subtree, U's confirmations up: saim_mesh/directives.py); reading what an observer reads plus cmdlog/**, notice/**, clock and the data families but raw hits; query store/** |
+| `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put cmd/*/ack/* (ATAK users' acknowledgements), its own source src/tak (PLI) |
+| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now), dir/<U>/* (U's orders to its subtree, U's confirmations up: saim_mesh/directives.py); reading what an observer reads plus cmdlog/**, notice/**, the sources' frames src/* |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
 (observer and console: on alert/** and alive/** only).
@@ -31,7 +29,7 @@ from pathlib import Path
 
 import zenoh
 
-from dissemination.keyspace import KeySpace, template
+from dissemination.keyspace import KeySpace
 
 from .pki import SecurityError, check_identity
 
@@ -64,19 +62,12 @@ def _chunk(kind: str, name: str) -> str:
     return name
 
 
-def data_families() -> list[str]:
-    """Key families of every registered data message (what the replay publishes for
-    SAIM); alerts are the EAs' own."""
-    from saim_mesh import messages as M
-    return sorted({template(c).family for c in M.MESSAGE_TYPES.values()} - {template(M.Alert).family})
-
-
 def identities(units, groups, taskorg=None, routers=()) -> list[str]:
     """Every certificate CN the rules know (one subject each); `console.<U>` per unit
     when the task organization is known (a commander's console acts for U's subtree);
     `router.<R>` per router of the topology."""
     consoles = [f"console.{u}" for u in units] if taskorg is not None else []
-    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), *READ_ONLY_ROLES, "tak",
+    return [*(f"ea.{u}" for u in units), *READ_ONLY_ROLES, "tak",
             *consoles, *(f"router.{r}" for r in routers), *(f"source.{n}" for n in source_names(units, taskorg, groups))]
 
 
@@ -101,10 +92,6 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     r = ks.root
     units = sorted(dict.fromkeys(_chunk("unit", u) for u in units))
     groups = sorted(dict.fromkeys(_chunk("fusion group", g) for g in groups))
-    for u in units:
-        # an EA's alive/bye chunk must not be the replay's or a fusion node's
-        if u == "replay" or u.startswith("fusion-"):
-            raise SecurityError(f"unit name {u!r} collides with the replay's or a fusion node's keys")
 
     rules: list[dict] = []
     subjects: list[dict] = []
@@ -119,7 +106,6 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     out = rule("egress", SENT, [f"{r}/**", adv], "egress")
     read_all = rule("read", READ, [f"{r}/**"])
     read_public = rule("read_public", READ, [f"{r}/alert/**", f"{r}/alive/**"])
-    query_store = rule("query_store", ["query"], [f"{r}/store/**"])
     # live sources (zenoh.ext): the advanced publisher puts on src/<name> and keeps its cache
     # and liveliness token under src/<name>/@adv/...; `@` chunks are verbatim (`**` does not
     # reach them), so they are named. An EA's advanced subscriber queries those caches and
@@ -131,12 +117,8 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
         subjects.append({"id": cn, "cert_common_names": [cn]})
         policies.append({"id": f"policy.{cn}", "rules": rule_ids, "subjects": [cn]})
 
-    subject("replay", [out, read_all, query_store,
-                       rule("replay_put", ["put"], [ks.clock(), *(f"{r}/{k}/**" for k in data_families())]),
-                       rule("replay_store", ["declare_queryable", "reply"], [ks.store()]),
-                       rule("replay_token", ["liveliness_token"], [ks.alive("replay", "*")])])
     for u in units:
-        subject(f"ea.{u}", [out, read_all, query_store, *ea_src,
+        subject(f"ea.{u}", [out, read_all, *ea_src,
                             rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
                                                           f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
                                                           ks.cmdlog(u), ks.notice("*", u),
@@ -152,25 +134,16 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                                 rule(f"source.{n}.put", ["put", "declare_queryable", "reply", "liveliness_token"],
                                      mine),
                                 rule(f"source.{n}.query", ["query"], [adv])])
-    for g in groups:
-        subject(f"fusion.{g}", [out, read_all, query_store,
-                                rule(f"fusion.{g}.put", ["put"], [f"{r}/trk/**", ks.fusion_tick(g),
-                                                                  ks.bye(f"fusion-{g}")]),
-                                rule(f"fusion.{g}.store", ["declare_queryable", "reply"], [ks.fusion_store(g)]),
-                                rule(f"fusion.{g}.token", ["liveliness_token"], [ks.alive(f"fusion-{g}", "*")])])
     subject("observer", [out, read_public])
     read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**"), f"{r}/notice/**"])
     subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
-    # ... and on the live mesh, the sources' frames (the same messages, batched per source)
-    seen = [ks.clock(), *(f"{r}/{k}/**" for k in data_families() if k != "hit"), ks.src("*")]
-    read_seen = rule("read_console", READ, seen)
-    # the TAK gateway: reads what a console reads, but no commands; its PLI go to the
-    # replay's ingest key, never straight to the EAs
-    subject("tak", [out, read_public, read_seen, read_cmdlog, query_store,
+    read_seen = rule("read_console", READ, [ks.src("*")])   # the sources' frames: the picture
+    # the TAK gateway: reads what a console reads, but no commands
+    subject("tak", [out, read_public, read_seen, read_cmdlog,
                     # ... and acknowledgements from ATAK users, sent as their mapped unit's console
                     # (each EA checks that unit commands it, as for a console: issue 33.6)
-                    rule("tak_put", ["put"], [ks.ingest("tak"), ks.cmd("*", "ack", "*")]),
-                    # on the live mesh its PLI are its own source's stream
+                    rule("tak_put", ["put"], [ks.cmd("*", "ack", "*")]),
+                    # its PLI are its own source's stream
                     rule("tak_src", ["put", "declare_queryable", "reply", "liveliness_token"],
                          [ks.src("tak"), f"{r}/src/tak/@adv/**", ks.srcj("tak")])])
     if taskorg is not None:
@@ -178,7 +151,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
         # it to that; the receiving EA decides whether that unit commands it at that moment
         # (its subtree changes with reorganizations, which access control cannot follow)
         for u in units:
-            subject(f"console.{u}", [out, read_public, read_cmdlog, read_seen, query_store,
+            subject(f"console.{u}", [out, read_public, read_cmdlog, read_seen,
                                      rule(f"console.{u}.put", ["put"], [ks.cmd("*", "*", u), f"{r}/dir/{u}/*"])])
     # a router relays what others sent: its link carries every role's traffic, so a
     # receiver behind it sees the router's CN (zenoh-security.md). Each router enforces

@@ -319,10 +319,10 @@ def make_pki(out_dir: str | Path, names: list[str], days: int = 30, *, ca_days: 
 
 
 def names_for(sc, units: list[str] | None = None, consoles: bool = False) -> list[str]:
-    """The identities of a scenario's mesh: replay, ea.<unit> for each unit (default:
-    every unit that gets an EA peer), fusion.<group> for each fusion group, observer,
-    console and tak (the Cursor-on-Target gateway), source.cp.<U> for each command post (a live
-    source); with `consoles`, console.<unit> for each unit too (a commander's console)."""
+    """The identities of a scenario's mesh: ea.<unit> for each unit (default: every unit
+    that gets an EA peer), observer, console and tak (the Cursor-on-Target gateway),
+    source.cp.<U> for each command post and source.fusion.<group> for each fusion group (live
+    sources); with `consoles`, console.<unit> for each unit too (a commander's console)."""
     from saim_mesh.scenario import mesh_units
     units = list(units) if units is not None else mesh_units(sc)
     unknown = [u for u in units if u not in sc.taskorg.units]
@@ -330,14 +330,14 @@ def names_for(sc, units: list[str] | None = None, consoles: bool = False) -> lis
         raise SecurityError(f"units not in the scenario's task organization: {', '.join(unknown)}")
     groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
     from .acl import source_names
-    return ["replay", *(f"ea.{u}" for u in units), *(f"fusion.{g}" for g in groups), "observer", "console", "tak",
+    return [*(f"ea.{u}" for u in units), "observer", "console", "tak",
             *(f"console.{u}" for u in units if consoles),
             *(f"source.{n}" for n in source_names(units, sc.taskorg, groups))]
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="make-certs", description="Make the mesh's CA and one certificate per "
-                                 "role (replay, ea.<unit>, fusion.<group>, observer, console).")
+                                 "role (ea.<unit>, observer, console, tak, source.<name>).")
     ap.add_argument("scenario", help="scenario folder")
     ap.add_argument("out_dir", help="where ca.pem/ca.key and NAME.pem/NAME.key go")
     ap.add_argument("--units", nargs="+", help="units that get an EA identity (default: every mesh unit)")

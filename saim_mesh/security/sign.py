@@ -9,9 +9,8 @@ A `Signed` envelope, (v, by, n, key, body, sig), travels as msgpack ext type 83 
 message is a map, a control message or batch a map or an array: the first byte tells them
 apart); `sig` covers a canonical encoding of (by, n, key, body), so a signed message
 cannot be moved to another key or claimed by another signer.
-`n` is a counter strictly new per signer: the replay uses each event's place in the
-script (the same after a restart that resumes from its state file), consoles a time-based
-counter. A `Verifier` rejects, with a `MessageError` of kind "signed" naming why: an
+`n` is a counter strictly new per signer: time-based (microseconds since the epoch,
+strictly increasing), so a restarted signer never reuses one. A `Verifier` rejects, with a `MessageError` of kind "signed" naming why: an
 undecodable envelope, an unknown signer, a signer not allowed on that key family, a key
 other than the one the envelope came on, a bad signature, and an `n` it has taken before
 (or older than its window of the last `window` taken per signer).
@@ -32,7 +31,7 @@ from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
-from dissemination.keyspace import KeySpace, template
+from dissemination.keyspace import KeySpace
 from saim_mesh import messages as M
 from saim_mesh import wire as W
 
@@ -47,9 +46,9 @@ MAX_BODY = 1 << 20               # the Gate's size bound on the whole envelope c
 WINDOW = 4096                    # counters remembered per signer
 _DOMAIN = "saim-mesh signed v1"  # what a signature is for: never valid for anything else
 
-# what carries authority: these message kinds must come signed in secure mode, by `replay`
+# what carries authority: these message kinds must come signed in secure mode (nobody signs them on
+# a data key today: orders and confirmations travel as directives, saim_mesh/directives.py)
 AUTHORITY: tuple[type, ...] = (M.Order, M.Reorganization, M.MissionConfirm, M.UvAgent)
-AUTHORITY_FAMILIES = tuple(template(c).family for c in AUTHORITY)   # ord, org, msn, agm
 COMMAND_FAMILY = "cmd"
 NOTICE_FAMILY = "notice"
 DIRECTIVE_FAMILY = "dir"    # orders down, confirmations up (saim_mesh/directives.py)
@@ -104,9 +103,9 @@ def _canonical(by: str, n: int, key: str, body: bytes) -> bytes:
 
 
 class Signer:
-    """Signs payloads as identity `name`. `n` is given (the replay: an event's place in
-    its script) or time-based: microseconds since the epoch, strictly increasing, so a
-    restarted console never reuses one."""
+    """Signs payloads as identity `name`. `n` is given (a directive carries the one it
+    was signed with: `next_n`) or time-based: microseconds since the epoch, strictly
+    increasing, so a restarted console never reuses one."""
 
     def __init__(self, name: str, private_key: Ed25519PrivateKey):
         if not NAME_RE.match(name) or len(name) > 128:
@@ -140,14 +139,11 @@ def seal(signer: Signer | None, key: str, msg, payload: bytes, n: int) -> bytes:
 
 def rules_for(identities: Iterable[str]) -> dict[str, list[str]]:
     """Which identity may sign which keys (relative to the root), as the access control
-    lets them publish today: the replay (SAIM's stand-in) the scripted orders,
-    reorganizations, mission confirmations and task delegations; `console` any command;
+    lets them publish today: `console` any command;
     `console.U` commands sent as U's console (`cmd/<unit>/<kind>/U`). Nobody else."""
     out: dict[str, list[str]] = {}
     for name in identities:
-        if name == "replay":
-            out[name] = [f"{f}/**" for f in AUTHORITY_FAMILIES]
-        elif name == "console":
+        if name == "console":
             out[name] = [f"{COMMAND_FAMILY}/**"]
         elif name == "tak":   # an ATAK user's acknowledgement, as the console of the unit its uid maps to
             out[name] = [f"{COMMAND_FAMILY}/*/ack/*"]

@@ -4,9 +4,7 @@ Out: reads the live mesh (`live.reader.LiveReader`: the sources' frames, alerts,
 notices, command results, every payload through `gate.Gate` and checked against its
 key), keeps the picture (`picture.Picture`, through `TakView`) and sends CoT through
 `transports.Network`. In: CoT PLI heard on the listen URLs becomes a LocationReport
-(`pli.PliIn`) put into the gateway's own live source `tak` (with --live). On the
-replay mesh (`reader.TakFeed`, imported only then, going with it) PLI go out on
-`<root>/ingest/tak` instead. Acknowledgements from ATAK users (GeoChat `ack BN/12`, a
+(`pli.PliIn`) put into the gateway's own live source `tak` (with --live). Acknowledgements from ATAK users (GeoChat `ack BN/12`, a
 `y-a-w` reply to an alert's CoT) go to the alert owner's EA as `ack` commands for the
 user's mapped unit (`acks.AckIn`, `ack_send.AckSender`); the EA's answer goes back to the
 user in GeoChat.
@@ -98,7 +96,7 @@ class TakView:
 
 
 class LiveTakFeed:
-    """The gateway on the live mesh (no replay): a `LiveReader` into the picture, its clock
+    """The gateway on the mesh: a `LiveReader` into the picture, its clock
     the event time every source it heard has promised. PLI in (only with `live_start`,
     event time = wall clock from it) go out as the gateway's own live source `tak`, with a
     watermark every epoch of wall time so that it holds no EA back; an EA takes them when
@@ -177,7 +175,7 @@ def picture_options(sc, opts) -> Options:
 
 def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None = None) -> int:
     """Run the gateway for the mesh at `conf` (zconf.config(..., name="tak") under --pki)
-    until the replay's end tick plus `--linger` wall seconds, SIGTERM or Ctrl-C.
+    until every source it hears has ended plus `--linger` wall seconds, SIGTERM or Ctrl-C.
     Prints `tak ready ...` once it listens and subscribes, `tak done ...` at the end."""
     log = log or (lambda *a, **k: print(*a, **k, file=sys.stdout))
     urls = opts.cot_url or [DEFAULT_COT_URL]
@@ -196,7 +194,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
     except Exception as e:
         print(f"saim-mesh tak: {e}", file=sys.stderr, flush=True)
         return 2
-    feed_box: list = []   # LiveTakFeed, or the replay's reader.TakFeed
+    feed_box: list = []   # the LiveTakFeed, once made
     gw_uid, gw_callsign = picture.uid("gateway", "cot"), f"SAIM {sc.name}"
     ack_timeout = float(getattr(opts, "ack_timeout", 10.0))
 
@@ -240,12 +238,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
     net = Network(urls, opts.proto, opts.listen_cot, opts.mcast_if, opts.mcast_ttl, tls, on_data, log=log,
                   hello=picture.presence_event())
     every = None if opts.no_overlay else opts.overlay_every
-    if getattr(opts, "sources", False):   # the live mesh: frames and watermarks, PLI as the `tak` source
-        feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log,
-                           live_start=getattr(opts, "live_start", None))
-    else:   # the replay mesh (going with it): its reader is never imported on the live path
-        from ..reader import TakFeed
-        feed = TakFeed(sc, conf, root, picture, net.send, every, log=log)
+    feed = LiveTakFeed(sc, conf, root, picture, net.send, every, log=log, live_start=getattr(opts, "live_start", None))
     feed_box.append(feed)
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
@@ -259,7 +252,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
     try:
         feed.open()
         log(f"tak ready cot={','.join(urls)} proto={opts.proto} "
-            f"listen={','.join(net.listening.values()) or '-'} ingest={feed.ks.ingest(IDENTITY)}", flush=True)
+            f"listen={','.join(net.listening.values()) or '-'} src={feed.ks.src(IDENTITY)}", flush=True)
         ended_at = None
         while not stop.wait(0.2):
             if picture.ended and ended_at is None:

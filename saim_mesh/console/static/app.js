@@ -18,9 +18,9 @@
   window.__frames = [];          // one per drawing: [start ms since navigation, its duration ms, alerts it drew]
   window.__paint = {};           // the first paint's steps: ms since navigation start
   window.__eventMs = {};         // per event type: [events handled, ms spent handling them]
-  // The mesh clock: [scenario t, wall ms the replay published that tick], in order. An
-  // alert raised at t is due on the mesh at the first tick at or after t; its latency is
-  // from that tick's publication to the alert's row on screen (same machine, same clock).
+  // The mesh clock: [scenario t, wall ms the console heard the clock reach t], in order. An
+  // alert raised at t is due on the mesh at the first step at or after t; its latency is
+  // from that moment to the alert's row on screen (same machine, same clock).
   const TICK_LOG_CAP = 400000;
   window.__ticks = [];
   // render_ms: from the page receiving the alert (its event, or the snapshot) to its row drawn.
