@@ -20,10 +20,12 @@ MAX_MSGS = 1024   # data messages in one frame
 Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.\-]+$")]
 
 
-class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, omit_defaults=True):
     """`msgs`: encoded data messages (messages.encode), each with its event time inside.
     `wm`: the source's watermark after this frame: nothing at or before it will follow.
-    `end`: the source finished (its watermark is +inf from now on)."""
+    `end`: the source finished (its watermark is +inf from now on). `groups`: a source
+    publishing by key group (`groupframes`): each message's group (its journal's frames,
+    and the flushes an EA assembles); absent otherwise."""
     v: Literal[1]
     source: Name
     epoch: Annotated[int, msgspec.Meta(ge=0, le=2**62)]
@@ -31,6 +33,7 @@ class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tru
     wm: Annotated[float, msgspec.Meta(ge=-1.0, le=W.T_LIMIT)]
     msgs: Annotated[list[bytes], msgspec.Meta(max_length=MAX_MSGS)] = []
     end: bool = False
+    groups: Annotated[list[str], msgspec.Meta(max_length=MAX_MSGS)] | None = None
 
 
 _ENC = msgspec.msgpack.Encoder()
