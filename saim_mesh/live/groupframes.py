@@ -152,3 +152,47 @@ class Assembler:
             del self.groups[k]
         if not self.groups:
             self.bytes = 0
+
+
+def data_templates() -> list[str]:
+    """The key templates of every data message kind the application knows (not the alert)."""
+    from ea_agent.core.messages import MESSAGE_TYPES
+    return sorted({c.KEY for c in MESSAGE_TYPES.values() if getattr(c, "KEY", None) and c is not M.Alert})
+
+
+def streams_of(sc, root: str):
+    """The key groups of a scenario's mesh (`dissemination.streams`)."""
+    from dissemination.streams import Streams
+    return Streams.of(root, sc.taskorg, data_templates())
+
+
+def grouper(sc, root: str) -> Callable[[object], str]:
+    """A source's map of each message (in event-time order) to its key group: its key
+    (`KeySpace.key`) cut to its group. Command paths are the organization as the source
+    knows it at the message's time: the plan's reorganizations from their start, and the
+    reorganizations it publishes (`docs/keyspace.md`, "Key groups")."""
+    from dissemination.keyspace import KeySpace
+    ks, streams = KeySpace.of(sc, root), streams_of(sc, root)
+    to, proj = sc.taskorg.copy(), sc.projection
+    plan = getattr(sc, "plan", None)
+    reorgs = sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in getattr(plan, "missions", ())
+                    if m.type == "reorganize" and m.params.get("subject") in to.units
+                    and m.params.get("new_parent") in to.units)
+
+    def move(u: str, p: str) -> None:
+        try:
+            to.resubordinate(u, p)
+        except (KeyError, ValueError):   # a reorganization the organization refuses: the EAs refuse it too
+            pass
+
+    def group(m) -> str:
+        while reorgs and reorgs[0][0] <= m.t:
+            move(*reorgs.pop(0)[1:])
+        try:
+            g = streams.group(ks.key(m, to, proj))
+        except (ValueError, AttributeError):   # a kind with no key: its own group
+            g = getattr(m, "KIND", "other")
+        if type(m) is M.Reorganization:
+            move(m.unit, m.new_parent)
+        return g
+    return group

@@ -37,9 +37,10 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
 
             def frames_of(name: str):   # a frame queued, its arrival noted: silence is the source's
                 return lambda smp: (came(name), put((str(smp.key_expr), smp.payload.to_bytes())))
-            # one advanced subscriber per source depended on: nothing else crosses a link to us
+            # one advanced subscriber per source depended on: its whole stream, or its key groups
+            # and progress stream (`bygroup`); nothing else crosses a link to us
             subs = [zx.declare_advanced_subscriber(
-                s, peer.ks.src(name), frames_of(name),
+                s, f"{peer.ks.src(name)}/**", frames_of(name),
                 history=zx.HistoryConfig(detect_late_publishers=False, max_samples=HISTORY),
                 recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True) for name in peer.sources]
             misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
