@@ -59,6 +59,8 @@ def test_peers_on_key_groups_raise_the_in_process_alerts(tmp_path, sc):
     for u, line in zip(units, lines):
         summary = json.loads(line.split(" ", 1)[1])
         assert summary["lost"] == {} and summary["rejects"] == {} and summary["gaps"] == 0, summary
+        offered = sum(len(streams[n]) for n in summary["depends"])
+        assert summary["messages"] < 0.9 * offered, (u, summary["messages"], offered)   # only its interest's groups
         got = plan_alerts(load(tmp_path / f"{u}.jsonl"))
         want = plan_alerts(in_process(sc, u, streams))
         assert len(want) >= 3 and got == want, u

@@ -13,6 +13,9 @@ from __future__ import annotations
 import time
 from typing import Callable
 
+from dissemination.exact import _chunks_match
+from dissemination.interest import Interest
+
 from .. import messages as M
 from . import frames as F
 from . import groupframes as GF
@@ -23,16 +26,44 @@ class GroupIntake:
     """`hears(group)`: whether this EA hears a group (its subscriptions). `journal(source,
     epoch, lo, hi)`: the source's journal's whole flushes (`Sequencer.journal_frames`)."""
 
-    def __init__(self, ks, max_bytes: int, gate, log, hears: Callable[[str], bool] = lambda g: True,
-                 journal: Callable | None = None):
+    def __init__(self, ks, max_bytes: int, gate, log, journal: Callable | None = None, streams=None,
+                 interest: dict | None = None):
         self.ks, self.max_bytes, self.gate, self.log = ks, max_bytes, gate, log
-        self.hears, self.journal = hears, journal
+        self.journal = journal
+        self.streams = streams   # None: every group is heard
+        dis = interest or {}
+        self.finder = Interest(ks, float(dis.get("radius_m", 3000.0)), int(dis.get("block_share", 10)))
+        self.want: frozenset[str] = frozenset({"**"})   # group expressions heard (relative to a source's prefix)
+        self.version = 0                                # bumped when `want` changes (serve re-declares)
+        self._match = None
+        self._heard: dict[str, bool] = {}
         self.asm: dict[str, GF.Assembler] = {}
         self.waiting_since: dict[tuple[str, int, int], float] = {}
         self.gaps = 0          # group frames never received (beyond recovery and the journal)
         self.filled = 0        # flushes filled from a journal
         self.prefix = ks.src("")
         self.last: dict[str, tuple[int, int, F.Frame]] = {}   # source -> its last flush assembled (offered again)
+
+    def hears(self, group: str) -> bool:
+        got = self._heard.get(group)
+        if got is None:
+            if len(self._heard) >= 8192:
+                self._heard.clear()
+            got = self._heard[group] = self._match is None or self._match(group)
+        return got
+
+    def interest(self, dom) -> frozenset[str]:
+        """The groups the EA's interest needs now (`Interest` -> `Streams.subscriptions`):
+        what it hears from here on, and what it subscribes to."""
+        if self.streams is None:
+            return self.want
+        want = frozenset(self.streams.subscriptions(self.finder.keys(dom)))
+        if want != self.want:
+            self.want, self.version = want, self.version + 1
+            pats = [tuple(e.split("/")) for e in want]
+            self._match = None if "**" in want else (lambda g: any(_chunks_match(p, g.split("/")) for p in pats))
+            self._heard = {}
+        return want
 
     def split_key(self, key: str) -> tuple[str, str] | None:
         """(source, group or `PROGRESS`) of a key group's stream; None for a whole stream."""
@@ -58,8 +89,7 @@ class GroupIntake:
             return None
         if rest == GF.PROGRESS:
             return x
-        if self.hears(x.group):
-            self.assembler(name).group(x, len(payload))
+        self.assembler(name).group(x, len(payload))   # kept even if not heard now: the interest may grow
         return None
 
     def assembler(self, name: str) -> GF.Assembler:

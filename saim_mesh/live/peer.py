@@ -133,8 +133,10 @@ class LivePeer:
         self.seq = Sequencer(self.take, self._frame, self.ks, log, lambda: self.max_held,
                              room=lambda: self.order.buffered() < self.order.max_buffered // 2,
                              session=lambda: self.session)
-        # sources publishing by key group: their flushes assembled from the groups it hears
-        self.bygroup = GroupIntake(self.ks, self.max_bytes, self.gate, log, journal=self.seq.journal_frames)
+        # sources publishing by key group: their flushes assembled from the groups its interest
+        # hears, decided at a deterministic point (`_interest_at`)
+        self.bygroup = GroupIntake(self.ks, self.max_bytes, self.gate, log, journal=self.seq.journal_frames,
+                                   streams=GF.streams_of(sc, root), interest=self.cfg.get("dissemination", {}))
         self.frames = 0
         self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
@@ -305,6 +307,10 @@ class LivePeer:
         if not retrying and journal and self.seq.hold.waiting_for(f.source):
             self.seq.hold.wait(f.source, (payload, key, f))
             return False
+        if journal and (type(f) is GF.Progress or f.groups is not None) and not self._interest_at(f.source):
+            if not retrying:   # by key group: taken once the EA stands at the source's last promise
+                self.seq.hold.wait(f.source, (payload, key, f))
+            return False
         if type(f) is GF.Progress:   # by key group: the flush, once the groups it hears are here
             whole = self.bygroup.assemble(f)
             if whole is None:
@@ -348,6 +354,18 @@ class LivePeer:
         self.frames += 1
         self.watch.took(f)
         self._apply()
+        return True
+
+    def _interest_at(self, source: str) -> bool:
+        """Whether the next flush of a source publishing by key group may be taken now, and
+        then the groups the EA hears for it (its interest now). Taken only once everything up
+        to the source's last promise is released, so the EA's state, and the interest it
+        gives, is the same whatever the arrival order: what the EA hears of the flush depends
+        on the data alone (docs/architecture.md, "Key groups on the live mesh")."""
+        wm = self.order.watermarks().get(source, -math.inf)
+        if self.order.released < wm and source not in self.order.lost:
+            return False
+        self.bygroup.interest(self.ea.domain)
         return True
 
     def back(self, source: str) -> None:

@@ -44,6 +44,10 @@ HISTORY = CACHE
 YIELDING_CACHE = 4
 FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
 LINGER_S = 0.05        # the longest a lingering source holds a watermark back (wall seconds)
+# by key group, the event time one flush spans at most, lingering or not: an EA decides
+# what it hears of a flush from its interest at the flush's start (`LivePeer._interest_at`),
+# so a flush is as long as a re-registration's period ([dissemination] reregister_s)
+GROUP_SPAN_S = 30.0
 
 
 def next_epoch(state_dir: str | Path | None, name: str) -> int:
@@ -109,6 +113,7 @@ class LiveSource:
             self.queryable = session.declare_queryable(jkey, lambda q: self.journal.serve(q, jkey))
         self.groups, self.session, self.cache, self.qos = groups, session, cache, qos
         self.pending_groups: list[str] = []
+        self.pending_t0 = 0.0                   # event time of the first message pending
         self.group_seq: dict[str, int] = {}     # each group's last frame seq
         self.group_pubs: dict[str, object] = {}
         # whole stream, or (by group) the progress stream; its heartbeat is periodic: one per source
@@ -135,6 +140,8 @@ class LiveSource:
         M.decode(b)   # checked as every receiver will check it (a NaN, a bad id): MessageError here, not there
         if self.pending and (self.size + len(b) > self.frame_bytes or len(self.pending) >= F.MAX_MSGS):
             self._send(self.wm)
+        if not self.pending:
+            self.pending_t0 = msg.t
         self.pending.append(b)
         if self.groups is not None:
             self.pending_groups.append(self.groups(msg))
@@ -149,7 +156,8 @@ class LiveSource:
         lingering source to take it for a silent one."""
         if t <= self.wm and not self.pending:
             return   # nothing new to say
-        if linger and time.monotonic() - self.last_sent < LINGER_S:
+        if linger and time.monotonic() - self.last_sent < LINGER_S and not (
+                self.groups is not None and self.pending and t - self.pending_t0 >= GROUP_SPAN_S):
             self.wm = max(self.wm, t)
             return
         self._send(max(t, self.wm))
