@@ -83,7 +83,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             progress = EaProgress(peer.ks, peer.unit)
             while not peer.done(time.monotonic()) and time.monotonic() < end_wall:
                 try:   # frames waiting for the release (key groups) are offered again soon
-                    key, payload = peer.q.get(timeout=CHECK_S if peer.seq.hold.waiting else 0.5)
+                    key, payload = peer.q.get(timeout=CHECK_S if peer.seq.hold.sources_waiting() else 0.5)
                 except queue.Empty:
                     key = None
                 if key == "miss":
