@@ -70,6 +70,9 @@ def next_epoch(state_dir: str | Path | None, name: str) -> int:
 class LiveSource:
     """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
 
+    groups = None        # a message -> its key group (None: one whole stream); set by __init__
+    pending_t0 = 0.0     # event time of the first message pending
+
     def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
                  cache: int | None = None, frame_bytes: int = FRAME_BYTES, yielding: bool = False,
                  catch_up_kbit: float | None = None, groups=None):
