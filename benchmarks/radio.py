@@ -1,14 +1,20 @@
 """What crosses each battalion's radio link to the brigade (issue 32, item 5: fit the radio).
 
 Routers forward one copy of a sample per link, to where some subscriber is. On the live
-mesh the bulk of that is the command posts' source frames (`src/<cp>`): each EA subscribes
-only to the sources it depends on (live/depend.py), so a link from battalion X up to the
-brigade carries cp.X's frames when some EA outside X's subtree depends on them, and down
-the frames of every other source some EA of X's subtree depends on. This benchmark builds
-those frames as a live source does (one per source per epoch, messages encoded as on the
-wire), sends each direction's frames through a counting TCP link between two Zenoh
-sessions made by `zconf.config` (secure mode aside), with the mesh's link compression off
-and on, and writes bytes and kbit/s at 1x per link and direction to bench/results/radio.json.
+mesh the bulk of that is the command posts' sources publishing by key group (issue 50,
+`live/groupframes.py`): each flush as one frame per group on `src/<cp>/<group>` and a
+progress frame on `src/<cp>/_p`. Each EA subscribes to the progress streams of the sources it
+depends on (live/depend.py) and to the groups of its interest (`Interest` ->
+`Streams.subscriptions`), so a link from battalion X up to the brigade carries a group
+frame of a source of X's subtree when some EA outside that subtree hears the group at the
+time, and down the frames of the other sources' groups some EA of X's subtree hears. This
+benchmark builds those frames as a live source does (one flush per source per epoch,
+messages encoded as on the wire), works out each EA's interest every 30 s of event time
+from its plan and its units' reported places (as its EA knows them: the mean of its
+entities' last reports), sends each direction's frames through a counting TCP link between
+two Zenoh sessions made by `zconf.config` (secure mode aside), with the mesh's link
+compression off and on, and writes bytes and kbit/s at 1x per link and direction, and per
+group family (`by_group`), to bench/results/radio.json.
 
 Not counted (small beside the frames): alerts, notices and command results going up to a
 console across the link, directives, liveliness and Zenoh's own control traffic."""
@@ -26,9 +32,14 @@ import zenoh
 from saim_mesh import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.commands import _wait_matching
-from saim_mesh.live import frames as F
+from dataclasses import replace
+
+from dissemination.exact import _chunks_match
+from dissemination.interest import Interest
+from dissemination.keyspace import KeySpace
+from saim_mesh.live import groupframes as GF
 from saim_mesh.live.depend import cp_shares, depends
-from saim_mesh.live.play import EPOCH_S, share
+from saim_mesh.live.play import EPOCH_S, of_share
 from saim_mesh.scenario import mesh_units
 from saim_mesh.net.linkemu import Link
 from saim_mesh.ondemand import ensure
@@ -40,16 +51,99 @@ from . import ROOT
 RATE_KBPS = 64.0   # a tactical data link (the issue's figure)
 
 
-def source_frames(sc) -> dict[str, list[bytes]]:
-    """Each command post's source as frames: one per epoch with messages, numbered."""
+SPAN_S = 30.0   # an EA's interest is re-registered this often (a grouped flush spans at most this)
+
+
+def source_frames(sc) -> dict[str, list[tuple[float, list[GF.GroupFrame], bytes]]]:
+    """Each source as flushes, one per epoch with messages: (its epoch's end, its group
+    frames, its progress frame encoded)."""
     out = {}
     for name, sh in cp_shares(sc).items():
-        by: dict[float, list[bytes]] = {}
-        for m in share(sc, list(sh.units) if sh.units else None, sh.tracks, list(sh.but)):
+        group_of = GF.grouper(sc, "bench")
+        by: dict[float, tuple[list[bytes], list[str]]] = {}
+        for m in of_share(sc, sh):
             if math.isfinite(m.t):
-                by.setdefault(math.ceil(m.t / EPOCH_S) * EPOCH_S, []).append(M.encode(m))
-        out[name] = [F.encode(F.Frame(v=1, source=name, epoch=1, seq=i, wm=end - EPOCH_S, msgs=msgs))
-                     for i, (end, msgs) in enumerate(sorted(by.items()), start=1)]
+                ms, gs = by.setdefault(math.ceil(m.t / EPOCH_S) * EPOCH_S, ([], []))
+                ms.append(M.encode(m))
+                gs.append(group_of(m))
+        counters: dict[str, int] = {}
+        out[name] = []
+        for i, (end, (ms, gs)) in enumerate(sorted(by.items()), start=1):
+            gfs, prog, _ = GF.split(name, 1, i, end - EPOCH_S, ms, gs, counters)
+            out[name].append((end, gfs, GF.encode(prog)))
+    return out
+
+
+def interests(sc, units: list[str], span: float = SPAN_S) -> dict[str, list[list[tuple[str, ...]]]]:
+    """Unit -> per `span` of event time, the group expressions (as chunk tuples) its EA hears:
+    its plan's needs at the start, its units' circles where their entities last reported."""
+    ks = KeySpace.of(sc, "bench")
+    streams = GF.streams_of(sc, "bench")
+    to, proj = sc.taskorg, sc.projection
+    n = int(math.ceil(sc.duration_s / span)) + 1
+    last: dict[str, tuple[float, float]] = {}
+    snaps: list[dict[str, tuple[float, float]]] = []
+    evs = iter(sorted((e for e in sc.events if type(e) is M.LocationReport), key=lambda e: e.t))
+    e = next(evs, None)
+    for w in range(n):
+        while e is not None and e.t <= w * span:
+            last[e.entity] = proj.to_xy(e.lon, e.lat)
+            e = next(evs, None)
+        snaps.append(dict(last))
+    out = {}
+    for u in units:
+        cfg = config_for(sc, u, None)
+        ea = make_ea(sc, u, cfg, sinks=[])
+        ea.start(0.0)
+        dom = ea.domain
+        dis = cfg["dissemination"]
+        it = Interest(ks, float(dis["radius_m"]), int(dis["block_share"]))
+        needs = dom.needs(it.radius)
+        r = needs.circles[0][2] if needs.circles else it.radius
+        rows = []
+        for snap in snaps:
+            circles = []
+            for v in sorted(dom.own_units):
+                pts = [snap[x] for x in to.units[v].entities if x in snap]
+                if pts:
+                    circles.append((sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts), r))
+            want = streams.subscriptions(it.of(replace(needs, circles=tuple(circles))))
+            rows.append([tuple(x.split("/")) for x in sorted(want)])
+        out[u] = rows
+    return out
+
+
+def group_crossing(sc, frames, deps, heard, bn: str, span: float = SPAN_S) -> dict[str, dict]:
+    """Per direction of the link from `bn` to the top: the progress and group frames that
+    cross it (payloads), by source and group family."""
+    inside = set(sc.taskorg.subtree(bn))
+    out = {}
+    for way in ("up", "down"):
+        beyond = [u for u in deps if (u not in inside) == (way == "up")]
+        streams: dict[str, list[bytes]] = {}
+        fams: dict[str, int] = {}
+        for name, flushes in frames.items():
+            home = name[3:] if name.startswith("cp.") else None
+            mine = home in inside if home is not None else False
+            if mine != (way == "up"):
+                continue
+            eas = [u for u in beyond if name in deps[u]]
+            if not eas:
+                continue
+            seq = []
+            for end, gfs, prog in flushes:
+                w = min(int((end - EPOCH_S) // span), len(heard[eas[0]]) - 1)
+                pats = {p for u in eas for p in heard[u][w]}
+                for gf in gfs:
+                    parts = gf.group.split("/")
+                    if any(_chunks_match(p, parts) for p in pats):
+                        b = GF.encode(gf)
+                        seq.append(b)
+                        fams[gf.group.split("/", 1)[0]] = fams.get(gf.group.split("/", 1)[0], 0) + len(b)
+                seq.append(prog)
+                fams["_p"] = fams.get("_p", 0) + len(prog)
+            streams[name] = seq
+        out[way] = (streams, fams)
     return out
 
 
@@ -63,16 +157,6 @@ def dependencies(sc, units: list[str], sources: list[str]) -> dict[str, set[str]
     return out
 
 
-def crossing(sc, deps: dict[str, set[str]], bn: str) -> dict[str, list[str]]:
-    """The sources whose frames cross the link from `bn` to the top: up (its own, when an EA
-    beyond its subtree depends on it) and down (the others an EA of its subtree depends on)."""
-    inside = set(sc.taskorg.subtree(bn))
-    own = f"cp.{bn}"
-    up = [own] if any(own in d for u, d in deps.items() if u not in inside) else []
-    down = sorted({s for u, d in deps.items() if u in inside for s in d} - {own})
-    return {"up": up, "down": down}
-
-
 def _session(compress: bool, **endpoints) -> zenoh.Session:
     conf = config(**endpoints)
     conf.insert_json5("transport/unicast/compression/enabled", "true" if compress else "false")
@@ -81,14 +165,15 @@ def _session(compress: bool, **endpoints) -> zenoh.Session:
 
 def wire_bytes(streams: dict[str, list[bytes]], compress: bool) -> int:
     """Bytes on a TCP link for these sources' frames, in event-time order, one at a time
-    (a paced source's frames go out one per batch)."""
+    (a paced source's frames go out one per batch). One key per source: a group's key is
+    declared once per link (Zenoh maps it to an id), so its length is not counted per frame."""
     if not streams:
         return 0
     port, front = free_port(), free_port()
     got: queue.SimpleQueue = queue.SimpleQueue()
     order = sorted(((i, name) for name, fs in streams.items() for i in range(len(fs))))
     with Link(front, port) as link, _session(compress, listen=[f"tcp/127.0.0.1:{port}"]) as rx:
-        rx.declare_subscriber("bench/src/*", lambda s: got.put(len(s.payload)))
+        rx.declare_subscriber("bench/src/*", lambda s: got.put(len(s.payload)))   # one key per source
         with _session(compress, connect=[f"tcp/127.0.0.1:{front}"], listen=[]) as tx:
             pubs = {n: tx.declare_publisher(f"bench/src/{n}") for n in streams}
             for p in pubs.values():
@@ -112,19 +197,22 @@ def main(argv=None) -> int:
     frames = source_frames(sc)
     units = mesh_units(sc)
     deps = dependencies(sc, units, sorted(frames))
+    heard = interests(sc, units)
     top = sc.taskorg.root
     links = {}
     for bn in sorted(u for u, p in sc.taskorg.parent.items() if p == top):
-        cross = crossing(sc, deps, bn)
+        cross = group_crossing(sc, frames, deps, heard, bn)
         row = {}
-        for way, names in cross.items():
-            streams = {n: frames[n] for n in names}
+        for way, (streams, fams) in cross.items():
+            names = sorted(streams)
             raw = sum(len(f) for fs in streams.values() for f in fs)
             plain, packed = wire_bytes(streams, False), wire_bytes(streams, True)
             per_s = 8 / 1000 / sc.duration_s
             row[way] = {"sources": names, "frames": sum(len(fs) for fs in streams.values()),
                         "by_family": {"src": {"bytes_payload": raw, "bytes_wire_plain": plain,
                                               "bytes_wire_compressed": packed}},
+                        "by_group": {f: {"bytes_payload": b, "kbps_1x_payload": round(b * per_s, 2)}
+                                     for f, b in sorted(fams.items())},
                         "kbps_1x_plain": round(plain * per_s, 2), "kbps_1x_compressed": round(packed * per_s, 2),
                         "compression_ratio": round(plain / packed, 3) if packed else None}
             print(f"{bn}-{top} {way}: {len(names)} sources, {row[way]['frames']} frames, "
@@ -138,7 +226,10 @@ def main(argv=None) -> int:
            "fits_link_1x_plain": worst_plain <= RATE_KBPS, "fits_link_1x_compressed": worst <= RATE_KBPS,
            "alerts_unchanged": "compression is Zenoh's transport (LZ4, negotiated per link): the same bytes "
                                "arrive (tests/test_compression.py), so every EA's input and alerts are unchanged",
-           "not_counted": "alerts, notices, command results, directives, liveliness and Zenoh control traffic",
+           "not_counted": "alerts, notices, command results, directives, liveliness and Zenoh control traffic "
+                          "(a group's sporadic heartbeats among them)",
+           "by_group_means": "payload bytes of the group frames of each family (and `_p`, the progress "
+                             "frames) that cross the direction: those some EA beyond it hears at the time",
            "bench_wall_s": round(time.monotonic() - t0, 1)}
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(out, indent=1) + "\n")

@@ -158,10 +158,11 @@ class Source(_Session):
     Secure (`pki`): identity `source.<name>`, which the access-control rules know for the
     command posts' sources `cp.<UNIT>` (`security.acl.source_names`). On leaving, it stays
     `linger_s`, and as long as its journal (`state_dir`) was asked within `linger_s`, at
-    most `linger_max_s` in all."""
+    most `linger_max_s` in all. `by_group`: published by key group (each EA hears only the
+    groups of its interest: docs/keyspace.md, "Key groups")."""
 
     def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None,
-                 routers=None, mesh=None, linger_s: float = 1.0, linger_max_s: float = 30.0):
+                 routers=None, mesh=None, linger_s: float = 1.0, linger_max_s: float = 30.0, by_group: bool = False):
         super().__init__(scenario, f"source.{name}", connect, listen, root, pki, routers, mesh,
                          near=name.removeprefix("cp."))
         if not (linger_s >= 0 and linger_max_s >= 0):   # also refuses NaN
@@ -169,9 +170,14 @@ class Source(_Session):
                              f"not {linger_s!r}, {linger_max_s!r}")
         self.name, self.state_dir, self.src = name, state_dir, None
         self.linger_s, self.linger_max_s = float(linger_s), float(linger_max_s)
+        self.by_group = by_group
 
     def _opened(self) -> None:
-        self.src = LiveSource(self.session, self.ks, self.name, self.state_dir)
+        groups = None
+        if self.by_group:
+            from .live.groupframes import grouper
+            groups = grouper(self.sc, self.ks.root)
+        self.src = LiveSource(self.session, self.ks, self.name, self.state_dir, groups=groups)
 
     def put(self, msg: M.Message) -> None:
         """Any data message (a LocationReport, a MissionConfirm, ...)."""

@@ -9,19 +9,36 @@ from saim_mesh import scenario as S
 from saim_mesh.runner import config_for, make_ea
 
 from .conftest import SMALL
+from .heard import by_live_groups
 
 EDGE_X = 4000.0   # NAI-SCREEN (watched by the recon platoon's screen) spans x 0..4000, y 15500..19000
 
 
-def _alerts(reports, until):
-    """BN's alerts about NAI-SCREEN from the track reports [(t, id, x, y, strength)], local metres."""
+def _tracks(reports) -> list:
+    """Track messages from the reports [(t, id, x, y, strength)], local metres."""
     sc = S.load(SMALL, events=False)
     ox, oy = sc.projection.to_xy(*ORIGIN_LONLAT)
-    ea = make_ea(sc, "BN", config_for(sc, "BN"))
-    ea.start(0.0)
+    out = []
     for t, k, x, y, s in sorted(reports):
         lon, lat = sc.projection.to_lonlat(ox + x, oy + y)
-        ea.submit(SensorTrack(t, k, float(lon), float(lat), s, at=t))
+        out.append(SensorTrack(t, k, float(lon), float(lat), s, at=t))
+    return out
+
+
+def _alerts(reports, until, heard_by_peer: bool = False):
+    """BN's alerts about NAI-SCREEN from the track reports [(t, id, x, y, strength)], local
+    metres: all of them (an in-process EA), or (`heard_by_peer`) what BN's live peer hears
+    of them by its key groups (`heard.by_live_groups`)."""
+    sc = S.load(SMALL, events=False)
+    ea = make_ea(sc, "BN", config_for(sc, "BN"))
+    ea.start(0.0)
+    msgs = _tracks(reports)
+    if heard_by_peer:
+        heard = by_live_groups(sc, msgs, "BN")
+        assert len(heard) < len(msgs), "the peer heard everything: the test shows nothing"
+        msgs = heard
+    for m in msgs:
+        ea.submit(m)
     ea.finish(until)
     return [a for a in ea.alerts if "NAI-SCREEN" in a.details.get("places", ())]
 
@@ -67,6 +84,6 @@ def test_a_group_that_stood_inside_until_it_left_is_no_news_back_whatever_else_i
     reps = [(100, "N-1", EDGE_X - 500, 17000.0, 4), (900, "N-1", EDGE_X + 1000, 17000.0, 4),
             (1000, "N-1", EDGE_X - 500, 17000.0, 4)]
     far = [(t, "F-9", -30000.0 + 5 * t, 40000.0, 4) for t in range(101, 1300, 2)]
-    alone, beside = _alerts(reps, 1300.0), _alerts(reps + far, 1300.0)
+    alone, beside = _alerts(reps + far, 1300.0, heard_by_peer=True), _alerts(reps + far, 1300.0)
     assert [a.to_json_dict() for a in alone] == [a.to_json_dict() for a in beside]
     assert len(alone) == 1 and alone[0].t < 200, [(a.t, a.type, a.details.get("new_tracks")) for a in alone]

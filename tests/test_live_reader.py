@@ -39,7 +39,7 @@ def alert(owner: str = "A", n: int = 1) -> M.Alert:
 def test_the_live_console_checks_every_payload(small):
     st = State(small)
     feed = live_feed(small, None, "saim", st, log=QUIET)
-    assert set(feed.keys()) == {"saim/alert/**", "saim/cmdlog/*", "saim/notice/*/*", "saim/src/*"}
+    assert set(feed.keys()) == {"saim/alert/**", "saim/cmdlog/*", "saim/notice/*/*", "saim/src/*/**"}
     ev = next(e for e in small.events if type(e) is M.LocationReport)
     feed.take("saim/src/cp.A", frame("cp.A", 1, 10.0, [ev]))
     assert st.t == 10.0 and not st.ended and st.entity_pos

@@ -21,9 +21,18 @@ from saim_mesh.runner import config_for, make_ea
 
 from .synthetic import (EPOCH, EXPIRY_S, REPORT_S, Force, alerts_of, box, edited, end, line, mission, play,
                         point, start, told, track, track_path)
+from .heard import by_live_groups
 from .synthetic import near as _near
 
 FORCE = Force(name="more-checks")
+
+
+def heard_and_all(sc, msgs: list, owner: str = "A") -> tuple[list, list]:
+    """(what a live peer of `owner` hears of `msgs` by its key groups, everything): what an
+    EA peer and an in-process EA take."""
+    heard = by_live_groups(sc, msgs, owner)
+    assert len(heard) < len(msgs), "the peer heard everything: the test shows nothing"
+    return heard, msgs
 write, at, path, elsewhere = FORCE.write, FORCE.at, FORCE.path, FORCE.elsewhere
 
 
@@ -167,7 +176,8 @@ def test_a_checkpoint_is_reached_at_the_same_moment_whatever_else_is_heard(tmp_p
     sc = scenario(tmp_path, CP_FEATURES, [mission("A1-march", "A1", "move", route="RTE-1", destination="AA-E",
                                                   checkpoints=[{"point": "CP-1", "t": 450}])])
     base = path("A1", 13, 600, east(6.07)) + [start(100, "A1-march", "A1")]
-    alone, beside = (of(play(sc, msgs, 600), "checkpoint") for msgs in (base, base + elsewhere(100, 600, "A2")))
+    alone, beside = (of(play(sc, msgs, 600), "checkpoint")
+                     for msgs in heard_and_all(sc, base + elsewhere(100, 600, "A2")))
     assert told(alone) == told(beside), table(*alone, *beside)
     assert len(alone) == 1 and alone[0].details["how"] == "early" and 256.5 <= alone[0].t <= 262.0, table(*alone)
 
@@ -181,7 +191,8 @@ def test_a_slow_march_is_projected_late_at_the_same_moment_whatever_else_is_hear
     sc = scenario(tmp_path, CP_FEATURES, [mission("A1-march", "A1", "move", route="RTE-1", destination="AA-E",
                                                   end={"type": "END-NLT", "t": 1500})])
     base = path("A1", 13, 1600, east(3.0)) + [start(100, "A1-march", "A1")]
-    alone, beside = (of(play(sc, msgs, 1600), "projected-late") for msgs in (base, base + elsewhere(0, 1600)))
+    alone, beside = (of(play(sc, msgs, 1600), "projected-late")
+                     for msgs in heard_and_all(sc, base + elsewhere(0, 1600)))
     assert told(alone) == told(beside), table(*alone, *beside)
     assert len(alone) == 1 and alone[0].t % 10.0 == 0.0, table(*alone)   # a sample's time
 
@@ -413,7 +424,7 @@ def test_a_standoff_is_told_at_the_same_moment_whatever_else_is_heard(tmp_path):
     sc = scenario(tmp_path, SO_FEATURES, [mission("A1-so", "A1", "withdraw", destination="AA-FAR")])
     base = path("A1", 13, 400, lambda t: (0.0, max(0.0, t - 100) * 5.0)) + [start(100, "A1-so", "A1"),
                                                                            track(110, "H1", 0, 1707)]
-    alone, beside = (of(play(sc, msgs, 400), "standoff") for msgs in (base, base + elsewhere(100, 400)))
+    alone, beside = (of(play(sc, msgs, 400), "standoff") for msgs in heard_and_all(sc, base + elsewhere(100, 400)))
     assert told(alone) == told(beside), table(*alone, *beside)
     assert len(alone) == 1 and 241.4 <= alone[0].t <= 246.0, table(*alone)
 
@@ -429,7 +440,7 @@ def test_a_standoff_is_judged_on_where_the_unit_is_now_whatever_else_is_heard(tm
     sc = scenario(tmp_path, SO_FEATURES, [mission("A1-so", "A1", "withdraw", destination="AA-FAR")])
     base = at(13, "A1", 0, 0) + at(113, "A1", 0, 500) + [start(100, "A1-so", "A1")]
     base += [track(110, "H1", 0, 1795)] if case == "silent" else at(171, "A1", 0, 500) + [track(300, "H2", 0, 1700)]
-    alone, beside = (of(play(sc, msgs, 400), "standoff") for msgs in (base, base + elsewhere(100, 400)))
+    alone, beside = (of(play(sc, msgs, 400), "standoff") for msgs in heard_and_all(sc, base + elsewhere(100, 400)))
     assert told(alone) == told(beside), table(*alone, *beside)
     if case == "silent":
         assert len(alone) == 1 and 173.0 <= alone[0].t <= 180.0 and alone[0].details["tracks"] == ["H1"], table(*alone)

@@ -1,8 +1,10 @@
 """A peer hears only what its interest lets through (its units' positions, tracks and
 reports in cells near them); an in-process EA hears everything. Both must raise the same
-alerts. Here one EA takes every message and another only those its own interest
-(recomputed every `reregister_s`, as a peer does) lets through, each message on the key
-the replay gives it: on battalion-sensors their alerts are equal.
+alerts. Here one EA takes every message and another only those the live peer's
+subscriptions let through: each message in the key group its source publishes it on
+(`groupframes.grouper`), heard when the groups of the EA's interest (`bygroup.GroupIntake`,
+recomputed every `reregister_s` on the EA's own state, as a peer does) take it in: on
+battalion-sensors their alerts are equal.
 
 Before detectors looked at a mission only when what it depends on changed (ThreatsAhead,
 Standoffs, Checkpoints, Projections' samples, the places they read), M's threat-ahead at
@@ -14,10 +16,10 @@ import json
 
 import pytest
 
-from dissemination.exact import exact
-from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace
 from saim_mesh import scenario as S
+from saim_mesh.live.bygroup import GroupIntake
+from saim_mesh.live.groupframes import grouper, streams_of
 from saim_mesh.messages import SensorHit
 from saim_mesh.runner import Fusion, config_for, make_ea
 
@@ -39,28 +41,24 @@ def both(sc, unit: str) -> tuple[list[str], list[str], dict[str, int]]:
     every.start(0.0)
     near.start(0.0)
     dis = cfg["dissemination"]
-    interest = Interest(ks, float(dis["radius_m"]), int(dis["block_share"]))
+    intake = GroupIntake(ks, 1 << 20, None, print, streams=streams_of(sc, ks.root), interest=dis)
     every_s = float(dis["reregister_s"])
-    to = sc.taskorg.copy()   # as it is at each message's time: the replay keys it so
-    reorgs = sorted((m.start.t, m.params["subject"], m.params["new_parent"]) for m in sc.plan.missions
-                    if m.type == "reorganize")
-    fusion, want, next_t = Fusion.of(sc), None, 0.0
+    group_of = grouper(sc, ks.root)   # the organization as it is at each message's time: the source keys it so
+    fusion, next_t = Fusion.of(sc), 0.0
     left_out = {"tracks": 0, "others": 0}
 
     def take(msg, what: str) -> None:
         every.submit(msg)
-        if want(ks.key(msg, to, sc.projection)):
+        if intake.hears(group_of(msg)):
             near.submit(msg)
         else:
             left_out[what] += 1
     for ev in sc.events:
-        while reorgs and reorgs[0][0] <= ev.t:
-            _, u, parent = reorgs.pop(0)
-            to.resubordinate(u, parent)
         trs = fusion.feed(ev)   # tracks of windows that closed: dated before ev
         if ev.t >= next_t:   # re-register on what the EA knows by now (all before the earliest still to come)
             near.advance(min([ev.t, *(tr.t for tr in trs)]) - 1e-9)
-            want, next_t = exact(interest.keys(near.domain), ks.root), next_t + every_s
+            intake.interest(near.domain)
+            next_t += every_s
         for tr in trs:
             take(tr, "tracks")
         if type(ev) is not SensorHit:

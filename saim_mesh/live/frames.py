@@ -20,10 +20,12 @@ MAX_MSGS = 1024   # data messages in one frame
 Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.\-]+$")]
 
 
-class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, omit_defaults=True):
     """`msgs`: encoded data messages (messages.encode), each with its event time inside.
     `wm`: the source's watermark after this frame: nothing at or before it will follow.
-    `end`: the source finished (its watermark is +inf from now on)."""
+    `end`: the source finished (its watermark is +inf from now on). `groups`: a source
+    publishing by key group (`groupframes`): each message's group (its journal's frames,
+    and the flushes an EA assembles); absent otherwise."""
     v: Literal[1]
     source: Name
     epoch: Annotated[int, msgspec.Meta(ge=0, le=2**62)]
@@ -31,6 +33,7 @@ class Frame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tru
     wm: Annotated[float, msgspec.Meta(ge=-1.0, le=W.T_LIMIT)]
     msgs: Annotated[list[bytes], msgspec.Meta(max_length=MAX_MSGS)] = []
     end: bool = False
+    groups: Annotated[list[str], msgspec.Meta(max_length=MAX_MSGS)] | None = None
 
 
 _ENC = msgspec.msgpack.Encoder()
@@ -66,7 +69,12 @@ class FrameReader:
         self.ended: set[str] = set()
 
     def read(self, key: str, payload: bytes) -> list | None:
-        """The frame's messages (checked), or None when the frame itself is refused (counted)."""
+        """The frame's messages (checked), or None when the frame itself is refused (counted).
+        A source publishing by key group (`groupframes`): its group frames' messages, and
+        its progress frames' watermarks."""
+        src = self.ks.src("")
+        if key.startswith(src) and "/" in key[len(src):]:
+            return self._read_group(key, payload, key[len(src):].split("/", 1))
         try:
             f = decode(payload, self.gate.max_bytes)
         except M.MessageError as e:
@@ -75,10 +83,30 @@ class FrameReader:
         if key != self.ks.src(f.source):
             self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {f.source!r} on {key[:80]}"), key)
             return None
-        self.wm[f.source] = max(self.wm.get(f.source, -1.0), f.wm)
-        if f.end:
-            self.ended.add(f.source)
+        self._promise(f.source, f.wm, f.end)
         return [m for b in f.msgs if (m := self.data_gate.data(b, key)) is not None]
+
+    def _promise(self, source: str, wm: float, end: bool) -> None:
+        self.wm[source] = max(self.wm.get(source, -1.0), wm)
+        if end:
+            self.ended.add(source)
+
+    def _read_group(self, key: str, payload: bytes, name_rest: list[str]) -> list | None:
+        from . import groupframes as GF
+        name, rest = name_rest
+        try:
+            x = GF.decode_progress(payload, self.gate.max_bytes) if rest == GF.PROGRESS else \
+                GF.decode_group(payload, self.gate.max_bytes)
+        except M.MessageError as e:
+            self.gate.rejects.add(e, key)
+            return None
+        if x.source != name or rest != GF.PROGRESS and x.group != rest:
+            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {x.source!r} on {key[:80]}"), key)
+            return None
+        if rest == GF.PROGRESS:
+            self._promise(x.source, x.wm, x.end)
+            return []
+        return [m for b in x.msgs if (m := self.data_gate.data(b, key)) is not None]
 
     def clock(self) -> tuple[float, bool]:
         """(event time promised by every source heard and not ended, whether all have ended)."""

@@ -40,7 +40,9 @@ from ..runner import config_for, make_ea
 from ..scenario import Scenario
 from ..security.sign import signer_for
 from . import frames as F
+from . import groupframes as GF
 from .authority import DirectiveIntake
+from .bygroup import GroupIntake
 from .depend import depends
 from .journal import InputJournal
 from .order import EventTimeOrder
@@ -131,6 +133,10 @@ class LivePeer:
         self.seq = Sequencer(self.take, self._frame, self.ks, log, lambda: self.max_held,
                              room=lambda: self.order.buffered() < self.order.max_buffered // 2,
                              session=lambda: self.session)
+        # sources publishing by key group: their flushes assembled from the groups its interest
+        # hears, decided at a deterministic point (`_interest_at`)
+        self.bygroup = GroupIntake(self.ks, self.max_bytes, self.gate, log, journal=self.seq.journal_frames,
+                                   streams=GF.streams_of(sc, root), interest=self.cfg.get("dissemination", {}))
         self.frames = 0
         self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
@@ -241,8 +247,19 @@ class LivePeer:
 
     # -- input ---------------------------------------------------------------------------
     def receive(self, payload: bytes, key: str) -> None:
-        """A frame off the wire: taken in its source's own sequence (`Sequencer.arrive`)."""
-        f = self._frame(payload, key)
+        """A frame off the wire: taken in its source's own sequence (`Sequencer.arrive`); of a
+        source publishing by key group, its progress frames are (`bygroup`)."""
+        grp = self.bygroup.split_key(key)
+        if grp is None:
+            f = self._frame(payload, key)
+        elif grp[0] not in self.order.watermarks():
+            return   # a source this EA does not depend on
+        else:
+            f = self.bygroup.arrive(payload, key, *grp)
+            if f is None:   # a group frame (kept): a progress frame waiting for it may go now
+                if self.seq.hold.waiting:
+                    self.seq.retry()
+                return
         if f is None:
             return
         self.heard(f)
@@ -290,6 +307,20 @@ class LivePeer:
         if not retrying and journal and self.seq.hold.waiting_for(f.source):
             self.seq.hold.wait(f.source, (payload, key, f))
             return False
+        if journal and (type(f) is GF.Progress or f.groups is not None) and not self._interest_at(f.source):
+            if not retrying:   # by key group: taken once the EA stands at the source's last promise
+                self.seq.hold.wait(f.source, (payload, key, f))
+            return False
+        if type(f) is GF.Progress:   # by key group: the flush, once the groups it hears are here
+            whole = self.bygroup.assemble(f)
+            if whole is None:
+                if not retrying:
+                    self.seq.hold.wait(f.source, (payload, key, f))
+                return False
+            f, payload, key = whole, F.encode(whole), self.ks.src(whole.source)
+        elif journal and f.groups is not None:   # a whole flush from its journal: what it hears of it
+            f = self.bygroup.heard_only(f)
+            payload = F.encode(f)
         if f.source in self.order.lost and self.rebuilding is None:   # back: rebuild as if never lost
             if journal and self.journal is not None:
                 self.journal.back(f.source)
@@ -323,6 +354,18 @@ class LivePeer:
         self.frames += 1
         self.watch.took(f)
         self._apply()
+        return True
+
+    def _interest_at(self, source: str) -> bool:
+        """Whether the next flush of a source publishing by key group may be taken now, and
+        then the groups the EA hears for it (its interest now). Taken only once everything up
+        to the source's last promise is released, so the EA's state, and the interest it
+        gives, is the same whatever the arrival order: what the EA hears of the flush depends
+        on the data alone (docs/architecture.md, "Key groups on the live mesh")."""
+        wm = self.order.watermarks().get(source, -math.inf)
+        if self.order.released < wm and source not in self.order.lost:
+            return False
+        self.bygroup.interest(self.ea.domain)
         return True
 
     def back(self, source: str) -> None:

@@ -142,7 +142,7 @@ class LiveReader:
         self.session = None
 
     def keys(self) -> list[str]:
-        return [*self.checks.keys(), self.ks.src("*")]
+        return [*self.checks.keys(), f"{self.ks.src('*')}/**"]   # whole streams and key groups
 
     def open(self) -> None:
         import zenoh

@@ -120,13 +120,19 @@ class Sequencer:
             st[1] += 1
 
     def retry(self) -> None:
-        """Offer the frames the order refused as full again, each source's in its order."""
-        for src in self.hold.sources_waiting():
-            while (item := self.hold.head(src)) is not None:
-                payload, key, f = item
-                if not self.take(payload, key, f=f, retrying=True):
-                    break                     # still full: it stays at the head
-                self.hold.done_head(src)
+        """Offer the frames the order refused as full (or that wait for the release: key
+        groups) again, each source's in its order, as long as one of them goes: one
+        source's frame taken may let another's go."""
+        moved = True
+        while moved:
+            moved = False
+            for src in self.hold.sources_waiting():
+                while (item := self.hold.head(src)) is not None:
+                    payload, key, f = item
+                    if not self.take(payload, key, f=f, retrying=True):
+                        break                     # still full: it stays at the head
+                    self.hold.done_head(src)
+                    moved = True
 
     def refetch_behind(self) -> None:
         """Sources we fell behind on: their frames fetched again from their journals, in

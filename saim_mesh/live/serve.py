@@ -15,6 +15,7 @@ import zenoh
 import zenoh.ext as zx
 
 from .. import wire as W
+from . import groupframes as GF
 from .pace import EaProgress
 from .peer import BLOCK, CHECK_S
 from .source import HISTORY
@@ -37,12 +38,28 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
 
             def frames_of(name: str):   # a frame queued, its arrival noted: silence is the source's
                 return lambda smp: (came(name), put((str(smp.key_expr), smp.payload.to_bytes())))
-            # one advanced subscriber per source depended on: nothing else crosses a link to us
-            subs = [zx.declare_advanced_subscriber(
-                s, peer.ks.src(name), frames_of(name),
-                history=zx.HistoryConfig(detect_late_publishers=False, max_samples=HISTORY),
-                recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True) for name in peer.sources]
-            misses = [sub.sample_miss_listener(lambda miss: put(("miss", miss.nb))) for sub in subs]
+            # per source depended on: its whole stream, or its progress stream and the key groups
+            # of the EA's interest (`bygroup`), re-declared as the interest changes; nothing else
+            # crosses a link to us
+            def declare(name: str, key: str):
+                sub = zx.declare_advanced_subscriber(
+                    s, key, frames_of(name), history=zx.HistoryConfig(detect_late_publishers=False, max_samples=HISTORY),
+                    recovery=zx.RecoveryConfig(heartbeat=True), subscriber_detection=True)
+                return sub, sub.sample_miss_listener(lambda miss: put(("miss", miss.nb)))
+            peer.bygroup.interest(peer.ea.domain)
+            subs = {(name, k): declare(name, key) for name in peer.sources
+                    for k, key in ((None, peer.ks.src(name)), (GF.PROGRESS, f"{peer.ks.src(name)}/{GF.PROGRESS}"))}
+            groups: dict = {}
+
+            def regroup() -> None:   # the group subscriptions the interest wants now
+                want = {(n, e) for n in peer.sources for e in peer.bygroup.want}
+                for k in [k for k in groups if k not in want]:
+                    for x in reversed(groups.pop(k)):
+                        x.undeclare()
+                for n, e in sorted(want - set(groups)):
+                    groups[(n, e)] = declare(n, f"{peer.ks.src(n)}/{e}")
+                regroup.version = peer.bygroup.version
+            regroup()
             cmds = s.declare_subscriber(peer.ks.cmd(peer.unit, "*", "*"),
                                         lambda smp: put(("cmd", (str(smp.key_expr), smp.payload.to_bytes()))))
             dirs = s.declare_subscriber(f"{peer.ks.root}/dir/*/*",
@@ -65,8 +82,8 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             next_check = 0.0
             progress = EaProgress(peer.ks, peer.unit)
             while not peer.done(time.monotonic()) and time.monotonic() < end_wall:
-                try:
-                    key, payload = peer.q.get(timeout=0.5)
+                try:   # frames waiting for the release (key groups) are offered again soon
+                    key, payload = peer.q.get(timeout=CHECK_S if peer.seq.hold.sources_waiting() else 0.5)
                 except queue.Empty:
                     key = None
                 if key == "miss":
@@ -78,6 +95,8 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                     peer.presence.bye(*payload)
                 elif key is not None and not _authority(peer, key, payload):
                     peer.receive(payload, key)
+                if peer.bygroup.version != regroup.version:
+                    regroup()
                 now = time.monotonic()
                 if key is not None and now < next_check:
                     continue   # while frames flow, the checks below run every CHECK_S
@@ -107,8 +126,9 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             s.put(peer.ks.bye(peer.unit), W.encode(W.make(W.Bye, unit=peer.unit)), congestion_control=BLOCK)
             for x in (cmds, dirs, dirj, alive, byes, token):
                 x.undeclare()
-            for x in (*misses, *subs):
-                x.undeclare()
+            for pair in (*subs.values(), *groups.values()):
+                for x in reversed(pair):
+                    x.undeclare()
             peer.session = None
     finally:
         peer.out.close()   # its logs and its input journal

@@ -20,6 +20,7 @@ from dissemination.keyspace import KeySpace
 
 from .. import messages as M
 from . import frames as F
+from . import groupframes as GF
 from .srcjournal import CATCH_UP_KBIT, YIELDING, Pacer, SourceJournal
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -43,6 +44,10 @@ HISTORY = CACHE
 YIELDING_CACHE = 4
 FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
 LINGER_S = 0.05        # the longest a lingering source holds a watermark back (wall seconds)
+# by key group, the event time one flush spans at most, lingering or not: an EA decides
+# what it hears of a flush from its interest at the flush's start (`LivePeer._interest_at`),
+# so a flush is as long as a re-registration's period ([dissemination] reregister_s)
+GROUP_SPAN_S = 30.0
 
 
 def next_epoch(state_dir: str | Path | None, name: str) -> int:
@@ -65,14 +70,20 @@ def next_epoch(state_dir: str | Path | None, name: str) -> int:
 class LiveSource:
     """Publish data messages and watermarks as one source. Not thread-safe: one writer."""
 
+    groups = None        # a message -> its key group (None: one whole stream); set by __init__
+    pending_t0 = 0.0     # event time of the first message pending
+
     def __init__(self, session, ks: KeySpace, name: str, state_dir: str | Path | None = None,
                  cache: int | None = None, frame_bytes: int = FRAME_BYTES, yielding: bool = False,
-                 catch_up_kbit: float | None = None):
+                 catch_up_kbit: float | None = None, groups=None):
         """`yielding` (across slow radio links): what it sends again for recoveries and
         catch-ups (its cache's and its journal's replies) yields to live traffic: DROP at a
         lower priority, so no router stalls on it and closes its links; the EAs ask again.
         Its journal's answers are then paced at `catch_up_kbit` (default `CATCH_UP_KBIT`)
-        over all askers together: k EAs beyond one link pull k copies of a gap."""
+        over all askers together: k EAs beyond one link pull k copies of a gap.
+        `groups` (a message -> its key group, `grouper`): each flush goes out by group
+        (`groupframes`: a stream per group, `src/<name>/<group>`, and the progress stream
+        `src/<name>/_p`), so that each EA hears only the groups of its interest."""
         if cache is None:
             cache = YIELDING_CACHE if yielding and state_dir is not None else CACHE
         if cache < 1:
@@ -103,10 +114,24 @@ class LiveSource:
         if self.journal is not None:
             jkey = ks.srcj(name)
             self.queryable = session.declare_queryable(jkey, lambda q: self.journal.serve(q, jkey))
-        self.pub = zx.declare_advanced_publisher(
-            session, ks.src(name), congestion_control=BLOCK,
-            cache=zx.CacheConfig(max_samples=cache, replies_config=zx.RepliesConfig(**qos) if qos else None),
-            sample_miss_detection=zx.MissDetectionConfig(heartbeat=0.5), publisher_detection=True)
+        self.groups, self.session, self.cache, self.qos = groups, session, cache, qos
+        self.pending_groups: list[str] = []
+        self.pending_t0 = 0.0                   # event time of the first message pending
+        self.group_seq: dict[str, int] = {}     # each group's last frame seq
+        self.group_pubs: dict[str, object] = {}
+        # whole stream, or (by group) the progress stream; its heartbeat is periodic: one per source
+        self.pub = self._publisher(ks.src(name) if groups is None else f"{ks.src(name)}/{GF.PROGRESS}", sporadic=False)
+
+    def _publisher(self, key: str, sporadic: bool = True):
+        """An advanced publisher: its cache, and miss detection. A group's heartbeat is
+        sporadic (only after it published): periodic heartbeats of hundreds of idle group
+        publishers fill a radio link (../shared/notes/live-mesh.md, "Key groups")."""
+        miss = zx.MissDetectionConfig(sporadic_heartbeat=0.5) if sporadic else zx.MissDetectionConfig(heartbeat=0.5)
+        return zx.declare_advanced_publisher(
+            self.session, key, congestion_control=BLOCK,
+            cache=zx.CacheConfig(max_samples=self.cache,
+                                 replies_config=zx.RepliesConfig(**self.qos) if self.qos else None),
+            sample_miss_detection=miss, publisher_detection=True)
 
     def put(self, msg: M.Message) -> None:
         """One data message; its event time must be after the watermark already given.
@@ -118,7 +143,11 @@ class LiveSource:
         M.decode(b)   # checked as every receiver will check it (a NaN, a bad id): MessageError here, not there
         if self.pending and (self.size + len(b) > self.frame_bytes or len(self.pending) >= F.MAX_MSGS):
             self._send(self.wm)
+        if not self.pending:
+            self.pending_t0 = msg.t
         self.pending.append(b)
+        if self.groups is not None:
+            self.pending_groups.append(self.groups(msg))
         self.size += len(b)
 
     def watermark(self, t: float, linger: bool = False) -> None:
@@ -130,7 +159,8 @@ class LiveSource:
         lingering source to take it for a silent one."""
         if t <= self.wm and not self.pending:
             return   # nothing new to say
-        if linger and time.monotonic() - self.last_sent < LINGER_S:
+        if linger and time.monotonic() - self.last_sent < LINGER_S and not (
+                self.groups is not None and self.pending and t - self.pending_t0 >= GROUP_SPAN_S):
             self.wm = max(self.wm, t)
             return
         self._send(max(t, self.wm))
@@ -164,6 +194,8 @@ class LiveSource:
     def stop(self) -> None:
         """Undeclare the publisher and the journal's queryable; close the journal."""
         self.pub.undeclare()
+        for p in self.group_pubs.values():
+            p.undeclare()
         if self.queryable is not None:
             self.queryable.undeclare()
         if self.journal is not None:
@@ -172,6 +204,9 @@ class LiveSource:
     def _send(self, wm: float, end: bool = False) -> None:
         self.seq += 1
         self.wm = max(self.wm, wm)
+        if self.groups is not None:
+            self._send_groups(end)
+            return
         f = F.Frame(v=1, source=self.name, epoch=self.epoch, seq=self.seq, wm=self.wm, msgs=self.pending, end=end)
         payload = F.encode(f)
         if self.journal is not None:   # on disk before it is on the wire
@@ -179,4 +214,22 @@ class LiveSource:
         self.pub.put(payload)
         self.sent += len(self.pending)
         self.pending, self.size = [], 0
+        self.last_sent = time.monotonic()
+
+    def _send_groups(self, end: bool) -> None:
+        """Flush `seq` by group: the group frames first, then the progress frame that says
+        which groups it holds (an EA that has it knows what it should have); the whole
+        flush, each message's group with it, in the journal."""
+        gfs, prog, whole = GF.split(self.name, self.epoch, self.seq, self.wm, self.pending, self.pending_groups,
+                                    self.group_seq, end)
+        if self.journal is not None:   # on disk before it is on the wire
+            self.journal.append(self.seq, F.encode(whole))
+        for gf in gfs:
+            pub = self.group_pubs.get(gf.group)
+            if pub is None:
+                pub = self.group_pubs[gf.group] = self._publisher(f"{self.ks.src(self.name)}/{gf.group}")
+            pub.put(GF.encode(gf))
+        self.pub.put(GF.encode(prog))
+        self.sent += len(self.pending)
+        self.pending, self.pending_groups, self.size = [], [], 0
         self.last_sent = time.monotonic()

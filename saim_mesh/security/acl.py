@@ -102,7 +102,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                       "key_exprs": keys})
         return rid
 
-    adv = f"{r}/src/*/@adv/**"   # zenoh.ext's verbatim chunks (below): named wherever they flow
+    adv = f"{r}/src/**/@adv/**"   # zenoh.ext's verbatim chunks (below), a key group's too: named wherever they flow
     out = rule("egress", SENT, [f"{r}/**", adv], "egress")
     read_all = rule("read", READ, [f"{r}/**"])
     read_public = rule("read_public", READ, [f"{r}/alert/**", f"{r}/alive/**"])
@@ -128,7 +128,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                             rule(f"ea.{u}.dirq", ["query"], [f"{r}/dirj/*"]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])
     for n in source_names(units, taskorg, groups):
-        mine = [ks.src(n), f"{r}/src/{n}/@adv/**", ks.srcj(n)]
+        mine = [ks.src(n), f"{r}/src/{n}/**", f"{r}/src/{n}/**/@adv/**", ks.srcj(n)]   # its stream or key groups
         # ... and the acks of the EAs that depend on it (live/pace.py: a max-speed source's pace)
         subject(f"source.{n}", [out, rule(f"source.{n}.read", READ, [f"{r}/src/**", adv, ks.ack("*", n)]),
                                 rule(f"source.{n}.put", ["put", "declare_queryable", "reply", "liveliness_token"],
@@ -137,7 +137,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     subject("observer", [out, read_public])
     read_cmdlog = rule("read_cmdlog", READ, [ks.cmdlog("**"), f"{r}/notice/**"])
     subject("console", [out, read_public, read_cmdlog, rule("console_put", ["put"], [f"{r}/cmd/**"])])
-    read_seen = rule("read_console", READ, [ks.src("*")])   # the sources' frames: the picture
+    read_seen = rule("read_console", READ, [ks.src("*"), f"{r}/src/*/**"])   # the sources' frames, by group too: the picture
     # the TAK gateway: reads what a console reads, but no commands
     subject("tak", [out, read_public, read_seen, read_cmdlog,
                     # ... and acknowledgements from ATAK users, sent as their mapped unit's console
