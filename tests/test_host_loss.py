@@ -196,27 +196,33 @@ def battle(b: Battalion, st: Steps) -> None:
     every host done and compared: the steps each test asserts."""
     poll(lambda: b.source_at(HOST, KILL_AT) and b.source_at(SUP, KILL_AT), 300,
          f"hosts {HOST} and {SUP}'s sources at event time {KILL_AT}")
-    n = len(b.hs.pids(SUP))
-    before = {h: {u: len(load(b.out(h) / f"{u}.jsonl")) for u in b.hosts[h]["eas"]} for h in (HOST, SUP)}
     since = len(b.log("BN"))
-    down = {HOST: time.time()}
-    killed = b.hs.kill(HOST)   # the host dies: its supervisor, zygote, router, EA peers, source, all at once
-    down[SUP] = time.time()
+    n = len(b.hs.pids(SUP))
+    # each host's alert logs counted once nothing runs in it: what is logged after, its EAs told
+    # after the restart
+    count = lambda h: {u: len(load(b.out(h) / f"{u}.jsonl")) for u in b.hosts[h]["eas"]}   # noqa: E731
+    before: dict[str, dict] = {}
+    down = {SUP: time.time()}
     os.kill(b.procs[SUP].pid, signal.SIGKILL)   # the supervisor alone
+    down[HOST] = time.time()
+    killed = b.hs.kill(HOST)   # the host dies: its supervisor, zygote, router, EA peers, source, all at once
 
     def host_gone():
         b.procs[HOST].p.wait(10)
         assert len(killed) >= 4 and not b.hs.pids(HOST), killed
+        before[HOST] = count(HOST)
         return len(killed)
 
     def sup_gone():
         b.procs[SUP].p.wait(10)
         poll(lambda: not b.hs.pids(SUP), 20, f"every process of host {SUP} gone with its supervisor")
         gone_s = time.time() - down[SUP]
+        before[SUP] = count(SUP)
         assert n >= 8, n   # the supervisor, the zygote, the router, 4 EA peers, the source
         return {"processes": n, "all_gone_s": round(gone_s, 1)}
-    st.run(f"{HOST}: every process killed", host_gone)
-    st.run(f"{SUP}: every child gone with its supervisor", sup_gone)
+    gone = {HOST: f"{HOST}: every process killed", SUP: f"{SUP}: every child gone with its supervisor"}
+    st.run(gone[HOST], host_gone)
+    st.run(gone[SUP], sup_gone)
     said = lost_and_back(b, down, since)
     for h in (HOST, SUP):
         st.run(f"{h}: its loss said by BN's EA", lambda h=h: said(h))
@@ -233,7 +239,7 @@ def battle(b: Battalion, st: Steps) -> None:
     st.run("every host done, its alerts the in-process run's", lambda: finish(b), *restarted)
     for h in (HOST, SUP):
         st.run(f"{h}: what fell due while down told late", lambda h=h: late(b, h, before[h], down_window(
-            b, h, down[h], ups[h])), "every host done, its alerts the in-process run's")
+            b, h, down[h], ups[h])), "every host done, its alerts the in-process run's", gone[h])
         st.run(f"{h}: its EAs said left", lambda h=h: peers_lost_s(b, h, down[h]),
                "every host done, its alerts the in-process run's")
         st.run(f"{h}: its EAs' input journals replayed", lambda h=h: replayed(b, h), *restarted)
