@@ -19,7 +19,7 @@ WHY = netns.unavailable()
 def test_bench_radio_priority_writes_each_phase(tmp_path):
     out = tmp_path / "radio_priority.json"
     before = set(netns.namespaces())
-    assert bench.main(["--secs", "3", "--out-dir", str(tmp_path / "run"), "--out", str(out)]) == 0
+    assert bench.main(["--secs", "4", "--out-dir", str(tmp_path / "run"), "--out", str(out)]) == 0
     res = json.loads(out.read_text())
     assert res["rate_kbit"] == 64 and set(res["phases"]) == set(bench.PHASES)
     for name, (bulk, *_) in bench.PHASES.items():
