@@ -1,6 +1,7 @@
 """bench_hosts in small: the small scenario over its four namespaced hosts (BN, A, B, C), secure,
-64 kbit/s on each company's link, the sources to event time 300 at 10x, the fault-free run only:
-the JSON has the keys the issue names, the peers' alerts were compared with the in-process
+64 kbit/s on each company's link, the sources to event time 300 at 25x, 15 s from starting the
+hosts to event time 0 (their EA peers are ready well before), the fault-free run only: the
+JSON has the keys the issue names, the peers' alerts were compared with the in-process
 run's (and equal), each rated link carried bytes both ways. Skipped with one line where
 namespaces cannot be made."""
 from __future__ import annotations
@@ -21,8 +22,8 @@ WHY = netns.unavailable()
 @pytest.mark.skipif(WHY is not None, reason=f"no namespaced hosts here: {WHY}")
 def test_bench_hosts_writes_its_keys_and_compares_alerts(tmp_path):
     out = tmp_path / "hosts.json"
-    code = bench_hosts.main(["--scenario", str(SMALL), "--until", "300", "--speed", "10", "--runs", "free",
-                             "--out-dir", str(tmp_path / "run"), "--out", str(out)])
+    code = bench_hosts.main(["--scenario", str(SMALL), "--until", "300", "--speed", "25", "--lead", "15",
+                             "--runs", "free", "--out-dir", str(tmp_path / "run"), "--out", str(out)])
     res = json.loads(out.read_text())
     assert code == 1   # four hosts and no cut or kill: not the done-when's targets
     for k in ("hosts", "ea_peers", "link_rate_kbps", "times_real_time", "alerts_equal_in_process", "links", "cut",

@@ -14,7 +14,9 @@ from __future__ import annotations
 import gzip
 import json
 import shutil
+import time
 import uuid
+from datetime import datetime, timezone
 from pathlib import Path
 
 import pytest
@@ -31,7 +33,10 @@ from .test_live import load, plan_alerts, reap
 
 pytestmark = pytest.mark.timeout(300)
 MISSION = "A1-attack"
-UNTIL = 2600   # the source stops here (A1 crosses its line at 2456): 52 s at 50x
+UNTIL = 2600   # the source stops here (A1 crosses its line at 2456)
+SPEED = 50
+PACED_FROM = 1800   # the source's clock reads this when it is started (what came before, at once):
+                    # the crossing and the confirmation's time paced at SPEED, 16 s of wall time
 
 
 def rewrite(dst: Path, keep) -> Path:
@@ -107,9 +112,11 @@ def test_live_an_inferred_start_is_published_up_once_and_taken_by_the_superiors(
                                             "--out", str(tmp_path / f"{u}.jsonl")], env=clean_env(), log_dir=tmp_path))
         for p, u in zip(procs, units):
             p.wait_for(f"ready {u}", 60)
+        start = datetime.fromtimestamp(time.time() - PACED_FROM / SPEED, timezone.utc).isoformat()
         procs.append(Proc("source-cp.all", [*py(), "source", sc_path, "--name", "cp.all", "--connect", ep,
-                                            "--root", root, "--linger", "600", "--tracks", "--speed", "50",
-                                            "--until", str(UNTIL), "--mode", "client"], env=clean_env(), log_dir=tmp_path))
+                                            "--root", root, "--linger", "600", "--tracks", "--speed", str(SPEED),
+                                            "--start", start, "--until", str(UNTIL), "--mode", "client"],
+                          env=clean_env(), log_dir=tmp_path))
         for p, u in zip(procs, units):
             p.wait_for("summary ", 180)
     finally:
@@ -127,7 +134,7 @@ def test_live_an_inferred_start_is_published_up_once_and_taken_by_the_superiors(
         assert len(ups) == 1 and ups[0].cmd.d.mission == MISSION and ups[0].cmd.d.phase == "start", (u, ups)
         res = [r for r in rows[u] if r.get("by") == "A1" and r["cmd"].get("mission") == MISSION]
         assert len(res) == 1 and res[0]["ok"], rows[u]
-        # at its time, or (a machine too loaded to keep up at 50x) said to be late
+        # at its time, or (a machine too loaded to keep up at SPEED) said to be late
         assert ups[0].t == at or "taken late" in res[0]["error"], (u, ups[0].t, res)
     assert not [c for c in taken["A2"] if c.cmd.by == "A1"]   # a peer, not a superior
     sc = S.load(noconf)

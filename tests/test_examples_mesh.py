@@ -4,13 +4,21 @@ EAs behind its router, joined through what it wrote in its output folder (`--mes
 the router's endpoint and name, the key root, the PKI). Each example does its one thing
 for real: alerts followed, an acknowledgement and an order taken by the EAs (their command
 logs say so), a platoon's reports published to an EA that advances on them; and what keeps
-one from joining is one line. Processes on loopback, reaped; waits on conditions."""
+one from joining is one line. Processes on loopback, reaped; waits on conditions.
+
+The same mesh runs the top unit's commander's console (issue 31.4, `--console 0`), tried
+last through its own HTTP API as the page uses it: the clock comes from the sources'
+watermarks, positions from their frames, the EAs' alerts arrive, and an acknowledgement
+reaches the EA that raised it (its command log says so)."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
 import time
+import urllib.request
 
 import pytest
 
@@ -19,11 +27,10 @@ from saim_mesh.proc import Proc, clean_env, py
 from saim_mesh.zconf import free_port
 
 from .conftest import ROOT, SMALL
-from .test_console_live import stop_mesh
 
 pytestmark = pytest.mark.timeout(600)
 EX = ROOT / "examples"
-SPEED = 10.0   # 540 s of wall time for the whole battle: the module is done long before (teardown stops it)
+SPEED = 20.0   # 270 s of wall time for the whole battle: the module is done long before (teardown stops it)
 END_T = 5400.0
 
 
@@ -31,7 +38,7 @@ END_T = 5400.0
 def mesh(tmp_path_factory):
     out = tmp_path_factory.mktemp("mesh")
     p = Proc("mesh-up", [*py(), "mesh", "up", str(SMALL), "--units", "BN", "A", "A2", "--speed", f"{SPEED:g}",
-                         "--out-dir", str(out)], env=clean_env(), log_dir=out)
+                         "--out-dir", str(out), "--console", "0"], env=clean_env(), log_dir=out)
     try:
         p.wait_for("host local: sources", 240)   # its router, EAs and sources are up
         yield out, p
@@ -150,3 +157,52 @@ def test_publish_reports_feeds_an_ea_behind_the_router(mesh, tmp_path):
         ea.stop()
     assert n > 0 and summary["depends"] == ["cp.A1"] and summary["frames"] > 0, summary
     assert summary["messages"] >= n and not summary["rejects"] and not summary["lost"], summary
+
+
+def get(url: str) -> dict:
+    with urllib.request.urlopen(url, timeout=10) as r:
+        return json.loads(r.read())
+
+
+def post(url: str, body: dict) -> tuple[int, dict]:
+    req = urllib.request.Request(url, json.dumps(body).encode(), {"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read())
+
+
+def test_the_console_draws_the_live_mesh_and_acks_reach_the_ea(mesh):
+    out = running(mesh)
+    url = mesh[1].wait_for("http://127.0.0.1:", 60).split()[0].rstrip("/")
+    st = until(lambda: (s := get(f"{url}/api/state"))["t"] > 60 and s["positions"] and s, 120, "clock and positions")
+    assert st["unit"] == "BN"
+    acked = lambda: [json.dumps(x) for x in logged(out / "BN.cmdlog") if '"ack"' in json.dumps(x)]   # noqa: E731
+    urgent = until(lambda: [a for a in get(f"{url}/api/state")["alerts"]   # one no other test acknowledged
+                            if a["owner"] == "BN" and a["priority"] in ("flash", "immediate")
+                            and not any(a["details"]["id"] in x for x in acked())], 200,
+                   "an urgent alert of BN not acknowledged yet")
+    aid = urgent[0]["details"]["id"]
+    code, res = post(f"{url}/api/ack", {"unit": "BN", "alert": aid})
+    assert code == 200 and res["ok"], res
+    until(lambda: [x for x in acked() if aid in x], 60, f"the console's ack of {aid} in BN's command log")
+    t_late = get(f"{url}/api/state")["t"]
+    assert t_late >= st["t"]   # the clock only moves forward
+
+
+def stop_mesh(p: Proc, out) -> list[str]:
+    """SIGTERM to mesh up, time for it to stop its children (more than Proc.stop's 5 s),
+    then any child still alive is named and killed: none may outlive the test."""
+    p.stop(timeout=90)
+    pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
+    left = []
+    for name, pid in pids.items():
+        try:
+            os.kill(int(pid), 0)
+            if not open(f"/proc/{int(pid)}/stat").read().split(") ", 1)[1].startswith("Z"):
+                left.append(name)
+                os.kill(int(pid), signal.SIGKILL)
+        except (ProcessLookupError, ValueError, TypeError, FileNotFoundError):
+            pass
+    return left

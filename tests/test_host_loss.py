@@ -14,6 +14,10 @@ host run by `saim-mesh deploy FILE --host H` under its own supervisor, the sourc
    the zygote and the EA peers forked from it) stops with it, nothing runs on headless in
    that namespace; started again, the host catches up as above.
 
+Both faults are made in one run (the `battalion` fixture, host A's and host C's at the same
+event time: neither host's EAs depend on the other's source), each test asserting its own
+steps of it; a step that failed is named by the tests that need it.
+
 Skipped with one line where namespaces cannot be made; the namespaces and every process
 in them are removed even when a test fails (net/netns.Hosts)."""
 from __future__ import annotations
@@ -40,9 +44,9 @@ from .conftest import SMALL
 pytestmark = pytest.mark.timeout(900)
 WHY = netns.unavailable()
 SPEED = 40            # the battle (5,400 s) in about 135 s of wall time
-KILL_AT = 2400        # event time of the host's own source when the host is killed
-BACK_AT = 3100        # ... and the earliest its clock reads when it is started again: each
-                      # downed host (A, B) has plan alerts due in between (A at 3030, B at 2900)
+KILL_AT = 2400        # event time of the hosts' own sources when the hosts are killed
+BACK_AT = 3100        # ... and the earliest its clock reads when each is started again: each
+                      # downed host (A, C) has plan alerts due in between (A at 3030, C at 3006)
 SLACK_S = 6.0         # beyond source_silence_s: the loss is said within this
 
 
@@ -123,10 +127,42 @@ class Battalion:
             p.stop(timeout=60)
 
 
-@pytest.fixture
-def battalion(tmp_path):
+class Steps:
+    """What the one run found, step by step: each test asserts its own steps, and a step
+    that failed (or was not reached) fails the tests that need it, naming it."""
+
+    def __init__(self):
+        self.failed: dict[str, str] = {}
+        self.done: dict[str, object] = {}
+
+    def run(self, key: str, fn, *needs: str):
+        if miss := [k for k in needs if k not in self.done]:
+            self.failed[key] = f"not reached: {', '.join(miss)} failed"
+            return None
+        try:
+            self.done[key] = fn()
+        except Exception as e:   # noqa: BLE001 -- kept to fail the tests that need this step
+            self.failed[key] = f"{type(e).__name__}: {e}"
+            return None
+        return self.done[key]
+
+    def check(self, *keys: str) -> dict:
+        bad = {k: self.failed[k] for k in keys if k in self.failed}
+        assert not bad, "\n".join(f"{k}: {v}" for k, v in bad.items())
+        return {k: self.done[k] for k in keys}
+
+
+HOST, SUP = "A", "C"   # the host killed outright, the one whose supervisor alone is killed: neither's
+                       # EAs depend on the other's source, so each restarted host sees no loss of its own
+
+
+@pytest.fixture(scope="module")
+def battalion(tmp_path_factory):
+    """One 4-host run for both faults, at the same event time: host A killed outright, host C's
+    supervisor alone killed; both started again; the run's steps, each test asserting its own."""
     if WHY is not None:
         pytest.skip(f"no namespaced hosts here: {WHY}")
+    tmp_path = tmp_path_factory.mktemp("host_loss")
     netns.cleanup_stale()
     f = tmp_path / "deploy.toml"
     init = cli(tmp_path, "init", "deploy", "init", str(SMALL), "--out", str(f), "--addresses", netns.SUBNET,
@@ -146,40 +182,114 @@ def battalion(tmp_path):
                 b.start(h)
             for h in hosts:
                 b.procs[h].wait_for(f"host {h}: routers ", 120)
-            yield b
+            steps = Steps()
+            battle(b, steps)
+            yield b, steps
         finally:
             b.stop()
         left = {h: hs.pids(h) for h in hosts}
     assert not any(left.values()), f"processes left in the hosts after their supervisors stopped: {left}"
 
 
-def lost_and_back(b: Battalion, h: str, down: float, since: list[int]) -> dict:
-    """Wait for the other hosts' EAs to say host `h` is gone (its source lost, its EAs
-    left) and return the seconds from `down` to each saying. `since`: the log lines of
-    the superior's EA before the loss."""
-    src = b.hosts[h]["sources"][0]
-    gone = set(b.hosts[h]["eas"])
+def battle(b: Battalion, st: Steps) -> None:
+    """Both faults at KILL_AT, each host's loss said, each started again (A, then C), then
+    every host done and compared: the steps each test asserts."""
+    poll(lambda: b.source_at(HOST, KILL_AT) and b.source_at(SUP, KILL_AT), 300,
+         f"hosts {HOST} and {SUP}'s sources at event time {KILL_AT}")
+    since = len(b.log("BN"))
+    n = len(b.hs.pids(SUP))
+    # each host's alert logs counted once nothing runs in it: what is logged after, its EAs told
+    # after the restart
+    count = lambda h: {u: len(load(b.out(h) / f"{u}.jsonl")) for u in b.hosts[h]["eas"]}   # noqa: E731
+    before: dict[str, dict] = {}
+    down = {SUP: time.time()}
+    os.kill(b.procs[SUP].pid, signal.SIGKILL)   # the supervisor alone
+    down[HOST] = time.time()
+    killed = b.hs.kill(HOST)   # the host dies: its supervisor, zygote, router, EA peers, source, all at once
+
+    def host_gone():
+        b.procs[HOST].p.wait(10)
+        assert len(killed) >= 4 and not b.hs.pids(HOST), killed
+        before[HOST] = count(HOST)
+        return len(killed)
+
+    def sup_gone():
+        b.procs[SUP].p.wait(10)
+        poll(lambda: not b.hs.pids(SUP), 20, f"every process of host {SUP} gone with its supervisor")
+        gone_s = time.time() - down[SUP]
+        before[SUP] = count(SUP)
+        assert n >= 8, n   # the supervisor, the zygote, the router, 4 EA peers, the source
+        return {"processes": n, "all_gone_s": round(gone_s, 1)}
+    gone = {HOST: f"{HOST}: every process killed", SUP: f"{SUP}: every child gone with its supervisor"}
+    st.run(gone[HOST], host_gone)
+    st.run(gone[SUP], sup_gone)
+    said = lost_and_back(b, down, since)
+    for h in (HOST, SUP):
+        st.run(f"{h}: its loss said by BN's EA", lambda h=h: said(h))
+    ups = {}
+    for h in (HOST, SUP):
+        ups[h] = st.run(f"{h}: started again on its state", lambda h=h: restart(b, h))
+    bn = lambda: b.log("BN")[since:]   # noqa: E731
+    for h in (HOST, SUP):
+        st.run(f"{h}: its EAs and source said back", lambda h=h: poll(
+            lambda: {a["subjects"][0] for a in problems(bn(), "peer-back")} >= set(b.hosts[h]["eas"])
+            and any(a["subjects"] == [b.hosts[h]["sources"][0]] for a in problems(bn(), "source-back")),
+            180, f"BN's EA says host {h}'s EAs and source are back"), f"{h}: started again on its state")
+    restarted = [f"{h}: started again on its state" for h in (HOST, SUP)]
+    st.run("every host done, its alerts the in-process run's", lambda: finish(b), *restarted)
+    for h in (HOST, SUP):
+        st.run(f"{h}: what fell due while down told late", lambda h=h: late(b, h, before[h], down_window(
+            b, h, down[h], ups[h])), "every host done, its alerts the in-process run's", gone[h])
+        st.run(f"{h}: its EAs said left", lambda h=h: peers_lost_s(b, h, down[h]),
+               "every host done, its alerts the in-process run's")
+        st.run(f"{h}: its EAs' input journals replayed", lambda h=h: replayed(b, h), *restarted)
+
+
+def replayed(b: Battalion, h: str) -> list[str]:
+    """Each EA of the restarted host stood where it stood: its input journal replayed."""
+    for u in b.hosts[h]["eas"]:
+        assert "input records replayed" in (b.out(h) / "logs" / f"{u}.log").read_text(), u
+    return b.hosts[h]["eas"]
+
+
+def lost_and_back(b: Battalion, down: dict[str, float], since: int):
+    """Wait for the other hosts' EAs to say each host in `down` is gone (its source lost,
+    its EAs left); returns a function giving, for a host, the seconds from its `down` to
+    each saying (or failing saying it was not said). `since`: the log lines of the
+    superior's EA before the losses."""
     bn = b.hosts["BN"]["eas"][0]   # the battalion's EA watches every EA below it
 
-    def said():
-        rows = b.log(bn)[since[0]:]
+    def said(h):
+        src, gone = b.hosts[h]["sources"][0], set(b.hosts[h]["eas"])
+        rows = b.log(bn)[since:]
         peers = {a["subjects"][0] for a in problems(rows, "peer-lost")}
         lost = [a for a in problems(rows, "source-lost") if a["subjects"] == [src]]
         return (peers >= gone and lost) and (peers, lost[0])
     silence = float(config_for(S.load(SMALL), "BN")["mesh"]["source_silence_s"])
-    peers, lost = poll(said, silence + SLACK_S + 10, f"BN's EA says {src} lost and {sorted(gone)} left")
-    seen = time.time() - down
-    lost_s = lost["details"]["declared_wall"] - down
-    assert lost_s <= silence + SLACK_S, (lost_s, silence)
-    assert seen <= silence + SLACK_S + 2, (seen, silence)
-    return {"source_lost_s": round(lost_s, 1), "peers_lost": sorted(peers), "said_within_s": round(seen, 1)}
+    seen: dict[str, tuple] = {}
+    end = time.monotonic() + silence + SLACK_S + 10
+    while len(seen) < len(down) and time.monotonic() < end:
+        for h in set(down) - set(seen):
+            if got := said(h):
+                seen[h] = (*got, time.time() - down[h])
+        time.sleep(0.2)
+
+    def check(h: str) -> dict:
+        if h not in seen:
+            raise AssertionError(f"not within {silence + SLACK_S + 10:.0f} s: BN's EA says "
+                                 f"{b.hosts[h]['sources'][0]} lost and {sorted(b.hosts[h]['eas'])} left")
+        peers, lost, s = seen[h]
+        lost_s = lost["details"]["declared_wall"] - down[h]
+        assert lost_s <= silence + SLACK_S, (lost_s, silence)
+        assert s <= silence + SLACK_S + 2, (s, silence)
+        return {"source_lost_s": round(lost_s, 1), "peers_lost": sorted(peers), "said_within_s": round(s, 1)}
+    return check
 
 
-def finish(b: Battalion, down_host: str, before: dict[str, int], down_evt: tuple[float, float]) -> dict:
-    """Every host done; each EA's plan alerts equal the in-process run's, once each; the
-    downed host's alerts that fell due while it was down marked late.
+def finish(b: Battalion) -> dict:
+    """Every host done; each EA's plan alerts equal the in-process run's, once each.
 
-    An EA that declared the downed host's source lost went on without it meanwhile (a
+    An EA that declared a downed host's source lost went on without it meanwhile (a
     logged decision, docs/deployment.md): the ids of what it raised then are its own
     sequence's, and an alert that partial picture implied (never withdrawn) stays in its
     log; nothing of the in-process run is missing or given twice there either."""
@@ -188,37 +298,45 @@ def finish(b: Battalion, down_host: str, before: dict[str, int], down_evt: tuple
         b.procs[h].wait_for(f"host {h}: {n} of {n} EA peers done", 600)
     units = [u for spec in b.hosts.values() for u in spec["eas"]]
     eas = {ea.owner: ea for ea in run(S.load(SMALL), units)}
-    dups, late, fell_due, renumbered, partial = 0, 0, 0, 0, 0
+    dups, renumbered, partial = 0, 0, 0
     for h, spec in b.hosts.items():
         for u in spec["eas"]:
             rows = load(b.out(h) / f"{u}.jsonl")
             ids = not problems(rows, "source-lost")
+            assert ids or h not in (HOST, SUP), (h, u, "a restarted host's EA declared a source lost")
             got, want = Counter(shown(rows, ids)), Counter(shown(eas[u].alerts, ids))
             dups += sum(n - max(1, want[k]) for k, n in got.items() if n > max(1, want[k]))
             assert not want - got, (h, u, "lost", sorted((want - got).elements())[:5])
-            if ids:   # no loss declared: exactly the in-process alerts, ids too (the restarted host's EAs)
+            if ids:   # no loss declared: exactly the in-process alerts, ids too (the restarted hosts' EAs)
                 assert got == want, (h, u, "extra", sorted((got - want).elements())[:5])
                 continue
             renumbered += len(Counter(shown(rows)) - Counter(shown(eas[u].alerts)))
             extra = got - want
-            while_lost, lost = set(), False
+            while_lost, lost = set(), set()   # the sources lost at each point of its log
             for a in rows:
-                if a["details"].get("event") in ("source-lost", "source-back"):
-                    lost = a["details"]["event"] == "source-lost"
+                if a["details"].get("event") == "source-lost":
+                    lost.add(a["subjects"][0])
+                elif a["details"].get("event") == "source-back":
+                    lost.discard(a["subjects"][0])
                 elif lost:
                     while_lost |= set(shown([a], False))
             assert set(extra) <= while_lost, (h, u, "extra, not while a source was lost", sorted(extra)[:5])
             partial += sum(extra.values())
-    for u in b.hosts[down_host]["eas"]:   # told after the restart and due while the host was down: late
-        after = [a for a in load(b.out(down_host) / f"{u}.jsonl")[before[u]:] if a["category"] != "system-problem"]
+    assert dups == 0
+    return {"duplicates": dups, "renumbered": renumbered, "raised_on_a_partial_picture": partial}
+
+
+def late(b: Battalion, h: str, before: dict[str, int], down_evt: tuple[float, float]) -> dict:
+    """The downed host's alerts told after its restart that fell due while it was down: late."""
+    late, fell_due = 0, 0
+    for u in b.hosts[h]["eas"]:
+        after = [a for a in load(b.out(h) / f"{u}.jsonl")[before[u]:] if a["category"] != "system-problem"]
         due = [a for a in after if a["t"] <= down_evt[1] - 60]
         fell_due += len(due)
         assert all(a["details"].get("late") for a in due), (u, [a for a in due if not a["details"].get("late")])
         late += sum(1 for a in after if a["details"].get("late"))
-    assert dups == 0
     assert fell_due >= 1 and late >= fell_due, (fell_due, late)
-    return {"duplicates": dups, "late": late, "fell_due_while_down": fell_due, "renumbered": renumbered,
-            "raised_on_a_partial_picture": partial}
+    return {"late": late, "fell_due_while_down": fell_due}
 
 
 def restart(b: Battalion, h: str) -> float:
@@ -257,44 +375,23 @@ def down_window(b: Battalion, h: str, down: float, up: float) -> tuple[float, fl
 
 
 def test_a_host_killed_mid_battle_is_said_by_the_others_and_catches_up_when_it_returns(battalion):
-    b, h = battalion, "A"
-    poll(lambda: b.source_at(h, KILL_AT), 300, f"host {h}'s source at event time {KILL_AT}")
-    before = {u: len(load(b.out(h) / f"{u}.jsonl")) for u in b.hosts[h]["eas"]}
-    since = [len(b.log("BN"))]
-    down = time.time()
-    killed = b.hs.kill(h)   # the host dies: its supervisor, zygote, router, EA peers, source, all at once
-    b.procs[h].p.wait(10)
-    assert len(killed) >= 4 and not b.hs.pids(h), killed
-    said = lost_and_back(b, h, down, since)
-    up = restart(b, h)
-    bn = lambda: b.log("BN")[since[0]:]   # noqa: E731
-    poll(lambda: {a["subjects"][0] for a in problems(bn(), "peer-back")} >= set(b.hosts[h]["eas"])
-         and any(a["subjects"] == [b.hosts[h]["sources"][0]] for a in problems(bn(), "source-back")),
-         180, "BN's EA says the host's EAs and source are back")
-    res = finish(b, h, before, down_window(b, h, down, up))
-    said["peer_lost_s"] = peers_lost_s(b, h, down)
-    for u in b.hosts[h]["eas"]:   # each EA of the host stood where it stood: its input journal replayed
-        assert "input records replayed" in (b.out(h) / "logs" / f"{u}.log").read_text(), u
-    print("host loss", json.dumps({**said, **res}))
+    _, st = battalion
+    h = HOST
+    got = st.check(f"{h}: every process killed", f"{h}: its loss said by BN's EA", f"{h}: started again on its state",
+                   f"{h}: its EAs and source said back", "every host done, its alerts the in-process run's",
+                   f"{h}: what fell due while down told late", f"{h}: its EAs said left",
+                   f"{h}: its EAs' input journals replayed")
+    print("host loss", json.dumps({k: v for k, v in got.items() if isinstance(v, dict | tuple)}))
 
 
 def test_a_killed_supervisor_leaves_nothing_running_in_its_host_and_restarts(battalion):
-    b, h = battalion, "B"
-    poll(lambda: b.source_at(h, KILL_AT), 300, f"host {h}'s source at event time {KILL_AT}")
-    n = len(b.hs.pids(h))
-    before = {u: len(load(b.out(h) / f"{u}.jsonl")) for u in b.hosts[h]["eas"]}
-    since = [len(b.log("BN"))]
-    down = time.time()
-    os.kill(b.procs[h].pid, signal.SIGKILL)   # the supervisor alone
-    b.procs[h].p.wait(10)
-    poll(lambda: not b.hs.pids(h), 20, f"every process of host {h} gone with its supervisor")
-    gone_s = time.time() - down
-    assert n >= 8, n   # the supervisor, the zygote, the router, 4 EA peers, the source
-    said = lost_and_back(b, h, down, since)
-    up = restart(b, h)
-    res = finish(b, h, before, down_window(b, h, down, up))
-    said["peer_lost_s"] = peers_lost_s(b, h, down)
-    print("supervisor loss", json.dumps({**said, **res, "processes": n, "all_gone_s": round(gone_s, 1)}))
+    _, st = battalion
+    h = SUP
+    got = st.check(f"{h}: every child gone with its supervisor", f"{h}: its loss said by BN's EA",
+                   f"{h}: started again on its state", f"{h}: its EAs and source said back",
+                   "every host done, its alerts the in-process run's", f"{h}: what fell due while down told late",
+                   f"{h}: its EAs said left", f"{h}: its EAs' input journals replayed")
+    print("supervisor loss", json.dumps({k: v for k, v in got.items() if isinstance(v, dict | tuple)}))
 
 
 def test_a_restart_keeps_only_its_own_deployments_state(tmp_path):
