@@ -36,7 +36,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.launch.proc import Proc, clean_env, py
 from . import results
 from .stats import percentiles
 
@@ -242,7 +242,7 @@ def unarmed_mesh(scenario: Path, out_dir: Path, speed: str, timeout_s: float) ->
 def unarmed_inprocess(scenario: Path, units: list[str]) -> dict[str, list[dict]]:
     """The same units in process, unarmed: their alerts as JSON lines would have them."""
     from saim_mesh import scenario as S
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.runner import run
     sc = S.load(scenario)
     logs: dict[str, list[dict]] = {u: [] for u in units}
     eas = run(sc, units)

@@ -17,7 +17,7 @@ from pathlib import Path
 from ea_agent.core.config import load_config
 from ea_agent.domains.suo import make_ea
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 
 from . import ROOT

@@ -65,7 +65,7 @@ def run_kalman(ds: DataSet, window_s: float = 5.0) -> tuple[list[tuple], float]:
 def run_window(ds: DataSet) -> tuple[list[tuple], float]:
     """The averager (node.py) needs lon/lat: an identity-like projection stands in."""
     from saim_mesh.fusion.node import FusionNode
-    from saim_mesh.messages import SensorHit
+    from saim_mesh.protocol.messages import SensorHit
 
     class Flat:   # metres as 'degrees': the averager only projects and unprojects
         def to_xy(self, lon, lat):
@@ -187,7 +187,7 @@ def battalion(path: Path) -> tuple[DataSet, dict]:
     """The battalion-with-sensors hits as a data set in metres, its truths the hostile
     groups' true centres (the simulator's), each group one object."""
     from ea_agent.domains.suo.generator import ORIGIN_LONLAT, build_sim
-    from saim_mesh.messages import SensorHit
+    from saim_mesh.protocol.messages import SensorHit
     sc = S.load(path)
     g = sc.meta["generator"]
     sim = build_sim(g["small"], g["seed"])

@@ -48,7 +48,7 @@ def _iso(t: float) -> str:
 
 
 def _cli(args: list[str], what: str, timeout: float = 600) -> str:
-    from saim_mesh.proc import clean_env, py
+    from saim_mesh.launch.proc import clean_env, py
     r = subprocess.run([*py(), *args], capture_output=True, text=True, env=clean_env(), timeout=timeout, cwd=ROOT)
     if r.returncode != 0:
         raise RuntimeError(f"{what}: exit {r.returncode}: {(r.stderr or r.stdout).strip()[-2000:]}")
@@ -116,7 +116,7 @@ def run_hosts(base: Path, hosts: dict, run_dir: Path, speed: float, until: float
     """One run over fresh namespaced hosts (`sysctls` set in each host's stack); returns
     what was measured (and writes each host's summary.json under run_dir/hosts/<H>/)."""
     from saim_mesh.net import netns
-    from saim_mesh.proc import Proc, clean_env, py
+    from saim_mesh.launch.proc import Proc, clean_env, py
     run_dir.mkdir(parents=True, exist_ok=True)
     hdir = run_dir / "hosts"
     shutil.rmtree(hdir, ignore_errors=True)
@@ -271,7 +271,7 @@ def merge(run_dir: Path, hosts: dict, start: float, killed: str | None = None, k
 def in_process(scenario: str, units: list[str], until: float | None) -> dict[str, list]:
     """Every unit's alerts in process, sorted as bench/partition.py keys them (up to `until`)."""
     from saim_mesh import scenario as S
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.runner import run
     sc = S.load(scenario)
     if until is not None:   # the peers go on to the scenario's end on no more facts: so does this run
         sc.events = [e for e in sc.events if e.t <= until]
@@ -499,7 +499,7 @@ def main(argv=None) -> int:
                             "times_real_time": r["times_real_time"], "hosts_not_done": r.get("not_done", [])}
     silence = None
     with contextlib.suppress(Exception):
-        from saim_mesh.runner import config_for
+        from saim_mesh.inprocess.runner import config_for
         sc_full = S.load(scenario, events=False)
         silence = float(config_for(sc_full, sc_full.taskorg.root)["mesh"]["source_silence_s"])
     out["targets"] = {"times_real_time": 1.0, "alerts_equal_in_process": True, "hosts": 5,

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.launch.proc import Proc, clean_env, py
 from . import results
 
 from . import RESULTS

@@ -36,8 +36,8 @@ def main(argv=None) -> int:
     from saim_mesh.live.journal import replay
     from saim_mesh.live.peer import LivePeer
     from saim_mesh.live.up import cp_sources, up
-    from saim_mesh.runner import config_for
-    from saim_mesh.zconf import config
+    from saim_mesh.inprocess.runner import config_for
+    from saim_mesh.launch.zenoh_config import config
     sc = S.load(a.scenario)
     until = a.minutes * 60.0
     start = time.time() + 25.0

@@ -13,9 +13,9 @@ import time
 from pathlib import Path
 
 from saim_mesh import scenario as S
-from saim_mesh.runner import config_for, make_ea, run
+from saim_mesh.inprocess.runner import config_for, make_ea, run
 from saim_mesh.scenario import mesh_units
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from . import ROOT
 from .procstat import Sampler

@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     from saim_mesh.net import topology as T
     from saim_mesh.live.up import cp_sources
     from saim_mesh.ondemand import ensure
-    from saim_mesh.runner import config_for, run as run_in_process
+    from saim_mesh.inprocess.runner import config_for, run as run_in_process
     scenario = a.scenario or str(ensure("brigade-small", ROOT / "out" / "scenarios"))
     sc = S.load(scenario)
     topo = T.derive(sc.taskorg)

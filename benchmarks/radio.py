@@ -12,7 +12,7 @@ benchmark builds those frames as a live source does (one flush per source per ep
 messages encoded as on the wire), works out each EA's interest every 30 s of event time
 from its plan and its units' reported places (as its EA knows them: the mean of its
 entities' last reports), sends each direction's frames through a counting TCP link between
-two Zenoh sessions made by `zconf.config` (secure mode aside), with the mesh's link
+two Zenoh sessions made by `zenoh_config.config` (secure mode aside), with the mesh's link
 compression off and on, and writes bytes and kbit/s at 1x per link and direction, and per
 group family (`by_group`), to bench/results/radio.json.
 
@@ -29,9 +29,9 @@ from pathlib import Path
 
 import zenoh
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
-from saim_mesh.commands import _wait_matching
+from saim_mesh.authority.commands import _wait_matching
 from dataclasses import replace
 
 from dissemination.exact import _chunks_match
@@ -43,8 +43,8 @@ from saim_mesh.live.play import EPOCH_S, of_share
 from saim_mesh.scenario import mesh_units
 from saim_mesh.net.linkemu import Link
 from saim_mesh.ondemand import ensure
-from saim_mesh.runner import config_for, make_ea
-from saim_mesh.zconf import config, free_port
+from saim_mesh.inprocess.runner import config_for, make_ea
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from . import ROOT
 

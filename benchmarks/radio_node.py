@@ -11,7 +11,7 @@ import time
 
 import zenoh
 
-from saim_mesh import zconf
+from saim_mesh.launch import zenoh_config
 
 
 def main(argv: list[str]) -> int:
@@ -19,7 +19,7 @@ def main(argv: list[str]) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     if role == "router":
-        conf = zconf.config(listen=[ep], connect=rest, mode="router")
+        conf = zenoh_config.config(listen=[ep], connect=rest, mode="router")
         if os.environ.get("RADIO_SNDBUF"):
             conf.insert_json5("transport/link/tcp/so_sndbuf", os.environ["RADIO_SNDBUF"])
         if os.environ.get("RADIO_BATCH"):
@@ -28,7 +28,7 @@ def main(argv: list[str]) -> int:
             print("ready", flush=True)
             stop.wait()
         return 0
-    with zenoh.open(zconf.config(connect=[ep], mode="client")) as s:
+    with zenoh.open(zenoh_config.config(connect=[ep], mode="client")) as s:
         key = rest[0]
         if role == "bulk":   # a catch-up as a yielding journal sends it: DROP, low priority, 8 kB every 20 ms or RADIO_BULK_EVERY s
             pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP,

@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from saim_mesh.proc import wait_line
+from saim_mesh.launch.proc import wait_line
 from .stats import percentiles
 
 from . import RESULTS, ROOT

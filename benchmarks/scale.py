@@ -21,7 +21,7 @@ from . import ROOT
 
 def _inproc(args: tuple[str, list[str]]) -> dict[str, list[str]]:
     from saim_mesh import scenario as S
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.runner import run
     scenario, units = args
     return {ea.owner: [json.dumps(a.to_json_dict(), sort_keys=True) for a in ea.alerts]
             for ea in run(S.load(scenario), units)}
@@ -60,7 +60,7 @@ def live_phase(scenario: str, tmp: Path, link: dict, insecure: bool, units: list
     """The brigade on the mesh: a source per command post at max speed, a router per
     battalion command post, every EA depending only on what its interest needs;
     wall time, peak PSS per EA peer, bytes per router link, alerts against in-process."""
-    from saim_mesh import zygote
+    from saim_mesh.launch import zygote
     from saim_mesh.live.up import up as live_up
     zyg = lambda: {"zygote": zygote._shared.p.pid} if zygote._shared is not None and zygote._shared.alive() else {}  # noqa
     tmp.mkdir(parents=True, exist_ok=True)

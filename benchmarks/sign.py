@@ -16,8 +16,8 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from dissemination.keyspace import KeySpace
 
-from saim_mesh import messages as M
-from saim_mesh.gate import Gate
+from saim_mesh.protocol import messages as M
+from saim_mesh.protocol.gate import Gate
 from saim_mesh.security import sign as G
 from . import results
 

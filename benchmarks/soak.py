@@ -41,8 +41,8 @@ from pathlib import Path
 import msgspec
 import zenoh
 
-from saim_mesh import directives as D
-from saim_mesh import wire as W
+from saim_mesh.authority import directives as D
+from saim_mesh.protocol import wire as W
 from saim_mesh.security import sign as SG
 
 from . import ROOT, RESULTS
@@ -133,7 +133,7 @@ class Attackers(threading.Thread):
         self.foreign = [m.id for m in sc.plan.missions if m.unit != "A2" and "A2" not in to.ancestors(m.unit)]
 
     def _session(self, name: str):
-        from saim_mesh.zconf import config
+        from saim_mesh.launch.zenoh_config import config
         return zenoh.open(config([], [self.ep], pki=self.pki, name=name, sc=self.sc, root=self.root, mode="client",
                                 routers=[self.router]))   # its relay
 
@@ -286,7 +286,7 @@ def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float,
     """One soak of the live mesh; returns the result written to soak.json."""
     from saim_mesh import scenario as S
     from saim_mesh.live.up import cp_sources, up
-    from saim_mesh.runner import config_for, run as run_in_process
+    from saim_mesh.inprocess.runner import config_for, run as run_in_process
     from saim_mesh.scenario import mesh_units
     sc = S.load(scenario, events=False)
     units = mesh_units(sc)

@@ -16,7 +16,7 @@ import platform
 import time
 from datetime import datetime, timezone
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.tak import cot as C
 from saim_mesh.tak.picture import Options, Picture

@@ -32,7 +32,7 @@ import numpy as np
 from ea_agent.core.geo import Projection
 from ea_agent.domains.uv import load_uv_config, make_ea
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 
 from . import ROOT
@@ -117,8 +117,8 @@ def pct(xs: list[float]) -> dict:
 
 def detection_delays(folder: Path = ROOT / "scenarios" / "uv-team") -> dict:
     """Scenario seconds from each true incident's onset to the first alert matching it."""
-    from saim_mesh.evaluate import _matches
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.evaluate import _matches
+    from saim_mesh.inprocess.runner import run
     sc = S.load(folder)
     truth = sc.truth()
     alerts = [a for ea in run(sc, truth["owners"]) for a in ea.alerts]
@@ -140,7 +140,7 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
     delays on that run."""
     from ea_agent.domains.uv import generator as G
 
-    from saim_mesh.evaluate import evaluate
+    from saim_mesh.inprocess.evaluate import evaluate
     from saim_mesh.robots.team import run_team
     out = Path(tempfile.mkdtemp(prefix="uvloop-"))
     res = run_team(out, timeout=timeout, echo=lambda *a, **k: None)

@@ -38,13 +38,13 @@ import zenoh
 
 from dissemination.keyspace import KeySpace
 
-from . import commands as C
-from . import messages as M
+from .authority import commands as C
+from .protocol import messages as M
 from . import scenario as S
-from . import gate as G
-from . import wire as W
+from .protocol import gate as G
+from .protocol import wire as W
 from .live.source import LiveSource
-from .zconf import config
+from .launch.zenoh_config import config
 
 __all__ = ["Source", "Alerts", "Commander", "Alert", "LocationReport", "MeshError"]
 Alert = M.Alert
@@ -293,7 +293,7 @@ class Commander(_Session):
         return self.send("inhibit", to, id=id, source=W.MatcherSpec(**source), target=W.MatcherSpec(**target),
                          equal=list(equal), for_s=for_s)
 
-    # -- directives: authority over the mesh (saim_mesh/directives.py) ------------------
+    # -- directives: authority over the mesh (saim_mesh/authority/directives.py) ------------------
     def order(self, action: str, at: float, plan: str = "", mission: str = "", expect=(),
               wait_s: float | None = None) -> dict[str, dict]:
         """Order `unit`'s subtree (execute-plan PLAN, abort-plan, start-mission or
@@ -323,7 +323,7 @@ class Commander(_Session):
 
     def _direct(self, kind: str, expect, wait_s: float | None, **fields) -> dict[str, dict]:
         import time
-        from . import directives as D
+        from .authority import directives as D
         D.make(kind, req="check", n=1, **fields)   # a bad directive: ValueError before anything is declared
         key = D.key(self.ks.root, self.unit, kind)
         answers: queue.SimpleQueue = queue.SimpleQueue()

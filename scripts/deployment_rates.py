@@ -33,9 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.append(str(ROOT))   # after PYTHONPATH: another checkout may load newer scenarios
 
 from dissemination.keyspace import KeySpace, cells_within, place  # noqa: E402
-from saim_mesh import messages as M  # noqa: E402
+from saim_mesh.protocol import messages as M  # noqa: E402
 from saim_mesh import scenario as S  # noqa: E402
-from saim_mesh import wire as W  # noqa: E402
+from saim_mesh.protocol import wire as W  # noqa: E402
 
 SIGNED = {"ord", "org", "msn", "agm"}     # sealed by the older replay mesh (docs/history/deployment-notes.md)
 ENVELOPE = 94                             # bench/results/sign.json envelope_overhead_bytes
@@ -95,18 +95,18 @@ def control() -> dict:
 def overhead(sc, n: int = 3000) -> dict:
     """Bytes on the router link per message, beyond payload + attachment (Zenoh framing + key)."""
     import zenoh
-    from saim_mesh import zconf
+    from saim_mesh.launch import zenoh_config
     from saim_mesh.net.linkemu import Link
     ks = KeySpace.of(sc, "saim/battalion")
     msgs = [(ks.key(ev, sc.taskorg, sc.projection), M.encode(ev)) for ev in sc.events
             if type(ev).__name__ == "LocationReport"][:n]
-    pa, pb = zconf.free_port(), zconf.free_port()
+    pa, pb = zenoh_config.free_port(), zenoh_config.free_port()
     link = Link(0, pa).start()
     pl = link.listen_port
-    ra = zenoh.open(zconf.config(listen=[f"tcp/127.0.0.1:{pa}"], mode="router"))
-    rb = zenoh.open(zconf.config(listen=[f"tcp/127.0.0.1:{pb}"], connect=[f"tcp/127.0.0.1:{pl}"], mode="router"))
-    pub = zenoh.open(zconf.config(connect=[f"tcp/127.0.0.1:{pa}"], mode="client"))
-    sub = zenoh.open(zconf.config(connect=[f"tcp/127.0.0.1:{pb}"], mode="client"))
+    ra = zenoh.open(zenoh_config.config(listen=[f"tcp/127.0.0.1:{pa}"], mode="router"))
+    rb = zenoh.open(zenoh_config.config(listen=[f"tcp/127.0.0.1:{pb}"], connect=[f"tcp/127.0.0.1:{pl}"], mode="router"))
+    pub = zenoh.open(zenoh_config.config(connect=[f"tcp/127.0.0.1:{pa}"], mode="client"))
+    sub = zenoh.open(zenoh_config.config(connect=[f"tcp/127.0.0.1:{pb}"], mode="client"))
     got = []
     s = sub.declare_subscriber("saim/battalion/pos/**", lambda smp: got.append(1))
     time.sleep(2.0)

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from saim_mesh import scenario as S
-from saim_mesh.runner import run
+from saim_mesh.inprocess.runner import run
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "scenarios" / "small"

@@ -9,7 +9,7 @@ from dissemination.keyspace import KeySpace
 from saim_mesh.live.bygroup import GroupIntake
 from saim_mesh.live.groupframes import grouper, streams_of
 from saim_mesh.live.source import GROUP_SPAN_S
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 ROOT = "heard"
 

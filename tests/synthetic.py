@@ -12,7 +12,7 @@ from ea_agent.core.geo import Projection
 from ea_agent.domains.suo.generator import ORIGIN_LONLAT
 from ea_agent.domains.suo.messages import LocationReport, MissionConfirm, SensorTrack
 from saim_mesh import scenario as S
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 EPSG = 32611
 PROJ = Projection(EPSG)

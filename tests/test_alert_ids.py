@@ -12,13 +12,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from saim_mesh import commands as C
+from saim_mesh.authority import commands as C
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
+from saim_mesh.protocol import wire as W
 from saim_mesh.live import frames as F
 from saim_mesh.live import play
 from saim_mesh.live.peer import LivePeer
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 from .test_live_rebuild import frames

@@ -6,7 +6,7 @@ from __future__ import annotations
 from ea_agent.domains.suo.generator import ORIGIN_LONLAT
 from ea_agent.domains.suo.messages import SensorTrack
 from saim_mesh import scenario as S
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 from .conftest import SMALL
 from .heard import by_live_groups

@@ -384,8 +384,8 @@ def test_cycles_never_hang():
 
 
 def test_jsonl_sink_flushes_every_alert(tmp_path):
-    from saim_mesh.messages import Alert
-    from saim_mesh.sinks import JsonlSink
+    from saim_mesh.protocol.messages import Alert
+    from saim_mesh.logs.sinks import JsonlSink
     p = tmp_path / "a.jsonl"
     with open(p, "w") as f:   # block-buffered: only the sink's flush puts the line in the file
         JsonlSink(f)(Alert(1.0, "A", "contact", "c", "flash", ("A1",), "m"))

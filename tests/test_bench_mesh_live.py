@@ -5,11 +5,11 @@ from __future__ import annotations
 import json
 from collections import Counter
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from benchmarks.mesh import (alerts_diff, in_process_same_input, logged_alerts, merge_live, peer_inputs,
                                   source_streams)
 from saim_mesh.live.depend import cp_shares
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 
 def _alert(t, category="plan-constraint-violated", **kw):

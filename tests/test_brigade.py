@@ -14,7 +14,7 @@ from ea_agent.domains import suo
 from ea_agent.domains.suo import brigade as B
 from saim_mesh import ondemand
 from saim_mesh import scenario as S
-from saim_mesh.evaluate import evaluate
+from saim_mesh.inprocess.evaluate import evaluate
 
 from .conftest import BATTALION
 

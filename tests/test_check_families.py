@@ -17,7 +17,7 @@ from ea_agent.domains.suo.detect.location import RECHECK_S
 from ea_agent.domains.suo.missions import REGISTRY
 from saim_mesh import cli
 from saim_mesh import scenario as S
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, box, edited, end, line, mission, near, play, start,
                         track, track_path)

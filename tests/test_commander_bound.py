@@ -13,8 +13,8 @@ import pytest
 from ea_agent.core.budget import Budget
 from ea_agent.core.config import ConfigError, load_config
 from saim_mesh import scenario as S
-from saim_mesh.evaluate import commander_view
-from saim_mesh.runner import config_for, run
+from saim_mesh.inprocess.evaluate import commander_view
+from saim_mesh.inprocess.runner import config_for, run
 
 from .conftest import BATTALION, ROOT, SMALL
 

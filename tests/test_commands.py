@@ -16,11 +16,11 @@ import pytest
 import zenoh
 
 from dissemination.keyspace import KeySpace
-from saim_mesh import commands as C
+from saim_mesh.authority import commands as C
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import config, free_port
+from saim_mesh.protocol import wire as W
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import ROOT, SMALL
 
@@ -130,7 +130,7 @@ def test_ack_and_set_through_the_cli(plain):
     logged = [json.loads(x) for x in open(out.with_name("A2.cmdlog"))]
     assert [(x["kind"], x["ok"]) for x in logged][-3:] == [("inhibit", True), ("uninhibit", True),
                                                           ("uninhibit", False)]
-    from saim_mesh import cmdlog
+    from saim_mesh.logs import cmdlog
     rule = [c.cmd for c in cmdlog.read([out.with_name("A2.cmdlog")]) if type(c.cmd) is W.InhibitCmd]
     assert rule and rule[0].source.types == ["contact"]   # replayable by run --commands
     code, res = cli("confirm", ep, root, "--mission", "no-such-mission", "--phase", "start")

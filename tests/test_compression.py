@@ -3,7 +3,7 @@ its unicast links (configs/zenoh-peer.json5), so a command post's frames of loca
 reports take about half the bytes on the wire, with nothing changed in what arrives.
 
 Measured through a counting TCP proxy (net/linkemu.Link) between two sessions made by
-`zconf.config`, once with compression and once without, on the same frames: cp.A's share
+`zenoh_config.config`, once with compression and once without, on the same frames: cp.A's share
 of the battalion's battle (its first 10 minutes), one frame per epoch (about 700 bytes) as a
 live source sends them. Measured 1.75x fewer bytes; smaller frames gain less (the small
 battle's 170-byte frames: 1.13x), a brigade battalion's larger ones more."""
@@ -16,13 +16,13 @@ import time
 import pytest
 import zenoh
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
-from saim_mesh.commands import _wait_matching
+from saim_mesh.authority.commands import _wait_matching
 from saim_mesh.live import frames as F
 from saim_mesh.live.play import EPOCH_S, share
 from saim_mesh.net.linkemu import Link
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import BATTALION
 

@@ -21,12 +21,12 @@ from pathlib import Path
 
 import pytest
 
-from saim_mesh import cmdlog
-from saim_mesh import directives as D
+from saim_mesh.logs import cmdlog
+from saim_mesh.authority import directives as D
 from saim_mesh import scenario as S
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.runner import run
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.inprocess.runner import run
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
 from .test_live import load, plan_alerts, reap
@@ -77,7 +77,7 @@ def test_an_ea_starts_its_mission_on_crossing_its_line_and_superiors_that_saw_it
         assert plan_alerts(a.alerts) == plan_alerts(b.alerts), a.owner
         assert b.domain.plan.started[MISSION] == t
     # the hook the live peer publishes from: called once, by the unit's own EA, with the start
-    from saim_mesh.runner import config_for, make_ea
+    from saim_mesh.inprocess.runner import config_for, make_ea
     ea = make_ea(sc, "A1", config_for(sc, "A1"))
     ea.domain.inferred.append(told.append)
     ea.start(0.0)

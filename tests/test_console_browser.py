@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from saim_mesh.proc import Proc, clean_env
+from saim_mesh.launch.proc import Proc, clean_env
 
 from .browser import chromium, js_errors
 from .conftest import ROOT, SMALL
@@ -132,7 +132,7 @@ class Stepped:
 
     def __init__(self, sc, owners=OWNERS, overrides=None):
         from saim_mesh.console.feed import serve_inprocess
-        from saim_mesh.runner import run
+        from saim_mesh.inprocess.runner import run
         self.cv = threading.Condition()
         self.target, self.at, self.done, self.error = 0.0, None, False, None
         self.server = self.state = None
@@ -441,7 +441,7 @@ def test_thousands_of_stories_stay_responsive(small):
     from selenium.webdriver.common.by import By
 
     from ea_agent import domains
-    from saim_mesh import messages as M
+    from saim_mesh.protocol import messages as M
     from saim_mesh.console.server import Server, make_app
     from saim_mesh.console.state import State
 

@@ -29,7 +29,7 @@ import time
 
 import pytest
 
-from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.launch.proc import Proc, clean_env, py
 
 from .browser import chromium, js_errors
 from .conftest import SMALL
@@ -177,7 +177,7 @@ def test_a_commander_acts_on_a_live_mesh(mesh):
     cmds = [out / f"{u}.cmdlog" for u in units if (out / f"{u}.cmdlog").exists()]
     kinds = [json.loads(x)["kind"] for f in cmds for x in open(f)]
     assert sorted(k for k in kinds if not k.startswith("dir.")) == ["ack", "set"], kinds
-    # the call for fire's confirmation is a directive (saim_mesh/directives.py): A2's EA has it in
+    # the call for fire's confirmation is a directive (saim_mesh/authority/directives.py): A2's EA has it in
     # its input journal; a directive it took is in its command log as `dir.<kind>`, replayed below too
     assert b"cff-confirm" in (out / "A2.input").read_bytes()
     replay, unarmed = out / "replay.jsonl", out / "unarmed.jsonl"

@@ -91,7 +91,7 @@ def test_a_call_for_fire_the_console_never_heard_goes_to_the_ea_which_answers(sm
 
 
 def test_a_heard_call_for_fire_is_confirmed_as_a_directive(small):
-    from saim_mesh import messages as M
+    from saim_mesh.protocol import messages as M
     st = State(small, "BN")
     st.clock(1200.0)
     st.message(M.CallForFire(1190.0, "F1", "A2", 10.1, 50.2, 250.0))

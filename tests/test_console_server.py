@@ -17,9 +17,9 @@ with warnings.catch_warnings():   # starlette's notice about httpx2 is not ours 
     warnings.simplefilter("ignore")
     from starlette.testclient import TestClient
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
+from saim_mesh.protocol import wire as W
 from saim_mesh.console.actions import CommandActions
 from saim_mesh.console.feed import hook_inprocess, live_feed
 from saim_mesh.scenario import mesh_units
@@ -302,7 +302,7 @@ def test_sse_delivers_alerts_and_batched_positions(small):
 
 
 def test_inprocess_hook_feeds_the_state(small):
-    from saim_mesh.runner import config_for, make_ea
+    from saim_mesh.inprocess.runner import config_for, make_ea
     eas = [make_ea(small, o, config_for(small, o)) for o in ("A", "A2")]
     st = State(small, "A", actors=["A", "A2"])
     actions = hook_inprocess(eas, small, st)
@@ -512,7 +512,7 @@ def test_inprocess_notices_quiet_alerts_and_an_inhibition_rule(small):
     escalation each EA gives reaches the state once, as `notice` events; an inhibition rule
     sent through the endpoint is in force on the EA, and the alerts it mutes are logged
     marked inhibited_by and kept quiet, while the counts count them."""
-    from saim_mesh.runner import config_for, make_ea, wire_notices
+    from saim_mesh.inprocess.runner import config_for, make_ea, wire_notices
     eas = [make_ea(small, o, config_for(small, o, overrides={"notify": {"escalate_s": 120.0}})) for o in ("A", "A2")]
     wire_notices(eas)   # as the runner does: A2's escalations reach A's EA
     st = State(small, "A", actors=["A", "A2"])

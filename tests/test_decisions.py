@@ -21,9 +21,9 @@ import pytest
 
 from ea_agent.domains.suo.messages import MissionConfirm
 from saim_mesh import cli
-from saim_mesh import commands as C
+from saim_mesh.authority import commands as C
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
+from saim_mesh.protocol import wire as W
 from saim_mesh.console.actions import BadRequest, CommandActions, validate
 from saim_mesh.console.state import State
 
@@ -555,8 +555,8 @@ def test_the_scripted_battalion_truth_has_the_threat_ahead_of_M(battalion_truth)
 def test_the_battalions_ea_asks_about_M_as_the_truth_says(battalion_truth):
     """BN's EA over the scripted battalion (~2 s): its threat-ahead alerts match the truth's
     incident (owner, window, about M) and none is unwanted; M's march offers the ABF branch."""
-    from saim_mesh.evaluate import _matches
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.evaluate import _matches
+    from saim_mesh.inprocess.runner import run
 
     sc = S.load(BATTALION)
     [ea] = run(sc, ["BN"])

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ea_agent.core.messages as CM
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 
 
 def slow(data: bytes, monkeypatch):

@@ -8,7 +8,7 @@ from saim_mesh import scenario as S
 from saim_mesh.live.depend import Share, cp_shares, depends
 from saim_mesh.live.play import share
 from saim_mesh.scenario import mesh_units
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -18,13 +18,13 @@ import msgspec
 import numpy as np
 import pytest
 
-from saim_mesh import cmdlog
-from saim_mesh import directives as D
+from saim_mesh.logs import cmdlog
+from saim_mesh.authority import directives as D
 from saim_mesh import scenario as S
 from saim_mesh.api import Commander
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.runner import run
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.inprocess.runner import run
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
 from .test_live import load, plan_alerts, reap, start_source
@@ -76,7 +76,7 @@ def test_orders_down_and_a_confirmation_up_change_what_the_eas_raise(sc):
 
 
 def test_a_console_that_does_not_command_a_unit_cannot_order_its_mission(sc):
-    from saim_mesh.runner import config_for, make_ea
+    from saim_mesh.inprocess.runner import config_for, make_ea
     ea = make_ea(sc, "A", config_for(sc, "A"))
     ea.start(0.0)
     ea.advance(2500.0, strict=True)
@@ -161,7 +161,7 @@ def test_live_orders_reach_the_subtree_at_one_event_time_and_equal_in_process(tm
 
 
 def _ea(sc, unit: str, t: float):
-    from saim_mesh.runner import config_for, make_ea
+    from saim_mesh.inprocess.runner import config_for, make_ea
     ea = make_ea(sc, unit, config_for(sc, unit))
     ea.start(0.0)
     ea.advance(t, strict=True)
@@ -252,7 +252,7 @@ def plan(by: str, n: int, at: float, missions, name: str = "A-plan", version: in
 
 
 def test_a_plan_version_is_validated_like_a_plan_file_and_taken_by_the_subtree(sc):
-    from saim_mesh.plans import validator
+    from saim_mesh.authority.plans import validator
     validate = validator(sc)
     ea = _ea(sc, "A2", 1000.0)
     bad = [*a_plan(sc), {"id": "X-1", "unit": "A2", "type": "move", "params": {"route": "NO-SUCH-ROUTE"}}]
@@ -314,7 +314,7 @@ def test_a_forged_misplaced_replayed_or_unsigned_directive_is_refused_and_counte
     said in one line; the EA goes on."""
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
-    from saim_mesh.gate import Gate
+    from saim_mesh.protocol.gate import Gate
     from saim_mesh.live.authority import DirectiveIntake
     from saim_mesh.security import sign as G
     root = "t/dir"
@@ -371,7 +371,7 @@ def test_order_refuses_what_its_action_does_not_read_and_asks_for_what_it_needs(
 def test_a_plan_version_is_bounded_in_size():
     """A plan's missions over 48 kB are refused when made, and any directive over the
     intake's bound is refused off the wire, counted, before it is decoded."""
-    from saim_mesh.gate import Gate
+    from saim_mesh.protocol.gate import Gate
     from saim_mesh.live.authority import MAX_BYTES, DirectiveIntake
     with pytest.raises(ValueError, match="plan"):
         D.make("plan", req="p", n=1, at=10.0, name="big", version=2, missions=b"[" + b" " * (48 * 1024) + b"]")

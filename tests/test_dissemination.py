@@ -6,7 +6,7 @@ import zenoh
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace, block_of, cell, cells_within
 from ea_agent.domains.suo import make_ea
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 
 
 def test_keys_and_cells():

@@ -4,7 +4,7 @@ import subprocess
 import sys
 
 from saim_mesh import scenario as S
-from saim_mesh.evaluate import evaluate
+from saim_mesh.inprocess.evaluate import evaluate
 
 from .conftest import BATTALION, ROOT, SMALL
 
@@ -58,7 +58,7 @@ def test_robot_team_meets_targets_against_the_simulators_truth():
 
 def test_a_projection_is_scored_by_lead_time_or_as_false():
     from ea_agent.core.alert import Alert
-    from saim_mesh.evaluate import score
+    from saim_mesh.inprocess.evaluate import score
     inc = {"owner": "A", "type": "out-of-position", "accept": ["out-of-position"], "subjects": ["A2"],
            "t0": 1000.0, "t1": 1100.0, "label": "A2 off route"}
     truth = {"incidents": [inc], "situations": []}
@@ -80,7 +80,7 @@ def test_a_repeat_is_wanted_only_with_a_material_change():
     """The same story (owner, type, truth item, subjects): the first alert is news, a later one
     only when its severity moved by the fixed step (1.25x) the worse way; a count type at any rise."""
     from ea_agent.core.alert import Alert
-    from saim_mesh.evaluate import score
+    from saim_mesh.inprocess.evaluate import score
     inc = {"owner": "A", "type": "out-of-position", "accept": ["out-of-position"], "subjects": ["A2"],
            "t0": 0.0, "t1": 1000.0, "label": "A2 off"}
     oop = lambda t, d: Alert(t, "A", "out-of-position", "plan-constraint-violated", "immediate", ("A2",),  # noqa: E731
@@ -104,8 +104,8 @@ def test_a_commander_in_the_loop_sees_what_the_commander_model_implies(tmp_path)
     acknowledging is told more (re-notifications, escalations) than a diligent commander,
     who acknowledges before the first re-notification falls due; no alert changes priority.
     The notice budget is off: this follows the cadence (test_commander_bound the budget)."""
-    from saim_mesh.evaluate import commander_view
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.evaluate import commander_view
+    from saim_mesh.inprocess.runner import run
     sc = S.load(SMALL)
     truth = sc.truth()
     owners = truth["owners"]

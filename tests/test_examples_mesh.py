@@ -23,8 +23,8 @@ import urllib.request
 import pytest
 
 from saim_mesh.api import Alerts, MeshError
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import ROOT, SMALL
 

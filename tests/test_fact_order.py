@@ -5,8 +5,8 @@ elsewhere, and its alerts must still be the in-process ones (brigade 3B, 3BN).""
 from __future__ import annotations
 
 from ea_agent.domains.suo import make_ea
-from saim_mesh.messages import LocationReport, MissionConfirm
-from saim_mesh.runner import config_for
+from saim_mesh.protocol.messages import LocationReport, MissionConfirm
+from saim_mesh.inprocess.runner import config_for
 
 
 def _until_end_of(sc, mission: str) -> tuple[list, MissionConfirm]:

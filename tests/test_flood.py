@@ -6,9 +6,9 @@ from __future__ import annotations
 import uuid
 
 from saim_mesh import scenario as S
-from saim_mesh import gate as G
+from saim_mesh.protocol import gate as G
 from saim_mesh.live.peer import LivePeer
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 

@@ -7,10 +7,10 @@ import numpy as np
 
 from saim_mesh import scenario as S
 from ea_agent.core.adjudication import Adjudicator, Report
-from saim_mesh.evaluate import evaluate
+from saim_mesh.inprocess.evaluate import evaluate
 from saim_mesh.fusion import FusionNode
 from ea_agent.core.geo import Projection
-from saim_mesh.messages import SensorHit
+from saim_mesh.protocol.messages import SensorHit
 
 from .conftest import ROOT
 from .test_evaluate import check_projections

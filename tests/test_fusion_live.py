@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.live import play
 from saim_mesh.live.depend import cp_shares, home_of

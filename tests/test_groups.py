@@ -15,7 +15,7 @@ from ea_agent.core.needs import Needs
 from ea_agent.domains.suo import make_ea
 from ea_agent.domains.suo.needs import TEMPLATES
 from ea_agent.domains.uv.messages import UvAgent, UvSighting, UvState
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 
 ROOT = "t"
 ALL_TEMPLATES = (*TEMPLATES, M.SensorHit.KEY, UvState.KEY, UvSighting.KEY, UvAgent.KEY)
@@ -52,7 +52,7 @@ def test_subscriptions_are_coarse_and_do_not_overlap():
 def stream(sc):
     """What the EAs hear, in the in-process run's order: raw hits go to the fusion nodes,
     their tracks to the EAs (`runner.run`)."""
-    from saim_mesh.runner import Fusion
+    from saim_mesh.inprocess.runner import Fusion
     fusion = Fusion.of(sc)
     for ev in sc.events:
         if fusion is not None:
@@ -108,7 +108,7 @@ def test_an_ea_fed_its_groups_alerts_as_in_process(small, small_run, unit):
 
 
 def test_battalion_sensors_groups_cover_every_interest():
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.runner import run
     from saim_mesh.scenario import load
     sc = load("scenarios/battalion-sensors")
     units = ["A1", "B", "BN"]

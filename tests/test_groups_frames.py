@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh.live import frames as F
 from saim_mesh.live import groupframes as G
 

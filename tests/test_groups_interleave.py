@@ -14,13 +14,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dissemination.exact import _chunks_match
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.live import groupframes as GF
 from saim_mesh.live import play
 from saim_mesh.live.peer import LivePeer
 from saim_mesh.live.source import GROUP_SPAN_S
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 from .test_live import in_process, plan_alerts

@@ -7,7 +7,7 @@ import pytest
 from ea_agent.core.alert import Alert
 from ea_agent.domains.suo import oracle
 from ea_agent.domains.suo.generator import build_sim, overlay_features, plan_doc
-from saim_mesh.evaluate import score
+from saim_mesh.inprocess.evaluate import score
 
 from .conftest import ROOT
 

@@ -35,9 +35,9 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.net import netns
-from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.launch.proc import Proc, clean_env, py
 from saim_mesh.deploy.launch import clear_state, restart_state
-from saim_mesh.runner import config_for, run
+from saim_mesh.inprocess.runner import config_for, run
 
 from .conftest import SMALL
 
@@ -421,9 +421,9 @@ def test_the_children_of_a_killed_supervisor_stop_with_it(tmp_path):
     script = tmp_path / "sup.py"
     script.write_text(f"""
 import sys, time
-from saim_mesh import zygote
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch import zygote
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 def router(name, spawner=None):
     return Proc(name, [*py(), "router", "--scenario", {str(SMALL)!r}, "--name", "hub", "--listen",
                        f"tcp/127.0.0.1:{{free_port()}}", "--root", "test/pdeath"], env=clean_env(),

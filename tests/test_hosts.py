@@ -14,8 +14,8 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.net import netns
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.runner import run
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.inprocess.runner import run
 
 from .conftest import SMALL
 from .test_deploy_hosts import in_process, plan_alerts

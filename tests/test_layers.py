@@ -131,5 +131,5 @@ def test_the_removed_module_check_sees_a_removed_import(tmp_path, monkeypatch):
 
 
 def test_the_zygote_preloads_nothing_removed():
-    from saim_mesh import zygote
+    from saim_mesh.launch import zygote
     assert [m for m in zygote.PRELOAD if m in REMOVED] == []

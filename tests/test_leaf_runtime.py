@@ -9,12 +9,12 @@ import sys
 
 import pytest
 
-from saim_mesh.proc import LEAF_RUNTIME, leaf_env
+from saim_mesh.launch.proc import LEAF_RUNTIME, leaf_env
 
 LEAF = r"""
 import collections, json, os, sys, threading
 import zenoh
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.zenoh_config import free_port
 ep = f"tcp/127.0.0.1:{free_port()}"
 def conf(**kw):
     c = zenoh.Config()

@@ -13,8 +13,8 @@ import time
 import pytest
 
 from saim_mesh.net.linkemu import CHUNK, Link
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import wait_until
 

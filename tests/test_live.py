@@ -21,9 +21,9 @@ from saim_mesh import scenario as S
 from saim_mesh.live import play
 from saim_mesh.live.journal import replay
 from saim_mesh.live.peer import LivePeer
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.runner import config_for, make_ea
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.inprocess.runner import config_for, make_ea
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import SMALL
 
@@ -167,7 +167,7 @@ def test_mesh_up_with_a_source_per_command_post_gives_the_in_process_alerts(tmp_
     """`mesh up --sources-per-cp`: a Zenoh router, a source per command post (each company's
     subtree, the battalion's own share with the tracks), EA peers as its clients, no replay:
     every peer's alerts equal the in-process run's (the same EA on the same facts)."""
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.runner import run
     units = ["BN", "A", "A2"]
     out = tmp_path / "mesh"
     r = Proc("mesh-up", [*py(), "mesh", "up", SC, "--sources-per-cp", "--units", *units, "--out-dir", str(out)],
@@ -191,7 +191,7 @@ def test_bad_input_to_a_source_or_a_live_peer_is_one_line_counted_never_fatal(sc
     import zenoh
 
     from dissemination.keyspace import KeySpace
-    from saim_mesh import messages as M
+    from saim_mesh.protocol import messages as M
     from saim_mesh.live import frames as F
     from saim_mesh.live.source import LiveSource
     root = f"test/{uuid.uuid4().hex[:8]}"
@@ -267,7 +267,7 @@ def test_a_frame_the_full_order_refuses_is_offered_again_never_dropped(sc):
     """The order holds at most `max_buffered` facts: a frame it refuses as full waits (and its
     source's later frames behind it) until a release makes room; nothing is lost and the
     journal holds frames in the order they were taken."""
-    from saim_mesh import messages as M
+    from saim_mesh.protocol import messages as M
     from saim_mesh.live import frames as F
     peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), "t/full", ["cp.a", "cp.b"])
     peer.order.max_buffered = 3
@@ -289,7 +289,7 @@ def test_a_source_back_after_every_other_ended_does_not_kill_the_peer(sc, tmp_pa
     """A lost source heard again once every other source ended (the order released up to
     +inf) is taken back with one line, not an OverflowError out of the alert's text (a
     brigade peer died so in bench_scale)."""
-    from saim_mesh import messages as M
+    from saim_mesh.protocol import messages as M
     from saim_mesh.live import frames as F
     peer = LivePeer(sc, "A2", config(["tcp/127.0.0.1:0"], None), "t/back", ["cp.a", "cp.b"],
                     out_path=str(tmp_path / "A2.jsonl"), log=lambda *a, **k: None)

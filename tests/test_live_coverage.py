@@ -16,8 +16,8 @@ from collections import Counter
 
 import pytest
 
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
 from .test_live import load, reap

@@ -14,13 +14,13 @@ import pytest
 import zenoh
 
 from dissemination.keyspace import KeySpace
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
+from saim_mesh.protocol import wire as W
 from saim_mesh.live import play
 from saim_mesh.live.source import LiveSource
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import SMALL
 from .test_live import in_process, load, plan_alerts, reap, start_live_peer

@@ -14,8 +14,8 @@ import pytest
 from saim_mesh import scenario as S
 from saim_mesh.live import play
 from saim_mesh.live.depend import cp_shares
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import ROOT
 from .test_live import in_process, load, plan_alerts, reap

@@ -17,8 +17,8 @@ import pytest
 from ea_agent.domains.uv import load_uv_config
 from ea_agent.domains.uv.messages import UvState
 from saim_mesh import scenario as S
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import ROOT
 from .test_live import load, reap

@@ -16,9 +16,9 @@ from saim_mesh.live import play
 from saim_mesh.live.depend import cp_shares
 from saim_mesh.live.journal import replay
 from saim_mesh.live.peer import LivePeer
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.runner import run
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.inprocess.runner import run
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .test_live import load, plan_alerts, reap
 

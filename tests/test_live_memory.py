@@ -11,7 +11,7 @@ from saim_mesh import scenario as S
 from saim_mesh.live import play
 from saim_mesh.live import peer as P
 from saim_mesh.live import sequence as SQ
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 from .test_live_rebuild import frames, keyed

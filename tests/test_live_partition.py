@@ -20,7 +20,7 @@ from saim_mesh import scenario as S
 from saim_mesh.live.depend import cp_shares, depends
 from saim_mesh.live.play import share
 from saim_mesh.live.up import up
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 from .conftest import SMALL
 

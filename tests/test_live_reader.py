@@ -10,14 +10,14 @@ import sys
 
 import pytest
 
-from saim_mesh import messages as M
-from saim_mesh import wire as W
+from saim_mesh.protocol import messages as M
+from saim_mesh.protocol import wire as W
 from saim_mesh.console.feed import live_feed
 from saim_mesh.console.state import State
 from saim_mesh.live import frames as F
 from saim_mesh.tak.gateway import LiveTakFeed
 from saim_mesh.tak.picture import Options, Picture
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import ROOT, SMALL
 

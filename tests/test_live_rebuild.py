@@ -10,13 +10,13 @@ from collections import Counter
 
 import pytest
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.live import frames as F
 from saim_mesh.live import play
 from saim_mesh.live.journal import replay
 from saim_mesh.live.peer import LivePeer
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 

@@ -16,9 +16,9 @@ from collections import Counter
 import pytest
 
 from saim_mesh import scenario as S
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.runner import run
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.inprocess.runner import run
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
 from .test_live import load, plan_alerts, reap

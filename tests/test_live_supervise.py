@@ -12,8 +12,8 @@ import time
 
 import pytest
 
-from saim_mesh.supervise import Supervisor
-from saim_mesh.proc import clean_env, py, wait_line
+from saim_mesh.launch.supervise import Supervisor
+from saim_mesh.launch.proc import clean_env, py, wait_line
 
 from .conftest import SMALL
 

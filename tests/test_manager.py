@@ -7,9 +7,9 @@ import pytest
 
 from ea_agent.domains.suo import make_ea
 from ea_agent.domains.suo.detect.fratricide import fratricide_pairs
-from saim_mesh.messages import LocationReport, MissionConfirm, Order, Reorganization
-from saim_mesh.runner import run
-from saim_mesh.sinks import JsonlSink
+from saim_mesh.protocol.messages import LocationReport, MissionConfirm, Order, Reorganization
+from saim_mesh.inprocess.runner import run
+from saim_mesh.logs.sinks import JsonlSink
 
 
 def test_bad_input_is_counted_and_never_fatal(small):

@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from saim_mesh.tak import cot as C
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
 from .test_tak_gateway import GROUP, Receivers, ea_alert, tcp_plan_alerts

@@ -3,7 +3,7 @@ import math
 import msgpack
 import pytest
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 
 SAMPLES = [
     M.LocationReport(1.0, "A1S1E01", -116.5, 35.3),

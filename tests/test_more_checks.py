@@ -17,7 +17,7 @@ import pytest
 from ea_agent.core.config import ConfigError
 from ea_agent.domains.suo.messages import Order
 from saim_mesh import scenario as S
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 from .synthetic import (EPOCH, EXPIRY_S, REPORT_S, Force, alerts_of, box, edited, end, line, mission, play,
                         point, start, told, track, track_path)

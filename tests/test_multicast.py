@@ -11,7 +11,7 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.live import play
-from saim_mesh.proc import Proc, clean_env, py
+from saim_mesh.launch.proc import Proc, clean_env, py
 
 from .conftest import SMALL
 from .test_live import in_process, load, plan_alerts
@@ -23,7 +23,7 @@ def _multicast_works() -> bool:
     """Probe: two sessions with multicast scouting and no endpoints find each other."""
     import zenoh
 
-    from saim_mesh.zconf import config
+    from saim_mesh.launch.zenoh_config import config
     key, found = f"probe/{uuid.uuid4().hex}", threading.Event()
     with zenoh.open(config(["tcp/127.0.0.1:0"], [], multicast=True)) as a, \
             zenoh.open(config(["tcp/127.0.0.1:0"], [], multicast=True)) as b:

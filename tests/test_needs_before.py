@@ -15,8 +15,8 @@ from dissemination.exact import exact
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace, Template, matcher
 from ea_agent.domains.suo import make_ea
-from saim_mesh import messages as M
-from saim_mesh.runner import run
+from saim_mesh.protocol import messages as M
+from saim_mesh.inprocess.runner import run
 
 ROOT = "t"
 

@@ -9,10 +9,10 @@ import logging
 import pytest
 
 from ea_agent.core.config import ConfigError
-from saim_mesh import commands as C
-from saim_mesh import messages as M
-from saim_mesh import wire as W
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.authority import commands as C
+from saim_mesh.protocol import messages as M
+from saim_mesh.protocol import wire as W
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 OWNER = "A2"
 
@@ -143,7 +143,7 @@ def test_a_modelled_commander_acknowledges_after_a_delay(small):
 
 
 def test_escalation_reaches_the_superiors_ea_in_process(small):
-    from saim_mesh.runner import run
+    from saim_mesh.inprocess.runner import run
     got = []
     eas = run(small, ["A", "A2"], armed=True, notice_sinks=[got.append])
     a, a2 = eas
@@ -334,8 +334,8 @@ def test_an_inhibition_in_a_command_log_replays_with_run_armed_commands(small, t
     import subprocess
     import sys
 
-    from saim_mesh import cmdlog
-    from saim_mesh.proc import clean_env
+    from saim_mesh.logs import cmdlog
+    from saim_mesh.launch.proc import clean_env
 
     from .conftest import SMALL
     cmd = C.make("inhibit", id="r", source=W.MatcherSpec(types=["out-of-position"]),

@@ -13,9 +13,9 @@ from ea_agent.domains.suo.detect import CATEGORY
 from ea_agent.domains.suo.battle_plan import DURATION
 from ea_agent.domains.suo.sim import Hostile
 from saim_mesh import scenario as S
-from saim_mesh.evaluate import score
-from saim_mesh.evaluate_seeds import by_type_summary
-from saim_mesh.runner import run
+from saim_mesh.inprocess.evaluate import score
+from benchmarks.evaluate_seeds import by_type_summary
+from saim_mesh.inprocess.runner import run
 
 SEED = 15
 OWNERS = ["A", "A2", "B"]

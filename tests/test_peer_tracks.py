@@ -20,8 +20,8 @@ from dissemination.keyspace import KeySpace
 from saim_mesh import scenario as S
 from saim_mesh.live.bygroup import GroupIntake
 from saim_mesh.live.groupframes import grouper, streams_of
-from saim_mesh.messages import SensorHit
-from saim_mesh.runner import Fusion, config_for, make_ea
+from saim_mesh.protocol.messages import SensorHit
+from saim_mesh.inprocess.runner import Fusion, config_for, make_ea
 
 from .conftest import ROOT
 

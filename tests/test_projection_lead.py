@@ -15,9 +15,9 @@ from ea_agent.core.config import ConfigError, load_config
 from ea_agent.core.alert import Alert
 from ea_agent.domains.suo.detect import projection as P
 from ea_agent.domains.suo.messages import LocationReport
-from saim_mesh.evaluate import score
-from saim_mesh.evaluate_seeds import summarize
-from saim_mesh.runner import config_for
+from saim_mesh.inprocess.evaluate import score
+from benchmarks.evaluate_seeds import summarize
+from saim_mesh.inprocess.runner import config_for
 
 from .synthetic import Force, alerts_of, box, line, ll, mission, play, start, track_path
 

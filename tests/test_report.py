@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from saim_mesh.report import ReportError, plot, read_alerts
+from saim_mesh.inprocess.report import ReportError, plot, read_alerts
 
 from .conftest import ROOT, SMALL
 

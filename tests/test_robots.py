@@ -14,7 +14,7 @@ from ea_agent.domains.uv import tasks as T
 from ea_agent.domains.uv.loop import ClosedLoop
 from saim_mesh import scenario as S
 from saim_mesh.robots import wire
-from saim_mesh.runner import run
+from saim_mesh.inprocess.runner import run
 
 from .conftest import ROOT
 

@@ -11,7 +11,7 @@ import pytest
 
 from saim_mesh import scenario as S
 from saim_mesh.robots.team import run_team
-from saim_mesh.runner import run
+from saim_mesh.inprocess.runner import run
 
 from .conftest import ROOT
 

@@ -16,7 +16,7 @@ import pytest
 
 from saim_mesh.net import netns
 from saim_mesh.net.netns import Hosts
-from saim_mesh.proc import wait_line
+from saim_mesh.launch.proc import wait_line
 
 from .conftest import ROOT, SMALL, wait_until
 from .test_netns import ZCLIENT, last, script

@@ -23,7 +23,7 @@ from saim_mesh import scenario as S
 from saim_mesh.scenario import mesh_units
 from saim_mesh.security import (SecurityError, access_control, check_files, check_identity, endpoint_tls,
                                 make_pki, names_for, secure_config, tls_config)
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import ROOT, SMALL
 from .zqueue import CallbackQueue

@@ -17,7 +17,7 @@ from ea_agent.domains.suo import generator as G
 from ea_agent.domains.suo import oracle as O
 from ea_agent.domains.suo.battle_plan import LANE_X, WITHDRAW_Y
 from ea_agent.domains.suo.sim import Hostile, sensor_pos
-from saim_mesh.evaluate import _no_news
+from saim_mesh.inprocess.evaluate import _no_news
 from saim_mesh.fusion import KalmanNode, make_node
 from saim_mesh.fusion.tracker import KalmanTracker
 

@@ -17,14 +17,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dissemination.keyspace import KeySpace
-from saim_mesh import commands as C
-from saim_mesh import messages as M
+from saim_mesh.authority import commands as C
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
-from saim_mesh.gate import Gate
-from saim_mesh import wire as W
+from saim_mesh.protocol.gate import Gate
+from saim_mesh.protocol import wire as W
 from saim_mesh.security import SecurityError, make_pki, names_for
 from saim_mesh.security import sign as G
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 

@@ -8,7 +8,7 @@ import pytest
 
 from ea_agent.core.snapshot import snapshot
 from saim_mesh import scenario as S
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.inprocess.runner import config_for, make_ea
 
 from .conftest import SMALL
 

@@ -15,8 +15,8 @@ from saim_mesh import scenario as S
 from saim_mesh.live import play
 from saim_mesh.live.srcjournal import (ASK_TIMEOUT_S, HELD, MAX_ASK_TIMEOUT_S, NONE_HELD, PACED, Asker,
                                       JournalQuery, Pacer, SourceJournal)
-from saim_mesh.proc import Proc, clean_env, py
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.proc import Proc, clean_env, py
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL, wait_until
 from .test_live import in_process, load, plan_alerts, reap
@@ -271,7 +271,7 @@ def test_a_yielding_source_leaves_a_long_gap_to_its_journal_not_its_cache(tmp_pa
     from dissemination.keyspace import KeySpace
     from saim_mesh.live import frames as F
     from saim_mesh.live.source import HISTORY, YIELDING_CACHE, LiveSource
-    from saim_mesh.zconf import config
+    from saim_mesh.launch.zenoh_config import config
     assert YIELDING_CACHE == 4
     ks = KeySpace(f"test/{uuid.uuid4().hex[:8]}")
     got: list[int] = []

@@ -10,12 +10,12 @@ import pytest
 import zenoh
 
 from dissemination.keyspace import KeySpace
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
 from saim_mesh.live import frames as F
 from saim_mesh.live import play
 from saim_mesh.live import source as SRC
-from saim_mesh.zconf import config
+from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
 

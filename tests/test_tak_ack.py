@@ -26,8 +26,8 @@ from pathlib import Path
 import pytest
 import takproto
 
-from saim_mesh import messages as M
-from saim_mesh import wire as W
+from saim_mesh.protocol import messages as M
+from saim_mesh.protocol import wire as W
 from saim_mesh.tak import acks as A
 from saim_mesh.tak.ack_send import AckSender, chat_event
 from saim_mesh.tak import cot as C
@@ -305,8 +305,8 @@ def test_an_ack_from_atak_reaches_an_ea_on_the_live_mesh(tmp_path):
     source at 40x to H+25 min, BN's live EA peer armed; BN's commander acknowledges the
     first urgent BN alert TAK shows: BN's EA takes it (command log, answer in GeoChat) and
     does not re-notify it after, while it re-notifies others."""
-    from saim_mesh.proc import Proc, clean_env, py
-    from saim_mesh.zconf import free_port
+    from saim_mesh.launch.proc import Proc, clean_env, py
+    from saim_mesh.launch.zenoh_config import free_port
 
     from .conftest import SMALL
     from .test_tak_gateway import GROUP, Receivers

@@ -11,7 +11,7 @@ from datetime import datetime, timedelta, timezone
 import pytest
 import takproto
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh.tak import cot as C
 from saim_mesh.tak import types as T
 from saim_mesh.tak.picture import Options, Picture

@@ -19,18 +19,18 @@ from urllib.parse import urlparse
 import pytest
 import takproto
 
-from saim_mesh import messages as M
+from saim_mesh.protocol import messages as M
 from saim_mesh import scenario as S
-from saim_mesh import wire as W
-from saim_mesh.proc import clean_env
-from saim_mesh.runner import config_for, make_ea
+from saim_mesh.protocol import wire as W
+from saim_mesh.launch.proc import clean_env
+from saim_mesh.inprocess.runner import config_for, make_ea
 from saim_mesh.tak import cot as C
 from saim_mesh.tak import types as T
 from saim_mesh.tak.gateway import LiveTakFeed
 from saim_mesh.tak.picture import Options, Picture
 from saim_mesh.tak.pli import PliIn, UidMap, load_uids
 from saim_mesh.tak.transports import Network
-from saim_mesh.zconf import free_port
+from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import ROOT, SMALL
 

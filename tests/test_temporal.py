@@ -6,7 +6,7 @@ from ea_agent.core.manager import ExecutionAssistant
 from ea_agent.core.plan import MissionSpec, PlanSpec, TimeConstraint
 from ea_agent.core.timed import TimedMonitors
 from ea_agent.domains.suo.domain import SuoDomain
-from saim_mesh.messages import MissionConfirm
+from saim_mesh.protocol.messages import MissionConfirm
 
 
 def ea_with(sc, missions, owner="A"):

@@ -17,10 +17,10 @@ from ea_agent.core.plan import TaskOrg, Unit
 from saim_mesh import scenario as S
 from saim_mesh.net import topology as T
 from saim_mesh.live.up import up
-from saim_mesh.proc import Proc
-from saim_mesh.runner import run
+from saim_mesh.launch.proc import Proc
+from saim_mesh.inprocess.runner import run
 from saim_mesh.security.acl import access_control, identities
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import SMALL
 

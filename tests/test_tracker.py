@@ -12,7 +12,7 @@ from saim_mesh import scenario as S
 from saim_mesh.fusion.kalman_node import KalmanNode
 from saim_mesh.fusion.node import FusionNode
 from saim_mesh.fusion.tracker import KalmanTracker
-from saim_mesh.messages import SensorHit, SensorTrack
+from saim_mesh.protocol.messages import SensorHit, SensorTrack
 
 from .conftest import SMALL
 

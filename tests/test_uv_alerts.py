@@ -518,7 +518,7 @@ def test_mesh_subscriptions_give_the_same_alerts_on_uv_team():
 
     from dissemination.interest import Interest
     from dissemination.keyspace import KeySpace, matcher
-    from saim_mesh.runner import config_for, make_ea as mk, run as run_all
+    from saim_mesh.inprocess.runner import config_for, make_ea as mk, run as run_all
     from saim_mesh.scenario import load as load_sc
 
     sc = load_sc(Path(__file__).resolve().parents[1] / "scenarios" / "uv-team")

@@ -138,7 +138,7 @@ def test_the_shipped_uv_team_tells_each_handoff_once_per_audience():
     from collections import Counter
 
     from saim_mesh import scenario as S
-    from saim_mesh.runner import run as run_all
+    from saim_mesh.inprocess.runner import run as run_all
 
     from .conftest import ROOT
     sc = S.load(ROOT / "scenarios" / "uv-team")

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from saim_mesh.proc import wait_line
+from saim_mesh.launch.proc import wait_line
 
 pytestmark = pytest.mark.timeout(60)
 

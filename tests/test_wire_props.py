@@ -16,9 +16,9 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from saim_mesh import messages as M
-from saim_mesh import gate as G
-from saim_mesh import wire as W
+from saim_mesh.protocol import messages as M
+from saim_mesh.protocol import gate as G
+from saim_mesh.protocol import wire as W
 
 SETTINGS = settings(max_examples=300, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

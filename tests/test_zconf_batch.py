@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from saim_mesh.zconf import config, free_port
+from saim_mesh.launch.zenoh_config import config, free_port
 
 from .conftest import wait_until
 

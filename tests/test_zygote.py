@@ -13,7 +13,7 @@ import pytest
 
 LAUNCHER = r"""
 import json, sys, time
-from saim_mesh import zygote
+from saim_mesh.launch import zygote
 p = zygote.spawner()(["link", "--listen", "0", "--to", "1"], sys.argv[1], None)
 print(json.dumps({"child": p.pid, "zygote": zygote._shared.p.pid}), flush=True)
 time.sleep(120)
@@ -60,7 +60,7 @@ def test_a_killed_launcher_leaves_no_orphan_peers(tmp_path):
 
 WARM = r"""
 import importlib, json, os, sys
-from saim_mesh import zygote
+from saim_mesh.launch import zygote
 from saim_mesh.live import warm
 for m in zygote.PRELOAD:
     importlib.import_module(m)
@@ -91,7 +91,7 @@ def test_the_warm_up_runs_a_live_peer_and_leaves_no_thread_to_fork_under():
 
 LIVE_PEER = r"""
 import importlib, json, sys
-from saim_mesh import zygote
+from saim_mesh.launch import zygote
 for m in zygote.PRELOAD:
     importlib.import_module(m)
 zygote.warm_up()
@@ -118,7 +118,7 @@ def test_a_live_peer_starts_after_the_zygotes_imports_and_warm_up(tmp_path):
 
 
 def test_a_warm_up_that_fails_is_named_and_the_zygote_goes_on(tmp_path):
-    from saim_mesh import zygote
+    from saim_mesh.launch import zygote
     bad = tmp_path / "nowhere"
     problem = zygote.warm_up(bad)
     assert problem is not None and str(bad) in problem and problem.startswith("zygote: no warm-up")
@@ -131,7 +131,7 @@ def test_a_warm_up_that_fails_is_named_and_the_zygote_goes_on(tmp_path):
 
 @pytest.mark.timeout(60)
 def test_a_zygote_that_cannot_warm_up_says_so_and_still_forks(tmp_path, capfd):
-    from saim_mesh import zygote
+    from saim_mesh.launch import zygote
     bad = tmp_path / "nowhere"
     env = dict(os.environ, SAIM_ZYGOTE_WARM=str(bad))
     z = zygote.Zygote(env)

@@ -32,7 +32,7 @@ def _command_fields(a) -> tuple[str, dict]:
     if a.cmd == "inhibit":
         if a.lift:
             return "uninhibit", {"id": a.id}
-        from .. import wire as W
+        from ..protocol import wire as W
         src = {k: v for k, v in (("types", a.source_types), ("subjects", a.source_subjects),
                                  ("priorities", a.source_priorities)) if v}
         tgt = {k: v for k, v in (("types", a.target_types), ("subjects", a.target_subjects),
@@ -54,9 +54,9 @@ def cmd_command(a) -> int:
 
     from dissemination.keyspace import KeySpace
 
-    from .. import commands as C
+    from ..authority import commands as C
     from ..scenario import mesh_units
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     sc = S.load(a.scenario, events=False)
     if a.unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
@@ -75,7 +75,7 @@ def cmd_command(a) -> int:
 
 def cmd_console(a) -> int:
     from ..console.main import main_console
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     sc = S.load(a.scenario, events=False)
     unit = a.unit or sc.taskorg.root
     if unit not in sc.taskorg.units:

@@ -1,5 +1,5 @@
 """`saim-mesh order` and `saim-mesh plan`: a commander's directives to its subtree over the
-live mesh (saim_mesh/directives.py), a thin layer over `api.Commander`. Each prints the
+live mesh (saim_mesh/authority/directives.py), a thin layer over `api.Commander`. Each prints the
 answers of the EAs that took or refused it (JSON lines) and exits 0 when every EA named
 in --expect took it, 2 otherwise."""
 from __future__ import annotations

@@ -18,7 +18,7 @@ def cmd_source(a) -> int:
 
     from ..live import play
     from ..live.source import LiveSource
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     sc = S.load(a.scenario, events=a.file is None)
     for u in [*(a.units or ()), *(a.but or ())]:
         if u not in sc.taskorg.units:
@@ -65,7 +65,7 @@ def cmd_source(a) -> int:
 
 
 def cmd_peer(a) -> int:
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     sc = S.load(a.scenario, events=False)
     if a.unit not in sc.taskorg.units:
         raise KeyError(f"unknown unit {a.unit!r}: not in the task organization of {sc.name}")
@@ -87,7 +87,7 @@ def cmd_peer(a) -> int:
 
 def cmd_router(a) -> int:
     from ..net.router import main_router
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     sc = S.load(a.scenario, events=False)
     root = a.root or f"saim/{sc.name}"
     routers = _zmode(a)["routers"] or [a.name]
@@ -178,7 +178,7 @@ def _live_tak(a):
 
 def cmd_tak(a) -> int:
     from ..tak.gateway import main_tak
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     sc = S.load(a.scenario, events=False)
     root = a.root or f"saim/{sc.name}"
     conf = config(a.listen, a.connect, a.zenoh_config, a.multicast, a.pki, "tak", sc, root, **_zmode(a))

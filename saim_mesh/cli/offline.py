@@ -8,7 +8,7 @@ from collections import Counter
 from pathlib import Path
 
 from .. import scenario as S
-from ..sinks import JsonlSink, TerminalSink
+from ..logs.sinks import JsonlSink, TerminalSink
 from .args import _speed, _seconds, _progress, DEFAULT_SCENARIO
 
 
@@ -33,7 +33,7 @@ def table(eas, alert_types=()) -> str:
 def cmd_run(a) -> int:
     from ea_agent import domains
 
-    from ..runner import config_for, default_eas, run
+    from ..inprocess.runner import config_for, default_eas, run
     sc = S.load(a.scenario)
     owners = a.ea or default_eas(sc)
     for o in owners:   # every bad input is reported before anything runs or is written
@@ -41,14 +41,14 @@ def cmd_run(a) -> int:
             raise KeyError(f"--ea {o}: unknown unit {o!r}: not in the task organization of {sc.name} "
                            f"({sc.root / 'plan.json'})")
         config_for(sc, o, a.config)
-    from ..cmdlog import read as read_commands
+    from ..logs.cmdlog import read as read_commands
     cmds = read_commands(a.commands, set(sc.taskorg.units)) if a.commands else None
     sinks = [] if a.quiet else [TerminalSink()]
     out = open(a.out, "w", buffering=1) if a.out else None   # line-buffered; JsonlSink flushes each alert
     notice_sinks: list = []
     if out:
         sinks.append(JsonlSink(out))
-        from ..noticelog import NoticeLog, path_for
+        from ..logs.noticelog import NoticeLog, path_for
         nlog = NoticeLog(path_for(a.out))   # re-notifications and escalations, beside the alerts
         notice_sinks.append(nlog)
     try:
@@ -81,7 +81,7 @@ def cmd_run(a) -> int:
 
 
 def cmd_evaluate(a) -> int:
-    from ..evaluate import evaluate
+    from ..inprocess.evaluate import evaluate
     res = evaluate(S.load(a.scenario), config_path=a.config, commander=a.commander)
     if a.json:
         print(json.dumps(res, sort_keys=True))
@@ -145,7 +145,7 @@ def cmd_validate(a) -> int:
     configuration of each default EA, and those EAs built and started on every plan."""
     from ea_agent.core.config import ConfigError
 
-    from ..runner import config_for, default_eas, make_ea
+    from ..inprocess.runner import config_for, default_eas, make_ea
     sc = S.load(a.scenario)
     owners = default_eas(sc)
     for o in owners:   # `run` without --ea runs these
@@ -174,7 +174,7 @@ def cmd_validate(a) -> int:
 
 
 def cmd_report(a) -> int:
-    from ..report import main_report
+    from ..inprocess.report import main_report
     return main_report(a.out, a.alerts, a.title)
 
 

@@ -233,7 +233,7 @@ class CommandActions:
 
     def __init__(self, run: Callable[[str, Any], Any], state=None, push: bool = False, direct=None,
                  lead_s: float = ORDER_LEAD_S):
-        """`direct(unit, kind, fields)`: publish a directive (saim_mesh/directives.py) as
+        """`direct(unit, kind, fields)`: publish a directive (saim_mesh/authority/directives.py) as
         `unit` on the live mesh: orders to the subtree, confirmations up the chain
         (None: an in-process console cannot)."""
         self.run, self.state, self.push, self.direct, self.lead_s = run, state, push, direct, lead_s
@@ -241,7 +241,7 @@ class CommandActions:
         self._tag = f"console-{os.getpid()}"
 
     def _do(self, unit: str, kind: str, **fields) -> dict:
-        from .. import commands   # the EA side's module (docs/console.md section 1)
+        from ..authority import commands   # the EA side's module (docs/console.md section 1)
         cmd = commands.make(kind, req=f"{self._tag}-{next(self._n)}", **fields)
         d = result_dict(self.run(unit, cmd), unit)
         if self.state is not None:

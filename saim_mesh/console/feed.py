@@ -11,8 +11,8 @@ from typing import Callable
 
 from ea_agent import domains
 
-from .. import messages as M
-from .. import wire as W
+from ..protocol import messages as M
+from ..protocol import wire as W
 from ..live.reader import LiveReader
 from .actions import CommandActions, result_dict
 from .state import State
@@ -64,17 +64,17 @@ def mesh_actions(feed, state: State, timeout: float = 10.0) -> CommandActions:
     """Commands on the mesh through `feed` (a reader: its `.session`, `.ks`, `.conf`), sent
     as this console's unit (the EA checks it commands it); their results come back on
     cmdlog/<unit> to every console. Signed as this console's identity in secure mode.
-    Orders and confirmations are directives (saim_mesh/directives.py), published once,
+    Orders and confirmations are directives (saim_mesh/authority/directives.py), published once,
     taken by every EA they concern."""
     from ..security.sign import signer_for
     signer = signer_for(feed.conf)
 
     def run(unit: str, cmd):
-        from .. import commands
+        from ..authority import commands
         return commands.send(feed.session, feed.ks, unit, cmd, state.unit, timeout, signer)
 
     def direct(unit: str, kind: str, fields: dict) -> str:
-        from .. import directives as D
+        from ..authority import directives as D
         return D.publish(feed.session, feed.ks.root, signer, unit, kind, **fields).req
     return CommandActions(run, state, push=False, direct=direct)
 
@@ -109,7 +109,7 @@ def hook_inprocess(eas: list, sc, state: State) -> CommandActions:
         guard(ea, "finish", (lambda t: state.clock(t, end=True)) if first else None)
 
     def run(unit: str, cmd):
-        from .. import commands
+        from ..authority import commands
         with lock:
             return commands.apply(by_owner[unit], cmd)
     return CommandActions(run, state, push=True)

@@ -16,7 +16,7 @@ from .state import State
 def main_console(sc, conf, root: str, unit: str | None = None, port: int = 0, linger_s: float = 30.0) -> int:
     """Serve the console for the mesh at `conf` (the sources' frames, the clock from their
     watermarks) until every source ended plus `linger_s` (wall seconds), SIGTERM or
-    Ctrl-C. `conf`: a zenoh.Config (zconf.config(..., name=f"console.{unit}") under
+    Ctrl-C. `conf`: a zenoh.Config (zenoh_config.config(..., name=f"console.{unit}") under
     --pki). Returns the exit code."""
     unit = unit or sc.taskorg.root
     if unit not in sc.taskorg.units:

@@ -198,7 +198,7 @@ class State:
         keeps a rule with for_s 0 active (the page's view of what the rule covers now)."""
         if unit not in self._expiries:
             try:
-                from ..runner import config_for
+                from ..inprocess.runner import config_for
                 self._expiries[unit] = float(config_for(self.sc, unit)["voa"]["expiry_s"])
             except Exception:   # a config that does not load here: the EA's default
                 self._expiries[unit] = 720.0

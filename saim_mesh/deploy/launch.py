@@ -32,11 +32,11 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import zygote
+from ..launch import zygote
 from ..live.depend import home_of
-from ..supervise import Supervisor
-from ..proc import Proc, clean_env, leaf_env, py
-from ..zconf import free_port
+from ..launch.supervise import Supervisor
+from ..launch.proc import Proc, clean_env, leaf_env, py
+from ..launch.zenoh_config import free_port
 from .check import interface_addresses
 from .file import Deployment, endpoint
 
@@ -105,7 +105,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
     from ..live.up import show_alerts, table
     from ..net import routed
     from ..net import topology as T
-    from ..sinks import COLOURS, RESET
+    from ..logs.sinks import COLOURS, RESET
     import sys
     from ea_agent.core.alert import hms
     pl = plan(dep, host)
@@ -195,7 +195,7 @@ def run_host(dep: Deployment, sc, host: str, out_dir: Path, *, echo=print, show:
             sup.add(Proc(u, [*py(), "peer", "--scenario", dep.scenario, "--unit", u, *where(u), "--root", root,
                              "--sources", *sources, "--out", str(out_dir / f"{u}.jsonl"), *live_args, *armed],
                          env=leaf_env(), log_dir=logs,
-                         spawner=zygote.spawner()))   # EA peers fork from one zygote (saim_mesh/zygote.py)
+                         spawner=zygote.spawner()))   # EA peers fork from one zygote (saim_mesh/launch/zygote.py)
         for u in units:
             sup.procs[u].wait_for(f"ready {u}", 120)
         if units:

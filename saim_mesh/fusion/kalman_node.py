@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ea_agent.core.geo import Projection
-from saim_mesh.messages import SensorHit, SensorTrack
+from saim_mesh.protocol.messages import SensorHit, SensorTrack
 
 from .node import Windowed
 from .tracker import KalmanTracker

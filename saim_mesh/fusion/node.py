@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ea_agent.core.geo import Projection
-from saim_mesh.messages import SensorHit, SensorTrack
+from saim_mesh.protocol.messages import SensorHit, SensorTrack
 
 
 @dataclass

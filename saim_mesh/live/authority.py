@@ -1,4 +1,4 @@
-"""A live EA's intake of directives (orders down, confirmations up: `saim_mesh/directives.py`).
+"""A live EA's intake of directives (orders down, confirmations up: `saim_mesh/authority/directives.py`).
 
 Checked like every input (bounded, decoded into a typed struct, the signature opened in
 secure mode), deduplicated (a late joiner hears the same directive from several EAs'
@@ -9,10 +9,10 @@ from __future__ import annotations
 import hashlib
 import heapq
 
-from .. import directives as D
-from .. import messages as M
-from .. import gate as G
-from .. import wire as W
+from ..authority import directives as D
+from ..protocol import messages as M
+from ..protocol import gate as G
+from ..protocol import wire as W
 
 MAX_DIRECTIVES = 10_000   # taken per EA over a run (a flood beyond is refused and counted)
 MAX_BYTES = 64 * 1024     # one directive's payload, envelope included (a plan version's missions: 48 kB)

@@ -16,7 +16,7 @@ from typing import Callable
 from dissemination.exact import _chunks_match
 from dissemination.interest import Interest
 
-from .. import messages as M
+from ..protocol import messages as M
 from . import frames as F
 from . import groupframes as GF
 from .sequence import GAP_WAIT_S

@@ -11,9 +11,9 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from .. import messages as M
-from .. import gate as G
-from .. import wire as W
+from ..protocol import messages as M
+from ..protocol import gate as G
+from ..protocol import wire as W
 
 MAX_MSGS = 1024   # data messages in one frame
 

@@ -21,8 +21,8 @@ from typing import Annotated, Callable, Literal
 
 import msgspec
 
-from .. import messages as M
-from .. import wire as W
+from ..protocol import messages as M
+from ..protocol import wire as W
 from . import frames as F
 
 PROGRESS = "_p"   # the progress stream's last chunk: no data family is called so

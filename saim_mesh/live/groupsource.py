@@ -12,7 +12,7 @@ import zenoh
 from dissemination.keyspace import KeySpace
 
 from .. import scenario as S
-from ..zconf import config
+from ..launch.zenoh_config import config
 from . import play
 from .depend import Share
 from .groupframes import grouper

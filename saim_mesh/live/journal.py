@@ -7,7 +7,7 @@ detected by wall clock is not reproducible, a decision written down is).
 Records are msgpack arrays, each prefixed by its length (4 bytes, big-endian), flushed
 as written (frames: before the next thing the peer tells anyone, see `frame`):
 ["frame", payload], ["lost", source, released, why], ["dir", by, kind, body] (a directive:
-saim_mesh/directives.py), ["cmd", t, kind, body] (a commander's command, taken at event
+saim_mesh/authority/directives.py), ["cmd", t, kind, body] (a commander's command, taken at event
 time t: a rebuilt or restarted EA takes it again at t), ["peer", unit, up] (another EA left
 without a goodbye, or came back) or ["back", source]. A half-written last record (a kill) is ignored on reading, and
 cut off when the journal is opened again, so that what a restart appends can be read."""

@@ -13,11 +13,11 @@ from dataclasses import replace
 
 import zenoh
 
-from .. import cmdlog
-from .. import messages as M
-from .. import noticelog
-from .. import wire as W
-from ..alertlog import AlertLog
+from ..logs import cmdlog
+from ..protocol import messages as M
+from ..logs import noticelog
+from ..protocol import wire as W
+from ..logs.alertlog import AlertLog
 from .journal import InputJournal
 
 BLOCK = zenoh.CongestionControl.BLOCK

@@ -23,9 +23,9 @@ import math
 import threading
 import time
 
-from .. import messages as M
-from .. import gate as G
-from .. import wire as W
+from ..protocol import messages as M
+from ..protocol import gate as G
+from ..protocol import wire as W
 
 LEAD_S = 120.0        # event seconds a source may run ahead of the slowest EA depending on it
 ACK_EVERY_S = 30.0    # event seconds between an EA's acks (and its first release)

@@ -31,12 +31,12 @@ from ea_agent.core.alert import hms
 from ea_agent.core.ids import AlertIds
 from ea_agent.core.snapshot import snapshot
 
-from .. import commands as C
-from .. import directives as D
-from .. import messages as M
-from .. import gate as G
-from .. import wire as W
-from ..runner import config_for, make_ea
+from ..authority import commands as C
+from ..authority import directives as D
+from ..protocol import messages as M
+from ..protocol import gate as G
+from ..protocol import wire as W
+from ..inprocess.runner import config_for, make_ea
 from ..scenario import Scenario
 from ..security.sign import signer_for
 from . import frames as F
@@ -99,7 +99,7 @@ class LivePeer:
         self.cmd_gate.rejects = self.gate.rejects   # one count of what was refused
         self.gate.rejects.on_flood = self._flood     # ... per sender: a flood is said (threat model)
         self.dirs = DirectiveIntake(root, self.cmd_gate)   # orders down, confirmations up (issue 33)
-        from ..plans import validator
+        from ..authority.plans import validator
         self.validate_plan = validator(sc)                   # plan versions checked as plan files are
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ids = AlertIds(unit)   # every alert id issued, kept across rebuilds: never rewound

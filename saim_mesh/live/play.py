@@ -13,7 +13,7 @@ import xml.etree.ElementTree as ET
 from datetime import datetime, timezone
 from typing import IO, Iterable, Iterator
 
-from .. import messages as M
+from ..protocol import messages as M
 from .source import LiveSource
 
 EPOCH_S = 2.0
@@ -29,7 +29,7 @@ def of_share(sc, sh) -> Iterator[M.Message]:
 def fused(sc, names: list[str]) -> Iterator[M.Message]:
     """The tracks the named sensor groups' fusion nodes give from their sensors' hits:
     the nodes as in process (`runner.Fusion`), flushed on every event's time as there."""
-    from ..runner import Fusion
+    from ..inprocess.runner import Fusion
     groups = sc.meta.get("fusion", {}).get("groups", {})
     for g in names:
         if g not in groups:

@@ -3,9 +3,9 @@ leave was clean (a goodbye) or not. It decides when a change is worth saying; th
 it (one system problem, journalled so a replay says the same)."""
 from __future__ import annotations
 
-from .. import gate as G
+from ..protocol import gate as G
 
-from .. import wire as W
+from ..protocol import wire as W
 
 
 class PeerPresence:

@@ -19,9 +19,9 @@ from typing import Callable, Protocol
 
 from dissemination.keyspace import KeySpace
 
-from .. import gate as G
-from .. import messages as M
-from .. import wire as W
+from ..protocol import gate as G
+from ..protocol import messages as M
+from ..protocol import wire as W
 from ..security.sign import verifier_for
 from .frames import FrameReader
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-from .. import wire as W
+from ..protocol import wire as W
 from .held import Held
 from .srcjournal import Asker
 

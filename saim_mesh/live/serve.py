@@ -14,7 +14,7 @@ import time
 import zenoh
 import zenoh.ext as zx
 
-from .. import wire as W
+from ..protocol import wire as W
 from . import groupframes as GF
 from .pace import EaProgress
 from .peer import BLOCK, CHECK_S

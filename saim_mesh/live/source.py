@@ -18,7 +18,7 @@ import zenoh.ext as zx
 
 from dissemination.keyspace import KeySpace
 
-from .. import messages as M
+from ..protocol import messages as M
 from . import frames as F
 from . import groupframes as GF
 from .srcjournal import CATCH_UP_KBIT, YIELDING, Pacer, SourceJournal

@@ -27,8 +27,8 @@ from typing import Annotated
 import msgspec
 import zenoh
 
-from .. import messages as M
-from .. import wire as W
+from ..protocol import messages as M
+from ..protocol import wire as W
 
 _LEN = struct.Struct(">I")
 MAX_FRAMES = 2_000

@@ -2,7 +2,7 @@
 post (each company's subtree; the battalion's own units and the hostile tracks its
 sensors see), one EA peer per unit advancing on those sources' watermarks. Alerts are
 printed as the peers raise them (read from their durable logs), the Fig. 7 table at the
-end. Supervised (saim_mesh/supervise.py): a child that dies is reported
+end. Supervised (saim_mesh/launch/supervise.py): a child that dies is reported
 and restarted, up to `max_restarts` times each (`--restarts`; a restarted source takes a
 new epoch and resumes after what it published, a restarted peer replays its input
 journal), then given up with one line and the mesh goes on without it."""

@@ -4,7 +4,7 @@ and encoded by `LiveSource` itself), taken by a `LivePeer` through the path a fr
 the wire takes (`receive`: decoding, its source's sequence, the gate, the event-time
 order, the EA, the alert log and the input journal).
 
-The zygote runs it before it forks (saim_mesh/zygote.py): what this code builds on first
+The zygote runs it before it forks (saim_mesh/launch/zygote.py): what this code builds on first
 use (msgspec's per-type codecs, the interpreter's specialised bytecode, the EA's
 detectors, shapely's and the domain's first-use state, modules imported on first use)
 then exists once, in pages every EA peer shares, instead of once in each of them.

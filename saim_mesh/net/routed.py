@@ -8,8 +8,8 @@ import json
 from pathlib import Path
 
 from . import topology as T
-from ..proc import Proc, clean_env, py
-from ..zconf import free_port
+from ..launch.proc import Proc, clean_env, py
+from ..launch.zenoh_config import free_port
 
 
 def _ep(port: int, secure: bool) -> str:

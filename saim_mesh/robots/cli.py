@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def session_config(a, name: str, listen: list[str] | None = None):
     """The process's Zenoh config: secure (mTLS, the loop's access control) with --pki."""
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     if not a.pki:
         return config(listen=listen, connect=[] if listen else [a.connect], mode="router" if listen else "client")
     from .. import scenario as S

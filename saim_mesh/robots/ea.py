@@ -26,13 +26,13 @@ import zenoh.ext as zx
 
 from ea_agent.domains.uv import tasks as T
 
-from .. import messages as M
+from ..protocol import messages as M
 from .. import scenario as S
-from .. import gate as G
+from ..protocol import gate as G
 from ..live import frames as F
 from ..live.order import EventTimeOrder
 from ..live.source import next_epoch
-from ..runner import config_for, make_ea
+from ..inprocess.runner import config_for, make_ea
 from . import wire
 
 BLOCK = zenoh.CongestionControl.BLOCK

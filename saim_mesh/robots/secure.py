@@ -68,7 +68,7 @@ def acl(root: str, taskorg, robots: list[str]) -> dict:
 def config(pki_dir: Path, name: str, root: str, taskorg, robots: list[str], connect: list[str] | None = None,
            listen: list[str] | None = None) -> zenoh.Config:
     """A secure session config as `name`: mTLS, our access-control rules, no scouting."""
-    from ..zconf import config as zc
+    from ..launch.zenoh_config import config as zc
     conf = zc(listen=listen, connect=connect, mode="router" if listen else "client")
     link = tls_config(pki_dir, name)
     conf.insert_json5("transport/link/protocols", json.dumps(link["protocols"]))

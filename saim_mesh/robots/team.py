@@ -17,8 +17,8 @@ from pathlib import Path
 
 from ea_agent.domains.uv import generator as G
 
-from ..proc import Proc, leaf_env
-from ..zconf import free_port
+from ..launch.proc import Proc, leaf_env
+from ..launch.zenoh_config import free_port
 from . import secure as S
 from . import wire
 

@@ -17,7 +17,7 @@ rules and the keys cannot drift apart.
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/** and notice/**, put cmd/** |
 | `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put cmd/*/ack/* (ATAK users' acknowledgements), its own source src/tak (PLI) |
-| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now), dir/<U>/* (U's orders to its subtree, U's confirmations up: saim_mesh/directives.py); reading what an observer reads plus cmdlog/**, notice/**, the sources' frames src/* |
+| `console.<U>` (with a task organization) | put cmd/*/*/<U> (commands sent as U's console: each EA checks U commands it now), dir/<U>/* (U's orders to its subtree, U's confirmations up: saim_mesh/authority/directives.py); reading what an observer reads plus cmdlog/**, notice/**, the sources' frames src/* |
 
 Reading = declare_subscriber, declare_liveliness_subscriber, liveliness_query on `<root>/**`
 (observer and console: on alert/** and alive/** only).
@@ -123,7 +123,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
                                                           f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
                                                           ks.cmdlog(u), ks.notice("*", u),
                                                           f"{r}/dir/{u}/confirm"]),   # its inferred confirmations
-                            # directives it took, for late joiners (saim_mesh/directives.py)
+                            # directives it took, for late joiners (saim_mesh/authority/directives.py)
                             rule(f"ea.{u}.dirj", ["declare_queryable", "reply"], [f"{r}/dirj/{u}"]),
                             rule(f"ea.{u}.dirq", ["query"], [f"{r}/dirj/*"]),
                             rule(f"ea.{u}.token", ["liveliness_token"], [ks.alive(u, "*")])])

@@ -32,8 +32,8 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
 from dissemination.keyspace import KeySpace
-from saim_mesh import messages as M
-from saim_mesh import wire as W
+from saim_mesh.protocol import messages as M
+from saim_mesh.protocol import wire as W
 
 from .pki import NAME_RE, SecurityError, _load_key, _read, _write
 
@@ -47,11 +47,11 @@ WINDOW = 4096                    # counters remembered per signer
 _DOMAIN = "saim-mesh signed v1"  # what a signature is for: never valid for anything else
 
 # what carries authority: these message kinds must come signed in secure mode (nobody signs them on
-# a data key today: orders and confirmations travel as directives, saim_mesh/directives.py)
+# a data key today: orders and confirmations travel as directives, saim_mesh/authority/directives.py)
 AUTHORITY: tuple[type, ...] = (M.Order, M.Reorganization, M.MissionConfirm, M.UvAgent)
 COMMAND_FAMILY = "cmd"
 NOTICE_FAMILY = "notice"
-DIRECTIVE_FAMILY = "dir"    # orders down, confirmations up (saim_mesh/directives.py)
+DIRECTIVE_FAMILY = "dir"    # orders down, confirmations up (saim_mesh/authority/directives.py)
 
 Name = Annotated[str, msgspec.Meta(min_length=1, max_length=128, pattern=NAME_RE.pattern)]
 

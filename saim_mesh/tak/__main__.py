@@ -11,7 +11,7 @@ def main(argv: list[str] | None = None) -> int:
     """`python -m saim_mesh.tak SCENARIO ...`: the same gateway before the CLI wires
     `saim-mesh tak` (no --pki: the `tak` identity's certificate and rules come with it)."""
     from .. import scenario as S
-    from ..zconf import config
+    from ..launch.zenoh_config import config
     from .gateway import main_tak
     ap = argparse.ArgumentParser(prog="python -m saim_mesh.tak", description="the Cursor-on-Target gateway as a Zenoh peer")
     ap.add_argument("scenario")

@@ -308,7 +308,7 @@ class AckIn:
             self._refuse("unknown-uid", f"{who} is not mapped to a unit (acks {', '.join(named)})")
             return [], [Reply(reply, f"ACK {', '.join(named)} refused: {callsign} ({sender}) is not mapped to a "
                                      f"unit at the gateway")]
-        from ..commands import authority
+        from ..authority.commands import authority
         acks, replies = [], []
         for aid in named:
             owner = aid.rsplit("/", 1)[0]

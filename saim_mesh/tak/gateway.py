@@ -22,8 +22,8 @@ from typing import Callable
 
 from ea_agent import domains
 
-from .. import messages as M
-from .. import wire as W
+from ..protocol import messages as M
+from ..protocol import wire as W
 from ..live.reader import LiveReader
 from .ack_send import AckSender, chat_event
 from .acks import AckIn
@@ -174,7 +174,7 @@ def picture_options(sc, opts) -> Options:
 
 
 def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None = None) -> int:
-    """Run the gateway for the mesh at `conf` (zconf.config(..., name="tak") under --pki)
+    """Run the gateway for the mesh at `conf` (zenoh_config.config(..., name="tak") under --pki)
     until every source it hears has ended plus `--linger` wall seconds, SIGTERM or Ctrl-C.
     Prints `tak ready ...` once it listens and subscribes, `tak done ...` at the end."""
     log = log or (lambda *a, **k: print(*a, **k, file=sys.stdout))
@@ -202,7 +202,7 @@ def main_tak(sc, conf, root: str, opts: argparse.Namespace, log: Callable | None
         net.send(chat_event(gw_uid, gw_callsign, conv, text, *picture.centre))
 
     def send_ack(ack):
-        from .. import commands
+        from ..authority import commands
         cmd = commands.make("ack", alert=ack.alert, by=f"tak:{ack.uid}")
         feed = feed_box[0] if feed_box else None
         if feed is None or feed.session is None:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from ..messages import LocationReport, MessageError
+from ..protocol.messages import LocationReport, MessageError
 from . import cot as C
 
 RULES = ("uid", "callsign")

@@ -60,7 +60,7 @@ class SuoDomain:
         self.watch = self.watchman.watch   # the watchman is the domain's filter, called directly
         self.scan_s = float(cfg["manager"]["unknown_scan_s"])
         # told of each confirmation this EA infers itself (crossing a line of departure): a
-        # peer publishes its own unit's up the chain of command (saim_mesh/directives.py)
+        # peer publishes its own unit's up the chain of command (saim_mesh/authority/directives.py)
         self.inferred: list[Callable[[MissionConfirm], None]] = []
         self.next_scan = self.scan_s
         self.plan: PlanState | None = None

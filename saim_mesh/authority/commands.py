@@ -13,9 +13,9 @@ from collections import OrderedDict
 import msgspec
 import zenoh
 
-from . import messages as M
-from . import gate as G
-from . import wire as W
+from ..protocol import messages as M
+from ..protocol import gate as G
+from ..protocol import wire as W
 
 KIND_OF = {cls: kind for kind, cls in W.COMMANDS.items()}
 CFF_BOOK = 1000   # calls for fire remembered per EA (the newest)

@@ -30,9 +30,9 @@ from pathlib import Path
 from .proc import clean_env, die_with_parent
 
 PRELOAD = ("numpy", "shapely", "shapely.geometry", "pyproj", "zenoh", "zenoh.ext", "msgspec", "msgpack",
-           "saim_mesh.cli", "saim_mesh.zconf", "saim_mesh.live.peer", "saim_mesh.live.serve",
+           "saim_mesh.cli", "saim_mesh.launch.zenoh_config", "saim_mesh.live.peer", "saim_mesh.live.serve",
            "ea_agent.domains.suo.domain", "ea_agent.domains.uv.domain")
-WARM_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "small"
+WARM_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "small"
 
 
 # -- the zygote process ------------------------------------------------------------------
@@ -95,7 +95,7 @@ def warm_up(scenario: Path = WARM_SCENARIO) -> str | None:
     if choice not in ("", "1"):
         scenario = Path(choice)
     try:
-        from .live.warm import warm
+        from ..live.warm import warm
         with contextlib.redirect_stdout(sys.stderr):   # stdout is the launcher's channel
             warm(scenario)
     except Exception as e:   # noqa: BLE001 -- whatever it was: named, and no warm-up
@@ -213,7 +213,7 @@ class Zygote:
         env = clean_env(env)
         env.setdefault("OPENBLAS_NUM_THREADS", "1")   # no thread pool to fork under
         env["SAIM_ZYGOTE_PARENT"] = str(os.getpid())   # it dies with us (PR_SET_PDEATHSIG, checked)
-        self.p = subprocess.Popen([sys.executable, "-m", "saim_mesh.zygote"], stdin=subprocess.PIPE,
+        self.p = subprocess.Popen([sys.executable, "-m", "saim_mesh.launch.zygote"], stdin=subprocess.PIPE,
                                   stdout=subprocess.PIPE, env=env)
         if self.p.stdout.readline().strip() != b"ready":
             self.p.kill()

@@ -34,8 +34,8 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from . import messages as M
-from . import wire as W
+from ..protocol import messages as M
+from ..protocol import wire as W
 
 KINDS = ("order", "confirm", "decide", "cff", "reorganize", "plan")
 # event seconds from a start an EA inferred to when its confirmation takes effect up the

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from .messages import Alert
+from ..protocol.messages import Alert
 from .runner import run
 
 

@@ -7,7 +7,7 @@ from typing import IO
 
 from ea_agent.core.alert import hms
 
-from .messages import Alert
+from ..protocol.messages import Alert
 
 COLOURS = {"flash": "\033[1;97;41m", "immediate": "\033[1;31m", "priority": "\033[33m", "routine": "\033[36m"}
 RESET = "\033[0m"

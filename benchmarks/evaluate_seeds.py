@@ -32,8 +32,8 @@ def one(args: tuple) -> dict:
     commanders = rest[0] if rest else ()
     from ea_agent.domains.suo.generator import write
 
-    from . import scenario as S
-    from .evaluate import evaluate
+    from saim_mesh import scenario as S
+    from saim_mesh.inprocess.evaluate import evaluate
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix=f"seed{seed}-") as d:
         gen = write(Path(d) / "sc", small=small, seed=seed, incidents="random", sensors=sensors)
@@ -41,8 +41,8 @@ def one(args: tuple) -> dict:
         res = evaluate(sc)
         armed = {}
         if commanders:   # the same battle with a commander in the loop, per model
-            from .evaluate import commander_view
-            from .runner import run
+            from saim_mesh.inprocess.evaluate import commander_view
+            from saim_mesh.inprocess.runner import run
             plain = run(sc, res["owners"])
             for m in commanders:
                 v = commander_view(sc, res["owners"], m, plain, sc.truth())
@@ -190,7 +190,7 @@ def main(argv=None) -> int:
     if a.seeds < 1 or a.jobs < 1:
         ap.error("--seeds and --jobs must be at least 1")
     commanders = tuple(m for m in a.commanders.split(",") if m)
-    from .evaluate import COMMANDERS
+    from saim_mesh.inprocess.evaluate import COMMANDERS
     for m in commanders:
         if m not in COMMANDERS:
             ap.error(f"--commanders: unknown model {m!r} (known: {', '.join(COMMANDERS)})")
@@ -203,7 +203,7 @@ def main(argv=None) -> int:
            "wall_s": round(time.perf_counter() - t0),
            "note": ("each seed is a battle drawn at random (ea_agent/domains/suo/random_battle.py); truth from "
                     "the oracle (ea_agent/domains/suo/oracle/, which imports nothing else of ea_agent); scored by "
-                    "saim_mesh/evaluate.py: recall per incident in its window, delay from when it happened, unwanted = "
+                    "saim_mesh/inprocess/evaluate.py: recall per incident in its window, delay from when it happened, unwanted = "
                     "matches nothing, repeats the same story without a 1.25x severity change, or wrong priority"),
            "rows": rows}
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)

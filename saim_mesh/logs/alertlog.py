@@ -16,7 +16,7 @@ import os
 from collections import Counter
 from pathlib import Path
 
-from .messages import Alert
+from ..protocol.messages import Alert
 from .sinks import alert_line
 
 FSYNC = ("alert", "urgent", "never")

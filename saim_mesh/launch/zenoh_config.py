@@ -7,7 +7,7 @@ from pathlib import Path
 
 import zenoh
 
-DEFAULT = Path(__file__).resolve().parents[1] / "configs" / "zenoh-peer.json5"
+DEFAULT = Path(__file__).resolve().parents[2] / "configs" / "zenoh-peer.json5"
 # A router's links may cross a radio of tens of kbit/s, where one full batch (16 KB: the
 # file's batch_size) takes 2 s at 64 kbit/s. Zenoh reads a batch whole within the lease:
 # at the file's 2 s lease (for leaves: a dead process is noticed at once) a router link
@@ -54,8 +54,8 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None,
     if connect is not None:
         conf.insert_json5("connect/endpoints", json.dumps(connect))
     if pki is not None:
-        from .scenario import mesh_units
-        from .security.acl import secure_config
+        from ..scenario import mesh_units
+        from ..security.acl import secure_config
         groups = sorted(sc.meta.get("fusion", {}).get("groups", {}))
         conf = secure_config(conf, pki, name, root, mesh_units(sc), groups, sc.taskorg, routers)
     return conf

@@ -8,12 +8,12 @@ from ea_agent import domains
 from ea_agent.core.config import load_config
 from ea_agent.core.manager import ExecutionAssistant, Sink
 
-from . import directives as D
-from .cmdlog import Logged
-from .commands import apply, tap
-from .fusion import make_node
-from .messages import SensorHit
-from .scenario import Scenario
+from ..authority import directives as D
+from ..logs.cmdlog import Logged
+from ..authority.commands import apply, tap
+from ..fusion import make_node
+from ..protocol.messages import SensorHit
+from ..scenario import Scenario
 
 
 def default_eas(sc: Scenario) -> list[str]:
@@ -117,7 +117,7 @@ def run(sc: Scenario, owners: Iterable[str], sinks: Iterable[Sink] = (), voa: bo
     dirs = sorted(directives, key=lambda tk: tk.sort_key())
     validate = None
     if dirs or any(isinstance(c.cmd, D.Taken) for c in cmds):
-        from .plans import validator
+        from ..authority.plans import validator
         validate = validator(sc)
     if dirs:   # stable: commands first at equal times, directives in (at, by, n) order
         cmds = sorted(cmds + [Logged(ea.owner, tk.t, tk) for tk in dirs for ea in eas], key=lambda c: c.t)

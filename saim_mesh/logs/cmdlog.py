@@ -19,7 +19,7 @@ from pathlib import Path
 
 import msgspec
 
-from . import wire as W
+from ..protocol import wire as W
 
 SUFFIX = ".cmdlog"
 
@@ -48,7 +48,7 @@ class CommandLog:
         os.fsync(self.f.fileno())
 
     def directive(self, unit: str, tk, res: W.CmdResult) -> None:
-        """A directive the EA took or refused (saim_mesh/directives.py): kind `dir.<kind>`,
+        """A directive the EA took or refused (saim_mesh/authority/directives.py): kind `dir.<kind>`,
         with its issuer `by`; `run --commands` applies it again the same way."""
         line = {"unit": unit, "t": tk.t, "kind": f"dir.{res.kind}", "by": tk.by, "cmd": msgspec.to_builtins(tk.d),
                 "ok": res.ok, "error": res.error}
@@ -100,8 +100,8 @@ def read(paths: list[str | Path], units: set[str] | None = None) -> list[Logged]
                 raise ValueError(f"{where}: unknown unit {unit!r}")
             if type(t) not in (int, float) or not math.isfinite(t) or not 0 <= t <= W.T_LIMIT:
                 raise ValueError(f"{where}: t must be a scenario time in seconds (got {t!r})")
-            if isinstance(kind, str) and kind.startswith("dir."):   # a directive (saim_mesh/directives.py)
-                from . import directives as D
+            if isinstance(kind, str) and kind.startswith("dir."):   # a directive (saim_mesh/authority/directives.py)
+                from ..authority import directives as D
                 by = d.get("by")
                 if not isinstance(by, str) or not by:
                     raise ValueError(f"{where}: a directive with no issuer ('by')")
