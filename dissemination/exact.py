@@ -1,7 +1,7 @@
 """The peer's exact interest: a received key tested against its fine key expressions.
 
-Coarse subscriptions (`coarse.py`) let through more than the EA asked for; this is
-the cheap test that drops the rest. The fine set changes every re-registration (as
+Key-group subscriptions (`streams.py`) let through more than the EA asked for (a group is
+coarser than the keys its interest names); this is the cheap test that tells the rest. The fine set changes every re-registration (as
 units move), so building the test must cost little too: expressions are indexed by
 family, second and third chunk (a place's block and cell), and a key is compared chunk by chunk with
 the few that can match it; answers are cached until the next re-registration."""

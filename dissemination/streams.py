@@ -6,7 +6,7 @@ that carries it, coarse enough that one source has few streams (a publisher each
 fine enough that an EA hears little beyond its interest. From the message's template:
 the family, then the first placeholder: a place keeps its block (the cell is dropped)
 and, when a command path follows it, the path's first `depth` chunks (a company's
-subtree: `groups.group_depth`); any other placeholder keeps its one chunk and ends the
+subtree: `group_depth`); any other placeholder keeps its one chunk and ends the
 group. So, in SUO: positions `pos/<block>/<path to the company>`, tracks `trk/<block>`,
 calls for fire `cff/<block>`, confirmations `msn/<unit>`, orders `ord/<issuer>`,
 reorganizations `org/<unit>`, fusion input `hit/<group>`; for the robot team states and
@@ -23,10 +23,16 @@ from collections.abc import Iterable
 
 import zenoh
 
-from .groups import group_depth
 from .keyspace import Template
 
 CACHE_MAX = 8192    # keys remembered (an entity's key repeats until it changes cell)
+
+
+def group_depth(taskorg) -> int:
+    """Command-path chunks per group: a company's subtree whatever sits above it (2 in a
+    battalion, BN/A; 3 in a brigade, BDE/1BN/1A): the hierarchy's height less two."""
+    height = max((len(taskorg.path(u).split("/")) for u in taskorg.units), default=3)
+    return max(1, height - 2)
 
 
 class _Layout:

@@ -170,8 +170,8 @@ def clean_env(base: dict | None = None) -> dict:
 
 # one worker thread for Zenoh's receive runtime where the default is two (the other
 # runtimes run one already): a leaf has a link or two, and on a shared machine a second
-# receive worker only wakes the first (BN peer in bench_mesh: share of in-process
-# 0.43 -> 0.47 in three A/B pairs, a fifth fewer context switches). Routers keep two.
+# receive worker only wakes the first (fewer context switches: bench_mesh measures the
+# peer's CPU against the in-process EA's). Routers keep two.
 LEAF_RUNTIME = "(rx:(worker_threads:1))"
 
 

@@ -54,7 +54,7 @@ from .timeline import Timeline
 
 BLOCK = zenoh.CongestionControl.BLOCK
 CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, silences) while frames flow
-ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report, its heap entry: 315 B measured)
+ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report and its heap entry)
 DATA = frozenset((M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
                   M.Reorganization))
 LOCATION = M.LocationReport

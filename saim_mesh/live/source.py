@@ -38,9 +38,8 @@ HISTORY = CACHE
 # recovery asks the cache for every frame missed at once, one copy per EA behind the link
 # (k EAs on a host: k copies at the same moment), which filled the link and held up the
 # live frames of other sources that share it. A small cache leaves the rest of the gap to
-# the journal, whose answers are paced over all askers together (`Pacer`). At 32 frames
-# (~140 B each, brigade-small) the 15 EAs of a healed BN host still pulled ~68 kB at once,
-# 8.5 s of a 64 kbit/s link; at 4, about 1 s.
+# the journal, whose answers are paced over all askers together (`Pacer`); what each cache
+# size costs a healed host link is measured by bench_hosts (bench/results/hosts_cut_*).
 YIELDING_CACHE = 4
 FRAME_BYTES = 48_000   # a frame is flushed before it grows past this (the gate's bound is 64 KiB)
 LINGER_S = 0.05        # the longest a lingering source holds a watermark back (wall seconds)

@@ -217,9 +217,9 @@ class Asker:
     (a congested link drops yielding replies, or the timeout cut them), so that k askers
     behind one slow link share it instead of each flooding it. And like TCP's retransmission
     timer, an ask the journal answered (`HELD`) but whose frames did not come in time waits
-    twice as long next time, up to `MAX_ASK_TIMEOUT_S`: a router queue of a few 16 kB batches
-    drains in 4-6 s over what a 64 kbit/s link has spare, so at 3 s every reply came after
-    its asker had stopped listening (bench_hosts at 1.5x: 17 askers, none got a frame)."""
+    twice as long next time, up to `MAX_ASK_TIMEOUT_S`: a router queue of a few full batches
+    drains in seconds over what a slow radio link has spare, longer than a fixed timeout
+    would wait, and then every reply would come after its asker stopped listening."""
 
     def __init__(self, timeout: float = ASK_TIMEOUT_S, chunk: int = FIRST_ASK_BYTES):
         self.base = self.timeout = timeout
