@@ -79,13 +79,9 @@ class GroupIntake:
         """A progress frame (returned, for the sequencer) or a group frame (kept; None).
         Refused (counted, None) when it does not decode or is not of the key's source/group."""
         try:
-            x = GF.decode_progress(payload, self.max_bytes) if rest == GF.PROGRESS else \
-                GF.decode_group(payload, self.max_bytes)
+            x = GF.decode_on(payload, key, name, rest, self.max_bytes)
         except M.MessageError as e:
             self.gate.rejects.add(e, key)
-            return None
-        if x.source != name or rest != GF.PROGRESS and x.group != rest:
-            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {x.source!r} on {key[:80]}"), key)
             return None
         if rest == GF.PROGRESS:
             return x

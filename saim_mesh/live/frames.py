@@ -95,13 +95,9 @@ class FrameReader:
         from . import groupframes as GF
         name, rest = name_rest
         try:
-            x = GF.decode_progress(payload, self.gate.max_bytes) if rest == GF.PROGRESS else \
-                GF.decode_group(payload, self.gate.max_bytes)
+            x = GF.decode_on(payload, key, name, rest, self.gate.max_bytes)
         except M.MessageError as e:
             self.gate.rejects.add(e, key)
-            return None
-        if x.source != name or rest != GF.PROGRESS and x.group != rest:
-            self.gate.rejects.add(M.MessageError("frame", "source", f"frame of {x.source!r} on {key[:80]}"), key)
             return None
         if rest == GF.PROGRESS:
             self._promise(x.source, x.wm, x.end)

@@ -72,6 +72,15 @@ def decode_progress(payload: bytes, max_bytes: int) -> Progress:
     return _decode(_DEC_P, payload, max_bytes, "progress frame")
 
 
+def decode_on(payload: bytes, key: str, name: str, rest: str, max_bytes: int) -> GroupFrame | Progress:
+    """The progress frame (`rest` is PROGRESS) or group frame that came on source `name`'s
+    stream `rest`, checked against that key; MessageError naming what was wrong."""
+    x = decode_progress(payload, max_bytes) if rest == PROGRESS else decode_group(payload, max_bytes)
+    if x.source != name or rest != PROGRESS and x.group != rest:
+        raise M.MessageError("frame", "source", f"frame of {x.source!r} on {key[:80]}")
+    return x
+
+
 def _decode(dec, payload: bytes, max_bytes: int, what: str):
     if len(payload) > max_bytes:
         raise M.MessageError(what, "(bytes)", f"{len(payload)} bytes, over the {max_bytes} limit")
