@@ -74,7 +74,7 @@ def test_a_bad_order_is_a_400_and_nothing_is_published(small, body, text):
 def test_a_console_that_cannot_publish_directives_says_so(small):
     c, _ = console(small, None)
     r = c.post("/api/order", json={"unit": "BN", "action": "abort-plan"})
-    assert r.status_code == 400 and "over the live mesh" in r.json()["error"]
+    assert r.status_code == 400 and "go over the mesh" in r.json()["error"]
 
 
 def test_a_call_for_fire_the_console_never_heard_goes_to_the_ea_which_answers(small):
