@@ -2,8 +2,8 @@
 and A company's command posts) joined by an emulated link, a source per command post
 paced together, secure. The link is cut for longer than `source_silence_s` and healed:
 each side declares the other's sources lost and goes on; after the heal the advanced
-subscribers recover every missed frame from the publishers' caches across the routers
-(no miss, no gap), the EAs are rebuilt, and what each shows its commander equals an EA
+subscribers recover the missed frames from the publishers' caches across the routers, and
+what a cache no longer holds from the source's journal (no gap), the EAs are rebuilt, and what each shows its commander equals an EA
 fed the same facts with no cut, nothing shown twice."""
 from __future__ import annotations
 
@@ -75,7 +75,8 @@ def test_a_cut_link_heals_with_nothing_missed_and_the_uncut_alerts(tmp_path):
         logged = [json.loads(x) for x in open(tmp_path / "out" / f"{u}.jsonl") if x.strip()]
         events = Counter(a["details"].get("event") for a in logged if a["category"] == "system-problem")
         assert events["source-lost"] >= 1 and events["source-back"] >= 1 and s["rebuilds"] >= 1, (u, events, s)
-        assert s["misses"] == 0 and s["gaps"] == 0, (u, s["misses"], s["gaps"])
+        # nothing lost: every frame beyond the publishers' caches came from the sources' journals
+        assert s["gaps"] == 0 and s["misses"] <= s["fetched"], (u, s["misses"], s["fetched"], s["gaps"])
         got = shown(logged)
         assert not [k for k, n in Counter(got).items() if n > 1], f"{u}: an alert shown twice"
         assert sorted(got) == sorted(uncut(sc, u)), u

@@ -125,7 +125,7 @@ def test_leaves_and_routers_never_scout_and_routers_are_trusted_relays():
     assert "router_relay" not in next(p for p in acl["policies"] if p["subjects"] == ["ea.A"])["rules"]
     # a live source's cache, recovery queries and replies and liveliness live under verbatim
     # `@adv` chunks, which `**` does not reach: a relay must name them or no recovery crosses
-    assert "saim/x/src/*/@adv/**" in relay["key_exprs"] and {"query", "reply"} <= set(relay["messages"])
+    assert "saim/x/src/**/@adv/**" in relay["key_exprs"] and {"query", "reply"} <= set(relay["messages"])
 
 
 # -- the mesh through routers -------------------------------------------------------------
