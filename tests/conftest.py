@@ -1,5 +1,8 @@
 from __future__ import annotations
 
+import json
+import os
+import signal
 import time
 from pathlib import Path
 
@@ -36,3 +39,21 @@ def small_run(small):
 
 def alerts_of(run_, owner, typ=None):
     return [a for a in run_[owner].alerts if typ is None or a.type == typ]
+
+
+def stop_supervised(p, out) -> list[str]:
+    """SIGTERM to a supervisor (`mesh up`, `deploy --host`), time for it to stop its children
+    (more than Proc.stop's 5 s), then any child still alive (its `pids.json`) is named and
+    killed: none may outlive the test."""
+    p.stop(timeout=90)
+    pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
+    left = []
+    for name, pid in pids.items():
+        try:
+            os.kill(int(pid), 0)
+            if not open(f"/proc/{int(pid)}/stat").read().split(") ", 1)[1].startswith("Z"):
+                left.append(name)
+                os.kill(int(pid), signal.SIGKILL)
+        except (ProcessLookupError, ValueError, TypeError, FileNotFoundError):
+            pass
+    return left

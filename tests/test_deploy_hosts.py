@@ -9,9 +9,7 @@ child is reaped (and any left named) even when the test fails."""
 from __future__ import annotations
 
 import json
-import os
 import random
-import signal
 import tomllib
 
 import pytest
@@ -20,7 +18,7 @@ from saim_mesh import scenario as S
 from saim_mesh.launch.proc import Proc, clean_env, py
 from saim_mesh.inprocess.runner import run
 
-from .conftest import SMALL
+from .conftest import SMALL, stop_supervised
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -39,23 +37,6 @@ def plan_alerts(path) -> list[tuple]:
 def in_process(alerts) -> list[tuple]:
     return [(a.t, a.type, tuple(a.subjects), a.message, a.priority, a.to_json_dict()["details"].get("id"))
             for a in alerts if a.category != "system-problem"]
-
-
-def stop_host(p: Proc, out) -> list[str]:
-    """SIGTERM to the host's supervisor, time to stop its children, then any child still
-    alive is named and killed."""
-    p.stop(timeout=90)
-    pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
-    left = []
-    for name, pid in pids.items():
-        try:
-            os.kill(int(pid), 0)
-            if not open(f"/proc/{int(pid)}/stat").read().split(") ", 1)[1].startswith("Z"):
-                left.append(name)
-                os.kill(int(pid), signal.SIGKILL)
-        except (ProcessLookupError, ValueError, TypeError, FileNotFoundError):
-            pass
-    return left
 
 
 def cli(tmp_path, name: str, *args: str) -> Proc:
@@ -88,7 +69,7 @@ def test_four_hosts_on_loopback_each_under_its_own_supervisor_give_the_in_proces
             procs[h].wait_for(f"host {h}: {n} of {n} EA peers done", 600)
     finally:
         for h, p in procs.items():
-            left[h] = stop_host(p, tmp_path / h)
+            left[h] = stop_supervised(p, tmp_path / h)
     assert not any(left.values()), f"children still running (killed now): {left}"
     units = [u for spec in hosts.values() for u in spec["eas"]]
     want = {ea.owner: in_process(ea.alerts) for ea in run(sc, units)}

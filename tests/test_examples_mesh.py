@@ -13,8 +13,6 @@ reaches the EA that raised it (its command log says so)."""
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -26,7 +24,7 @@ from saim_mesh.api import Alerts, MeshError
 from saim_mesh.launch.proc import Proc, clean_env, py
 from saim_mesh.launch.zenoh_config import free_port
 
-from .conftest import ROOT, SMALL
+from .conftest import ROOT, SMALL, stop_supervised
 
 pytestmark = pytest.mark.timeout(600)
 EX = ROOT / "examples"
@@ -43,7 +41,7 @@ def mesh(tmp_path_factory):
         p.wait_for("host local: sources", 240)   # its router, EAs and sources are up
         yield out, p
     finally:
-        left = stop_mesh(p, out)
+        left = stop_supervised(p, out)
     assert not left, f"children of mesh up still running (killed now): {left}"
 
 
@@ -189,20 +187,3 @@ def test_the_console_draws_the_live_mesh_and_acks_reach_the_ea(mesh):
     until(lambda: [x for x in acked() if aid in x], 60, f"the console's ack of {aid} in BN's command log")
     t_late = get(f"{url}/api/state")["t"]
     assert t_late >= st["t"]   # the clock only moves forward
-
-
-def stop_mesh(p: Proc, out) -> list[str]:
-    """SIGTERM to mesh up, time for it to stop its children (more than Proc.stop's 5 s),
-    then any child still alive is named and killed: none may outlive the test."""
-    p.stop(timeout=90)
-    pids = json.loads((out / "pids.json").read_text()) if (out / "pids.json").exists() else {}
-    left = []
-    for name, pid in pids.items():
-        try:
-            os.kill(int(pid), 0)
-            if not open(f"/proc/{int(pid)}/stat").read().split(") ", 1)[1].startswith("Z"):
-                left.append(name)
-                os.kill(int(pid), signal.SIGKILL)
-        except (ProcessLookupError, ValueError, TypeError, FileNotFoundError):
-            pass
-    return left
