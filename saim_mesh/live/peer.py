@@ -313,7 +313,15 @@ class LivePeer:
         if not retrying and journal and self.seq.hold.waiting_for(f.source):
             self.seq.hold.wait(f.source, (payload, key, f))
             return False
-        if journal and (type(f) is GF.Progress or f.groups is not None) and not self._interest_at(f.source):
+        grouped = type(f) is GF.Progress or f.groups is not None
+        if journal and grouped and f.source in self.order.lost and self.rebuilding is None:
+            # back, by key group: the EA is rebuilt first, so that what it hears of this flush is
+            # decided by the rebuilt EA (as an EA that never lost the source decides it), not by
+            # the one that went on without it and is thrown away
+            if self.journal is not None:
+                self.journal.back(f.source)
+            self.back(f.source)
+        if journal and grouped and not self._interest_at(f.source):
             if not retrying:   # by key group: taken once the EA stands at the source's last promise
                 self.seq.hold.wait(f.source, (payload, key, f))
             return False
@@ -482,6 +490,8 @@ class LivePeer:
             self.journalled_command(rec)
         elif rec[0] == "peer":
             self.peer_change(rec[1], rec[2])
+        elif rec[0] == "back" and rec[1] in self.order.lost and self.rebuilding is None:
+            self.back(rec[1])   # rebuilt where it was live (by key group: before the flush that brought it back)
 
     def journalled_directive(self, rec: list) -> None:
         """A directive as the input journal holds it (checked when it came): held again."""
