@@ -158,11 +158,11 @@ class Source(_Session):
     Secure (`pki`): identity `source.<name>`, which the access-control rules know for the
     command posts' sources `cp.<UNIT>` (`security.acl.source_names`). On leaving, it stays
     `linger_s`, and as long as its journal (`state_dir`) was asked within `linger_s`, at
-    most `linger_max_s` in all. `by_group` (the default): published by key group (each EA hears only
-    the groups of its interest: docs/keyspace.md, "Key groups"); False: one whole stream."""
+    most `linger_max_s` in all. `by_group`: published by key group (each EA hears only the
+    groups of its interest: docs/keyspace.md, "Key groups")."""
 
     def __init__(self, scenario, name: str, connect=None, listen=None, root=None, pki=None, state_dir=None,
-                 routers=None, mesh=None, linger_s: float = 1.0, linger_max_s: float = 30.0, by_group: bool = True):
+                 routers=None, mesh=None, linger_s: float = 1.0, linger_max_s: float = 30.0, by_group: bool = False):
         super().__init__(scenario, f"source.{name}", connect, listen, root, pki, routers, mesh,
                          near=name.removeprefix("cp."))
         if not (linger_s >= 0 and linger_max_s >= 0):   # also refuses NaN

@@ -252,7 +252,7 @@ def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
             pub = s.declare_publisher(KeySpace.of(sc, root).src("cp.BN"))
             pub.put(forged)
             pub.undeclare()
-        procs.append(start_source(tmp_path, "cp.BN", ep, root, "--tracks", "--speed", "max", *sec,
+        procs.append(start_source(tmp_path, "cp.BN", ep, root, "--tracks", "--speed", "max", "--by-group", *sec,
                                   "--listen", "tls/127.0.0.1:0"))
         line = procs[0].wait_for("summary ", 120)
     finally:

@@ -1,6 +1,6 @@
 """The live mesh by key group (issue 50), real processes on loopback: every command post's
 source and every fusion node publishes each flush as per-group frames and a progress frame
-(`saim-mesh source`, by key group by default); several EA peers (`saim-mesh peer`) hear only the groups of their
+(`saim-mesh source --by-group`); several EA peers (`saim-mesh peer`) hear only the groups of their
 interest, assemble the flushes of those, and raise exactly the in-process run's alerts
 (`runner.run`); the input journal replays to them."""
 from __future__ import annotations
@@ -26,8 +26,8 @@ pytestmark = pytest.mark.timeout(600)
 
 
 def start_group_source(tmp, sc_path: str, name: str, root: str, *args: str) -> Proc:
-    return Proc(f"source-{name}", [sys.executable, "-m", "saim_mesh", "source", sc_path, "--name", name, "--root", root,
-                                   "--linger", "600", "--linger-max", "600", *args],
+    return Proc(f"source-{name}", [sys.executable, "-m", "saim_mesh", "source", sc_path, "--name", name, "--by-group",
+                                   "--root", root, "--linger", "600", "--linger-max", "600", *args],
                 env=clean_env(), log_dir=tmp)
 
 

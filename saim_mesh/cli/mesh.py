@@ -44,7 +44,7 @@ def cmd_source(a) -> int:
     with zenoh.open(conf) as s:
         from ..live.groupframes import grouper
         src = LiveSource(s, KeySpace.of(sc, root), a.name, a.state, cache=a.cache, yielding=a.yield_catch_up,
-                         catch_up_kbit=a.catch_up_kbit, groups=None if a.whole_stream else grouper(sc, root))
+                         catch_up_kbit=a.catch_up_kbit, groups=grouper(sc, root) if a.by_group else None)
         pace = None
         if not a.speed and not a.live:   # as fast as possible: no further ahead than its EAs allow
             from ..live.pace import SourcePace
@@ -223,10 +223,9 @@ def add(sub) -> None:
                     "with --speed: event time 0 is at that instant (sources paced together)")
     so.add_argument("--state", metavar="DIR", help="keep the source's epoch here (bumped at each start) and its "
                     "durable journal of frames, served for catch-up beyond the publisher's cache")
-    so.add_argument("--whole-stream", action="store_true",
-                    help="publish one stream of every message instead of one per key group (docs/keyspace.md, "
-                         "\"Key groups\"): each EA then takes all of it, whatever its interest (for comparison: "
-                         "bench_radio's whole-stream figures)")
+    so.add_argument("--by-group", action="store_true",
+                    help="publish one stream per key group (docs/keyspace.md, \"Key groups\") instead of one "
+                         "stream of everything: each EA hears only the groups of its interest")
     so.add_argument("--cache", type=int, default=None, metavar="N",
                     help="frames the publisher keeps in memory for recovery and late joiners (default 100000; "
                     "4 with --yield-catch-up and --state: its journal gives the rest, paced)")
