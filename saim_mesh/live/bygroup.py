@@ -7,7 +7,12 @@ A progress frame waits (the `Sequencer`'s waiting queue, offered again on every 
 until every heard group of it is here; a heard group's frame missing `GAP_WAIT_S` after
 its progress frame came is asked of the source's journal (its whole flush, each message's
 group with it), and what no journal holds is a gap, said and counted. A group it does not
-hear is never waited for."""
+hear is never waited for.
+
+Group frames kept for assembly count against the peer's memory bound (`[mesh] max_held_mb`)
+with the frames its `Sequencer` holds (`bytes`, the sequencer's `held`): one the bound has
+no room for is dropped, counted, and its flush filled from the source's journal, as a
+whole stream's frame beyond the bound is fetched again."""
 from __future__ import annotations
 
 import time
@@ -27,7 +32,7 @@ class GroupIntake:
     epoch, lo, hi)`: the source's journal's whole flushes (`Sequencer.journal_frames`)."""
 
     def __init__(self, ks, max_bytes: int, gate, log, journal: Callable | None = None, streams=None,
-                 interest: dict | None = None):
+                 interest: dict | None = None, room: Callable[[int], bool] | None = None):
         self.ks, self.max_bytes, self.gate, self.log = ks, max_bytes, gate, log
         self.journal = journal
         self.streams = streams   # None: every group is heard
@@ -43,6 +48,12 @@ class GroupIntake:
         self.filled = 0        # flushes filled from a journal
         self.prefix = ks.src("")
         self.last: dict[str, tuple[int, int, F.Frame]] = {}   # source -> its last flush assembled (offered again)
+        # memory: `room(n)` says whether n more bytes may be held (None: no bound); the bytes
+        # of the group frames kept, per source and frame, so that what leaves is subtracted
+        self.room = room
+        self.sizes: dict[str, dict[tuple[int, int, str], int]] = {}
+        self.bytes = 0
+        self.dropped = 0       # group frames dropped for want of room (their flushes come from a journal)
 
     def hears(self, group: str) -> bool:
         got = self._heard.get(group)
@@ -85,8 +96,25 @@ class GroupIntake:
             return None
         if rest == GF.PROGRESS:
             return x
+        k = (x.epoch, x.at, x.group)
+        sizes = self.sizes.setdefault(name, {})
+        if k in sizes:
+            return None
+        if self.room is not None and not self.room(len(payload)):
+            self.dropped += 1   # its flush waits GAP_WAIT_S, then comes from the source's journal
+            return None
         self.assembler(name).group(x, len(payload))   # kept even if not heard now: the interest may grow
+        sizes[k] = len(payload)
+        self.bytes += len(payload)
         return None
+
+    def _forget(self, name: str) -> None:
+        """The bytes of the group frames of `name` its assembler no longer holds, subtracted."""
+        sizes, kept = self.sizes.get(name), self.asm[name].groups if name in self.asm else {}
+        if not sizes:
+            return
+        for k in [k for k in sizes if k not in kept]:
+            self.bytes -= sizes.pop(k)
 
     def assembler(self, name: str) -> GF.Assembler:
         a = self.asm.get(name)
@@ -126,6 +154,7 @@ class GroupIntake:
                 f = asm.ready(p)
         self.waiting_since.pop(k, None)
         asm.forget_before(p.epoch, p.seq + 1)
+        self._forget(p.source)
         self.last[p.source] = (p.epoch, p.seq, f)
         return f
 
@@ -134,4 +163,6 @@ class GroupIntake:
         EA hears, as an assembled flush holds them (the same whether it came live or not)."""
         if f.groups is None:
             return f
-        return self.assembler(f.source).fill(f)
+        got = self.assembler(f.source).fill(f)
+        self._forget(f.source)
+        return got

@@ -132,11 +132,12 @@ class LivePeer:
         # each source's frames in its own sequence: held, fetched again, gaps (`sequence`)
         self.seq = Sequencer(self.take, self._frame, self.ks, log, lambda: self.max_held,
                              room=lambda: self.order.buffered() < self.order.max_buffered // 2,
-                             session=lambda: self.session)
+                             session=lambda: self.session, also_held=lambda: self.bygroup.bytes)
         # sources publishing by key group: their flushes assembled from the groups its interest
         # hears, decided at a deterministic point (`_interest_at`)
         self.bygroup = GroupIntake(self.ks, self.max_bytes, self.gate, log, journal=self.seq.journal_frames,
-                                   streams=GF.streams_of(sc, root), interest=self.cfg.get("dissemination", {}))
+                                   streams=GF.streams_of(sc, root), interest=self.cfg.get("dissemination", {}),
+                                   room=self._room_for)
         self.frames = 0
         self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
@@ -279,6 +280,11 @@ class LivePeer:
                 self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
             self.heard_again.add(f.source)
 
+    def _room_for(self, n: int) -> bool:
+        """Whether `n` more bytes of frames may wait outside the order: the frames the
+        sequencer holds and the group frames kept for assembly share half of `max_held_mb`."""
+        return self.seq.hold.bytes + self.bygroup.bytes + n <= self.max_held // 2
+
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)
 
@@ -307,7 +313,15 @@ class LivePeer:
         if not retrying and journal and self.seq.hold.waiting_for(f.source):
             self.seq.hold.wait(f.source, (payload, key, f))
             return False
-        if journal and (type(f) is GF.Progress or f.groups is not None) and not self._interest_at(f.source):
+        grouped = type(f) is GF.Progress or f.groups is not None
+        if journal and grouped and f.source in self.order.lost and self.rebuilding is None:
+            # back, by key group: the EA is rebuilt first, so that what it hears of this flush is
+            # decided by the rebuilt EA (as an EA that never lost the source decides it), not by
+            # the one that went on without it and is thrown away
+            if self.journal is not None:
+                self.journal.back(f.source)
+            self.back(f.source)
+        if journal and grouped and not self._interest_at(f.source):
             if not retrying:   # by key group: taken once the EA stands at the source's last promise
                 self.seq.hold.wait(f.source, (payload, key, f))
             return False
@@ -476,6 +490,8 @@ class LivePeer:
             self.journalled_command(rec)
         elif rec[0] == "peer":
             self.peer_change(rec[1], rec[2])
+        elif rec[0] == "back" and rec[1] in self.order.lost and self.rebuilding is None:
+            self.back(rec[1])   # rebuilt where it was live (by key group: before the flush that brought it back)
 
     def journalled_directive(self, rec: list) -> None:
         """A directive as the input journal holds it (checked when it came): held again."""
@@ -712,7 +728,8 @@ class LivePeer:
     def summary(self) -> dict:
         return {"unit": self.unit, "depends": self.sources, "alerts": len(self.given), "rebuilds": self.rebuilds,
                 "restored": self.restored, "frames": self.frames, "misses": self.seq.misses,
-                "fetched": self.seq.fetched, "dropped": self.seq.dropped, "gaps": self.seq.gaps,
+                "fetched": self.seq.fetched, "dropped": self.seq.dropped + self.bygroup.dropped,
+                "gaps": self.seq.gaps + self.bygroup.gaps,
                 "late_alerts": self.out.late, "lost": dict(self.order.lost), "released": self.order.released,
                 "rejects": dict(self.gate.rejects.by_kind), "rejects_by_sender": dict(self.gate.rejects.by_sender),
                 "messages": self.ea.n_in, **self.timeline.summary()}

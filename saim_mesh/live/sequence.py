@@ -42,8 +42,9 @@ class Sequencer:
     order can take more facts now."""
 
     def __init__(self, take: Take, read: Read, ks, log, max_held: Callable[[], int], room: Callable[[], bool],
-                 session: Callable[[], object]):
+                 session: Callable[[], object], also_held: Callable[[], int] = lambda: 0):
         self.take, self.read, self.ks, self.log = take, read, ks, log
+        self.also_held = also_held        # () -> bytes held elsewhere against the same bound (key groups' frames)
         self.max_held = max_held          # () -> bytes the peer may hold for the order (half of them here)
         self.room, self.session = room, session
         self.seq_of: dict[str, list[int]] = {}   # source -> [epoch, next seq expected]
@@ -72,7 +73,7 @@ class Sequencer:
             self.hold.reset_early(f.source)
         if f.epoch < st[0] or f.seq < st[1]:
             return True   # an old epoch's frame, or one taken already
-        if self.behind.get(f.source) or self.hold.bytes + len(payload) > self.max_held() // 2 and (
+        if self.behind.get(f.source) or self.hold.bytes + self.also_held() + len(payload) > self.max_held() // 2 and (
                 f.seq > st[1] or self.hold.waiting_for(f.source)):
             if not self.behind.get(f.source):
                 self.log(f"source {f.source}: over {self.max_held() >> 21} MB held: its frames from {st[1]} "
