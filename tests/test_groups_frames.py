@@ -83,3 +83,43 @@ def test_bad_group_frames_are_refused_with_a_reason():
         G.decode_progress(b"x" * 100, 10)
     with pytest.raises(M.MessageError):
         G.decode_group(b"\x00junk", 1 << 20)
+
+
+LON = st.floats(-180, 180, allow_nan=False)
+LAT = st.floats(-90, 90, allow_nan=False)
+NAME = st.text(min_size=1, max_size=40)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 1e6, allow_nan=False) | st.integers(0, 10**8).map(lambda q: q / 100), NAME,
+                          LON | st.integers(-1_800_000_000, 1_800_000_000).map(lambda q: q / 1e7),
+                          LAT | st.integers(-900_000_000, 900_000_000).map(lambda q: q / 1e7)), max_size=20))
+def test_a_group_frame_gives_back_every_message_byte_for_byte(rows):
+    """Positions packed as arrays or not, the EA gets the bytes the source encoded: lossless."""
+    msgs = [M.encode(M.LocationReport(t, e, lon, lat)) for t, e, lon, lat in rows]
+    msgs.append(M.encode(M.Order(t=1.0, action="abort-plan", plan="p1", issuer="BN")))
+    gf = G.GroupFrame(v=1, source="cp.A", epoch=1, group="pos/X1Y1/BN/A", seq=1, at=1,
+                      idx=list(range(len(msgs))), msgs=msgs)
+    back = G.decode_group(G.encode(gf), 1 << 20)
+    assert back == gf
+    assert [M.decode(b) for b in back.msgs] == [M.decode(b) for b in msgs]
+
+
+def test_a_recorded_position_travels_in_a_third_of_its_bytes():
+    b = M.encode(M.LocationReport(1234.56, "2C2S2E04", -116.3680719, 35.2191442))
+    one = G.GroupFrame(v=1, source="cp.A", epoch=1, group="pos/X1Y1/BN/A", seq=1, at=1, idx=[0], msgs=[b])
+    two = G.GroupFrame(v=1, source="cp.A", epoch=1, group="pos/X1Y1/BN/A", seq=1, at=1, idx=[0, 1], msgs=[b, b])
+    assert len(G.encode(two)) - len(G.encode(one)) <= len(b) / 2.5
+    odd = M.encode(M.LocationReport(1 / 3, "E1", 1.0, 2.0))   # a time off the 1/100 s grid: sent as it is
+    three = G.GroupFrame(v=1, source="cp.A", epoch=1, group="pos/X1Y1/BN/A", seq=1, at=1, idx=[0, 1], msgs=[b, odd])
+    assert len(G.encode(three)) - len(G.encode(one)) > len(odd)
+
+
+def test_a_bad_packed_position_is_refused_with_a_reason():
+    import msgspec
+    wire = msgspec.msgpack.encode([1, "cp.A", 1, "pos/X", 1, 1, [0], [[5, "é" * 20, 1, 2]]])
+    with pytest.raises(M.MessageError, match="entity of 40 bytes"):
+        G.decode_group(wire, 1 << 20)
+    wire = msgspec.msgpack.encode([1, "cp.A", 1, "pos/X", 1, 1, [0], [[5, "E1", 2_000_000_000, 2]]])
+    with pytest.raises(M.MessageError, match="decode"):
+        G.decode_group(wire, 1 << 20)
