@@ -323,7 +323,7 @@ def test_an_ack_from_atak_reaches_an_ea_on_the_live_mesh(tmp_path):
         procs.append(Proc("router", [*py(), "router", "--scenario", sc, "--name", "hub", "--listen", ep, "--root", root],
                           env=clean_env(), log_dir=tmp_path))
         procs[-1].wait_for("router ready", 60)
-        gw = Proc("tak", [*py(), "tak", sc, *client, "--sources", "--epoch", "2026-05-01T06:00:00Z",
+        gw = Proc("tak", [*py(), "tak", sc, *client, "--epoch", "2026-05-01T06:00:00Z",
                           "--cot-url", f"tcp://127.0.0.1:{tport}", "--listen-cot", f"tcp://127.0.0.1:{lport}",
                           "--uids", str(uids), "--no-overlay", "--period", "300", "--linger", "600"],
                   env=clean_env(), log_dir=tmp_path)
