@@ -162,11 +162,11 @@ class Attackers(threading.Thread):
         try:
             rnd = random.Random(1)
             signer = SG.load_signer(self.pki, FORGER_ID)
-            tick = W.encode(W.make(W.Tick, t=1e8, n=1, seq=1, end=True))
+            ahead = W.encode(W.make(W.Ack, t=1e8))   # well-formed, dated past any scenario's end
             with self._session(JUNK_ID) as junk, self._session(FORGER_ID) as forge:
                 while not self.stop_ev.wait(1.0 / self.rate):
                     k = rnd.choice(("dir/C/confirm", "bye/C", "ack/C/cp.BN", "alert/C/contact", "health/C"))
-                    payload = rnd.choice((rnd.randbytes(rnd.randint(1, 64)), b"\xc1", tick, b"\x00" * 100_000,
+                    payload = rnd.choice((rnd.randbytes(rnd.randint(1, 64)), b"\xc1", ahead, b"\x00" * 100_000,
                                           rnd.randbytes(2000)))
                     junk.put(f"{self.root}/{k}", payload)
                     self.sent["junk"] += 1

@@ -44,7 +44,7 @@ class Interest:
 
     def of(self, needs) -> set[str]:
         r = self.ks.root
-        out = {self.ks.clock()} | {f"{r}/{fam}/**" for fam in needs.whole}
+        out = {f"{r}/{fam}/**" for fam in needs.whole}
         places = self._places(needs)
         only = dict(needs.only)
         for text in needs.templates:

@@ -10,24 +10,20 @@ SUO's families:
 
   <root>/pos/<block>/<cell>/<command path>/<entity>    friendly positions
   <root>/trk/<block>/<cell>/<track>                    hostile tracks (fused)
-  <root>/hit/<fusion group>/<sensor>           raw sensor hits, to the group's fusion node
-  <root>/fusion-tick/<group>                   a fusion node's tracks up to clock time t are out
+  <root>/hit/<fusion group>/<sensor>           raw sensor hits, to the group's fusion source
   <root>/msn/<unit>/<mission>                  mission start/end confirmations
   <root>/ord/<unit>                            orders to a unit (and its subordinates)
   <root>/cff/<block>/<cell>/<requester>/<cff>  calls for fire and confirmations
   <root>/org/<unit>                            reorganizations
-  <root>/clock                                 scenario-time ticks (ordering barrier)
   <root>/alert/<owner>/<type>                  alerts raised by an EA
   <root>/alive/<unit>/<peer>                   liveliness tokens (presence)
   <root>/rtr/<router>/<zid>                    a router's liveliness token (a link or router lost)
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
-  <root>/ack/<unit>/<peer>                     the last clock tick a peer processed (replay pacing);
-                                               live: <peer> is a source it depends on (its pace)
+  <root>/ack/<unit>/<source>                   how far unit's EA has taken in a source it depends on (its pace)
+  <root>/src/<source>, <root>/srcj/<source>    a live source's frames and its journal (queryable)
   <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
   <root>/cmd/<unit>/<kind>/<by>                a command to a unit's EA from the console of unit <by>
   <root>/cmdlog/<unit>                         the EA's answer to every command (CmdResult)
-  <root>/store/log/<source>                    the situation store, per replay source (queryable)
-  <root>/store/fusion/<group>                  a fusion node's published tracks (queryable)
 UV (robot team): <root>/st/<block>/<cell>/<robot>, <root>/sgt/<block>/<cell>/<robot>/<target>,
 <root>/agm/<to>/<sender> (docs/uv-domain.md).
 """
@@ -215,7 +211,7 @@ class KeySpace:
     def key_checks(self, key: str, cls: type) -> tuple[tuple[str, str], ...] | str:
         """What a message of `cls` on `key` must carry: (field, the key's chunk) pairs,
         or why no such message belongs there. Depends on the key and class alone, so a
-        receiver works it out once per key (`saim_mesh/keyfacts.py`)."""
+        receiver can work it out once per key."""
         n = len(self.root) + 1
         if key[:n] != self.root + "/":
             return f"key {key[:80]!r} outside the root"
@@ -230,15 +226,12 @@ class KeySpace:
             return f"key {key[:80]!r} has too few chunks"
         return tuple((a, chunks[i]) for i, a in checks)
 
-    def clock(self) -> str:
-        return f"{self.root}/clock"
-
     def data(self, cls: type, **bind: str) -> str:
         """A key expression for messages of `cls` with some placeholders fixed."""
         return f"{self.root}/{template(cls).expr(bind)}"
 
     def family(self, key: str) -> str:
-        """The family chunk of a key under our root ('pos', 'alert', 'clock', ...)."""
+        """The family chunk of a key under our root ('pos', 'alert', 'src', ...)."""
         return key[len(self.root) + 1:].split("/", 1)[0]
 
     def last(self, key: str, n: int = 1) -> list[str]:
@@ -252,12 +245,6 @@ class KeySpace:
         """A router's liveliness token: its DELETE on the far side means the router or the link to it is gone."""
         return f"{self.root}/rtr/{name}/{zid}"
 
-    def fusion_store(self, group: str) -> str:
-        return f"{self.root}/store/fusion/{group}"
-
-    def fusion_tick(self, group: str) -> str:
-        return f"{self.root}/fusion-tick/{group}"
-
     def ack(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/ack/{unit}/{peer}"
 
@@ -267,21 +254,11 @@ class KeySpace:
     def bye(self, unit: str) -> str:
         return f"{self.root}/bye/{unit}"
 
-    def store(self, source: str = "*") -> str:
-        """The situation store: one queryable per source of the replay (per router behind
-        routers, `main` on a flat mesh); a query on the default asks them all."""
-        return f"{self.root}/store/log/{source}"
-
     def cmd(self, unit: str, kind: str = "*", by: str = "*") -> str:
         """Commands to `unit`'s EA (ack, silence, unsilence, set, confirm, cff) from the
         console of unit `by`: access control binds `by` to the sender's certificate, and
         the EA checks that `by` commands it in the hierarchy as it is now."""
         return f"{self.root}/cmd/{unit}/{kind}/{by}"
-
-    def ingest(self, source: str = "*") -> str:
-        """Live reports from outside the script (a TAK gateway's PLI): the replay, which
-        orders every event, takes them into its stream."""
-        return f"{self.root}/ingest/{source}"
 
     def notice(self, to: str = "*", owner: str = "*") -> str:
         """Re-notifications (to = owner) and escalations (to = the owner's superior) of
@@ -307,7 +284,7 @@ def matcher(exprs: list[str]):
     """A fast test of concrete keys against key expressions: the `prefix/**` and
     `prefix/*` forms our subscriptions use are string checks; others go to Zenoh, those
     ending in a literal chunk (`pos/*/*/**/<entity>`, one entity wherever it is) only
-    for keys ending in it (a store scans every key it holds). An expression Zenoh will not
+    for keys ending in it . An expression Zenoh will not
     parse (`$*`, `a//b`: attacker input in a query) is a ValueError naming it, never a
     `zenoh.ZError` out of the caller's loop."""
     deep, one, other = [], [], []

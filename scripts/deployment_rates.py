@@ -3,12 +3,13 @@
     PYTHONPATH=. .venv/bin/python scripts/deployment_rates.py [--alerts FILE] [--overhead]
         [--boundary BRIGADE_SCENARIO] [--json OUT]
 
-* per key family: messages/s and bytes/s (payload as `messages.encode` gives it, plus the
-  8-byte sequence attachment, plus the 94-byte Ed25519 envelope on what is signed), for
-  the whole battalion and per friendly entity; the key's length beside it;
+* per key family: messages/s and bytes/s (payload as `messages.encode` gives it: a live
+  source carries its messages inside its frames, `saim_mesh/live/frames.py`, so no
+  per-message attachment or envelope), for the whole battalion and per friendly entity;
+  the key's length beside it;
 * authority messages (orders, reorganizations, confirmations, calls for fire) per hour;
 * alerts (from `saim-mesh run scenarios/battalion --ea <every mesh unit> --out FILE`):
-  per EA per hour and their encoded size; the control traffic (clock tick, ack);
+  per EA per hour and their encoded size; the control traffic (an EA's pace ack to a source);
 * `--overhead`: Zenoh's bytes per message on a router link, measured: two routers in
   this process joined through `linkemu.Link` (its byte counters: TCP payload, so no
   TCP/IP or radio headers), a client publishing the battalion's real position keys and
@@ -37,9 +38,7 @@ from saim_mesh.protocol import messages as M  # noqa: E402
 from saim_mesh import scenario as S  # noqa: E402
 from saim_mesh.protocol import wire as W  # noqa: E402
 
-SIGNED = {"ord", "org", "msn", "agm"}     # sealed by the older replay mesh (docs/history/deployment-notes.md)
-ENVELOPE = 94                             # bench/results/sign.json envelope_overhead_bytes
-ATTACHMENT = 8                            # the sequence number the older replay mesh attached
+ATTACHMENT = 8                            # what the --overhead probe attaches to each put
 AUTHORITY = ("ord", "org", "msn", "cff")
 
 
@@ -51,7 +50,7 @@ def rates(sc, root: str = "saim/battalion") -> dict:
     for ev in sc.events:
         k = ks.key(ev, sc.taskorg, sc.projection)
         fam = ks.family(k)
-        size = len(M.encode(ev)) + ATTACHMENT + (ENVELOPE if fam in SIGNED else 0)
+        size = len(M.encode(ev))
         n[fam] += 1
         b[fam] += size
         kb[fam] += len(k)
@@ -64,8 +63,7 @@ def rates(sc, root: str = "saim/battalion") -> dict:
     return {"scenario": sc.name, "entities": n_ent, "units": len(sc.taskorg.units), "duration_s": dur,
             "events": len(sc.events), "families": fams,
             "total_msg_per_s": sum(n.values()) / dur, "total_bytes_per_s": sum(b.values()) / dur,
-            "authority_per_hour": {f: n[f] / dur * 3600 for f in AUTHORITY},
-            "signed": sum(n[f] for f in SIGNED)}
+            "authority_per_hour": {f: n[f] / dur * 3600 for f in AUTHORITY}}
 
 
 def alerts(path: Path, dur: float) -> dict:
@@ -84,16 +82,12 @@ def alerts(path: Path, dur: float) -> dict:
 
 
 def control() -> dict:
-    try:   # a tick of one of 13 sources (a division's routers)
-        tick = W.make(W.Tick, t=2700.0, n=1350, seq=38000, w=time.time(), src="r-1BN", of=13)
-    except TypeError:   # a checkout from before per-router sources
-        tick = W.make(W.Tick, t=2700.0, n=1350, seq=38000, w=time.time())
-    ack = W.make(W.Ack, t=2700.0)
-    return {"tick_bytes": len(W.encode(tick)), "ack_bytes": len(W.encode(ack)), "tick_period_s": W.TICK_S}
+    """An EA's pace ack to a source it depends on (`saim_mesh/live/pace.py`)."""
+    return {"ack_bytes": len(W.encode(W.make(W.Ack, t=2700.0)))}
 
 
 def overhead(sc, n: int = 3000) -> dict:
-    """Bytes on the router link per message, beyond payload + attachment (Zenoh framing + key)."""
+    """Bytes on the router link per message, beyond payload + an 8-byte attachment (Zenoh framing + key)."""
     import zenoh
     from saim_mesh.launch import zenoh_config
     from saim_mesh.net.linkemu import Link
@@ -210,7 +204,7 @@ def main() -> int:
         print(f"{f:6} {d['messages']:7d} {d['msg_per_s']:8.3f} {d['bytes_per_s']:9.1f} {d['bytes_per_msg']:6.0f} "
               f"{d['key_chars']:5.0f} {d['per_entity_msg_per_s']:10.5f} {d['per_entity_bytes_per_s']:8.3f}")
     print(f"total  {r['events']:7d} {r['total_msg_per_s']:8.3f} {r['total_bytes_per_s']:9.1f}")
-    print("authority per hour:", {k: round(v, 1) for k, v in r["authority_per_hour"].items()}, "signed:", r["signed"])
+    print("authority per hour:", {k: round(v, 1) for k, v in r["authority_per_hour"].items()})
     print("control:", res["control"])
     if a.alerts:
         res["alerts"] = al = alerts(Path(a.alerts), sc.duration_s)

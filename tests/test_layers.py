@@ -98,12 +98,47 @@ def test_benchmarks_find_the_repository():
 REMOVED = [f"saim_mesh.{m}" for m in ("peer", "replay", "offline", "intake", "tickwait", "store", "storeq", "batch",
                                       "keyfacts", "radios", "script", "inbox", "pacer", "presence", "mesh", "reader",
                                       "fusion.peer", "fusion.barrier")]
+# and the names in live modules that only the replay used: its clock, store and fusion messages
+# (saim_mesh/protocol/wire.py) and KeySpace's keys for them (dissemination/keyspace.py)
+REMOVED_NAMES = {"saim_mesh.protocol.wire": ("Tick", "StoreQuery", "StoreReply", "FusionTick", "FusionQuery",
+                                             "FusionReply", "TICK_S", "KEYS_LIMIT", "KeyExprs")}
+REMOVED += [f"{mod}.{n}" for mod, names in REMOVED_NAMES.items() for n in names]
+REMOVED_KEYS = ("clock", "fusion_store", "fusion_tick", "store", "ingest")   # KeySpace methods
 EVERYWHERE = ("saim_mesh", "tests", "benchmarks", "scripts", "examples", "ea_agent", "dissemination")
 
 
 def removed_imports(paths) -> list[str]:
     return [f"{f.relative_to(ROOT)} imports {m}" for f in paths for m in sorted(imports(f))
             if any(m == x or m.startswith(x + ".") for x in REMOVED)]
+
+
+def removed_uses(paths) -> list[str]:
+    """Uses of a removed name through its module (`W.Tick` where W is the wire module) and of
+    a removed KeySpace key (`ks.clock()`, `self.ks.store(...)`): what an import check misses."""
+    bad = []
+    for f in paths:
+        pkg = ".".join(f.relative_to(ROOT).with_suffix("").parts[:-1])
+        tree = ast.parse(f.read_text(), str(f))
+        alias: dict[str, str] = {}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                alias.update({a.asname: a.name for a in node.names if a.asname})
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                    base = ".".join(p for p in [*parts, base] if p)
+                alias.update({a.asname or a.name: f"{base}.{a.name}" for a in node.names})
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Attribute):
+                continue
+            v = node.value
+            if isinstance(v, ast.Name) and node.attr in REMOVED_NAMES.get(alias.get(v.id, ""), ()):
+                bad.append(f"{f.relative_to(ROOT)}:{node.lineno} uses {alias[v.id]}.{node.attr}")
+            who = v.id if isinstance(v, ast.Name) else v.attr if isinstance(v, ast.Attribute) else ""
+            if node.attr in REMOVED_KEYS and who == "ks":
+                bad.append(f"{f.relative_to(ROOT)}:{node.lineno} uses KeySpace.{node.attr}")
+    return bad
 
 
 def test_nothing_imports_a_module_of_the_removed_replay_mesh():
@@ -114,8 +149,13 @@ def test_nothing_imports_a_module_of_the_removed_replay_mesh():
     paths += [f for f in sorted((ROOT / "scripts").iterdir()) if f.is_file() and f.suffix != ".py"
               and f.read_text(errors="replace").startswith("#!") and "python" in f.read_text(errors="replace")[:80]]
     assert removed_imports(paths) == []
+    assert removed_uses(paths) == []
     back = [m for m in REMOVED if (ROOT / (m.replace(".", "/") + ".py")).exists()]
     assert back == []
+    from dissemination.keyspace import KeySpace
+    from saim_mesh.protocol import wire
+    assert [n for n in REMOVED_NAMES["saim_mesh.protocol.wire"] if hasattr(wire, n)] == []
+    assert [k for k in REMOVED_KEYS if hasattr(KeySpace, k)] == []
 
 
 def test_the_removed_module_check_sees_a_removed_import(tmp_path, monkeypatch):
@@ -128,6 +168,19 @@ def test_the_removed_module_check_sees_a_removed_import(tmp_path, monkeypatch):
     assert removed_imports([f]) == ["saim_mesh/live/probe.py imports saim_mesh.replay",
                                     "saim_mesh/live/probe.py imports saim_mesh.replay.main_replay",
                                     "saim_mesh/live/probe.py imports saim_mesh.storeq"]
+
+
+def test_the_removed_name_check_sees_a_removed_name(tmp_path, monkeypatch):
+    """The checker itself: a removed control message, imported by name or used through its
+    module's alias, and a removed KeySpace key are seen; a live name beside them is not."""
+    monkeypatch.setitem(globals(), "ROOT", tmp_path)
+    f = tmp_path / "saim_mesh" / "live" / "probe.py"
+    f.parent.mkdir(parents=True)
+    f.write_text("from ..protocol import wire as W\nfrom saim_mesh.protocol.wire import StoreReply\n"
+                 "def f(ks, self):\n    W.make(W.Tick)\n    W.make(W.Ack)\n    self.ks.store()\n    ks.src()\n")
+    assert removed_imports([f]) == ["saim_mesh/live/probe.py imports saim_mesh.protocol.wire.StoreReply"]
+    assert removed_uses([f]) == ["saim_mesh/live/probe.py:4 uses saim_mesh.protocol.wire.Tick",
+                                 "saim_mesh/live/probe.py:6 uses KeySpace.store"]
 
 
 def test_the_zygote_preloads_nothing_removed():

@@ -1,7 +1,7 @@
 """The live console and the live TAK gateway stand on `live.reader.LiveReader` alone
 (issue 51.3): every payload checked by the gate and against its key, the picture and the
 clock from the sources' frames, and nothing of the replay mesh imported, neither by the
-modules nor by a console or gateway started on the live mesh (`--sources`)."""
+modules nor by a console or gateway started on the live mesh."""
 from __future__ import annotations
 
 import json
@@ -45,7 +45,7 @@ def test_the_live_console_checks_every_payload(small):
     assert st.t == 10.0 and not st.ended and st.entity_pos
     feed.take("saim/src/cp.B", frame("cp.A", 2, 50.0, [ev]))          # A's frame on B's key
     feed.take("saim/src/cp.A", b"\x00junk")
-    feed.take("saim/clock", W.encode(W.make(W.Tick, t=30.0, n=5, seq=3)))   # the replay's clock: not ours
+    feed.take("saim/ack/A/cp.A", W.encode(W.make(W.Ack, t=30.0)))   # a well-formed pace ack: not the feed's
     assert st.t == 10.0 and feed.gate.rejects.total == 3
     feed.take("saim/alert/A/out-of-position", M.encode(alert()))
     feed.take("saim/alert/B/out-of-position", M.encode(alert()))     # owner differs from the key
@@ -109,9 +109,9 @@ assert rc == 0, rc
     ["tak", "--cot-url", "udp://127.0.0.1:{port}", "--no-overlay", "--linger", "0"],
 ])
 def test_a_live_console_or_gateway_started_loads_nothing_of_the_replay(cmd):
-    """`saim-mesh console|tak SCENARIO --sources`, run a few seconds and stopped: the
+    """`saim-mesh console|tak SCENARIO`, run a few seconds and stopped: the
     replay's modules were never loaded, at start, while serving, or when closing."""
     port = free_port()
-    argv = [cmd[0], str(SMALL), "--sources", *[x.format(port=free_port()) for x in cmd[1:]],
+    argv = [cmd[0], str(SMALL), *[x.format(port=free_port()) for x in cmd[1:]],
             "--listen", f"tcp/127.0.0.1:{port}"]
     assert loaded_replay(STARTED.format(argv=argv)) == []

@@ -57,7 +57,7 @@ def peer_run(sc, unit: str, events: list, prefetch: bool = True):
             continue
         needs = ea.domain.needs_before(ev) if prefetch else None
         if needs is not None:
-            match = matcher(sorted(it.of(needs) - {ks.clock()}))
+            match = matcher(sorted(it.of(needs)))
             latest = sorted(js[h - 1] for k, js in by_key.items() if match(k) and (h := bisect_left(js, i)))
             for j in latest:
                 ea.submit(events[j])

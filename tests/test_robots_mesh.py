@@ -27,9 +27,14 @@ def test_the_team_on_the_mesh_equals_the_closed_loop_in_process(tmp_path):
     assert (tmp_path / "events.jsonl.gz").read_bytes() == (UV / "events.jsonl.gz").read_bytes()
     assert (tmp_path / "truth.json").read_bytes() == (UV / "truth.json").read_bytes()
     sc = S.load(UV)
-    want = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts]
-            for ea in run(sc, sc.truth()["owners"])}
+    in_process = run(sc, sc.truth()["owners"])
+    want = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts] for ea in in_process}
     assert res["alerts"] == want
+    # each robot's EA hears only the teammates within its comm range: on the mesh it leaves out
+    # exactly the states the in-process EA leaves out; the operator's (TEAM) hears every robot
+    out_of_range = {ea.owner: ea.domain.watchman.dropped for ea in in_process}
+    assert {u: s["out_of_range"] for u, s in res["eas"].items()} == out_of_range
+    assert out_of_range[sc.taskorg.root] == 0 and sum(out_of_range.values()) > 0, out_of_range
     assert sum(s["commits"] for s in res["robots"].values()) >= 5   # the EAs' pursuits were carried out
     assert sum(s["tasks"] for s in res["eas"].values()) == sum(s["tasks_taken"] for s in res["robots"].values())
 

@@ -301,18 +301,24 @@ def _bounded(pred, timeout: float, what: str):
 
 @pytest.mark.timeout(300)
 def test_an_ack_from_atak_reaches_an_ea_on_the_live_mesh(tmp_path):
-    """ATAK users acknowledge alerts on the mesh (issue 31): a router, one
-    source at 40x to H+25 min, BN's live EA peer armed; BN's commander acknowledges the
-    first urgent BN alert TAK shows: BN's EA takes it (command log, answer in GeoChat) and
-    does not re-notify it after, while it re-notifies others."""
+    """ATAK users acknowledge alerts on the mesh (issue 31), in secure mode (mTLS, access
+    control, signed commands): a router, one source at 40x to H+25 min, BN's live EA peer
+    armed; BN's commander acknowledges the first urgent BN alert TAK shows: the gateway
+    signs it as `tak`, BN's EA takes it (command log, answer in GeoChat) and does not
+    re-notify it after, while it re-notifies others."""
+    from saim_mesh import scenario as S
     from saim_mesh.launch.proc import Proc, clean_env, py
     from saim_mesh.launch.zenoh_config import free_port
+    from saim_mesh.security import endpoint_tls, make_pki, names_for
 
     from .conftest import SMALL
     from .test_tak_gateway import GROUP, Receivers
     sc = str(SMALL)
-    ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
-    client = ["--connect", ep, "--mode", "client", "--root", root]
+    pki = tmp_path / "pki"
+    make_pki(pki, [*names_for(S.load(sc, events=False)), "router.hub"])
+    sec = ["--pki", str(pki)]
+    ep, root = endpoint_tls(free_port()), f"test/{uuid.uuid4().hex[:8]}"
+    client = ["--connect", ep, "--mode", "client", "--root", root, *sec, "--routers", "hub"]
     tport, lport = free_port(), free_port()
     uids = tmp_path / "uids.toml"
     uids.write_text(f'[units]\n"{BN_USER}" = "BN"\n')
@@ -320,20 +326,21 @@ def test_an_ack_from_atak_reaches_an_ea_on_the_live_mesh(tmp_path):
     procs: list[Proc] = []
     user = None
     try:
-        procs.append(Proc("router", [*py(), "router", "--scenario", sc, "--name", "hub", "--listen", ep, "--root", root],
+        procs.append(Proc("router", [*py(), "router", "--scenario", sc, "--name", "hub", "--listen", ep, "--root", root,
+                                     *sec],
                           env=clean_env(), log_dir=tmp_path))
         procs[-1].wait_for("router ready", 60)
-        gw = Proc("tak", [*py(), "tak", sc, *client, "--sources", "--epoch", "2026-05-01T06:00:00Z",
+        gw = Proc("tak", [*py(), "tak", sc, *client, "--epoch", "2026-05-01T06:00:00Z",
                           "--cot-url", f"tcp://127.0.0.1:{tport}", "--listen-cot", f"tcp://127.0.0.1:{lport}",
                           "--uids", str(uids), "--no-overlay", "--period", "300", "--linger", "600"],
                   env=clean_env(), log_dir=tmp_path)
         procs.append(gw)
         gw.wait_for("tak ready", 60)
-        peer = Proc("BN", [*py(), "peer", "--scenario", sc, "--unit", "BN", *client, "--sources", "cp.all", "--armed",
+        peer = Proc("BN", [*py(), "peer", "--scenario", sc, "--unit", "BN", *client, "--sources", "cp.BN", "--armed",
                            "--out", str(tmp_path / "BN.jsonl")], env=clean_env(), log_dir=tmp_path)
         procs.append(peer)
         peer.wait_for("ready BN", 60)
-        procs.append(Proc("source", [*py(), "source", sc, "--name", "cp.all", "--tracks", *client, "--speed",
+        procs.append(Proc("source", [*py(), "source", sc, "--name", "cp.BN", "--tracks", *client, "--speed",
                                      str(SPEED), "--until", str(UNTIL), "--linger", "60"],
                           env=clean_env(), log_dir=tmp_path))
 

@@ -1,5 +1,5 @@
 """The TAK gateway on the live mesh (issue 31.4): no replay, a Zenoh router, one source
-for the small scenario, A's and A2's EAs; the gateway (`tak --sources`) draws the picture
+for the small scenario, A's and A2's EAs; the gateway (`tak`) draws the picture
 from the source's frames, its clock from their watermarks, and sends every alert the EAs
 raise as CoT to a TAK server (a TCP receiver built with pytak), with the units and tracks."""
 from __future__ import annotations
@@ -32,7 +32,7 @@ def test_live_mesh_alerts_arrive_as_cot(tmp_path):
         procs.append(Proc("router", [*py(), "router", "--scenario", sc, "--name", "hub", "--listen", ep, "--root", root],
                           env=clean_env(), log_dir=tmp_path))
         procs[-1].wait_for("router ready", 60)
-        gw = Proc("tak", [sys.executable, "-m", "saim_mesh", "tak", sc, *client, "--sources",
+        gw = Proc("tak", [sys.executable, "-m", "saim_mesh", "tak", sc, *client,
                           "--epoch", "2026-05-01T06:00:00Z", "--cot-url", f"tcp://127.0.0.1:{tport}",
                           "--period", "60", "--linger", "120"], env=clean_env(), log_dir=tmp_path)
         procs.append(gw)
@@ -67,7 +67,7 @@ def test_live_mesh_alerts_arrive_as_cot(tmp_path):
 
 @pytest.mark.timeout(240)
 def test_pli_on_the_live_mesh_reach_an_ea_as_the_tak_source(tmp_path):
-    """`tak --sources --live`: an ATAK user's PLI go out as the live source `tak` at the wall
+    """`tak --live`: an ATAK user's PLI go out as the live source `tak` at the wall
     clock's event time; A2's EA, live on the same clock with `--sources tak`, takes them."""
     import asyncio
     import threading
@@ -87,7 +87,7 @@ def test_pli_on_the_live_mesh_reach_an_ea_as_the_tak_source(tmp_path):
                            "--out", str(tmp_path / "A2.jsonl")], env=clean_env(), log_dir=tmp_path)
         procs.append(peer)
         peer.wait_for("ready A2", 60)
-        gw = Proc("tak", [sys.executable, "-m", "saim_mesh", "tak", sc, *client, "--sources", *start,
+        gw = Proc("tak", [sys.executable, "-m", "saim_mesh", "tak", sc, *client, *start,
                           "--cot-url", f"udp://{GROUP}:{free_port()}", "--mcast-if", "127.0.0.1", "--mcast-ttl", "0",
                           "--listen-cot", f"tcp://127.0.0.1:{lport}",
                           "--uid-rule", "regex:^ATAK-(?P<entity>\\w+)$", "--no-overlay", "--linger", "600"],

@@ -125,31 +125,12 @@ def check_control(m, t_max: float = W.T_LIMIT) -> None:
     assert type(m.v) is int and m.v == 1
     if hasattr(m, "t"):
         assert _finite_in(m.t, 0.0, min(t_max, W.T_LIMIT)), m
-    if isinstance(m, W.Tick):
-        assert _seq(m.n) and _seq(m.seq) and type(m.end) is bool
-        assert m.w is None or _finite_in(m.w, 0.0, 1e11)
-    elif isinstance(m, W.StoreQuery):
-        assert _seq(m.since)
-    elif isinstance(m, W.StoreReply):
-        assert type(m.entries) is list
-        for e in m.entries:
-            assert type(e) is tuple and len(e) == 2 and _seq(e[0]) and type(e[1]) is bytes
-        assert type(m.fusion) is dict
-        for k, v in m.fusion.items():
-            assert type(k) is str and _finite_in(v, 0.0, W.T_LIMIT)
-    elif isinstance(m, W.FusionTick):
-        assert _seq(m.last)
-    elif isinstance(m, W.FusionReply):
-        assert type(m.entries) is list and all(type(e) is bytes for e in m.entries)
-    elif isinstance(m, W.Bye):
+    if isinstance(m, W.Bye):
         assert type(m.unit) is str and 1 <= len(m.unit) <= 128
     elif type(m).__name__ == "Health":
         assert type(m.unit) is str and 1 <= len(m.unit) <= 128 and _seq(m.rejects)
         assert type(m.by_kind) is dict and len(m.by_kind) <= 64
         assert all(type(k) is str and len(k) <= 64 and _seq(v) for k, v in m.by_kind.items())
-    if isinstance(m, (W.StoreQuery, W.FusionQuery)):
-        assert m.keys is None or (type(m.keys) is list and len(m.keys) <= W.KEYS_LIMIT and all(
-            type(k) is str and 1 <= len(k) <= W.KEY_LIMIT for k in m.keys))
 
 
 # --------------------------------------------------------------------------- strategies
@@ -207,19 +188,8 @@ data_messages = st.one_of(
 # --- valid control messages, within bounds
 t_ctl = fl(0.0, W.T_LIMIT)
 seq = st.integers(0, W.SEQ_LIMIT)
-key_expr = st.one_of(st.text(alphabet=st.characters(codec="utf-8"), min_size=1, max_size=30),
-                     st.text(alphabet=st.characters(codec="utf-8"), min_size=W.KEY_LIMIT,
-                             max_size=W.KEY_LIMIT))
-key_exprs = st.none() | st.lists(key_expr, max_size=6)
 control_messages = st.one_of(
-    st.builds(W.Tick, t=t_ctl, n=seq, seq=seq, end=st.booleans(), w=st.none() | fl(0.0, 1e11)),
     st.builds(W.Ack, t=t_ctl),
-    st.builds(W.StoreQuery, since=seq, keys=key_exprs),
-    st.builds(W.StoreReply, t=t_ctl, entries=st.lists(st.tuples(seq, st.binary(max_size=40)), max_size=5),
-              fusion=st.dictionaries(text, t_ctl, max_size=4)),
-    st.builds(W.FusionTick, t=t_ctl, last=seq),
-    st.builds(W.FusionQuery, keys=key_exprs),
-    st.builds(W.FusionReply, entries=st.lists(st.binary(max_size=40), max_size=5)),
     st.builds(W.Bye, unit=st.text(alphabet=st.characters(codec="utf-8"), min_size=1, max_size=128)),
     *([st.builds(W.Health, unit=name, rejects=seq,
                  by_kind=st.dictionaries(st.text(alphabet=st.characters(codec="utf-8"), max_size=64), seq,
@@ -243,13 +213,7 @@ DATA_SAMPLES = [
     M.UvAgent(10.0, "UGV1", "UGV2", "delegate", "pursue", "EV1"),
 ]
 CONTROL_SAMPLES = [
-    W.make(W.Tick, t=10.0, n=3, seq=42, end=False, w=1.7e9),
     W.make(W.Ack, t=10.0),
-    W.make(W.StoreQuery, since=5, keys=["saim/loc/**"]),
-    W.make(W.StoreReply, t=10.0, entries=[(1, b"abc"), (2, b"")], fusion={"g1": 9.0}),
-    W.make(W.FusionTick, t=10.0, last=7),
-    W.make(W.FusionQuery, keys=["saim/track/*"]),
-    W.make(W.FusionReply, entries=[b"abc"]),
     W.make(W.Bye, unit="A1"),
     *([W.make(W.Health, unit="A1", rejects=3, by_kind={"location": 2, "undecodable": 1})] if hasattr(W, "Health") else []),
     *([W.make(W.AckCmd, req="r1", alert="A2/3", by="cdr"),
@@ -453,7 +417,7 @@ def test_data_round_trip(m):
 def test_control_round_trip(m):
     payload = W.encode(m)
     assert W.decode_control(type(m), payload, BIG) == m
-    gate = G.Gate(W.T_LIMIT, max_bytes=BIG, max_reply_bytes=BIG)
+    gate = G.Gate(W.T_LIMIT, max_bytes=BIG)
     assert gate.control(type(m), payload, "rt") == m
     assert gate.ok == 1 and gate.rejects.total == 0
 
@@ -471,7 +435,7 @@ def _padded_location(size: int) -> bytes:
 
 def _padded_control(cls, size: int) -> bytes:
     for n in range(1, 4 * size):
-        m = W.make(W.Bye, unit="U" * n) if cls is W.Bye else W.make(W.FusionReply, entries=[b"x" * n])
+        m = W.make(W.Bye, unit="U" * n) if cls is W.Bye else W.make(W.Health, unit="U" * n, rejects=0)
         p = W.encode(m)
         if len(p) == size:
             return p
@@ -502,11 +466,10 @@ def test_size_bound_data_rejected_before_decoding():
     assert len(gate.rejects.by_kind) == 1
 
 
-@pytest.mark.parametrize("cls", [W.Bye, W.FusionReply])
+@pytest.mark.parametrize("cls", [W.Bye, W.Health])
 def test_size_bound_control_rejected_before_decoding(cls):
-    big = cls is W.FusionReply
-    gate = G.Gate(T_MAX, max_bytes=100, max_reply_bytes=200)
-    limit = 200 if big else 100
+    limit = 100
+    gate = G.Gate(T_MAX, max_bytes=limit)
     over, at = _padded_control(cls, limit + 1), _padded_control(cls, limit)
     spy = _Spy(W._DECODERS[cls])
     with mock.patch.dict(W._DECODERS, {cls: spy}):
@@ -527,7 +490,7 @@ def test_size_bound_property(m, slack):
     is_ctl = isinstance(m, msgspec.Struct)
     payload = W.encode(m) if is_ctl else M.encode(m)
     limit = max(0, len(payload) + slack)
-    gate = G.Gate(W.T_LIMIT, max_bytes=limit, max_reply_bytes=limit)
+    gate = G.Gate(W.T_LIMIT, max_bytes=limit)
     if is_ctl:
         spy = _Spy(W._DECODERS[type(m)])
         with mock.patch.dict(W._DECODERS, {type(m): spy}):
@@ -628,7 +591,6 @@ def test_time_bound_property(t_max, t, sample):
     gate = G.Gate(t_max)
     got = gate.control(type(sample), packb(d)) if is_ctl else gate.data(packb(d))
     ok = isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t <= t_max
-    ok = ok and all(ft <= t_max for ft in d.get("fusion", {}).values())   # a store reply's fusion times too
     if got is None:
         assert not ok, f"t={t!r} inside [0, {t_max}] was rejected"
     else:
@@ -636,21 +598,19 @@ def test_time_bound_property(t_max, t, sample):
         assert got.t == float(t) and math.isfinite(got.t)
 
 
-@pytest.mark.parametrize("field", ["n", "seq"])
 @pytest.mark.parametrize("value", [-1, -(2**63), W.SEQ_LIMIT + 1, 2**64 - 1, True, 1.0, math.nan, "1"], ids=repr)
-def test_tick_seq_bounds(field, value):
-    d = raw_dict(W.encode(CONTROL_SAMPLES[0]))
-    d[field] = value
+@pytest.mark.parametrize("where", ["rejects", "by_kind"])
+def test_health_count_bounds(where, value):
+    """A count outside [0, SEQ_LIMIT] (or not an int), as a total or per kind, is refused and counted."""
+    d = raw_dict(W.encode(next(s for s in CONTROL_SAMPLES if type(s) is W.Health)))
+    if where == "rejects":
+        d["rejects"] = value
+    else:
+        d["by_kind"] = {"location": value}
     gate = G.Gate(T_MAX)
-    assert gate.control(W.Tick, packb(d)) is None and gate.rejects.total == 1
-
-
-@pytest.mark.parametrize("cls, field", [(W.StoreQuery, "since"), (W.FusionTick, "last")])
-def test_other_seq_bounds(cls, field):
-    d = raw_dict(W.encode(next(s for s in CONTROL_SAMPLES if type(s) is cls)))
-    d[field] = -1
+    assert gate.control(W.Health, packb(d)) is None and gate.rejects.total == 1
     with pytest.raises(M.MessageError):
-        W.decode_control(cls, packb(d), BIG)
+        W.decode_control(W.Health, packb(d), BIG)
 
 
 # --------------------------------------------------------------------------- 7. bounded logging

@@ -134,6 +134,5 @@ def add(sub) -> None:
     co.add_argument("--unit", help="whose commander (default: the top unit); acts for the unit's subtree")
     co.add_argument("--port", type=int, default=8470, help="HTTP port on 127.0.0.1 (0: a free port)")
     co.add_argument("--linger", type=_seconds, default=30.0, help="seconds to stay up after the scenario's end")
-    co.add_argument("--sources", action="store_true", help=argparse.SUPPRESS)   # the only mesh now: accepted, no-op
     _zenoh_args(co)
     co.set_defaults(fn=cmd_console)

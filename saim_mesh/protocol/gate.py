@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 
 from . import messages as M
-from .wire import ENVELOPE_HEADS, KINDS, FusionReply, StoreReply, decode_control
+from .wire import ENVELOPE_HEADS, KINDS, decode_control
 
 
 FLOOD_THRESHOLDS = (100, 1_000, 10_000, 100_000, 1_000_000)   # refusals per sender that are said
@@ -84,11 +84,10 @@ class Gate:
     map) and, in secure mode, refuses authority that comes unsigned; without one a signed
     envelope cannot be checked and is refused."""
 
-    def __init__(self, t_max: float, max_bytes: int = 65536, max_reply_bytes: int = 256 * 2**20, log=None,
-                 verifier=None):
+    def __init__(self, t_max: float, max_bytes: int = 65536, log=None, verifier=None):
         self.t_max = float(t_max)
         self.verifier = verifier
-        self.max_bytes, self.max_reply_bytes = max_bytes, max_reply_bytes
+        self.max_bytes = max_bytes
         self.rejects = Rejects(log)
         self.ok = 0
 
@@ -152,7 +151,6 @@ class Gate:
     def control(self, cls: type, payload: bytes | None, key: str = "", signed: bool = False):
         """A control message of type `cls`, or None (counted) when it is bad. `signed`
         (a command): an envelope is opened, and required in secure mode."""
-        big = cls in (StoreReply, FusionReply)
         try:
             if payload is None:
                 raise M.MessageError(cls.__name__.lower(), "(bytes)", "no payload")
@@ -162,12 +160,10 @@ class Gate:
                 elif self.verifier is not None and self.verifier.require:
                     raise M.MessageError(cls.__name__.lower(), "(signature)",
                                          "an unsigned command: commands must be signed in secure mode")
-            m = decode_control(cls, payload, self.max_reply_bytes if big else self.max_bytes)
+            m = decode_control(cls, payload, self.max_bytes)
             t = getattr(m, "t", None)
             if t is not None:
                 self._bound(cls.__name__.lower(), t)
-            for ft in getattr(m, "fusion", {}).values():
-                self._bound(cls.__name__.lower(), ft)
         except M.MessageError as e:
             self.rejects.add(e, key)
             return None

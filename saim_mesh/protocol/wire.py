@@ -2,9 +2,9 @@
 where every payload a process receives is checked before use.
 
 Data messages (positions, tracks, orders, alerts...) keep their validating decoder
-in `messages.py`; the control messages that steer the peers (clock, acks, store
-queries and replies, fusion ticks, bye, health) and the commander's commands to an
-EA with its answers (docs/console.md section 1) are here. Both go through `gate.Gate`
+in `messages.py`; the control messages between peers (a source's pace acks, bye,
+health) and the commander's commands to an EA with its answers (docs/console.md
+section 1) are here. Both go through `gate.Gate`
 before use.
 """
 from __future__ import annotations
@@ -18,70 +18,20 @@ from . import messages as M
 VERSION = 1
 T_LIMIT = 1e9            # no scenario lasts 30 years: the outer bound of any time
 SEQ_LIMIT = 2**53        # sequence numbers stay exact in every language that reads them
-KEY_LIMIT = 512          # characters in one key expression of a query
-KEYS_LIMIT = 20_000      # key expressions in one query
-TICK_S = 2.0             # the replay's clock period: tick n is at scenario time n x TICK_S
+KEY_LIMIT = 512          # characters in one key expression (a signed envelope's key, a directive's)
 
 Time = Annotated[float, msgspec.Meta(ge=0.0, le=T_LIMIT)]
 Seq = Annotated[int, msgspec.Meta(ge=0, le=SEQ_LIMIT)]
-KeyExprs = Annotated[list[Annotated[str, msgspec.Meta(min_length=1, max_length=KEY_LIMIT)]],
-                     msgspec.Meta(max_length=KEYS_LIMIT)]
 
 
 class _Wire(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
     v: Literal[1]    # required: a message without its version is not ours (build with `make`)
 
 
-class Tick(_Wire, kw_only=True):
-    """The replay's clock: scenario time `t` reached, tick number `n` (a missing number
-    means we were cut off), every message up to `seq` sent; `w` is the wall clock.
-    Behind routers the replay publishes through one source per router: each source
-    ticks (`src`), and a tick is whole once all `of` sources gave it (each source's
-    messages travel its own path, in order with its own ticks)."""
-    t: Time
-    n: Seq
-    seq: Seq
-    end: bool = False
-    w: Annotated[float, msgspec.Meta(ge=0.0, le=1e11)] | None = None
-    src: Annotated[str, msgspec.Meta(max_length=64)] = ""
-    of: Annotated[int, msgspec.Meta(ge=1, le=256)] = 1
-
-
 class Ack(_Wire, kw_only=True):
-    """An EA peer has taken in every tick up to scenario time `t` (replay pacing)."""
+    """An EA has taken in a source's frames up to event time `t`: the source's pace
+    (`saim_mesh/live/pace.py`, a source waits for its slowest EA)."""
     t: Time
-
-
-class StoreQuery(_Wire, kw_only=True):
-    """Entries after `since` on `keys` (every key when None). `before` (when not 0): only
-    entries before that seq; `latest`: only the last such entry of each key (a peer
-    bringing a place up to date before it judges a message, `Peer._prefetch`)."""
-    since: Seq = 0
-    keys: KeyExprs | None = None
-    before: Seq = 0
-    latest: bool = False
-
-
-class StoreReply(_Wire, kw_only=True):
-    """The situation store's answer: `(seq, payload)` entries and the time it reached;
-    `fusion` is the clock time each fusion group's tracks are out to."""
-    t: Time
-    entries: list[tuple[Seq, bytes]]
-    fusion: dict[str, Time] = {}
-
-
-class FusionTick(_Wire, kw_only=True):
-    """A fusion node's tracks up to clock time `t` are out; `last` is its highest track number."""
-    t: Time
-    last: Seq = 0
-
-
-class FusionQuery(_Wire, kw_only=True):
-    keys: KeyExprs | None = None
-
-
-class FusionReply(_Wire, kw_only=True):
-    entries: list[bytes]
 
 
 class Bye(_Wire, kw_only=True):
@@ -217,8 +167,7 @@ class CmdResult(_Wire, kw_only=True):
 COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": UnsilenceCmd, "set": SetCmd,
                              "confirm": ConfirmCmd, "cff": CffCmd, "decide": DecideCmd,
                              "inhibit": InhibitCmd, "uninhibit": UninhibitCmd}
-CONTROL = (Tick, Ack, StoreQuery, StoreReply, FusionTick, FusionQuery, FusionReply, Bye, Health,
-           *COMMANDS.values(), CmdResult, Notice)
+CONTROL = (Ack, Bye, Health, *COMMANDS.values(), CmdResult, Notice)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
 KINDS = (frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}
          | {"signed", "directive"})   # what rejects are counted under ("signed": a forged or replayed

@@ -161,8 +161,10 @@ def run(scenario: Path, unit: str, conf: zenoh.Config, root: str, robots: list[s
         publish(tail, fin + T.LAG_S, end=True)
         Path(out).write_text("".join(json.dumps(a) + "\n" for a in alerts))
         summary = {"unit": unit, "alerts": len(alerts), "tasks": len(decided),
-                   "published": 0 if mute else len(decided), "forged": forged, "frames": streams.frames, "rejects": dict(gate.rejects.by_kind), "released": advanced,
-                   "gave_up": gave_up}
+                   "published": 0 if mute else len(decided), "forged": forged, "frames": streams.frames,
+                   "rejects": dict(gate.rejects.by_kind), "released": advanced, "gave_up": gave_up,
+                   # states of teammates beyond its comm range, not heard (the robots' radios)
+                   "out_of_range": getattr(getattr(ea.domain, "watchman", None), "dropped", 0)}
         log("summary " + json.dumps(summary), flush=True)
         if linger:   # our last frame may still be recovered from our cache: the driver stops us
             signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})

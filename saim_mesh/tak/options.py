@@ -74,7 +74,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--alert-stale", type=_positive, default=1800.0, metavar="S",
                    help="seconds an alert stays on a TAK client after its time")
     g.add_argument("--uid-prefix", metavar="P", help="prefix of every uid we send (default saim.<scenario>)")
-    g.add_argument("--sources", action="store_true", help=argparse.SUPPRESS)   # the only mesh now: accepted, no-op
     g.add_argument("--live", action="store_true",
                    help="event time is the wall clock from --start; PLI go out as the live source `tak` (EAs "
                         "take them with `--sources ... tak`)")
