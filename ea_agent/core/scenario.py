@@ -53,6 +53,42 @@ def check_key_chunk(value: Any, where: str, name: str) -> str:
     return value
 
 
+def new_id(d: dict, where: str, seen: set[str], what: str) -> tuple[str, str]:
+    """An entry's `id` (a key chunk) not given before in its list (`seen`, which it joins),
+    and `where` naming the entry by it."""
+    ident = check_key_chunk(need(d, "id", where, str), where, "id")
+    where += f" ({ident})"
+    if ident in seen:
+        raise ScenarioError(f"{where}: field 'id': duplicate {what} id")
+    seen.add(ident)
+    return ident, where
+
+
+def check_default_eas(meta: dict, units: set[str] | dict) -> None:
+    """scenario.json's `default_eas`, when given: a non-empty list of the plan's units."""
+    dflt = meta.get("default_eas")
+    if dflt is None:
+        return
+    if not isinstance(dflt, list) or not dflt:
+        raise ScenarioError("scenario.json: field 'default_eas': expected a non-empty list of unit ids")
+    for u in dflt:
+        if not isinstance(u, str):
+            raise ScenarioError(f"scenario.json: field 'default_eas': expected a unit id, got {type(u).__name__}")
+        if u not in units:
+            raise ScenarioError(f"scenario.json: field 'default_eas': unknown unit {u!r:.40}")
+
+
+def guarded(fname: str, fn: Callable, *args):
+    """Run one file's loader; an error its checks did not foresee still names the file, in one line."""
+    from .config import ConfigError   # (a plan's VOI overrides are checked against the domain's config)
+    try:
+        return fn(*args)
+    except (ScenarioError, ConfigError):
+        raise
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as e:
+        raise ScenarioError(f"{fname}: unexpected {type(e).__name__} while loading: {e}") from e
+
+
 def number(v: Any, where: str, name: str, positive: bool = False) -> float:
     """A finite number >= 0 (> 0 if `positive`), never a bool."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):

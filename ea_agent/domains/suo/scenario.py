@@ -11,12 +11,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ea_agent.core.config import ConfigError
 from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit)
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, need as _need,  # noqa: F401
-                                    number as _number, read_events, read_json as _read_json, time_constraint)
+from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_default_eas,  # noqa: F401
+                                    check_key_chunk, guarded, need as _need, new_id, number as _number, read_events,
+                                    read_json as _read_json, time_constraint)
 
 from .event_checks import EventContext, load_events
 from .overlay import ControlMeasure, article, load_overlay
@@ -105,11 +105,7 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
     ids: set[str] = set()
     for i, u in enumerate(_need(doc, "task_organization", p.name, list)):
         where = f"{p.name}: task_organization[{i}]"
-        uid = check_key_chunk(_need(u, "id", where, str), where, "id")
-        where += f" ({uid})"
-        if uid in ids:
-            raise ScenarioError(f"{where}: field 'id': duplicate unit id")
-        ids.add(uid)
+        uid, where = new_id(u, where, ids, "unit")
         ech = _need(u, "echelon", where, str)
         if ech not in ECHELONS:
             raise ScenarioError(f"{where}: field 'echelon': {ech!r} not one of {', '.join(ECHELONS)}")
@@ -154,11 +150,7 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
         mids: set[str] = set()
         for i, m in enumerate(ms):
             where = f"{p.name}: plans.{pname}[{i}]"
-            mid = check_key_chunk(_need(m, "id", where, str), where, "id")
-            where += f" ({mid})"
-            if mid in mids:
-                raise ScenarioError(f"{where}: field 'id': duplicate mission id")
-            mids.add(mid)
+            mid, where = new_id(m, where, mids, "mission")
             unit = _need(m, "unit", where, str)
             if unit not in ids:
                 raise ScenarioError(f"{where}: field 'unit': unknown unit {unit!r}")
@@ -270,35 +262,20 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list
     return meta, name, proj, duration, groups
 
 
-def _guarded(fname: str, fn, *args):
-    """Run one file's loader; an error its checks did not foresee still names the file, in one line."""
-    try:
-        return fn(*args)
-    except (ScenarioError, ConfigError):   # (plan.json's VOI overrides are checked against configs/ea.toml)
-        raise
-    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as e:
-        raise ScenarioError(f"{fname}: unexpected {type(e).__name__} while loading: {e}") from e
-
-
 def load(path: str | Path, events: bool = True) -> Scenario:
     root = Path(path)
     if not root.is_dir():
         raise ScenarioError(f"{root}: not a scenario folder")
-    meta, name, proj, duration, groups = _guarded("scenario.json", _load_meta, root)
-    overlay = _guarded("overlay.geojson", load_overlay, root / "overlay.geojson", proj)
-    taskorg, plans, initial = _guarded("plan.json", load_plan, root / "plan.json", overlay)
+    meta, name, proj, duration, groups = guarded("scenario.json", _load_meta, root)
+    overlay = guarded("overlay.geojson", load_overlay, root / "overlay.geojson", proj)
+    taskorg, plans, initial = guarded("plan.json", load_plan, root / "plan.json", overlay)
     for cm in overlay.values():
         if cm.owner is not None and cm.owner not in taskorg.units:
             raise ScenarioError(f"overlay.geojson: feature {cm.id}: field 'owner': unknown unit {cm.owner!r}")
-    dflt = meta.get("default_eas")
-    if dflt is not None:
-        if not isinstance(dflt, list) or not dflt:
-            raise ScenarioError("scenario.json: field 'default_eas': expected a non-empty list of unit ids")
-        for u in dflt:
-            _unit_ref(u, "scenario.json", "default_eas", taskorg.units)
+    check_default_eas(meta, taskorg.units)
     evs: list = []
     if events:
         cx = EventContext(duration, taskorg, plans,
                           None if groups is None else {sid for sids in groups.values() for sid in sids})
-        evs = _guarded("events", load_events, root, cx)
+        evs = guarded("events", load_events, root, cx)
     return Scenario(name, root, proj, duration, taskorg, plans, initial, evs, meta, overlay=overlay)

@@ -15,8 +15,9 @@ import shapely
 
 from ea_agent.core.geo import Projection
 from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need, number, read_events,
-                                    read_json, time_constraint)
+from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_default_eas, check_key_chunk,
+                                    guarded, lonlat_geometry, need, new_id, number, read_events, read_json,
+                                    time_constraint)
 
 from . import messages as M   # registers the uv-* message kinds with the core codec
 from .missions import REGISTRY
@@ -97,12 +98,10 @@ def load_world(p: Path, proj: Projection) -> dict[str, Place]:
 
 def _units(doc: dict, p: Path) -> TaskOrg:
     units: list[Unit] = []
+    unit_ids: set[str] = set()
     for i, u in enumerate(need(doc, "team", p.name, list)):
         where = f"{p.name}: team[{i}]"
-        uid = check_key_chunk(need(u, "id", where, str), where, "id")
-        where += f" ({uid})"
-        if any(x.id == uid for x in units):
-            raise ScenarioError(f"{where}: field 'id': duplicate unit id")
+        uid, where = new_id(u, where, unit_ids, "unit")
         kind = need(u, "kind", where, str)
         if kind not in UNIT_KINDS:
             raise ScenarioError(f"{where}: field 'kind': {kind!r} not one of {', '.join(UNIT_KINDS)}")
@@ -174,12 +173,10 @@ def load_plan(p: Path, world: dict[str, Place], targets: set[str] | None) -> tup
         if not isinstance(ms, list):
             raise ScenarioError(f"{p.name}: plans.{pname}: expected a list of missions")
         specs: list[MissionSpec] = []
+        mids: set[str] = set()
         for i, m in enumerate(ms):
             where = f"{p.name}: plans.{pname}[{i}]"
-            mid = check_key_chunk(need(m, "id", where, str), where, "id")
-            where += f" ({mid})"
-            if any(s.id == mid for s in specs):
-                raise ScenarioError(f"{where}: field 'id': duplicate mission id")
+            mid, where = new_id(m, where, mids, "mission")
             unit = need(m, "unit", where, str)
             if unit not in taskorg.units:
                 raise ScenarioError(f"{where}: field 'unit': unknown unit {unit!r}")
@@ -245,30 +242,14 @@ def load_events(root: Path, duration: float, taskorg: TaskOrg, targets: set[str]
     return read_events(root, check)
 
 
-def _guarded(fname: str, fn, *args):
-    """Run one file's loader; an error its checks did not foresee still names the file."""
-    try:
-        return fn(*args)
-    except ScenarioError:
-        raise
-    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as e:
-        raise ScenarioError(f"{fname}: unexpected {type(e).__name__} while loading: {e}") from e
-
-
 def load(path: str | Path, events: bool = True) -> UvScenario:
     root = Path(path)
     if not root.is_dir():
         raise ScenarioError(f"{root}: not a scenario folder")
-    meta, name, proj, duration = _guarded("scenario.json", _load_meta, root)
+    meta, name, proj, duration = guarded("scenario.json", _load_meta, root)
     targets = set(meta["targets"]) if meta.get("targets") is not None else None
-    world = _guarded("world.geojson", load_world, root / "world.geojson", proj)
-    taskorg, plans, initial = _guarded("plan.json", load_plan, root / "plan.json", world, targets)
-    dflt = meta.get("default_eas")
-    if dflt is not None:
-        if not isinstance(dflt, list) or not dflt:
-            raise ScenarioError("scenario.json: field 'default_eas': expected a non-empty list of unit ids")
-        for u in dflt:
-            if not isinstance(u, str) or u not in taskorg.units:
-                raise ScenarioError(f"scenario.json: field 'default_eas': unknown unit {u!r:.40}")
-    evs = _guarded("events", load_events, root, duration, taskorg, targets) if events else []
+    world = guarded("world.geojson", load_world, root / "world.geojson", proj)
+    taskorg, plans, initial = guarded("plan.json", load_plan, root / "plan.json", world, targets)
+    check_default_eas(meta, taskorg.units)
+    evs = guarded("events", load_events, root, duration, taskorg, targets) if events else []
     return UvScenario(name, root, proj, duration, taskorg, plans, initial, evs, meta, world=world)
