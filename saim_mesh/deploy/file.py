@@ -117,8 +117,9 @@ class Deployment:
 
     def topology(self):
         """The routers as a `net.topology.Topology` (top: the router at the top unit's CP)."""
-        from ..net import topology as T
-        return T.Topology({n: T.Router(n, r.cp, r.links) for n, r in self.routers.items()}, {}, self._top())
+        from ..net import topology
+        routers = {n: topology.Router(n, r.cp, r.links) for n, r in self.routers.items()}
+        return topology.Topology(routers, {}, self._top())
 
     def _top(self, taskorg=None) -> str:
         cps = {r.cp for r in self.routers.values()}

@@ -10,16 +10,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import shapely
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit
+from ea_agent.core.plan import PlanSpec, TaskOrg, Unit
 from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_default_eas, check_key_chunk,
-                                    guarded, lonlat_geometry, need, new_id, number, read_events, read_json,
-                                    time_constraint)
+                                    checked_taskorg, guarded, load_plans, need, new_id, number, place_feature,
+                                    read_events, read_json, unit_entry)
 
-from . import messages as M   # registers the uv-* message kinds with the core codec
+from . import messages   # registers the uv-* message kinds with the core codec
 from .missions import REGISTRY
 from .world import KINDS, Place
 
@@ -70,25 +69,8 @@ def load_world(p: Path, proj: Projection) -> dict[str, Place]:
     fc = read_json(p)
     out: dict[str, Place] = {}
     for i, f in enumerate(need(fc, "features", p.name, list)):
-        where = f"{p.name}: feature {i}"
-        props = need(f, "properties", where, dict)
-        fid = check_key_chunk(need(props, "id", where, str), where, "id")
-        where = f"{p.name}: feature {i} ({fid})"
-        kind = need(props, "kind", where, str)
-        if kind not in KINDS:
-            raise ScenarioError(f"{where}: field 'kind': unknown kind {kind!r} (one of {', '.join(KINDS)})")
-        if fid in out:
-            raise ScenarioError(f"{where}: field 'id': duplicate id {fid!r}")
-        g = need(f, "geometry", where, dict)
-        geom = lonlat_geometry(g, where)
-        if geom.geom_type != GEOM[kind]:
-            raise ScenarioError(f"{where}: field 'geometry': a {kind} must be a {GEOM[kind]}, not {geom.geom_type}")
-        if not shapely.is_valid(geom):
-            why = shapely.is_valid_reason(geom)
-            raise ScenarioError(f"{where}: field 'geometry': invalid {geom.geom_type} ({why})")
-        xy = shapely.transform(geom, lambda c: proj.to_xy_array(c))
-        if not np.isfinite(shapely.get_coordinates(xy)).all():
-            raise ScenarioError(f"{where}: field 'geometry': cannot be projected to EPSG:{proj.epsg}")
+        where, fid, kind, props, xy = place_feature(f, f"{p.name}: feature {i}", KINDS, out,
+                                                    lambda kind: {GEOM[kind]}, proj)
         if props.get("radius_m") is not None:
             number(props["radius_m"], where, "radius_m", positive=True)
         shapely.prepare(xy)
@@ -101,13 +83,7 @@ def _units(doc: dict, p: Path) -> TaskOrg:
     unit_ids: set[str] = set()
     for i, u in enumerate(need(doc, "team", p.name, list)):
         where = f"{p.name}: team[{i}]"
-        uid, where = new_id(u, where, unit_ids, "unit")
-        kind = need(u, "kind", where, str)
-        if kind not in UNIT_KINDS:
-            raise ScenarioError(f"{where}: field 'kind': {kind!r} not one of {', '.join(UNIT_KINDS)}")
-        parent = u.get("parent")
-        if parent is not None and not isinstance(parent, str):
-            raise ScenarioError(f"{where}: field 'parent': expected a unit id or null, got {type(parent).__name__}")
+        uid, where, kind, parent = unit_entry(u, where, unit_ids, "kind", UNIT_KINDS)
         attrs = u.get("attrs", {})
         if not isinstance(attrs, dict):
             raise ScenarioError(f"{where}: field 'attrs': expected an object")
@@ -118,18 +94,7 @@ def _units(doc: dict, p: Path) -> TaskOrg:
                 number(v, where, f"attrs.{k}")
         ents = (uid,) if kind in ROBOT_KINDS else ()
         units.append(Unit(uid, str(u.get("name", uid)), kind, parent, ents, dict(attrs)))
-    roots = [u.id for u in units if u.parent is None]
-    if len(roots) != 1:
-        raise ScenarioError(f"{p.name}: team: field 'parent': need exactly one top unit, found {roots}")
-    ids = {u.id for u in units}
-    for u in units:
-        if u.parent is not None and u.parent not in ids:
-            raise ScenarioError(f"{p.name}: team ({u.id}): field 'parent': unknown unit {u.parent!r}")
-    taskorg = TaskOrg(units)
-    cyc = taskorg.cycle()
-    if cyc:
-        raise ScenarioError(f"{p.name}: team ({cyc[0]}): field 'parent': cycle {' -> '.join(cyc)}")
-    return taskorg
+    return checked_taskorg(units, f"{p.name}: team")
 
 
 def _params(cls, params: Any, where: str, world: dict[str, Place], targets: set[str] | None) -> None:
@@ -167,48 +132,15 @@ def load_plan(p: Path, world: dict[str, Place], targets: set[str] | None) -> tup
     if not isinstance(doc, dict):
         raise ScenarioError(f"{p.name}: expected an object")
     taskorg = _units(doc, p)
-    plans: dict[str, PlanSpec] = {}
-    for pname, ms in need(doc, "plans", p.name, dict).items():
-        check_key_chunk(pname, f"{p.name}: plans", "name")
-        if not isinstance(ms, list):
-            raise ScenarioError(f"{p.name}: plans.{pname}: expected a list of missions")
-        specs: list[MissionSpec] = []
-        mids: set[str] = set()
-        for i, m in enumerate(ms):
-            where = f"{p.name}: plans.{pname}[{i}]"
-            mid, where = new_id(m, where, mids, "mission")
-            unit = need(m, "unit", where, str)
-            if unit not in taskorg.units:
-                raise ScenarioError(f"{where}: field 'unit': unknown unit {unit!r}")
-            if taskorg.units[unit].kind not in ROBOT_KINDS:
-                raise ScenarioError(f"{where}: field 'unit': {unit!r} is a {taskorg.units[unit].kind}, not a robot")
-            typ = need(m, "type", where, str)
-            cls = REGISTRY.get(typ)
-            if cls is None:
-                raise ScenarioError(f"{where}: field 'type': unknown mission type {typ!r} "
-                                    f"(one of {', '.join(sorted(REGISTRY))})")
-            params = m.get("params", {})
-            _params(cls, params, where, world, targets)
-            after = m.get("after", [])
-            if not isinstance(after, list) or not all(isinstance(a, str) for a in after):
-                raise ScenarioError(f"{where}: field 'after': expected a list of mission ids")
-            if mid in after:
-                raise ScenarioError(f"{where}: field 'after': a mission cannot come after itself")
-            specs.append(MissionSpec(mid, unit, typ, time_constraint(m.get("start"), where + " start", START_TYPES),
-                                     time_constraint(m.get("end"), where + " end", END_TYPES), tuple(after), params))
-        mids = {s.id for s in specs}
-        for s in specs:
-            for a in s.after:
-                if a not in mids:
-                    raise ScenarioError(f"{p.name}: plans.{pname} ({s.id}): field 'after': unknown mission {a!r}")
-        plan = PlanSpec(pname, specs)
-        cyc = plan.cycle()
-        if cyc:
-            raise ScenarioError(f"{p.name}: plans.{pname} ({cyc[0]}): field 'after': cycle {' -> '.join(cyc)}")
-        plans[pname] = plan
-    initial = doc.get("initial_plan", "main")
-    if not isinstance(initial, str) or initial not in plans:
-        raise ScenarioError(f"{p.name}: field 'initial_plan': no plan named {initial!r}")
+
+    def check_mission(cls, params: dict, where: str, unit: str) -> None:
+        """This domain's checks of one mission of a plan."""
+        if taskorg.units[unit].kind not in ROBOT_KINDS:
+            raise ScenarioError(f"{where}: field 'unit': {unit!r} is a {taskorg.units[unit].kind}, not a robot")
+        _params(cls, params, where, world, targets)
+
+    plans, initial = load_plans(doc, p.name, taskorg.units, REGISTRY, f"one of {', '.join(sorted(REGISTRY))}",
+                                check_mission)
     return taskorg, plans, initial
 
 
@@ -227,13 +159,13 @@ def load_events(root: Path, duration: float, taskorg: TaskOrg, targets: set[str]
             raise ScenarioError(f"{where}: field 't': {m.t} is after the end of the scenario "
                                 f"(scenario.json duration_s = {duration})")
         k = type(m)
-        if k is M.UvState or k is M.UvSighting:
+        if k is messages.UvState or k is messages.UvSighting:
             known(m.robot, where, "robot", robots, "robot")
-            if k is M.UvSighting:
+            if k is messages.UvSighting:
                 check_key_chunk(m.target, where, "target")
                 if targets is not None and m.target not in targets:
                     raise ScenarioError(f"{where}: field 'target': unknown target {m.target!r} (scenario.json targets)")
-        elif k is M.UvAgent:
+        elif k is messages.UvAgent:
             known(m.sender, where, "sender", units, "unit")
             known(m.to, where, "to", units, "unit")
             check_key_chunk(m.task, where, "task")
