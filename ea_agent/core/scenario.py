@@ -53,6 +53,22 @@ def check_key_chunk(value: Any, where: str, name: str) -> str:
     return value
 
 
+def scenario_head(meta: dict, root: Path, where: str = "scenario.json") -> tuple[str, Projection, float]:
+    """scenario.json's name (a key chunk; the folder's name when absent), its projection
+    (`epsg`) and its duration (`duration_s`, positive, at most MAX_DURATION_S)."""
+    name = meta.get("name", root.resolve().name)
+    check_key_chunk(name, where if "name" in meta else f"{where} (no name: the folder name is used)", "name")
+    epsg = need(meta, "epsg", where, int)
+    try:
+        proj = Projection(epsg)
+    except Exception as e:   # pyproj raises its own CRSError (and ValueError for a geographic CRS)
+        raise ScenarioError(f"{where}: field 'epsg': {e}") from None
+    duration = number(need(meta, "duration_s", where, (int, float)), where, "duration_s", positive=True)
+    if duration > MAX_DURATION_S:
+        raise ScenarioError(f"{where}: field 'duration_s': {duration} is more than {MAX_DURATION_S:.0f} s (7 days)")
+    return name, proj, duration
+
+
 def new_id(d: dict, where: str, seen: set[str], what: str) -> tuple[str, str]:
     """An entry's `id` (a key chunk) not given before in its list (`seen`, which it joins),
     and `where` naming the entry by it."""

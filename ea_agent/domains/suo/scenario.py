@@ -14,9 +14,9 @@ from typing import Any
 from ea_agent.core.plan import PlanSpec, TaskOrg, Unit
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_default_eas,  # noqa: F401
+from ea_agent.core.scenario import (ScenarioBase, ScenarioError, check_default_eas,  # noqa: F401
                                     check_key_chunk, checked_taskorg, guarded, load_plans, need as _need, new_id,
-                                    number as _number, read_events, read_json as _read_json, unit_entry)
+                                    number as _number, read_events, read_json as _read_json, scenario_head, unit_entry)
 
 from .event_checks import EventContext, load_events
 from .overlay import ControlMeasure, article, load_overlay
@@ -175,16 +175,7 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list
     where = "scenario.json"
     if not isinstance(meta, dict):
         raise ScenarioError(f"{where}: expected an object")
-    name = meta.get("name", root.resolve().name)
-    check_key_chunk(name, where if "name" in meta else f"{where} (no name: the folder name is used)", "name")
-    epsg = _need(meta, "epsg", where, int)
-    try:
-        proj = Projection(epsg)
-    except Exception as e:   # pyproj raises its own CRSError (and ValueError for a geographic CRS)
-        raise ScenarioError(f"{where}: field 'epsg': {e}") from None
-    duration = _number(_need(meta, "duration_s", where, (int, float)), where, "duration_s", positive=True)
-    if duration > MAX_DURATION_S:
-        raise ScenarioError(f"{where}: field 'duration_s': {duration} is more than {MAX_DURATION_S:.0f} s (7 days)")
+    name, proj, duration = scenario_head(meta, root, where)
     groups = None
     if meta.get("fusion") is not None:
         fw = f"{where}: fusion"

@@ -14,9 +14,9 @@ import shapely
 
 from ea_agent.core.geo import Projection
 from ea_agent.core.plan import PlanSpec, TaskOrg, Unit
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_default_eas, check_key_chunk,
+from ea_agent.core.scenario import (ScenarioBase, ScenarioError, check_default_eas, check_key_chunk,
                                     checked_taskorg, guarded, load_plans, need, new_id, number, place_feature,
-                                    read_events, read_json, unit_entry)
+                                    read_events, read_json, scenario_head, unit_entry)
 
 from . import messages   # registers the uv-* message kinds with the core codec
 from .missions import REGISTRY
@@ -44,15 +44,7 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float]:
         raise ScenarioError(f"{where}: expected an object")
     if meta.get("domain") != "uv":
         raise ScenarioError(f"{where}: field 'domain': expected \"uv\", got {meta.get('domain')!r:.40}")
-    name = check_key_chunk(meta.get("name", root.resolve().name), where, "name")
-    epsg = need(meta, "epsg", where, int)
-    try:
-        proj = Projection(epsg)
-    except Exception as e:   # pyproj raises its own CRSError (and ValueError for a geographic CRS)
-        raise ScenarioError(f"{where}: field 'epsg': {e}") from None
-    duration = number(need(meta, "duration_s", where, (int, float)), where, "duration_s", positive=True)
-    if duration > MAX_DURATION_S:
-        raise ScenarioError(f"{where}: field 'duration_s': {duration} is more than {MAX_DURATION_S:.0f} s (7 days)")
+    name, proj, duration = scenario_head(meta, root, where)
     ks = meta.get("keyspace")
     if ks is not None:
         number(need(ks, "cell_m", f"{where}: keyspace", (int, float)), f"{where}: keyspace", "cell_m", positive=True)
