@@ -93,11 +93,12 @@ def _counts(logs: dict[str, list[dict]]) -> tuple[int, int]:
     return alerts, flash
 
 
-def _peers_done(out_dir: Path) -> bool:
-    """Every EA peer said its summary (the run is over)."""
-    logs = [p for p in (out_dir / "logs").glob("*.log")
-            if p.stem not in ("console", "tak", "hub") and not p.stem.startswith(("cp.", "fusion", "router", "link"))]
-    return bool(logs) and all("summary " in p.read_text(errors="replace") for p in logs)
+def _peers_done(out_dir: Path, units: list[str]) -> bool:
+    """Every EA peer `mesh up` started (the scenario's mesh units, by name: the other
+    processes' logs, `console-BN`, `cp.A`, `hub`, ..., never say a summary) said its
+    summary: the run is over."""
+    logs = [out_dir / "logs" / f"{u}.log" for u in units]
+    return bool(logs) and all(p.exists() and "summary " in p.read_text(errors="replace") for p in logs)
 
 
 def _summaries(out_dir: Path) -> dict[str, dict]:
@@ -120,15 +121,21 @@ def _mesh_up(scenario: Path, out_dir: Path, speed: str, console: bool) -> Proc:
                 env=clean_env(), log_dir=out_dir)
 
 
-def _wait_done(proc: Proc, out_dir: Path, timeout_s: float, each=None) -> None:
+def _mesh_units(scenario: Path) -> list[str]:
+    """The EA peers `mesh up` starts for this scenario."""
+    from saim_mesh import scenario as scenarios
+    return scenarios.mesh_units(scenarios.load(scenario, events=False))
+
+
+def _wait_done(proc: Proc, out_dir: Path, units: list[str], timeout_s: float, each=None) -> None:
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
         if each is not None:
             each()
-        if _peers_done(out_dir):
+        if _peers_done(out_dir, units):
             return
         if proc.p.poll() is not None:
-            if _peers_done(out_dir):
+            if _peers_done(out_dir, units):
                 return
             raise RuntimeError(f"mesh up exited early: {proc.tail()}")
         time.sleep(0.25)   # a sampling period, not a synchronisation
@@ -175,7 +182,7 @@ def watched(scenario: Path, out_dir: Path, speed: str = "max", screenshot: Path 
                 t0 = time.perf_counter()
                 d.execute_script("return document.querySelectorAll('li.story').length")
                 rtt.append(1000 * (time.perf_counter() - t0))
-            _wait_done(proc, out_dir, timeout_s, sample)
+            _wait_done(proc, out_dir, _mesh_units(scenario), timeout_s, sample)
             _settle(d, out_dir)
             page = d.execute_script("""return {lat: window.__latencies(), notices: window.__noticeLog,
                 frames: window.__frames, longTasks: window.__longTasks || [], seen: window.__alertsSeen,
@@ -234,16 +241,16 @@ def unarmed_mesh(scenario: Path, out_dir: Path, speed: str, timeout_s: float) ->
     """The same run without a console: the peers unarmed."""
     proc = _mesh_up(scenario, out_dir, speed, console=False)
     try:
-        _wait_done(proc, out_dir, timeout_s)   # a peer's summary comes after its logs are closed
+        _wait_done(proc, out_dir, _mesh_units(scenario), timeout_s)   # a peer's summary comes after its logs are closed
     finally:
         proc.stop()
 
 
 def unarmed_inprocess(scenario: Path, units: list[str]) -> dict[str, list[dict]]:
     """The same units in process, unarmed: their alerts as JSON lines would have them."""
-    from saim_mesh import scenario as S
+    from saim_mesh import scenario as scenarios
     from saim_mesh.inprocess.runner import run
-    sc = S.load(scenario)
+    sc = scenarios.load(scenario)
     logs: dict[str, list[dict]] = {u: [] for u in units}
     eas = run(sc, units)
     for ea in eas:

@@ -17,8 +17,8 @@ from pathlib import Path
 from ea_agent.core.config import load_config
 from ea_agent.domains.suo import make_ea
 
-from saim_mesh.protocol import messages as M
-from saim_mesh import scenario as S
+from saim_mesh.protocol import messages
+from saim_mesh import scenario as scenarios
 
 from . import ROOT
 
@@ -47,16 +47,16 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--out", default=str(ROOT / "bench" / "results" / "ea.json"))
     a = p.parse_args(argv)
-    sc = S.load(a.scenario)
+    sc = scenarios.load(a.scenario)
     n = len(sc.events)
     t0 = time.perf_counter()
     for _ in sc.events:
         pass
     loop_s = time.perf_counter() - t0
-    wire = [M.encode(e) for e in sc.events]
+    wire = [messages.encode(e) for e in sc.events]
     t0 = time.perf_counter()
     for w in wire:
-        M.decode(w)
+        messages.decode(w)
     decode_s = time.perf_counter() - t0
     results = {}
     for b in [int(x) for x in a.batches.split(",")]:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from saim_mesh import scenario as S
+from saim_mesh import scenario as scenarios
 from saim_mesh.fusion.datasets import DATASETS, DataSet
 from saim_mesh.fusion.tracker import KalmanTracker
 
@@ -47,17 +47,23 @@ def scans(hits) -> list[tuple[float, str, np.ndarray, np.ndarray | None]]:
     return res
 
 
-def run_kalman(ds: DataSet, window_s: float = 5.0) -> tuple[list[tuple], float]:
-    tr = KalmanTracker("K", ds.sigma, window_s=window_s)
-    sc = scans(ds.hits)
-    t0 = time.process_time()
+def feed_scans(tr: KalmanTracker, scans: list[tuple], window_s: float) -> list:
+    """Every report the tracker makes of the scans, its windows closed on their event time."""
     reps, end = [], window_s
-    for t, s, z, alt in sc:
+    for t, s, z, alt in scans:
         while t >= end:
             reps += tr.close_window(end)
             end += window_s
         tr.scan(t, s, z, alt)
     reps += tr.close_window(end)
+    return reps
+
+
+def run_kalman(ds: DataSet, window_s: float = 5.0) -> tuple[list[tuple], float]:
+    tr = KalmanTracker("K", ds.sigma, window_s=window_s)
+    sc = scans(ds.hits)
+    t0 = time.process_time()
+    reps = feed_scans(tr, sc, window_s)
     dt = time.process_time() - t0
     return [(r.t, r.track, r.x, r.y, r.vx, r.vy) for r in reps if r.strength > 0], len(ds.hits) / dt
 
@@ -188,7 +194,7 @@ def battalion(path: Path) -> tuple[DataSet, dict]:
     groups' true centres (the simulator's), each group one object."""
     from ea_agent.domains.suo.generator import ORIGIN_LONLAT, build_sim
     from saim_mesh.protocol.messages import SensorHit
-    sc = S.load(path)
+    sc = scenarios.load(path)
     g = sc.meta["generator"]
     sim = build_sim(g["small"], g["seed"])
     ox, oy = sc.projection.to_xy(*ORIGIN_LONLAT)

@@ -38,9 +38,9 @@ import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
 
-from . import partition as P
+from . import partition
 
-from . import ROOT
+from . import ROOT, results
 
 
 def _iso(t: float) -> str:
@@ -270,18 +270,18 @@ def merge(run_dir: Path, hosts: dict, start: float, killed: str | None = None, k
 
 def in_process(scenario: str, units: list[str], until: float | None) -> dict[str, list]:
     """Every unit's alerts in process, sorted as bench/partition.py keys them (up to `until`)."""
-    from saim_mesh import scenario as S
+    from saim_mesh import scenario as scenarios
     from saim_mesh.inprocess.runner import run
-    sc = S.load(scenario)
+    sc = scenarios.load(scenario)
     if until is not None:   # the peers go on to the scenario's end on no more facts: so does this run
         sc.events = [e for e in sc.events if e.t <= until]
-    return {ea.owner: sorted(P._key(x.to_json_dict()) for x in ea.alerts) for ea in run(sc, units)}
+    return {ea.owner: sorted(partition._key(x.to_json_dict()) for x in ea.alerts) for ea in run(sc, units)}
 
 
 def equal_in_process(run_dir: Path, units: list[str], want: dict[str, list]) -> dict:
     unequal = {}
     for u in units:
-        got = sorted(map(P._key, (x for x in P._alerts(run_dir / f"{u}.jsonl") if P._shown(x))))
+        got = sorted(map(partition._key, (x for x in partition._alerts(run_dir / f"{u}.jsonl") if partition._shown(x))))
         if got != want.get(u):
             g, w = set(got), set(want.get(u, []))
             unequal[u] = {"peer": len(got), "in_process": len(want.get(u, [])), "missing": len(w - g),
@@ -299,7 +299,7 @@ def analyze(base: Path, other: str, router: str, t0: float, secs: float, speed: 
     (tmp / "free").symlink_to((base / "free").resolve())
     (tmp / "cut").symlink_to((base / other).resolve())
     with contextlib.redirect_stdout(io.StringIO()):
-        P.main(["--scenario", scenario, "--speed", f"{speed:g}", "--cut", router, "--cut-from", f"{t0:g}",
+        partition.main(["--scenario", scenario, "--speed", f"{speed:g}", "--cut", router, "--cut-from", f"{t0:g}",
                 "--cut-s", f"{secs:g}", "--frozen-s", f"{frozen_s:g}", "--out-dir", str(tmp), "--analyze-only",
                 "--out", str(out)])
     return json.loads(out.read_text())
@@ -322,7 +322,7 @@ def lost_after(run_dir: Path, hosts: dict, host: str, t_wall: float, own: bool =
             deps = set((summ["peers"].get(u) or {}).get("depends", [])) or across
             if not deps & across:
                 continue
-            gone = [x["details"]["declared_wall"] for x in P._alerts(run_dir / f"{u}.jsonl")
+            gone = [x["details"]["declared_wall"] for x in partition._alerts(run_dir / f"{u}.jsonl")
                     if x["category"] == "system-problem" and x["details"].get("event") == "source-lost"
                     and x["subjects"][0] in across and "declared_wall" in x["details"]]
             if any(w < t_wall for w in gone):
@@ -370,7 +370,7 @@ def main(argv=None) -> int:
                     "earlier analysis of the same fault-free run (when the EA's code changed since the runs)")
     a = ap.parse_args(argv)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: the hosts' namespaces still go
-    from saim_mesh import scenario as S
+    from saim_mesh import scenario as scenarios
     from saim_mesh.net import netns
     from saim_mesh.ondemand import ensure
     if why := netns.unavailable():
@@ -378,7 +378,7 @@ def main(argv=None) -> int:
         return 3
     netns.cleanup_stale()
     scenario = str(Path(a.scenario).resolve()) if a.scenario else str(ensure("brigade-small", ROOT / "out" / "scenarios"))
-    sc = S.load(scenario, events=False)
+    sc = scenarios.load(scenario, events=False)
     duration = min(a.until, sc.duration_s) if a.until else sc.duration_s
     out_dir = Path(a.out_dir).resolve()
     t_all = time.monotonic()
@@ -500,7 +500,7 @@ def main(argv=None) -> int:
     silence = None
     with contextlib.suppress(Exception):
         from saim_mesh.inprocess.runner import config_for
-        sc_full = S.load(scenario, events=False)
+        sc_full = scenarios.load(scenario, events=False)
         silence = float(config_for(sc_full, sc_full.taskorg.root)["mesh"]["source_silence_s"])
     out["targets"] = {"times_real_time": 1.0, "alerts_equal_in_process": True, "hosts": 5,
                       "cut": {"frozen_epochs_uncut": 0, "on_time_share_uncut": 0.99,
@@ -522,8 +522,7 @@ def main(argv=None) -> int:
         out["in_process_compared"] = (f"by an earlier analysis of this fault-free run ({a.equal_from}), with the "
                                       "code the runs were made with")
     out["bench_wall_s"] = round(time.monotonic() - t_all, 1)
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(out, indent=1) + "\n")
+    results.write(a.out, out)
     print(json.dumps({k: v for k, v in out.items() if k not in ("links", "unequal")}, indent=1))
     return 0 if out["targets_met"] else 1
 

@@ -41,11 +41,11 @@ from pathlib import Path
 import msgspec
 import zenoh
 
-from saim_mesh.authority import directives as D
-from saim_mesh.protocol import wire as W
-from saim_mesh.security import sign as SG
+from saim_mesh.authority import directives
+from saim_mesh.protocol import wire
+from saim_mesh.security import sign
 
-from . import ROOT, RESULTS
+from . import ROOT, RESULTS, results
 
 BLOCK = zenoh.CongestionControl.BLOCK
 RSS_GROWTH_MB = 24.0   # per process over the second half of its last run: "memory flat"
@@ -137,32 +137,34 @@ class Attackers(threading.Thread):
         return zenoh.open(config([], [self.ep], pki=self.pki, name=name, sc=self.sc, root=self.root, mode="client",
                                 routers=[self.router]))   # its relay
 
-    def _forge(self, rnd: random.Random, signer: SG.Signer) -> tuple[str, str, bytes]:
+    def _forge(self, rnd: random.Random, signer: sign.Signer) -> tuple[str, str, bytes]:
         """(kind sent, key, payload): one forged directive of a random kind."""
         at = min(self.sc.duration_s - 1, max(0.0, self.clock()) + 10.0)
         mission = rnd.choice(self.foreign)
-        k_order, k_confirm = D.key(self.root, "A2", "order"), D.key(self.root, "A2", "confirm")
+        k_order, k_confirm = directives.key(self.root, "A2", "order"), directives.key(self.root, "A2", "confirm")
         n = signer.next_n()
         kind = rnd.choice(("order_outside_command", "confirm_not_its_own", "signed_as_other", "signed_for_other_key",
                            "bad_signature"))
         if kind == "confirm_not_its_own":
-            body = msgspec.msgpack.encode(D.make("confirm", req=D._req(), n=n, at=at, mission=mission, phase="start"))
+            body = msgspec.msgpack.encode(directives.make("confirm", req=directives._req(), n=n, at=at, mission=mission,
+                                                          phase="start"))
             return kind, k_confirm, signer.sign(k_confirm, body, n)
         action = rnd.choice(("start-mission", "end-mission"))
-        body = msgspec.msgpack.encode(D.make("order", req=D._req(), n=n, at=at, action=action, mission=mission))
+        body = msgspec.msgpack.encode(directives.make("order", req=directives._req(), n=n, at=at, action=action,
+                                                      mission=mission))
         if kind == "order_outside_command":
             return kind, k_order, signer.sign(k_order, body, n)
         if kind == "signed_for_other_key":   # its own signature over the battalion's key, put on its own
-            return kind, k_order, signer.sign(D.key(self.root, "BN", "order"), body, n)
+            return kind, k_order, signer.sign(directives.key(self.root, "BN", "order"), body, n)
         by = "console.BN" if kind == "signed_as_other" else signer.name
-        env = SG.Signed(v=SG.VERSION, by=by, n=n, key=k_order, body=body, sig=bytes(rnd.randbytes(64)))
-        return kind, k_order, SG._ENC.encode(msgspec.msgpack.Ext(SG.EXT, SG._ENC.encode(env)))
+        env = sign.Signed(v=sign.VERSION, by=by, n=n, key=k_order, body=body, sig=bytes(rnd.randbytes(64)))
+        return kind, k_order, sign._ENC.encode(msgspec.msgpack.Ext(sign.EXT, sign._ENC.encode(env)))
 
     def run(self) -> None:
         try:
             rnd = random.Random(1)
-            signer = SG.load_signer(self.pki, FORGER_ID)
-            ahead = W.encode(W.make(W.Ack, t=1e8))   # well-formed, dated past any scenario's end
+            signer = sign.load_signer(self.pki, FORGER_ID)
+            ahead = wire.encode(wire.make(wire.Ack, t=1e8))   # well-formed, dated past any scenario's end
             with self._session(JUNK_ID) as junk, self._session(FORGER_ID) as forge:
                 while not self.stop_ev.wait(1.0 / self.rate):
                     k = rnd.choice(("dir/C/confirm", "bye/C", "ack/C/cp.BN", "alert/C/contact", "health/C"))
@@ -284,11 +286,11 @@ def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float,
          hold_s: float | None, seed: int = 11, restarts: int = 10, timeout: float | None = None,
          cut: str | None = None, cut_at: float = 3000.0, cut_s: float = 30.0) -> dict:
     """One soak of the live mesh; returns the result written to soak.json."""
-    from saim_mesh import scenario as S
+    from saim_mesh import scenario as scenarios
     from saim_mesh.live.up import cp_sources, up
     from saim_mesh.inprocess.runner import config_for, run as run_in_process
     from saim_mesh.scenario import mesh_units
-    sc = S.load(scenario, events=False)
+    sc = scenarios.load(scenario, events=False)
     units = mesh_units(sc)
     sources = list(cp_sources(sc))
     silence = float(config_for(sc, sc.taskorg.root)["mesh"]["source_silence_s"])
@@ -331,7 +333,8 @@ def soak(scenario: str, out_dir: Path, speed: float, kills: int, every_s: float,
     wall_end = time.time()
     att, chaos, sampler = parts["attackers"], parts["chaos"], parts["sampler"]
     print("soak: the fault-free run in process ...", flush=True)
-    want = {ea.owner: [plan_key(x.to_json_dict()) for x in ea.alerts] for ea in run_in_process(S.load(scenario), units)}
+    want = {ea.owner: [plan_key(x.to_json_dict()) for x in ea.alerts]
+            for ea in run_in_process(scenarios.load(scenario), units)}
     got = {u: _alerts(out_dir / f"{u}.jsonl") for u in units}
     verdict = judge(want, got)
     peers = res["peers"]
@@ -395,8 +398,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     res = soak(a.scenario, Path(a.out_dir), a.speed, a.kills, a.every, a.hold, a.hold_at, a.hold_s, a.seed,
                cut=None if a.cut == "none" else a.cut, cut_at=a.cut_at, cut_s=a.cut_s)
-    Path(a.result).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.result).write_text(json.dumps(res, indent=1) + "\n")
+    results.write(a.result, res)
     print(json.dumps({k: v for k, v in res.items() if k not in ("killed", "peak_rss_mb")}, indent=1))
     return 0 if res["targets_met"] else 1
 

@@ -32,10 +32,11 @@ import numpy as np
 from ea_agent.core.geo import Projection
 from ea_agent.domains.uv import load_uv_config, make_ea
 
-from saim_mesh.protocol import messages as M
-from saim_mesh import scenario as S
+from saim_mesh.protocol import messages
+from saim_mesh import scenario as scenarios
 
 from . import ROOT
+from .ea import feed
 
 EPSG, LON0, LAT0 = 32611, -116.60, 35.26
 HZ = 2.0
@@ -97,13 +98,7 @@ def throughput(sc, owner: str, repeat: int = 3) -> tuple[float, int]:
     best, alerts = math.inf, 0
     for _ in range(repeat):
         ea = make_ea(sc, owner, load_uv_config(None, owner))
-        ea.start(0.0)
-        submit = ea.submit
-        t0 = time.perf_counter()
-        for ev in sc.events:
-            submit(ev)
-        ea.finish(sc.duration_s)
-        best, alerts = min(best, time.perf_counter() - t0), len(ea.alerts)
+        best, alerts = min(best, feed(ea, sc)), len(ea.alerts)
     return len(sc.events) / best, alerts
 
 
@@ -119,7 +114,7 @@ def detection_delays(folder: Path = ROOT / "scenarios" / "uv-team") -> dict:
     """Scenario seconds from each true incident's onset to the first alert matching it."""
     from saim_mesh.inprocess.evaluate import _matches
     from saim_mesh.inprocess.runner import run
-    sc = S.load(folder)
+    sc = scenarios.load(folder)
     truth = sc.truth()
     alerts = [a for ea in run(sc, truth["owners"]) for a in ea.alerts]
     delays, by_type = [], {}
@@ -138,15 +133,15 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
     (`saim_mesh.robots`): processes, wall time, `evaluate` on the run it records, whether
     the mesh's reports and alerts equal the closed loop in process; and the detection
     delays on that run."""
-    from ea_agent.domains.uv import generator as G
+    from ea_agent.domains.uv import generator as uv_generator
 
     from saim_mesh.inprocess.evaluate import evaluate
     from saim_mesh.robots.team import run_team
     out = Path(tempfile.mkdtemp(prefix="uvloop-"))
     res = run_team(out, timeout=timeout, echo=lambda *a, **k: None)
-    loop, _ = G.simulate(out)
+    loop, _ = uv_generator.simulate(out)
     inproc = {ea.owner: [json.loads(json.dumps(a.to_json_dict())) for a in ea.alerts] for ea in loop.eas}
-    ev = evaluate(S.load(out))
+    ev = evaluate(scenarios.load(out))
     shipped = ROOT / "scenarios" / "uv-team" / "events.jsonl.gz"
     return {"robot_processes": res["robot_processes"], "ea_processes": res["ea_processes"], "secure": res["secure"],
             "wall_s": res["wall_s"], "scenario_s": res["scenario_s"],
@@ -157,7 +152,7 @@ def closed_loop(timeout: float = 600.0) -> tuple[dict, dict]:
             "pursuits": sum(x["commits"] for x in res["robots"].values()),
             "alerts": sum(len(v) for v in res["alerts"].values()),
             "alerts_equal_in_process": res["alerts"] == inproc,
-            "events_equal_in_process": (out / "events.jsonl.gz").read_bytes() == G.events_bytes(loop.events),
+            "events_equal_in_process": (out / "events.jsonl.gz").read_bytes() == uv_generator.events_bytes(loop.events),
             "events_equal_shipped_scenario": (out / "events.jsonl.gz").read_bytes() == shipped.read_bytes(),
             "evaluate": {k: ev[k] for k in ("incidents", "recall", "alerts", "unwanted", "unwanted_share",
                                               "unwanted_flash", "by_type")},
@@ -170,7 +165,7 @@ def mesh_latency(n: int, duration_s: float, timeout: float = 400.0) -> dict:
     long as the run; each peer's latency from a report to the alerts it raised."""
     from saim_mesh.live.up import up
     folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), n, duration_s)
-    sc = S.load(folder, events=False)
+    sc = scenarios.load(folder, events=False)
     out = Path(tempfile.mkdtemp(prefix="uvbench-"))
     t0 = time.monotonic()
     res = up(str(folder), None, out, "1", live=True, insecure=True, show=False, timeout=timeout,
@@ -191,16 +186,16 @@ def main(argv=None) -> int:
                    help="skip the robot team obeying its EAs over the mesh (one process per robot)")
     a = p.parse_args(argv)
     folder = team_folder(Path(tempfile.mkdtemp(prefix="uvteam-")), a.robots)
-    sc = S.load(folder)
+    sc = scenarios.load(folder)
     n = len(sc.events)
     t0 = time.perf_counter()
     for _ in sc.events:
         pass
     loop = n / (time.perf_counter() - t0)
-    wire = [M.encode(e) for e in sc.events]
+    wire = [messages.encode(e) for e in sc.events]
     t0 = time.perf_counter()
     for w in wire:
-        M.decode(w)
+        messages.decode(w)
     decode = n / (time.perf_counter() - t0)
     robot_rate, robot_alerts = throughput(sc, "R01")
     team_rate, team_alerts = throughput(sc, "TEAM")

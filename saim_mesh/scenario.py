@@ -4,12 +4,9 @@ and checks the rest."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Protocol
 
 from ea_agent import domains
-from ea_agent.core.geo import Projection
-from ea_agent.core.plan import PlanSpec, TaskOrg
-from ea_agent.core.scenario import ScenarioError, check_key_chunk  # noqa: F401
+from ea_agent.core.scenario import ScenarioBase, ScenarioError, check_key_chunk  # noqa: F401
 
 
 def load(path: str | Path, events: bool = True):
@@ -21,19 +18,8 @@ def load(path: str | Path, events: bool = True):
     return dom.load(path, events=events)
 
 
-class Scenario(Protocol):
-    """What the application reads of any domain's loaded scenario."""
-    name: str
-    root: Path
-    projection: Projection
-    duration_s: float
-    taskorg: TaskOrg
-    plans: dict[str, PlanSpec]
-    initial_plan: str
-    events: list
-    meta: dict[str, Any]
-
-    def truth(self) -> dict: ...
+# What the application reads of any domain's loaded scenario: every domain's scenario is one.
+Scenario = ScenarioBase
 
 
 def mesh_units(sc) -> list[str]:

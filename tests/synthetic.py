@@ -185,3 +185,14 @@ def told(alerts) -> list[dict]:
 def near(t: float, want: float, tol: float = 2 * EPOCH) -> bool:
     """At `want`, or within `tol` after it (by the end of the epoch after it, by default)."""
     return want <= t <= want + tol
+
+
+def along(legs: list[tuple[float, float, float, float]], s: float) -> tuple[float, float]:
+    """The point `s` metres along axis-parallel legs (x0, y0, x1, y1), or the last leg's end."""
+    for x0, y0, x1, y1 in legs:
+        n = abs(x1 - x0) + abs(y1 - y0)
+        if s <= n:
+            f = s / n
+            return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
+        s -= n
+    return legs[-1][2], legs[-1][3]

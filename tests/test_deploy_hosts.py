@@ -14,7 +14,7 @@ import tomllib
 
 import pytest
 
-from saim_mesh import scenario as S
+from saim_mesh import scenario as scenarios
 from saim_mesh.launch.proc import Proc, clean_env, py
 from saim_mesh.inprocess.runner import run
 
@@ -39,12 +39,22 @@ def in_process(alerts) -> list[tuple]:
             for a in alerts if a.category != "system-problem"]
 
 
+def assert_hosts_logged_the_in_process_alerts(sc, hosts: dict, out) -> None:
+    """Each host's EA peers (`hosts[h]["eas"]`, logs under out/h) logged the plan alerts the
+    same units raise in process."""
+    units = [u for spec in hosts.values() for u in spec["eas"]]
+    want = {ea.owner: in_process(ea.alerts) for ea in run(sc, units)}
+    for h, spec in hosts.items():
+        for u in spec["eas"]:
+            assert plan_alerts(out / h / f"{u}.jsonl") == want[u], (h, u)
+
+
 def cli(tmp_path, name: str, *args: str) -> Proc:
     return Proc(name, [*py(), *args], env=clean_env(), log_dir=tmp_path / "cli")
 
 
 def test_four_hosts_on_loopback_each_under_its_own_supervisor_give_the_in_process_alerts(tmp_path):
-    sc = S.load(SMALL)
+    sc = scenarios.load(SMALL)
     base = f"127.{random.randrange(1, 255)}.{random.randrange(0, 255)}.0/24"   # no clash with another run
     f = tmp_path / "deploy.toml"
     init = cli(tmp_path, "init", "deploy", "init", str(SMALL), "--out", str(f), "--addresses", base, "--no-consoles")
@@ -71,10 +81,6 @@ def test_four_hosts_on_loopback_each_under_its_own_supervisor_give_the_in_proces
         for h, p in procs.items():
             left[h] = stop_supervised(p, tmp_path / h)
     assert not any(left.values()), f"children still running (killed now): {left}"
-    units = [u for spec in hosts.values() for u in spec["eas"]]
-    want = {ea.owner: in_process(ea.alerts) for ea in run(sc, units)}
-    for h, spec in hosts.items():
-        for u in spec["eas"]:
-            assert plan_alerts(tmp_path / h / f"{u}.jsonl") == want[u], (h, u)
+    assert_hosts_logged_the_in_process_alerts(sc, hosts, tmp_path)
     summary = json.loads((tmp_path / "A" / "summary.json").read_text())
     assert summary["secure"] and summary["endpoints"]["r-BN"] == f"tls/{hosts['BN']['addresses'][0]}:7447"

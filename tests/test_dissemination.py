@@ -6,7 +6,7 @@ import zenoh
 from dissemination.interest import Interest
 from dissemination.keyspace import KeySpace, block_of, cell, cells_within
 from ea_agent.domains.suo import make_ea
-from saim_mesh.protocol import messages as M
+from saim_mesh.protocol import messages
 
 
 def test_keys_and_cells():
@@ -16,7 +16,7 @@ def test_keys_and_cells():
     for bad in ("", "/saim", "a//b", "a/*"):
         with pytest.raises(ValueError):
             KeySpace(bad)
-    assert ks.key(M.MissionConfirm(1.0, "m", "A1", "start"), None, None) == "saim/x/msn/A1/m"
+    assert ks.key(messages.MissionConfirm(1.0, "m", "A1", "start"), None, None) == "saim/x/msn/A1/m"
 
 
 def filtered_run(sc, unit):

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import fusion as B
+from benchmarks import fusion as fusion_bench
 from saim_mesh.fusion.datasets import DATASETS
 from saim_mesh.fusion.tracker import KalmanTracker, Track
 
@@ -67,14 +67,7 @@ def orbit_hits(rng, radius=1000.0, speed=35.0, alt=1500.0, duration=600.0, sigma
 
 
 def feed(kt: KalmanTracker, scans, window=5.0):
-    reps, end = [], window
-    for t, s, z, a in scans:
-        while t >= end:
-            reps += kt.close_window(end)
-            end += window
-        kt.scan(t, s, z, a)
-    reps += kt.close_window(end)
-    return [r for r in reps if r.strength > 0]
+    return [r for r in fusion_bench.feed_scans(kt, scans, window) if r.strength > 0]
 
 
 def test_an_orbiting_aircraft_keeps_one_track():
@@ -145,14 +138,14 @@ def test_receivers_hold_within_1_5x_of_the_trackers_error_at_5x_fewer_reports(na
     hold between dead-reckoned reports is within 1.5x of the reports' own error, with at
     least 5 hits per report, and every truth keeps one track."""
     ds = DATASETS[name]()
-    reps, _ = B.run_kalman(ds)
-    s = B.score(ds, reps, 1.0)
-    assert B.dead_reckoned(ds, reps) <= 1.5 * s["rmse_m"]
+    reps, _ = fusion_bench.run_kalman(ds)
+    s = fusion_bench.score(ds, reps, 1.0)
+    assert fusion_bench.dead_reckoned(ds, reps) <= 1.5 * s["rmse_m"]
     assert s["hits_per_report"] >= 5.0 and s["tracks_per_truth"] == 1.0, s
 
 
 def test_the_battalion_keeps_its_figures():
-    ds, _ = B.battalion(ROOT / "scenarios" / "battalion-sensors")
-    reps, _ = B.run_kalman(ds)
-    s = B.score(ds, reps, 1.0)
-    assert B.dead_reckoned(ds, reps) <= 1.5 * s["rmse_m"] and s["hits_per_report"] >= 5.0
+    ds, _ = fusion_bench.battalion(ROOT / "scenarios" / "battalion-sensors")
+    reps, _ = fusion_bench.run_kalman(ds)
+    s = fusion_bench.score(ds, reps, 1.0)
+    assert fusion_bench.dead_reckoned(ds, reps) <= 1.5 * s["rmse_m"] and s["hits_per_report"] >= 5.0

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import pytest
 
-from saim_mesh import scenario as S
+from saim_mesh import scenario as scenarios
 from saim_mesh.net import netns
 from saim_mesh.launch.proc import Proc, clean_env, py
 from saim_mesh.deploy.launch import clear_state, restart_state
@@ -265,7 +265,7 @@ def lost_and_back(b: Battalion, down: dict[str, float], since: int):
         peers = {a["subjects"][0] for a in problems(rows, "peer-lost")}
         lost = [a for a in problems(rows, "source-lost") if a["subjects"] == [src]]
         return (peers >= gone and lost) and (peers, lost[0])
-    silence = float(config_for(S.load(SMALL), "BN")["mesh"]["source_silence_s"])
+    silence = float(config_for(scenarios.load(SMALL), "BN")["mesh"]["source_silence_s"])
     seen: dict[str, tuple] = {}
     end = time.monotonic() + silence + SLACK_S + 10
     while len(seen) < len(down) and time.monotonic() < end:
@@ -297,7 +297,7 @@ def finish(b: Battalion) -> dict:
         n = len(spec["eas"])
         b.procs[h].wait_for(f"host {h}: {n} of {n} EA peers done", 600)
     units = [u for spec in b.hosts.values() for u in spec["eas"]]
-    eas = {ea.owner: ea for ea in run(S.load(SMALL), units)}
+    eas = {ea.owner: ea for ea in run(scenarios.load(SMALL), units)}
     dups, renumbered, partial = 0, 0, 0
     for h, spec in b.hosts.items():
         for u in spec["eas"]:

@@ -12,13 +12,12 @@ import tomllib
 
 import pytest
 
-from saim_mesh import scenario as S
+from saim_mesh import scenario as scenarios
 from saim_mesh.net import netns
 from saim_mesh.launch.proc import Proc, clean_env, py
-from saim_mesh.inprocess.runner import run
 
 from .conftest import SMALL
-from .test_deploy_hosts import in_process, plan_alerts
+from .test_deploy_hosts import assert_hosts_logged_the_in_process_alerts
 
 pytestmark = pytest.mark.timeout(900)
 WHY = netns.unavailable()
@@ -31,7 +30,7 @@ def cli(tmp_path, name: str, *args: str) -> Proc:
 @pytest.mark.skipif(WHY is not None, reason=f"no namespaced hosts here: {WHY}")
 def test_the_battalion_over_four_namespaced_hosts_gives_the_in_process_alerts(tmp_path):
     netns.cleanup_stale()
-    sc = S.load(SMALL)
+    sc = scenarios.load(SMALL)
     f = tmp_path / "deploy.toml"
     init = cli(tmp_path, "init", "deploy", "init", str(SMALL), "--out", str(f), "--addresses", netns.SUBNET,
                "--no-consoles")
@@ -60,10 +59,6 @@ def test_the_battalion_over_four_namespaced_hosts_gives_the_in_process_alerts(tm
                 p.stop(timeout=60)
         left = {h: hs.pids(h) for h in hosts}
     assert not any(left.values()), f"processes left in the hosts after their supervisors stopped: {left}"
-    units = [u for spec in hosts.values() for u in spec["eas"]]
-    want = {ea.owner: in_process(ea.alerts) for ea in run(sc, units)}
-    for h, spec in hosts.items():
-        for u in spec["eas"]:
-            assert plan_alerts(tmp_path / h / f"{u}.jsonl") == want[u], (h, u)
+    assert_hosts_logged_the_in_process_alerts(sc, hosts, tmp_path)
     summary = json.loads((tmp_path / "A" / "summary.json").read_text())
     assert summary["secure"]

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from saim_mesh.tak import cot as C
+from saim_mesh.tak import cot
 from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
@@ -40,8 +40,8 @@ def test_mesh_up_tak_sends_every_alert_as_cot(tmp_path, proto):
         assert rx.wait(lambda g: len(alerts()) >= len(want), 30), (len(alerts()), len(want))
         assert alerts() == want
         raw = [d for s, d in rx.got if s == "tcp"]
-        assert all((d[:1] == bytes([C.STREAM])) == (proto == "1") for d in raw), "every event in the asked protocol"
-        kinds = {C.parse(d).detail.get("__saim", {}).get("kind") for d in raw}
+        assert all((d[:1] == bytes([cot.STREAM])) == (proto == "1") for d in raw), "every event in the asked protocol"
+        kinds = {cot.parse(d).detail.get("__saim", {}).get("kind") for d in raw}
         assert {"unit", "alert"} <= kinds
     finally:
         rx.close()
@@ -60,10 +60,10 @@ def test_mesh_up_tak_refuses_what_cannot_work_in_one_line(tmp_path, args, says):
 
 
 def test_on_the_wall_clock_the_gateways_pli_are_a_source_every_ea_takes(tmp_path):
-    from saim_mesh import scenario as S
+    from saim_mesh import scenario as scenarios
     from saim_mesh.deploy.file import Tak
     from saim_mesh.live.up import one_host
-    sc = S.load(SMALL, events=False)
+    sc = scenarios.load(SMALL, events=False)
     tak = Tak(("tcp://127.0.0.1:9",), ("udp://127.0.0.1:6969",), None, "xml")
     live, _ = one_host(sc, str(SMALL), UNITS, tmp_path, live=True, insecure=True, tak=tak)
     played, _ = one_host(sc, str(SMALL), UNITS, tmp_path, live=False, insecure=True, tak=tak)

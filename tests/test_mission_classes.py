@@ -19,8 +19,8 @@ from ea_agent.domains.suo.messages import LocationReport
 from ea_agent.domains.suo.missions import REGISTRY, Isolate, Occupy
 from saim_mesh import cli
 
-from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, box, end, feed, line, ll, mission, near, play, start, track,
-                        track_path)
+from .synthetic import (EPOCH, REPORT_S, Force, alerts_of, along, box, end, feed, line, ll, mission, near, play, start,
+                        track, track_path)
 
 FORCE = Force(name="mission-classes")
 scenario, path = FORCE.scenario, FORCE.path
@@ -365,14 +365,7 @@ def _rear_first(t):
         return 1000.0, -300.0
     legs = [(1000, -300, 1000, 900), (1000, 900, 0, 900), (0, 900, 2000, 900), (2000, 900, 2000, 400),
             (2000, 400, 0, 400), (0, 400, 0, 100), (0, 100, 2000, 100)]
-    s = (t - 200) * 5.0
-    for x0, y0, x1, y1 in legs:
-        n = abs(x1 - x0) + abs(y1 - y0)
-        if s <= n:
-            f = s / n
-            return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
-        s -= n
-    return 2000.0, 100.0
+    return along(legs, (t - 200) * 5.0)
 
 
 ABREAST = Force({"A1": tuple(f"A1E{i}" for i in range(1, 6)), "A2": ("A2E1", "A2E2"), "B1": ("B1E1", "B1E2")},
@@ -750,8 +743,8 @@ def test_a_branch_is_offered_and_its_base_is_not(tmp_path, monkeypatch):
     ("movement-to-contact", {"destination": "DEST-FAR", "limit": "OBJ-MID"}, "limit"),
 ], ids=lambda v: v if isinstance(v, str) else None)
 def test_a_new_parameter_given_wrong_is_refused_naming_it(tmp_path, typ, params, field):
-    from saim_mesh import scenario as S
-    with pytest.raises(S.ScenarioError) as e:
+    from saim_mesh import scenario as scenarios
+    with pytest.raises(scenarios.ScenarioError) as e:
         scenario(tmp_path, [DEST_FAR, OBJ_MID, BP_HOME, CP_LINK], [mission("A1-x", "A1", typ, **params)])
     assert "A1-x" in str(e.value) and f"params.{field}" in str(e.value), str(e.value)
 

@@ -8,8 +8,9 @@ from __future__ import annotations
 import pytest
 
 from ea_agent.domains.suo.detect.recon import RECHECK_S
-from saim_mesh import scenario as S
+from saim_mesh import scenario as scenarios
 
+from .synthetic import along
 from .test_check_families import EPOCH, box, end, mission, of, path, play, scenario, start, stays, write
 
 ZONE = box("ZONE-Z", "area", 0, 0, 2000, 1000)          # 2 km x 1 km: 8 x 4 cells of 250 m
@@ -22,14 +23,7 @@ def sweep(t0: float, t1: float):
     total = sum(abs(x1 - x0) + abs(y1 - y0) for x0, y0, x1, y1 in legs)
 
     def where(t):
-        s = max(0.0, min(1.0, (t - t0) / (t1 - t0))) * total
-        for x0, y0, x1, y1 in legs:
-            n = abs(x1 - x0) + abs(y1 - y0)
-            if s <= n:
-                f = s / n
-                return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
-            s -= n
-        return legs[-1][2], legs[-1][3]
+        return along(legs, max(0.0, min(1.0, (t - t0) / (t1 - t0))) * total)
     return where
 
 
@@ -82,8 +76,8 @@ def test_an_incomplete_reconnaissance_is_told_at_its_end(tmp_path):
 
 
 def test_recon_by_must_be_a_time(tmp_path):
-    with pytest.raises(S.ScenarioError, match="by"):
-        S.load(write(tmp_path / "bad", [ZONE, SCREEN], [recon("zone-reconnaissance", by="soon")]), events=False)
+    with pytest.raises(scenarios.ScenarioError, match="by"):
+        scenarios.load(write(tmp_path / "bad", [ZONE, SCREEN], [recon("zone-reconnaissance", by="soon")]), events=False)
 
 
 # ---------------------------------------------------------------- passage of lines and fratricide

@@ -12,12 +12,12 @@ import pytest
 import zenoh
 
 from dissemination.keyspace import KeySpace
-from saim_mesh.protocol import messages as M
-from saim_mesh import scenario as S
-from saim_mesh.protocol import wire as W
-from saim_mesh.live import pace as P
+from saim_mesh.protocol import messages
+from saim_mesh import scenario as scenarios
+from saim_mesh.protocol import wire as wire_codec
+from saim_mesh.live import pace as live_pace
 from saim_mesh.live import play
-from saim_mesh.live import source as SRC
+from saim_mesh.live import source as live_source
 from saim_mesh.launch.zenoh_config import config
 
 from .conftest import SMALL
@@ -26,15 +26,15 @@ from .test_source_linger import Wire, check_stream
 
 @pytest.fixture(scope="module")
 def reports():
-    sc = S.load(SMALL)
-    return sc, [e for e in sc.events if type(e) is M.LocationReport][:3000]
+    sc = scenarios.load(SMALL)
+    return sc, [e for e in sc.events if type(e) is messages.LocationReport][:3000]
 
 
 def ack(s, ks, unit: str, t: float) -> None:
-    s.put(ks.ack(unit, "cp.test"), W.encode(W.make(W.Ack, t=t)))
+    s.put(ks.ack(unit, "cp.test"), wire_codec.encode(wire_codec.make(wire_codec.Ack, t=t)))
 
 
-def release(pace: P.SourcePace, th: threading.Thread) -> None:
+def release(pace: live_pace.SourcePace, th: threading.Thread) -> None:
     """Never leave the publishing thread waiting, whatever the test asserted."""
     pace.acks["stop"] = (math.inf, math.inf)
     with pace.cv:
@@ -49,8 +49,23 @@ def published_all(src, pace, th, done: list, msgs) -> None:
     pace.close()
 
 
+def publishing(s, ks, msgs, **pace_args):
+    """A source publishing `msgs` as fast as its pace lets it, on a thread, into a Wire
+    that keeps its frames: (source, wire, pace, thread, [count published, once done])."""
+    src = live_source.LiveSource(s, ks, "cp.test")
+    src.pub.undeclare()
+    src.pub = wire = Wire()
+    pace = live_pace.SourcePace(s, ks, "cp.test", lead_s=60.0, stale_s=3600.0, first_s=3600.0,
+                                log=lambda *a, **k: None, **pace_args)
+    done: list = []
+    th = threading.Thread(target=lambda: done.append(play.publish(src, msgs, speed=None, pace=pace,
+                                                                    log=lambda *a, **k: None)))
+    th.start()
+    return src, wire, pace, th, done
+
+
 def sent_upto(wire: Wire) -> float:
-    return max((M.decode(b).t for f in wire.frames for b in f.msgs), default=-math.inf)
+    return max((messages.decode(b).t for f in wire.frames for b in f.msgs), default=-math.inf)
 
 
 @pytest.mark.timeout(60)
@@ -59,14 +74,7 @@ def test_a_fast_source_waits_for_its_slowest_ea(reports):
     assert msgs[-1].t > 400
     with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
         ks = KeySpace.of(sc, f"test/{uuid.uuid4().hex[:8]}")
-        src = SRC.LiveSource(s, ks, "cp.test")
-        src.pub.undeclare()
-        src.pub = wire = Wire()
-        pace = P.SourcePace(s, ks, "cp.test", lead_s=60.0, stale_s=3600.0, first_s=3600.0, log=lambda *a, **k: None)
-        done = []
-        th = threading.Thread(target=lambda: done.append(play.publish(src, msgs, speed=None, pace=pace,
-                                                                        log=lambda *a, **k: None)))
-        th.start()
+        src, wire, pace, th, done = publishing(s, ks, msgs)
         def blocked_beyond(x: float) -> None:
             with pace.cv:   # the source notifies when it starts waiting
                 assert pace.cv.wait_for(lambda: pace.blocked.is_set() and pace.blocked_t > x, timeout=20)
@@ -99,15 +107,7 @@ def test_a_held_source_beats_so_no_ea_takes_it_for_a_silent_one(reports):
     sc, msgs = reports
     with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
         ks = KeySpace.of(sc, f"test/{uuid.uuid4().hex[:8]}")
-        src = SRC.LiveSource(s, ks, "cp.test")
-        src.pub.undeclare()
-        src.pub = wire = Wire()
-        pace = P.SourcePace(s, ks, "cp.test", lead_s=60.0, stale_s=3600.0, first_s=3600.0, beat_s=0.05,
-                            log=lambda *a, **k: None)
-        done = []
-        th = threading.Thread(target=lambda: done.append(play.publish(src, msgs, speed=None, pace=pace,
-                                                                        log=lambda *a, **k: None)))
-        th.start()
+        src, wire, pace, th, done = publishing(s, ks, msgs, beat_s=0.05)
         try:
             with pace.cv:   # held at 60 (nobody acked) and beating
                 assert pace.cv.wait_for(lambda: pace.blocked.is_set() and pace.beats >= 3, timeout=20)
@@ -128,7 +128,7 @@ def test_an_ea_not_heard_for_stale_s_holds_nobody(reports):
     sc, _ = reports
     with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
         ks = KeySpace.of(sc, f"test/{uuid.uuid4().hex[:8]}")
-        pace = P.SourcePace(s, ks, "cp.test", lead_s=60.0, stale_s=5.0, log=lambda *a, **k: None)
+        pace = live_pace.SourcePace(s, ks, "cp.test", lead_s=60.0, stale_s=5.0, log=lambda *a, **k: None)
         assert pace.allowed() == 60.0          # nobody heard yet: the first lead only
         pace.acks = {"A1": (100.0, 1000.0), "A2": (400.0, 1003.0)}
         assert pace.allowed(now=1004.0) == 160.0    # both fresh: the slowest
@@ -142,9 +142,9 @@ def test_a_bad_ack_is_counted_not_taken(reports):
     said = []
     with zenoh.open(config(["tcp/127.0.0.1:0"], None)) as s:
         ks = KeySpace.of(sc, f"test/{uuid.uuid4().hex[:8]}")
-        pace = P.SourcePace(s, ks, "cp.test", log=lambda *a, **k: said.append(a[0]))
+        pace = live_pace.SourcePace(s, ks, "cp.test", log=lambda *a, **k: said.append(a[0]))
         s.put(ks.ack("A1", "cp.test"), b"\x93not an ack")
-        s.put(ks.ack("A1", "cp.test"), W.encode(W.make(W.Ack, t=float("nan"))))
+        s.put(ks.ack("A1", "cp.test"), wire_codec.encode(wire_codec.make(wire_codec.Ack, t=float("nan"))))
         ack(s, ks, "A2", 50.0)
         with pace.cv:
             assert pace.cv.wait_for(lambda: "A2" in pace.acks, timeout=10)
@@ -159,9 +159,9 @@ def test_an_ea_acks_every_ack_every_s_of_event_time():
             self.puts = []
 
         def put(self, key, payload):
-            self.puts.append((key, W.decode_control(W.Ack, payload, 256).t))
+            self.puts.append((key, wire_codec.decode_control(wire_codec.Ack, payload, 256).t))
     s, ks = Session(), KeySpace("test/x")
-    prog = P.EaProgress(ks, "A1", every_s=30.0)
+    prog = live_pace.EaProgress(ks, "A1", every_s=30.0)
     for t in (-math.inf, 0.0, 10.0, 29.9, 30.0, 45.0, 61.0, math.inf):
         prog.send(s, t, ["cp.a", "cp.b"])
     assert s.puts == [(ks.ack("A1", "cp.a"), 0.0), (ks.ack("A1", "cp.b"), 0.0),

@@ -11,15 +11,15 @@ from typing import Callable
 
 from ea_agent import domains
 
-from ..protocol import messages as M
-from ..protocol import wire as W
+from ..protocol import messages
+from ..protocol import wire
 from ..live.reader import LiveReader
 from .actions import CommandActions, result_dict
 from .state import State
 
-CLASSES = {"suo": (M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm,
-                   M.Order, M.Reorganization),
-           "uv": (M.UvState, M.UvSighting, M.UvAgent)}
+CLASSES = {"suo": (messages.LocationReport, messages.SensorTrack, messages.MissionConfirm, messages.CallForFire,
+                   messages.CallForFireConfirm, messages.Order, messages.Reorganization),
+           "uv": (messages.UvState, messages.UvSighting, messages.UvAgent)}
 
 
 def classes_of(sc) -> tuple:
@@ -40,13 +40,13 @@ class ConsoleView:
     def clock(self, t: float, end: bool, w: float | None = None) -> None:
         self.state.clock(t, end, w)
 
-    def alert(self, m: M.Alert) -> None:
+    def alert(self, m: messages.Alert) -> None:
         self.state.alert(m)
 
-    def result(self, res: W.CmdResult, owner: str) -> None:
+    def result(self, res: wire.CmdResult, owner: str) -> None:
         self.state.result(result_dict(res, owner))
 
-    def notice(self, n: W.Notice) -> None:
+    def notice(self, n: wire.Notice) -> None:
         d = {f: getattr(n, f) for f in n.__struct_fields__ if f != "v"}
         d["subjects"] = list(n.subjects)
         self.state.notice(d)
@@ -74,8 +74,8 @@ def mesh_actions(feed, state: State, timeout: float = 10.0) -> CommandActions:
         return commands.send(feed.session, feed.ks, unit, cmd, state.unit, timeout, signer)
 
     def direct(unit: str, kind: str, fields: dict) -> str:
-        from ..authority import directives as D
-        return D.publish(feed.session, feed.ks.root, signer, unit, kind, **fields).req
+        from ..authority import directives
+        return directives.publish(feed.session, feed.ks.root, signer, unit, kind, **fields).req
     return CommandActions(run, state, push=False, direct=direct)
 
 

@@ -117,8 +117,9 @@ class Deployment:
 
     def topology(self):
         """The routers as a `net.topology.Topology` (top: the router at the top unit's CP)."""
-        from ..net import topology as T
-        return T.Topology({n: T.Router(n, r.cp, r.links) for n, r in self.routers.items()}, {}, self._top())
+        from ..net import topology
+        routers = {n: topology.Router(n, r.cp, r.links) for n, r in self.routers.items()}
+        return topology.Topology(routers, {}, self._top())
 
     def _top(self, taskorg=None) -> str:
         cps = {r.cp for r in self.routers.values()}
@@ -238,6 +239,30 @@ def _unknown(d: dict, known: set[str], e, where: str) -> None:
         e(f"{where}: unknown keys {', '.join(map(repr, extra))} (known: {', '.join(sorted(known))})")
 
 
+def _named_tables(doc: dict, kind: str, known: set[str], e, none: str):
+    """Each `[[kind]]` table with a valid name not used before: (name, where, table);
+    every problem on the way said once through `e`."""
+    raw = doc.get(kind, [])
+    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+        e(f"{kind}: expected [[{kind}]] tables")
+        raw = []
+    if not raw:
+        e(none)
+    seen: set[str] = set()
+    for i, t in enumerate(raw):
+        name = t.get("name")
+        where = f"{kind} #{i + 1}" + (f" {name!r}" if isinstance(name, str) else "")
+        _unknown(t, known, e, where)
+        if not isinstance(name, str) or not NAME_RE.match(name):
+            e(f"{where}: name: expected letters, digits, '.', '_' or '-', not {name!r}")
+            continue
+        if name in seen:
+            e(f"{where}: {kind} {name!r} named twice")
+            continue
+        seen.add(name)
+        yield name, where, t
+
+
 def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[str]]:
     """The file's structure and types (no scenario needed): a Deployment, and every
     problem found, one line each."""
@@ -280,22 +305,7 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
         e("catch_up_kbit: a pace must be > 0 kbit/s")
         catch_up_kbit = None
     hosts: dict[str, Host] = {}
-    raw_hosts = doc.get("host", [])
-    if not isinstance(raw_hosts, list) or not all(isinstance(h, dict) for h in raw_hosts):
-        e("host: expected [[host]] tables")
-        raw_hosts = []
-    if not raw_hosts:
-        e("no [[host]] entries")
-    for i, h in enumerate(raw_hosts):
-        name = h.get("name")
-        where = f"host #{i + 1}" + (f" {name!r}" if isinstance(name, str) else "")
-        _unknown(h, HOST_KEYS, e, where)
-        if not isinstance(name, str) or not NAME_RE.match(name):
-            e(f"{where}: name: expected letters, digits, '.', '_' or '-', not {name!r}")
-            continue
-        if name in hosts:
-            e(f"{where}: host {name!r} named twice")
-            continue
+    for name, where, h in _named_tables(doc, "host", HOST_KEYS, e, "no [[host]] entries"):
         addrs = []
         for a in _strs(h.get("addresses"), e, f"{where}: addresses"):
             try:
@@ -343,22 +353,8 @@ def parse(text: str, path: Path | None = None) -> tuple[Deployment | None, list[
                            _strs(h.get("eas"), e, f"{where}: eas"), _strs(h.get("sources"), e, f"{where}: sources"),
                            _strs(h.get("fusion"), e, f"{where}: fusion"), tuple(consoles), tak)
     routers: dict[str, RouterSpec] = {}
-    raw_r = doc.get("router", [])
-    if not isinstance(raw_r, list) or not all(isinstance(r, dict) for r in raw_r):
-        e("router: expected [[router]] tables")
-        raw_r = []
-    if not raw_r:
-        e("no [[router]] entries (every host's processes attach to a router)")
-    for i, r in enumerate(raw_r):
-        name = r.get("name")
-        where = f"router #{i + 1}" + (f" {name!r}" if isinstance(name, str) else "")
-        _unknown(r, ROUTER_KEYS, e, where)
-        if not isinstance(name, str) or not NAME_RE.match(name):
-            e(f"{where}: name: expected letters, digits, '.', '_' or '-', not {name!r}")
-            continue
-        if name in routers:
-            e(f"{where}: router {name!r} named twice")
-            continue
+    for name, where, r in _named_tables(doc, "router", ROUTER_KEYS, e,
+                                        "no [[router]] entries (every host's processes attach to a router)"):
         host = _str(r.get("host"), e, f"{where}: host", required=True)
         cp = _str(r.get("cp"), e, f"{where}: cp", required=True)
         routers[name] = RouterSpec(name, host or "", cp or "", _port(r.get("port"), e, f"{where}: port", DEFAULT_PORT),

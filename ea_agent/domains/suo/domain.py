@@ -174,7 +174,7 @@ class SuoDomain:
     def voi(self, m: Mission, key: str) -> float:
         """A VOI threshold: the mission's override, else the EA's configuration."""
         default = self.voi_cfg[key]   # looked up first: an unknown key is an error even when overridden
-        over = m.params.get("voi")     # asked ~50k times a run: no empty dict made per call
+        over = m.params.get("voi")     # asked for every report checked: no empty dict made per call
         return float(default if over is None else over.get(key, default))
 
     def in_plan(self, m: Mission) -> bool:

@@ -11,7 +11,7 @@ from ea_agent.core.alert import Alert
 from ea_agent.core.plan import PlanSpec, TaskOrg
 from ea_agent.core.scenario import ScenarioError, check_key_chunk, read_events
 
-from . import messages as M
+from . import messages
 
 @dataclass
 class EventContext:
@@ -41,15 +41,15 @@ def _check_event(m, cx: EventContext, where: str) -> None:
                             f"(scenario.json duration_s = {cx.duration_s})")
     k = type(m)
     good = cx.good
-    if k is M.LocationReport:   # unknown entities are fine (the EA counts and drops them); their ids must be keys
+    if k is messages.LocationReport:   # unknown entities are fine (the EA counts and drops them); their ids must be keys
         if m.entity not in good:
             good.add(check_key_chunk(m.entity, where, "entity"))
         return
-    if k is M.SensorTrack:
+    if k is messages.SensorTrack:
         if m.track not in good:
             good.add(check_key_chunk(m.track, where, "track"))
         return
-    if k is M.SensorHit:
+    if k is messages.SensorHit:
         if m.sensor not in good:
             good.add(check_key_chunk(m.sensor, where, "sensor"))
         if cx.sensors is None:
@@ -69,7 +69,7 @@ def _check_event(m, cx: EventContext, where: str) -> None:
             raise ScenarioError(f"{where}: field '{name}': unknown unit {v!r}")
         return v
 
-    if k is M.MissionConfirm:
+    if k is messages.MissionConfirm:
         u = unit("unit")
         if m.mission not in good:
             good.add(check_key_chunk(m.mission, where, "mission"))
@@ -80,7 +80,7 @@ def _check_event(m, cx: EventContext, where: str) -> None:
             if u not in owners:
                 raise ScenarioError(f"{where}: field 'unit': mission {m.mission!r} belongs to "
                                     f"{' or '.join(sorted(owners))}, not to {u!r}")
-    elif k is M.Order:
+    elif k is messages.Order:
         unit("issuer")
         if m.plan not in good:
             good.add(check_key_chunk(m.plan, where, "plan"))
@@ -100,11 +100,11 @@ def _check_event(m, cx: EventContext, where: str) -> None:
             if not any(m.issuer in cx.taskorg.ancestors(u) for u in owners):
                 raise ScenarioError(f"{where}: field 'issuer': {m.issuer!r} is not a superior of "
                                     f"{' or '.join(sorted(owners))}, whose mission {m.mission!r} it orders")
-    elif k is M.CallForFire or k is M.CallForFireConfirm:
+    elif k is messages.CallForFire or k is messages.CallForFireConfirm:
         unit("requester")
         if m.cff not in good:
             good.add(check_key_chunk(m.cff, where, "cff"))
-    elif k is M.Reorganization:
+    elif k is messages.Reorganization:
         u, parent = unit("unit"), unit("new_parent")
         if u == parent:
             raise ScenarioError(f"{where}: field 'new_parent': a unit cannot be put under itself")
@@ -118,7 +118,7 @@ def load_events(root: Path, context: EventContext | None = None) -> list:
     """The event script, time-ordered; with a `context` (as `load` gives) also checked
     against the scenario: times within duration_s, known units, missions and plans."""
     cx = context or EventContext()
-    dur, good, loc = cx.duration_s, cx.good, M.LocationReport
+    dur, good, loc = cx.duration_s, cx.good, messages.LocationReport
 
     def check(m, where: str) -> None:
         if not (type(m) is loc and m.t <= dur and m.entity in good):   # the common case, checked

@@ -8,11 +8,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import shapely
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import ScenarioError, check_key_chunk, lonlat_geometry
+from ea_agent.core.scenario import ScenarioError, check_key_chunk, place_feature
 from ea_agent.core.scenario import need as _need
 from ea_agent.core.scenario import number as _number
 from ea_agent.core.scenario import read_json as _read_json
@@ -90,35 +89,18 @@ class ControlMeasure:
     props: dict = field(default_factory=dict)
 
 
+def _geom_types(kind: str) -> set[str]:
+    return {"Polygon"} if kind in AREA_KINDS else {"LineString"} if kind in LINE_KINDS else {"Point", "Polygon"}
+
+
 def load_overlay(p: Path, proj: Projection) -> dict[str, ControlMeasure]:
     fc = _read_json(p)
     feats = _need(fc, "features", p.name, list)
     out: dict[str, ControlMeasure] = {}
     for i, f in enumerate(feats):
-        where = f"{p.name}: feature {i}"
-        props = _need(f, "properties", where, dict)
-        fid = _need(props, "id", where, str)
-        if not fid:
-            raise ScenarioError(f"{where}: field 'id': empty")
-        where = f"{p.name}: feature {i} ({fid})"
-        kind = _need(props, "kind", where, str)
-        if kind not in KINDS:
-            raise ScenarioError(f"{where}: field 'kind': unknown kind {kind!r} (one of {', '.join(sorted(KINDS))})")
-        if fid in out:
-            raise ScenarioError(f"{where}: field 'id': duplicate id {fid!r}")
-        g = _need(f, "geometry", where, dict)
-        geom = lonlat_geometry(g, where)
-        want = {"Polygon"} if kind in AREA_KINDS else {"LineString"} if kind in LINE_KINDS else {"Point", "Polygon"}
-        if geom.geom_type not in want:
-            raise ScenarioError(f"{where}: field 'geometry': a {kind} must be {' or '.join(sorted(want))}, not {geom.geom_type}")
-        if not shapely.is_valid(geom):
-            raise ScenarioError(f"{where}: field 'geometry': invalid {geom.geom_type} "
-                                f"({shapely.is_valid_reason(geom)})")
-        _check_props(props, kind, geom.geom_type, where)
-        xy = shapely.transform(geom, lambda c: proj.to_xy_array(c))
-        if not np.isfinite(shapely.get_coordinates(xy)).all():
-            raise ScenarioError(f"{where}: field 'geometry': cannot be projected to EPSG:{proj.epsg} "
-                                f"(too far from the scenario's area)")
+        where, fid, kind, props, xy = place_feature(f, f"{p.name}: feature {i}", sorted(KINDS), out, _geom_types,
+                                                    proj, key_id=False)
+        _check_props(props, kind, xy.geom_type, where)
         size = {k: _number(props[k], where, k, positive=True) for k in ("width_m", "radius_m")
                 if props.get(k) is not None}
         if kind in AREA_KINDS or xy.geom_type == "Polygon":

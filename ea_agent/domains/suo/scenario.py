@@ -11,12 +11,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ea_agent.core.config import ConfigError
-from ea_agent.core.plan import (END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit)
+from ea_agent.core.plan import PlanSpec, TaskOrg, Unit
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, need as _need,  # noqa: F401
-                                    number as _number, read_events, read_json as _read_json, time_constraint)
+from ea_agent.core.scenario import (ScenarioBase, ScenarioError, check_default_eas,  # noqa: F401
+                                    check_key_chunk, checked_taskorg, guarded, load_plans, need as _need, new_id,
+                                    number as _number, read_events, read_json as _read_json, scenario_head, unit_entry)
 
 from .event_checks import EventContext, load_events
 from .overlay import ControlMeasure, article, load_overlay
@@ -105,17 +105,7 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
     ids: set[str] = set()
     for i, u in enumerate(_need(doc, "task_organization", p.name, list)):
         where = f"{p.name}: task_organization[{i}]"
-        uid = check_key_chunk(_need(u, "id", where, str), where, "id")
-        where += f" ({uid})"
-        if uid in ids:
-            raise ScenarioError(f"{where}: field 'id': duplicate unit id")
-        ids.add(uid)
-        ech = _need(u, "echelon", where, str)
-        if ech not in ECHELONS:
-            raise ScenarioError(f"{where}: field 'echelon': {ech!r} not one of {', '.join(ECHELONS)}")
-        parent = u.get("parent")
-        if parent is not None and not isinstance(parent, str):
-            raise ScenarioError(f"{where}: field 'parent': expected a unit id or null, got {type(parent).__name__}")
+        uid, where, ech, parent = unit_entry(u, where, ids, "echelon", ECHELONS)
         ents = u.get("entities", [])
         if not isinstance(ents, list) or not all(isinstance(e, str) for e in ents):
             raise ScenarioError(f"{where}: field 'entities': expected a list of entity ids")
@@ -133,75 +123,27 @@ def load_plan(p: Path, overlay: dict[str, ControlMeasure]) -> tuple[TaskOrg, dic
         attrs = {"boundary": bnd,
                  "weapons_range_m": _number(wr, where, "weapons_range_m", positive=True) if wr is not None else None}
         units.append(Unit(uid, str(u.get("name", uid)), ech, parent, tuple(ents), attrs))
-    roots = [u.id for u in units if u.parent is None]
-    if len(roots) != 1:
-        raise ScenarioError(f"{p.name}: task_organization: field 'parent': need exactly one top unit, found {roots}")
-    for u in units:
-        if u.parent is not None and u.parent not in ids:
-            raise ScenarioError(f"{p.name}: task_organization ({u.id}): field 'parent': unknown unit {u.parent!r}")
-    taskorg = TaskOrg(units)
-    cyc = taskorg.cycle()
-    if cyc:
-        raise ScenarioError(f"{p.name}: task_organization ({cyc[0]}): field 'parent': cycle in the command "
-                            f"hierarchy: {' -> '.join(cyc)} (every unit must lead up to {roots[0]})")
+    taskorg = checked_taskorg(units, f"{p.name}: task_organization")
     voi_keys = _voi_keys()
-    plans: dict[str, PlanSpec] = {}
-    for pname, ms in _need(doc, "plans", p.name, dict).items():
-        check_key_chunk(pname, f"{p.name}: plans", "name")
-        if not isinstance(ms, list):
-            raise ScenarioError(f"{p.name}: plans.{pname}: expected a list of missions")
-        specs: list[MissionSpec] = []
-        mids: set[str] = set()
-        for i, m in enumerate(ms):
-            where = f"{p.name}: plans.{pname}[{i}]"
-            mid = check_key_chunk(_need(m, "id", where, str), where, "id")
-            where += f" ({mid})"
-            if mid in mids:
-                raise ScenarioError(f"{where}: field 'id': duplicate mission id")
-            mids.add(mid)
-            unit = _need(m, "unit", where, str)
-            if unit not in ids:
-                raise ScenarioError(f"{where}: field 'unit': unknown unit {unit!r}")
-            typ = _need(m, "type", where, str)
-            cls = REGISTRY.get(typ)
-            if cls is None:
-                raise ScenarioError(f"{where}: field 'type': unknown mission type {typ!r} (see `saim-mesh missions`)")
-            params = m.get("params", {})
-            _check_params(cls, params, where, "params.", overlay, ids, voi_keys)
-            if issubclass(cls, ContingentMission):
-                _check_trigger(params["trigger"], where, overlay, ids)
-                task = params["task"]
-                if not isinstance(task, str) or task not in REGISTRY:
-                    raise ScenarioError(f"{where}: field 'params.task': unknown mission type {task!r}")
-                # triggered, the task is a monitored mission: it needs what its class requires
-                _check_params(REGISTRY[task], params.get("task_params", {}), where, "params.task_params.", overlay,
-                              ids, voi_keys)
-            if issubclass(cls, ReorganizationMission) and params["subject"] == taskorg.root:
-                raise ScenarioError(f"{where}: field 'params.subject': the top unit {params['subject']!r} "
-                                    f"cannot be resubordinated")
-            if issubclass(cls, ReorganizationMission) and params["subject"] == params["new_parent"]:
-                raise ScenarioError(f"{where}: field 'params.new_parent': a unit cannot be put under itself")
-            after = m.get("after", [])
-            if not isinstance(after, list) or not all(isinstance(a, str) for a in after):
-                raise ScenarioError(f"{where}: field 'after': expected a list of mission ids")
-            if mid in after:
-                raise ScenarioError(f"{where}: field 'after': a mission cannot come after itself")
-            specs.append(MissionSpec(mid, unit, typ, time_constraint(m.get("start"), where + " start", START_TYPES),
-                                     time_constraint(m.get("end"), where + " end", END_TYPES), tuple(after), params))
-        for s in specs:
-            for a in s.after:
-                if a not in mids:
-                    raise ScenarioError(f"{p.name}: plans.{pname} ({s.id}): field 'after': unknown mission {a!r}")
-        plan = PlanSpec(pname, specs)
-        cyc = plan.cycle()
-        if cyc:
-            raise ScenarioError(f"{p.name}: plans.{pname} ({cyc[0]}): field 'after': cycle "
-                                f"{' -> '.join(reversed(cyc))} (each waits for the one before it, so none "
-                                f"would ever become ready)")
-        plans[pname] = plan
-    initial = doc.get("initial_plan", "main")
-    if not isinstance(initial, str) or initial not in plans:
-        raise ScenarioError(f"{p.name}: field 'initial_plan': no plan named {initial!r}")
+
+    def check_mission(cls, params: dict, where: str, unit: str) -> None:
+        """This domain's checks of one mission of a plan."""
+        _check_params(cls, params, where, "params.", overlay, ids, voi_keys)
+        if issubclass(cls, ContingentMission):
+            _check_trigger(params["trigger"], where, overlay, ids)
+            task = params["task"]
+            if not isinstance(task, str) or task not in REGISTRY:
+                raise ScenarioError(f"{where}: field 'params.task': unknown mission type {task!r}")
+            # triggered, the task is a monitored mission: it needs what its class requires
+            _check_params(REGISTRY[task], params.get("task_params", {}), where, "params.task_params.", overlay,
+                          ids, voi_keys)
+        if issubclass(cls, ReorganizationMission) and params["subject"] == taskorg.root:
+            raise ScenarioError(f"{where}: field 'params.subject': the top unit {params['subject']!r} "
+                                f"cannot be resubordinated")
+        if issubclass(cls, ReorganizationMission) and params["subject"] == params["new_parent"]:
+            raise ScenarioError(f"{where}: field 'params.new_parent': a unit cannot be put under itself")
+
+    plans, initial = load_plans(doc, p.name, ids, REGISTRY, "see `saim-mesh missions`", check_mission)
     return taskorg, plans, initial
 
 
@@ -233,16 +175,7 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list
     where = "scenario.json"
     if not isinstance(meta, dict):
         raise ScenarioError(f"{where}: expected an object")
-    name = meta.get("name", root.resolve().name)
-    check_key_chunk(name, where if "name" in meta else f"{where} (no name: the folder name is used)", "name")
-    epsg = _need(meta, "epsg", where, int)
-    try:
-        proj = Projection(epsg)
-    except Exception as e:   # pyproj raises its own CRSError (and ValueError for a geographic CRS)
-        raise ScenarioError(f"{where}: field 'epsg': {e}") from None
-    duration = _number(_need(meta, "duration_s", where, (int, float)), where, "duration_s", positive=True)
-    if duration > MAX_DURATION_S:
-        raise ScenarioError(f"{where}: field 'duration_s': {duration} is more than {MAX_DURATION_S:.0f} s (7 days)")
+    name, proj, duration = scenario_head(meta, root, where)
     groups = None
     if meta.get("fusion") is not None:
         fw = f"{where}: fusion"
@@ -270,35 +203,20 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float, dict[str, list
     return meta, name, proj, duration, groups
 
 
-def _guarded(fname: str, fn, *args):
-    """Run one file's loader; an error its checks did not foresee still names the file, in one line."""
-    try:
-        return fn(*args)
-    except (ScenarioError, ConfigError):   # (plan.json's VOI overrides are checked against configs/ea.toml)
-        raise
-    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as e:
-        raise ScenarioError(f"{fname}: unexpected {type(e).__name__} while loading: {e}") from e
-
-
 def load(path: str | Path, events: bool = True) -> Scenario:
     root = Path(path)
     if not root.is_dir():
         raise ScenarioError(f"{root}: not a scenario folder")
-    meta, name, proj, duration, groups = _guarded("scenario.json", _load_meta, root)
-    overlay = _guarded("overlay.geojson", load_overlay, root / "overlay.geojson", proj)
-    taskorg, plans, initial = _guarded("plan.json", load_plan, root / "plan.json", overlay)
+    meta, name, proj, duration, groups = guarded("scenario.json", _load_meta, root)
+    overlay = guarded("overlay.geojson", load_overlay, root / "overlay.geojson", proj)
+    taskorg, plans, initial = guarded("plan.json", load_plan, root / "plan.json", overlay)
     for cm in overlay.values():
         if cm.owner is not None and cm.owner not in taskorg.units:
             raise ScenarioError(f"overlay.geojson: feature {cm.id}: field 'owner': unknown unit {cm.owner!r}")
-    dflt = meta.get("default_eas")
-    if dflt is not None:
-        if not isinstance(dflt, list) or not dflt:
-            raise ScenarioError("scenario.json: field 'default_eas': expected a non-empty list of unit ids")
-        for u in dflt:
-            _unit_ref(u, "scenario.json", "default_eas", taskorg.units)
+    check_default_eas(meta, taskorg.units)
     evs: list = []
     if events:
         cx = EventContext(duration, taskorg, plans,
                           None if groups is None else {sid for sids in groups.values() for sid in sids})
-        evs = _guarded("events", load_events, root, cx)
+        evs = guarded("events", load_events, root, cx)
     return Scenario(name, root, proj, duration, taskorg, plans, initial, evs, meta, overlay=overlay)

@@ -306,6 +306,23 @@ def sensor_pos(sim: "Sim", sid: str, t: float) -> tuple[float, float]:
     return sim.platoon_center(sid[1:], t)
 
 
+def _sensed(sim: "Sim", groups: list[str], offs: dict, t: float, sx: float, sy: float, rng_m: float, pd: float,
+            sigma: float, rng) -> list[tuple[float, float]]:
+    """The noisy positions of the entities of `groups` a sensor at (sx, sy) detects at `t`,
+    drawn from `rng` (each stream's draws in the same order as ever)."""
+    pts = []
+    for h in groups:
+        p = sim.hostiles[h].pos(t)
+        if p is None:
+            continue
+        for ex, ey in offs[h]:
+            x, y = p[0] + ex, p[1] + ey
+            if math.hypot(x - sx, y - sy) <= rng_m and rng.random() < pd:
+                nx, ny = rng.normal(0, sigma, 2)
+                pts.append((x + nx, y + ny))
+    return pts
+
+
 def hits(sim: "Sim", proj: Projection, ox: float, oy: float) -> list[tuple[float, int, dict]]:
     """Raw detections of hostile entities (and false alarms) by every sensor, from the true state.
     The groups in `sim.apart` are sensed from a stream of their own, after the others in each
@@ -322,28 +339,11 @@ def hits(sim: "Sim", proj: Projection, ox: float, oy: float) -> list[tuple[float
         t = phase
         while t < DURATION:
             sx, sy = sensor_pos(sim, sid, t)
-            pts = []
-            for h in main:
-                p = sim.hostiles[h].pos(t)
-                if p is None:
-                    continue
-                for ex, ey in offs[h]:
-                    x, y = p[0] + ex, p[1] + ey
-                    if math.hypot(x - sx, y - sy) <= rng_m and rng.random() < pd:
-                        nx, ny = rng.normal(0, sigma, 2)
-                        pts.append((x + nx, y + ny))
+            pts = _sensed(sim, main, offs, t, sx, sy, rng_m, pd, sigma, rng)
             for _ in range(rng.poisson(fa)):
                 r, a = rng_m * math.sqrt(rng.random()), rng.uniform(0, 2 * math.pi)
                 pts.append((sx + r * math.cos(a), sy + r * math.sin(a)))
-            for h in apart:
-                p = sim.hostiles[h].pos(t)
-                if p is None:
-                    continue
-                for ex, ey in offs[h]:
-                    x, y = p[0] + ex, p[1] + ey
-                    if math.hypot(x - sx, y - sy) <= rng_m and own.random() < pd:
-                        nx, ny = own.normal(0, sigma, 2)
-                        pts.append((x + nx, y + ny))
+            pts += _sensed(sim, apart, offs, t, sx, sy, rng_m, pd, sigma, own)
             for x, y in pts:
                 lon, lat = proj.to_lonlat(x + ox, y + oy)
                 out.append((round(t, 2), {"kind": "hit", "t": round(t, 2), "sensor": sid,

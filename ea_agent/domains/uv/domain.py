@@ -17,7 +17,7 @@ from ea_agent.core.needs import Needs
 from ea_agent.core.plan import MissionSpec, PlanSpec, PlanState, TaskOrg, TimeConstraint
 from ea_agent.core.schedule import Schedule
 
-from . import detectors as D
+from . import detectors
 from . import render
 from .detectors.collision import Obstacles
 from .messages import UvAgent, UvSighting, UvState
@@ -259,13 +259,13 @@ class UvDomain:
         return bool(w.dirty or w.dirty_targets or w.acquired or self.posted_here or self.since or self.reported)
 
     def next_wakeup(self) -> float:
-        nxt = D.status.wakeup(self, self.now)
+        nxt = detectors.status.wakeup(self, self.now)
         for q in (self.auto, self.ends):
             if q:
                 nxt = min(nxt, q[0][0])
         lost = float(self.uv["lost_s"])
-        for m, target in D.targets._pursuits(self):
-            last = D.targets.last_seen(self, m, target)
+        for m, target in detectors.targets._pursuits(self):
+            last = detectors.targets.last_seen(self, m, target)
             nxt = min(nxt, last + lost if last + lost > self.now else self.now + lost)
         return nxt
 
@@ -273,7 +273,7 @@ class UvDomain:
         for f in facts:
             try:
                 if type(f) is UvAgent:
-                    D.handoff.on_agent(self, f, self.posted_here)
+                    detectors.handoff.on_agent(self, f, self.posted_here)
             except (KeyError, ValueError) as e:   # a bad agent message is counted, the rest goes on
                 self.ea.error(f"{type(f).__name__} at t={f.t}: {e}")
 
@@ -293,20 +293,20 @@ class UvDomain:
         cands, self.posted_here = self.posted_here, []
         if self.plan is not None:
             self._due(t)
-            D.progress.track(self, t)
-            D.progress.at_goal(self, t, cands)
+            detectors.progress.track(self, t)
+            detectors.progress.at_goal(self, t, cands)
             self._due(t)   # successors of reached goals start in the same epoch
-            D.progress.divergent(self, t, cands)
-            D.progress.stuck(self, t, cands)
-            D.targets.target_visible(self, t, cands)
-            D.targets.lost_target(self, t, cands)
-            D.targets.target_gone(self, t, cands)
+            detectors.progress.divergent(self, t, cands)
+            detectors.progress.stuck(self, t, cands)
+            detectors.targets.target_visible(self, t, cands)
+            detectors.targets.lost_target(self, t, cands)
+            detectors.targets.target_gone(self, t, cands)
             self.policies.step(t, cands)
             self._end_reported()
             self._photos(t)
             self._due(t)
-        D.status.no_status(self, t, cands)
-        D.collision.collisions(self, t, cands)
+        detectors.status.no_status(self, t, cands)
+        detectors.collision.collisions(self, t, cands)
         self.watchman.dirty = set()
         self.watchman.dirty_targets = set()
         return self._gate(t, cands)

@@ -26,7 +26,7 @@ import shapely
 
 from ea_agent.core.plan import MissionSpec
 
-from . import tasks as T
+from . import tasks as task_messages
 from .detectors.handoff import story_key
 
 if TYPE_CHECKING:
@@ -42,7 +42,7 @@ class Policies:
         self.resume: dict[str, str] = {}   # pursue mission id -> suspended patrol id
         self.n = 0
         self.cooldown: dict[tuple[str, str], float] = {}   # (robot, target) -> no pursuit before
-        self.outbox: list[T._Task] = []    # tasks for our own robot (a robot's EA), drained by the loop
+        self.outbox: list[task_messages._Task] = []    # tasks for our own robot (a robot's EA), drained by the loop
         self.task_n = 0
 
     # -- tasks ---------------------------------------------------------------------------
@@ -56,7 +56,7 @@ class Policies:
         if robot != self.dom.owner:
             return
         self.task_n += 1
-        self.outbox.append(cls(robot=robot, at=round(self._epoch_of(t) + T.LAG_S, 6), n=self.task_n, **fields))
+        self.outbox.append(cls(robot=robot, at=round(self._epoch_of(t) + task_messages.LAG_S, 6), n=self.task_n, **fields))
 
     def drain(self) -> list:
         out, self.outbox = self.outbox, []
@@ -81,7 +81,7 @@ class Policies:
         return None
 
     def commit_pursuit(self, patrol: "Mission | None", robot: str, target: str, sector: str | None,
-                       t: float, kind: type = T.Pursue, **extra) -> None:
+                       t: float, kind: type = task_messages.Pursue, **extra) -> None:
         """`robot` pursues `target` (inside `sector`), suspending `patrol` if given."""
         dom = self.dom
         if robot not in dom.mine or self.pursuing(robot, target) is not None:
@@ -104,14 +104,14 @@ class Policies:
         target = m.params.get("target")
         dom.end_mission(m, t, advance=False)
         self.cooldown[(m.unit, target)] = t + COOLDOWN_S
-        self._task(T.Drop, m.unit, t, target=target, why=why, mission=m.id)
+        self._task(task_messages.Drop, m.unit, t, target=target, why=why, mission=m.id)
         patrol = self.resume.pop(m.id, None)
         if patrol is not None and dom.plan.state.get(patrol) == "suspended":
             dom.plan.state[patrol] = "active"
-            self._task(T.Resume, m.unit, t, mission=patrol)
+            self._task(task_messages.Resume, m.unit, t, mission=patrol)
         dom.advance_plan(t)
 
-    def take_over(self, robot: str, target: str, sector: str | None, t: float, kind: type = T.Pursue,
+    def take_over(self, robot: str, target: str, sector: str | None, t: float, kind: type = task_messages.Pursue,
                   **extra) -> None:
         """`robot` takes a pursuit from a teammate, suspending its own patrol if any."""
         patrol = self._patrol(robot)
@@ -193,7 +193,7 @@ class Policies:
                                   f"(target entered {area})", story_key(dom, m.unit, rid, target, t), None,
                                   {"from": m.unit, "to": rid, "task": m.id, "target": target,
                                    "act": "policy", "places": [area]}))
-            self._task(T.Handoff, m.unit, t, target=target, to=rid, task=m.id)
+            self._task(task_messages.Handoff, m.unit, t, target=target, to=rid, task=m.id)
         self.drop_pursuit(m, t, "gone")
 
     def _teammate(self, robot: str, x: float, y: float) -> tuple[str, str] | None:

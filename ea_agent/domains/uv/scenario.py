@@ -10,15 +10,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import shapely
 
 from ea_agent.core.geo import Projection
-from ea_agent.core.plan import END_TYPES, START_TYPES, MissionSpec, PlanSpec, TaskOrg, Unit
-from ea_agent.core.scenario import (MAX_DURATION_S, ScenarioBase, ScenarioError, check_key_chunk, lonlat_geometry, need, number, read_events,
-                                    read_json, time_constraint)
+from ea_agent.core.plan import PlanSpec, TaskOrg, Unit
+from ea_agent.core.scenario import (ScenarioBase, ScenarioError, check_default_eas, check_key_chunk,
+                                    checked_taskorg, guarded, load_plans, need, new_id, number, place_feature,
+                                    read_events, read_json, scenario_head, unit_entry)
 
-from . import messages as M   # registers the uv-* message kinds with the core codec
+from . import messages   # registers the uv-* message kinds with the core codec
 from .missions import REGISTRY
 from .world import KINDS, Place
 
@@ -44,15 +44,7 @@ def _load_meta(root: Path) -> tuple[dict, str, Projection, float]:
         raise ScenarioError(f"{where}: expected an object")
     if meta.get("domain") != "uv":
         raise ScenarioError(f"{where}: field 'domain': expected \"uv\", got {meta.get('domain')!r:.40}")
-    name = check_key_chunk(meta.get("name", root.resolve().name), where, "name")
-    epsg = need(meta, "epsg", where, int)
-    try:
-        proj = Projection(epsg)
-    except Exception as e:   # pyproj raises its own CRSError (and ValueError for a geographic CRS)
-        raise ScenarioError(f"{where}: field 'epsg': {e}") from None
-    duration = number(need(meta, "duration_s", where, (int, float)), where, "duration_s", positive=True)
-    if duration > MAX_DURATION_S:
-        raise ScenarioError(f"{where}: field 'duration_s': {duration} is more than {MAX_DURATION_S:.0f} s (7 days)")
+    name, proj, duration = scenario_head(meta, root, where)
     ks = meta.get("keyspace")
     if ks is not None:
         number(need(ks, "cell_m", f"{where}: keyspace", (int, float)), f"{where}: keyspace", "cell_m", positive=True)
@@ -69,25 +61,8 @@ def load_world(p: Path, proj: Projection) -> dict[str, Place]:
     fc = read_json(p)
     out: dict[str, Place] = {}
     for i, f in enumerate(need(fc, "features", p.name, list)):
-        where = f"{p.name}: feature {i}"
-        props = need(f, "properties", where, dict)
-        fid = check_key_chunk(need(props, "id", where, str), where, "id")
-        where = f"{p.name}: feature {i} ({fid})"
-        kind = need(props, "kind", where, str)
-        if kind not in KINDS:
-            raise ScenarioError(f"{where}: field 'kind': unknown kind {kind!r} (one of {', '.join(KINDS)})")
-        if fid in out:
-            raise ScenarioError(f"{where}: field 'id': duplicate id {fid!r}")
-        g = need(f, "geometry", where, dict)
-        geom = lonlat_geometry(g, where)
-        if geom.geom_type != GEOM[kind]:
-            raise ScenarioError(f"{where}: field 'geometry': a {kind} must be a {GEOM[kind]}, not {geom.geom_type}")
-        if not shapely.is_valid(geom):
-            why = shapely.is_valid_reason(geom)
-            raise ScenarioError(f"{where}: field 'geometry': invalid {geom.geom_type} ({why})")
-        xy = shapely.transform(geom, lambda c: proj.to_xy_array(c))
-        if not np.isfinite(shapely.get_coordinates(xy)).all():
-            raise ScenarioError(f"{where}: field 'geometry': cannot be projected to EPSG:{proj.epsg}")
+        where, fid, kind, props, xy = place_feature(f, f"{p.name}: feature {i}", KINDS, out,
+                                                    lambda kind: {GEOM[kind]}, proj)
         if props.get("radius_m") is not None:
             number(props["radius_m"], where, "radius_m", positive=True)
         shapely.prepare(xy)
@@ -97,18 +72,10 @@ def load_world(p: Path, proj: Projection) -> dict[str, Place]:
 
 def _units(doc: dict, p: Path) -> TaskOrg:
     units: list[Unit] = []
+    unit_ids: set[str] = set()
     for i, u in enumerate(need(doc, "team", p.name, list)):
         where = f"{p.name}: team[{i}]"
-        uid = check_key_chunk(need(u, "id", where, str), where, "id")
-        where += f" ({uid})"
-        if any(x.id == uid for x in units):
-            raise ScenarioError(f"{where}: field 'id': duplicate unit id")
-        kind = need(u, "kind", where, str)
-        if kind not in UNIT_KINDS:
-            raise ScenarioError(f"{where}: field 'kind': {kind!r} not one of {', '.join(UNIT_KINDS)}")
-        parent = u.get("parent")
-        if parent is not None and not isinstance(parent, str):
-            raise ScenarioError(f"{where}: field 'parent': expected a unit id or null, got {type(parent).__name__}")
+        uid, where, kind, parent = unit_entry(u, where, unit_ids, "kind", UNIT_KINDS)
         attrs = u.get("attrs", {})
         if not isinstance(attrs, dict):
             raise ScenarioError(f"{where}: field 'attrs': expected an object")
@@ -119,18 +86,7 @@ def _units(doc: dict, p: Path) -> TaskOrg:
                 number(v, where, f"attrs.{k}")
         ents = (uid,) if kind in ROBOT_KINDS else ()
         units.append(Unit(uid, str(u.get("name", uid)), kind, parent, ents, dict(attrs)))
-    roots = [u.id for u in units if u.parent is None]
-    if len(roots) != 1:
-        raise ScenarioError(f"{p.name}: team: field 'parent': need exactly one top unit, found {roots}")
-    ids = {u.id for u in units}
-    for u in units:
-        if u.parent is not None and u.parent not in ids:
-            raise ScenarioError(f"{p.name}: team ({u.id}): field 'parent': unknown unit {u.parent!r}")
-    taskorg = TaskOrg(units)
-    cyc = taskorg.cycle()
-    if cyc:
-        raise ScenarioError(f"{p.name}: team ({cyc[0]}): field 'parent': cycle {' -> '.join(cyc)}")
-    return taskorg
+    return checked_taskorg(units, f"{p.name}: team")
 
 
 def _params(cls, params: Any, where: str, world: dict[str, Place], targets: set[str] | None) -> None:
@@ -168,50 +124,15 @@ def load_plan(p: Path, world: dict[str, Place], targets: set[str] | None) -> tup
     if not isinstance(doc, dict):
         raise ScenarioError(f"{p.name}: expected an object")
     taskorg = _units(doc, p)
-    plans: dict[str, PlanSpec] = {}
-    for pname, ms in need(doc, "plans", p.name, dict).items():
-        check_key_chunk(pname, f"{p.name}: plans", "name")
-        if not isinstance(ms, list):
-            raise ScenarioError(f"{p.name}: plans.{pname}: expected a list of missions")
-        specs: list[MissionSpec] = []
-        for i, m in enumerate(ms):
-            where = f"{p.name}: plans.{pname}[{i}]"
-            mid = check_key_chunk(need(m, "id", where, str), where, "id")
-            where += f" ({mid})"
-            if any(s.id == mid for s in specs):
-                raise ScenarioError(f"{where}: field 'id': duplicate mission id")
-            unit = need(m, "unit", where, str)
-            if unit not in taskorg.units:
-                raise ScenarioError(f"{where}: field 'unit': unknown unit {unit!r}")
-            if taskorg.units[unit].kind not in ROBOT_KINDS:
-                raise ScenarioError(f"{where}: field 'unit': {unit!r} is a {taskorg.units[unit].kind}, not a robot")
-            typ = need(m, "type", where, str)
-            cls = REGISTRY.get(typ)
-            if cls is None:
-                raise ScenarioError(f"{where}: field 'type': unknown mission type {typ!r} "
-                                    f"(one of {', '.join(sorted(REGISTRY))})")
-            params = m.get("params", {})
-            _params(cls, params, where, world, targets)
-            after = m.get("after", [])
-            if not isinstance(after, list) or not all(isinstance(a, str) for a in after):
-                raise ScenarioError(f"{where}: field 'after': expected a list of mission ids")
-            if mid in after:
-                raise ScenarioError(f"{where}: field 'after': a mission cannot come after itself")
-            specs.append(MissionSpec(mid, unit, typ, time_constraint(m.get("start"), where + " start", START_TYPES),
-                                     time_constraint(m.get("end"), where + " end", END_TYPES), tuple(after), params))
-        mids = {s.id for s in specs}
-        for s in specs:
-            for a in s.after:
-                if a not in mids:
-                    raise ScenarioError(f"{p.name}: plans.{pname} ({s.id}): field 'after': unknown mission {a!r}")
-        plan = PlanSpec(pname, specs)
-        cyc = plan.cycle()
-        if cyc:
-            raise ScenarioError(f"{p.name}: plans.{pname} ({cyc[0]}): field 'after': cycle {' -> '.join(cyc)}")
-        plans[pname] = plan
-    initial = doc.get("initial_plan", "main")
-    if not isinstance(initial, str) or initial not in plans:
-        raise ScenarioError(f"{p.name}: field 'initial_plan': no plan named {initial!r}")
+
+    def check_mission(cls, params: dict, where: str, unit: str) -> None:
+        """This domain's checks of one mission of a plan."""
+        if taskorg.units[unit].kind not in ROBOT_KINDS:
+            raise ScenarioError(f"{where}: field 'unit': {unit!r} is a {taskorg.units[unit].kind}, not a robot")
+        _params(cls, params, where, world, targets)
+
+    plans, initial = load_plans(doc, p.name, taskorg.units, REGISTRY, f"one of {', '.join(sorted(REGISTRY))}",
+                                check_mission)
     return taskorg, plans, initial
 
 
@@ -230,13 +151,13 @@ def load_events(root: Path, duration: float, taskorg: TaskOrg, targets: set[str]
             raise ScenarioError(f"{where}: field 't': {m.t} is after the end of the scenario "
                                 f"(scenario.json duration_s = {duration})")
         k = type(m)
-        if k is M.UvState or k is M.UvSighting:
+        if k is messages.UvState or k is messages.UvSighting:
             known(m.robot, where, "robot", robots, "robot")
-            if k is M.UvSighting:
+            if k is messages.UvSighting:
                 check_key_chunk(m.target, where, "target")
                 if targets is not None and m.target not in targets:
                     raise ScenarioError(f"{where}: field 'target': unknown target {m.target!r} (scenario.json targets)")
-        elif k is M.UvAgent:
+        elif k is messages.UvAgent:
             known(m.sender, where, "sender", units, "unit")
             known(m.to, where, "to", units, "unit")
             check_key_chunk(m.task, where, "task")
@@ -245,30 +166,14 @@ def load_events(root: Path, duration: float, taskorg: TaskOrg, targets: set[str]
     return read_events(root, check)
 
 
-def _guarded(fname: str, fn, *args):
-    """Run one file's loader; an error its checks did not foresee still names the file."""
-    try:
-        return fn(*args)
-    except ScenarioError:
-        raise
-    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as e:
-        raise ScenarioError(f"{fname}: unexpected {type(e).__name__} while loading: {e}") from e
-
-
 def load(path: str | Path, events: bool = True) -> UvScenario:
     root = Path(path)
     if not root.is_dir():
         raise ScenarioError(f"{root}: not a scenario folder")
-    meta, name, proj, duration = _guarded("scenario.json", _load_meta, root)
+    meta, name, proj, duration = guarded("scenario.json", _load_meta, root)
     targets = set(meta["targets"]) if meta.get("targets") is not None else None
-    world = _guarded("world.geojson", load_world, root / "world.geojson", proj)
-    taskorg, plans, initial = _guarded("plan.json", load_plan, root / "plan.json", world, targets)
-    dflt = meta.get("default_eas")
-    if dflt is not None:
-        if not isinstance(dflt, list) or not dflt:
-            raise ScenarioError("scenario.json: field 'default_eas': expected a non-empty list of unit ids")
-        for u in dflt:
-            if not isinstance(u, str) or u not in taskorg.units:
-                raise ScenarioError(f"scenario.json: field 'default_eas': unknown unit {u!r:.40}")
-    evs = _guarded("events", load_events, root, duration, taskorg, targets) if events else []
+    world = guarded("world.geojson", load_world, root / "world.geojson", proj)
+    taskorg, plans, initial = guarded("plan.json", load_plan, root / "plan.json", world, targets)
+    check_default_eas(meta, taskorg.units)
+    evs = guarded("events", load_events, root, duration, taskorg, targets) if events else []
     return UvScenario(name, root, proj, duration, taskorg, plans, initial, evs, meta, world=world)

@@ -22,7 +22,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Point
 
-from . import tasks as T
+from . import tasks as task_messages
 
 DT = 0.5
 FAULTS = ("stuck", "gps", "diverge", "link")
@@ -177,8 +177,8 @@ class RobotSim:
         if getattr(task, "sector", None) is not None and task.sector not in self.world:
             self.log.append({"t": t, "what": "refused", "robot": self.id, "why": f"unknown sector {task.sector}"})
             return
-        if isinstance(task, (T.Pursue, T.Accept)):
-            if isinstance(task, T.Accept):
+        if isinstance(task, (task_messages.Pursue, task_messages.Accept)):
+            if isinstance(task, task_messages.Accept):
                 self.emit(t, {"kind": "uv-agent", "sender": self.id, "to": task.frm, "act": "accept",
                               "task": task.task, "target": task.target})
                 self.log.append({"t": t, "what": "accept", "robot": self.id, "from": task.frm, "target": task.target})
@@ -191,7 +191,7 @@ class RobotSim:
             self.pursuit = Pursuit(task.target, task.sector, None, max(lt, t), tuple(lxy))
             self.held = False
             self.log.append({"t": t, "what": "commit", "robot": self.id, "target": task.target, "sector": task.sector})
-        elif isinstance(task, T.Drop):
+        elif isinstance(task, task_messages.Drop):
             pu = self.pursuit
             if pu is None or pu.target != task.target:
                 return
@@ -200,11 +200,11 @@ class RobotSim:
                 self._next(t, ok=False)
             else:
                 self.pursuit, self.held = None, True
-        elif isinstance(task, T.Resume):
+        elif isinstance(task, task_messages.Resume):
             if self.pursuit is None:
                 self.held = False
                 self._begin(t)       # resume the patrol from the nearest corner
-        elif isinstance(task, T.Handoff):
+        elif isinstance(task, task_messages.Handoff):
             self.emit(t, {"kind": "uv-agent", "sender": self.id, "to": task.to, "act": "delegate",
                           "task": task.task, "target": task.target})
             self.log.append({"t": t, "what": "handoff", "robot": self.id, "to": task.to, "target": task.target})

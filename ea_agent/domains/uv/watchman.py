@@ -72,7 +72,7 @@ class Watchman:
     def __init__(self, owner: str, taskorg: TaskOrg, proj: Projection, reacquire_s: float, human: bool):
         self.owner = owner
         self.proj = proj
-        self.to_xy = proj._fwd.transform   # scalar projection, ~1 us
+        self.to_xy = proj._fwd.transform   # the scalar projection: one point per message, no array made for it
         self.robots: dict[str, Robot] = {u.id: Robot(u.id, u.attrs, u.kind) for u in taskorg.units.values()
                                          if u.kind in ROBOT_KINDS}
         self.units = set(taskorg.units)
