@@ -30,10 +30,8 @@ PROGRESS = "_p"   # the progress stream's last chunk: no data family is called s
 Group = Annotated[str, msgspec.Meta(min_length=1, max_length=512, pattern=r"^[^*$#?]+$")]
 
 
-class GroupFrame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, array_like=True):
-    """One group's messages of flush `at`: `seq` numbers this group's frames; `idx` is each
-    message's index in the flush. An array, not a map: a group frame is small and there are
-    many (field names were a third of its bytes over a radio link)."""
+class _GroupHead(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, array_like=True):
+    """What a group frame is before its messages: shared by the frame in memory and as sent."""
     v: Literal[1]
     source: F.Name
     epoch: Annotated[int, msgspec.Meta(ge=0, le=2**62)]
@@ -41,6 +39,12 @@ class GroupFrame(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_onl
     seq: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
     at: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
     idx: Annotated[list[int], msgspec.Meta(max_length=F.MAX_MSGS)] = []
+
+
+class GroupFrame(_GroupHead, frozen=True, forbid_unknown_fields=True, kw_only=True, array_like=True):
+    """One group's messages of flush `at`: `seq` numbers this group's frames; `idx` is each
+    message's index in the flush. An array, not a map: a group frame is small and there are
+    many (field names were a third of its bytes over a radio link)."""
     msgs: Annotated[list[bytes], msgspec.Meta(max_length=F.MAX_MSGS)] = []
 
 
@@ -102,15 +106,8 @@ def _pack(b: bytes):
     return p
 
 
-class _GroupWire(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, array_like=True):
+class _GroupWire(_GroupHead, frozen=True, forbid_unknown_fields=True, kw_only=True, array_like=True):
     """A `GroupFrame` as sent: each message its bytes or, a position report, its array."""
-    v: Literal[1]
-    source: F.Name
-    epoch: Annotated[int, msgspec.Meta(ge=0, le=2**62)]
-    group: Group
-    seq: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
-    at: Annotated[int, msgspec.Meta(ge=1, le=W.SEQ_LIMIT)]
-    idx: Annotated[list[int], msgspec.Meta(max_length=F.MAX_MSGS)] = []
     msgs: Annotated[list[bytes | Packed], msgspec.Meta(max_length=F.MAX_MSGS)] = []
 
 
