@@ -137,7 +137,7 @@ class LivePeer:
         # hears, decided at a deterministic point (`_interest_at`)
         self.bygroup = GroupIntake(self.ks, self.max_bytes, self.gate, log, journal=self.seq.journal_frames,
                                    streams=GF.streams_of(sc, root), interest=self.cfg.get("dissemination", {}),
-                                   room=self._room_for)
+                                   room=self.seq.fits)
         self.frames = 0
         self.rebuilding: str | None = None    # the source whose return the EA is being rebuilt for
         self.caught_up_to = -math.inf         # what a rebuilt EA raises at or before this is late
@@ -279,11 +279,6 @@ class LivePeer:
             if late:
                 self.caught_up_to = max(self.caught_up_to, f.wm if math.isfinite(f.wm) else self.caught_up_to)
             self.heard_again.add(f.source)
-
-    def _room_for(self, n: int) -> bool:
-        """Whether `n` more bytes of frames may wait outside the order: the frames the
-        sequencer holds and the group frames kept for assembly share half of `max_held_mb`."""
-        return self.seq.hold.bytes + self.bygroup.bytes + n <= self.max_held // 2
 
     def _order_bound(self) -> int:
         return max(1000, self.max_held // 2 // ORDER_ITEM_BYTES)

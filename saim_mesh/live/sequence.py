@@ -57,6 +57,11 @@ class Sequencer:
         self.gaps = 0                            # frames that never came (beyond recovery and journals)
         self.misses = 0                          # frames the advanced subscriber said it missed
 
+    def fits(self, n: int) -> bool:
+        """Whether `n` more bytes may wait outside the order: what this holds and what is held
+        elsewhere against the same bound (`also_held`) share half of the peer's `max_held`."""
+        return self.hold.bytes + self.also_held() + n <= self.max_held() // 2
+
     def resume(self, source: str, epoch: int, next_seq: int) -> None:
         """The source's sequence goes on at `next_seq` of `epoch` (a journal replayed)."""
         self.seq_of[source] = [epoch, next_seq]
@@ -73,7 +78,7 @@ class Sequencer:
             self.hold.reset_early(f.source)
         if f.epoch < st[0] or f.seq < st[1]:
             return True   # an old epoch's frame, or one taken already
-        if self.behind.get(f.source) or self.hold.bytes + self.also_held() + len(payload) > self.max_held() // 2 and (
+        if self.behind.get(f.source) or not self.fits(len(payload)) and (
                 f.seq > st[1] or self.hold.waiting_for(f.source)):
             if not self.behind.get(f.source):
                 self.log(f"source {f.source}: over {self.max_held() >> 21} MB held: its frames from {st[1]} "
