@@ -43,3 +43,22 @@ def test_the_timeout_is_said_not_waited_past(tmp_path):
     finally:
         p.kill()
         p.wait()
+
+
+def test_a_line_still_being_written_is_read_only_once_whole(tmp_path):
+    """The child writes the line's start, waits, then its end: the line returned is whole
+    (a read of the unfinished line gave 'received 150000' without its duration)."""
+    code = ("import sys, time; sys.stdout.write('received 150000'); sys.stdout.flush(); time.sleep(0.5); "
+            "print(' 3.1', flush=True); time.sleep(30)")
+    log, p = spawn(tmp_path, code)
+    try:
+        assert wait_line(log, p, "received", 20) == "received 150000 3.1"
+    finally:
+        p.kill()
+        p.wait()
+
+
+def test_a_line_printed_just_before_exit_is_found_not_called_an_early_exit(tmp_path):
+    log, p = spawn(tmp_path, "print('received 5 0.1', flush=True)")
+    p.wait()
+    assert wait_line(log, p, "received", 20) == "received 5 0.1"

@@ -115,9 +115,16 @@ def wait_line(log: Path, proc, prefix: str, timeout: float) -> str:
     end = time.monotonic() + timeout
 
     def lines() -> list[str]:
-        return log.read_text(errors="replace").splitlines() if log.exists() else []
-    while (got := next((x for x in lines() if x.startswith(prefix)), None)) is None:
+        """Whole lines only: a line still being written would match its prefix cut short."""
+        text = log.read_text(errors="replace") if log.exists() else ""
+        return text[:text.rfind("\n") + 1].splitlines()
+
+    def first() -> str | None:
+        return next((x for x in lines() if x.startswith(prefix)), None)
+    while (got := first()) is None:
         if proc.poll() is not None:
+            if (got := first()) is not None:   # it printed, then exited, between the two looks
+                return got
             raise RuntimeError(f"exited {proc.returncode} before '{prefix}': {lines()[-10:]}")
         if time.monotonic() > end:
             raise RuntimeError(f"within {timeout} s: no '{prefix}' in {log}: {lines()[-10:]}")
