@@ -166,3 +166,19 @@ def test_malformed_commands_are_counted_and_answered(plain):
     assert peer.p.poll() is None   # the peer keeps working
     code, res = cli("ack", ep, root, "--alert", aid)
     assert code == 0 and res["ok"]
+
+
+def test_a_command_given_mode_and_routers_opens_its_session_with_them(monkeypatch):
+    """`ack --mode client --routers r0` (a mesh launched by hand through a router): the
+    session is opened as a client that accepts router.r0 as a relay, not in peer mode."""
+    from saim_mesh.cli import main
+    from saim_mesh.launch import zenoh_config
+    seen: list[dict] = []
+
+    def config_seen(*args, **kw):
+        seen.append(kw)
+        raise ConnectionError("stop here: no session in this test")
+    monkeypatch.setattr(zenoh_config, "config", config_seen)
+    code = main(["ack", "--scenario", SC, "--unit", "A2", "--alert", "A2/1", "--connect", "tcp/127.0.0.1:9",
+                 "--mode", "client", "--routers", "r0"])
+    assert code == 2 and seen == [{"mode": "client", "routers": ["r0"]}]

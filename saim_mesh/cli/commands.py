@@ -65,7 +65,7 @@ def cmd_command(a) -> int:
     root = a.root or f"saim/{sc.name}"
     name = a.as_ or (f"console.{a.unit}" if a.unit in mesh_units(sc) else f"console.{sc.taskorg.root}")
     from ..security.sign import signer_for
-    conf = config(None, a.connect, a.zenoh_config, a.multicast, a.pki, name, sc, root)
+    conf = config(None, a.connect, a.zenoh_config, a.multicast, a.pki, name, sc, root, **_zmode(a))
     signer = signer_for(conf)   # secure mode: signed as `name`
     with zenoh.open(conf) as session:
         res = C.send(session, KeySpace.of(sc, root), a.unit, cmd, C.by_of(name, a.unit), a.timeout, signer)
