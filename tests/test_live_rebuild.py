@@ -154,7 +154,7 @@ def test_a_rebuild_from_the_copy_taken_at_the_loss_equals_one_from_event_time_ze
     flapping(fast, merged, downs)
     slow = LivePeer(sc, "BN", config(["tcp/127.0.0.1:0"], None), "t/rebuild", list(NAMES),
                     str(tmp_path / "slow" / "BN.jsonl"), log=lambda s, **k: None)
-    slow._keep_before_loss = lambda source, n: None   # no copies: every return rebuilds from 0
+    slow.before_loss.keep = lambda source, n, state: None   # no copies: every return rebuilds from 0
     flapping(slow, merged, downs)
 
     assert fast.rebuilds == slow.rebuilds == 3

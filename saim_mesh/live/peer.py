@@ -16,20 +16,17 @@ monitoring goes on with the others. When it comes back its facts are taken on a 
 and what they raise is marked late."""
 from __future__ import annotations
 
-import copy
 import heapq
 import math
 import queue
 import sys
 import time
-from dataclasses import dataclass
 
 import zenoh
 
 from dissemination.keyspace import KeySpace
 from ea_agent.core.alert import hms
 from ea_agent.core.ids import AlertIds
-from ea_agent.core.snapshot import snapshot
 
 from ..authority import commands as C
 from ..authority import directives as D
@@ -45,6 +42,7 @@ from .authority import DirectiveIntake
 from .bygroup import GroupIntake
 from .depend import depends
 from .journal import InputJournal
+from .losses import BeforeLosses, Carried
 from .order import EventTimeOrder
 from .outputs import Outputs
 from .liveness import SourceWatch
@@ -57,19 +55,6 @@ CHECK_S = 0.05        # wall seconds between the loop's checks (retries, gaps, s
 ORDER_ITEM_BYTES = 320   # what one fact waiting in the order holds (a decoded report and its heap entry)
 DATA = frozenset((M.LocationReport, M.SensorTrack, M.MissionConfirm, M.CallForFire, M.CallForFireConfirm, M.Order,
                   M.Reorganization))
-LOCATION = M.LocationReport
-TRACK = M.SensorTrack
-
-
-@dataclass
-class BeforeLoss:
-    """What a source's return rebuilds the EA from: its input record index `n` (the loss)
-    and copies of the EA, the order, the held directives and commands just before it."""
-    n: int
-    ea: object
-    order: EventTimeOrder
-    pending: list
-    cmds: list
 
 
 class LivePeer:
@@ -127,7 +112,7 @@ class LivePeer:
         # the depended sources' liveness: heard when, promised how far, ended
         self.watch = SourceWatch(self.sources, silence_s, max(silence_s, float(mesh["source_join_s"])),
                                  float(mesh["source_end_wait_s"]))
-        self.reports: dict[str, set[str]] = {}   # source -> the units whose positions it carried
+        self.carried = Carried(sc.taskorg)   # per source, the units and tracks its loss leaves unsure
         self.late_from: float | None = None   # set while facts of a returning source are taken
         # each source's frames in its own sequence: held, fetched again, gaps (`sequence`)
         self.seq = Sequencer(self.take, self._frame, self.ks, log, lambda: self.max_held,
@@ -145,7 +130,7 @@ class LivePeer:
         self.history: list | None = None      # journal replay: the records taken so far (else the file)
         self.at_record: int | None = None     # the index of the input record a replay is taking
         # per lost source, the EA as it stood just before the loss: its return rebuilds from there
-        self.before_loss: dict[str, BeforeLoss] = {}
+        self.before_loss = BeforeLosses((self, self.sc, self.ids), log)
         self.presence = PeerPresence(unit, self.ks, self.gate)   # the other EAs it watches
         self.restoring = False                # a restarted peer replaying its own input journal
         self.catching_up = False              # ... then taking what its sources sent while it was down
@@ -342,15 +327,7 @@ class LivePeer:
                     self.gate.rejects.add(M.MessageError(m.KIND, "(kind)", f"a {m.KIND} message in a source's "
                                                                            "frame"), key)
             items = [m for m in items if type(m) in self.data_kinds]
-        reported = self.reports.get(f.source)
-        if reported is None:
-            reported = self.reports[f.source] = set()
-        if LOCATION in kinds:
-            unit_of = self.sc.taskorg.entity_unit.get
-            reported.update(u for e in {m.entity for m in items if type(m) is LOCATION}
-                            if (u := unit_of(e)) is not None)
-        if TRACK in kinds:   # a lost source's hostile tracks stand still where it last saw them
-            reported.update(m.track for m in items if type(m) is TRACK)
+        self.carried.note(f.source, kinds, items)
         why = self.order.take(f.source, f.epoch, f.seq, f.wm, items, f.end)
         if why == "full":   # the order's buffer is full: offered again after the next release, never dropped
             if not retrying:
@@ -393,8 +370,8 @@ class LivePeer:
                      event="source-back")
         self.rebuilds += 1
         self.rebuilding = source
-        snap = self.before_loss.pop(source, None)
-        if snap is not None and snap.n < len(records) and records[snap.n][:2] == ["lost", source]:
+        snap = self.before_loss.take(source, records)
+        if snap is not None:
             self.ea, self.order, self.dirs.pending, self.held_cmds = snap.ea, snap.order, snap.pending, snap.cmds
             start = snap.n + 1
             self.log(f"source {source} back: EA rebuilt from its loss ({len(records) - start} records)", flush=True)
@@ -412,9 +389,7 @@ class LivePeer:
             start = 0
         lost_at = start - 1 if start else max((i for i, r in enumerate(records) if r[:2] == ["lost", source]),
                                               default=-1)
-        for s, b in list(self.before_loss.items()):   # taken while `source` was lost: taken again below
-            if b.n > lost_at:
-                del self.before_loss[s]
+        self.before_loss.forget_after(lost_at)   # losses while `source` was lost: taken again below
         waiting = self.seq.hold.take_waiting()   # never journalled: offered again after the journal's frames
         returned = {source} | {r[1] for r in records if r[0] == "back"}
         try:
@@ -532,12 +507,12 @@ class LivePeer:
             return
         n = self.at_record if self.at_record is not None else self.journal.n if self.journal is not None else None
         if n is not None:
-            self._keep_before_loss(source, n)
+            self.before_loss.keep(source, n, (self.ea, self.order, list(self.dirs.pending), list(self.held_cmds)))
         if journal and self.journal is not None:
             self.journal.lost(source, self.order.released, why)
         self.order.lose(source, why)
-        self._inhibit_unknown(source)
-        units = self._units_of(source)
+        self.carried.inhibit(self.ea, source, self.log)
+        units = self.carried.units_of(source)
         named = ", ".join(units[:8]) + (f" and {len(units) - 8} more" if len(units) > 8 else "")
         wm = self.order.watermarks()[source]
         since = f"since {hms(wm)}" if math.isfinite(wm) and wm >= 0 else "at all"
@@ -545,42 +520,6 @@ class LivePeer:
                              f" ({why}); monitoring of {named or 'what it reports'} degraded",
                      event="source-lost", why=why, units=units, declared_wall=round(time.time(), 3))
         self._apply()
-
-    def _keep_before_loss(self, source: str, n: int) -> None:
-        """A copy of the EA, its order and held directives as they stand before the loss of
-        `source` (input record `n`): when it returns, the EA is rebuilt from there rather
-        than from event time 0, which at every flap of a link cost each EA beyond it its
-        whole journal again (docs/deployment.md). The copy shares the scenario and this peer."""
-        try:
-            ea, order, pending, cmds = snapshot((self.ea, self.order, list(self.dirs.pending), list(self.held_cmds)),
-                                                share=(self, self.sc, self.ids))
-        except (TypeError, copy.Error) as e:   # state that cannot be copied: the return rebuilds from 0
-            self.log(f"source {source} lost: no copy of the EA to rebuild from ({e})", flush=True)
-            return
-        self.before_loss[source] = BeforeLoss(n, ea, order, pending, cmds)
-
-    def _inhibit_unknown(self, source: str) -> None:
-        """While the loss stands, what the EA concludes about the units and hostile tracks
-        the source reported (silent, late, off their route; a contact with a track that
-        moved on) rests on a picture it knows to be partial, as the
-        system problem says: those alerts are inhibited by it (logged, marked, not shown as
-        new; docs/console.md). When the source is back the rebuilt EA raises what really
-        fell due, shown, marked late. Rules of at most 64 units."""
-        carried = sorted(set(self.reports.get(source, ())) | set(self._units_of(source)))
-        for i in range(0, len(carried), 64):
-            try:
-                self.ea.inhibit({"id": f"lost-{source}-{i // 64}", "source": {"types": ["unknown-position"],
-                                 "subjects": [source]}, "target": {"subjects": carried[i:i + 64]}, "for_s": 86400.0,
-                                 "comment": f"source {source} lost: its units' silence is that loss"})
-            except ValueError as e:   # a unit name the rules refuse: say so, monitoring goes on
-                self.log(f"source {source}: no inhibition of its units' unknown positions: {e}", flush=True)
-
-    def _units_of(self, source: str) -> list[str]:
-        """The units whose positions the source carried (the platoons: the units an EA monitors)."""
-        to = self.sc.taskorg
-        us = {to.parent.get(u, u) if to.units[u].kind == "squad" else u for u in self.reports.get(source, ())
-              if u in to.units}
-        return sorted(us)
 
     def _apply(self) -> None:
         """Everything the watermarks allow, in event-time order; then the late path."""
