@@ -29,7 +29,6 @@ from ea_agent.core.alert import hms
 from ea_agent.core.ids import AlertIds
 
 from ..authority import commands as C
-from ..authority import directives as D
 from ..protocol import messages as M
 from ..protocol import gate as G
 from ..protocol import wire as W
@@ -37,6 +36,7 @@ from ..inprocess.runner import config_for, make_ea
 from ..scenario import Scenario
 from ..security.sign import signer_for
 from . import frames as F
+from . import commanded, recover
 from . import groupframes as GF
 from .authority import DirectiveIntake
 from .bygroup import GroupIntake
@@ -181,25 +181,7 @@ class LivePeer:
             inferred.append(self._confirm_up)
 
     def _confirm_up(self, c) -> None:
-        """Its EA inferred that one of its own unit's missions started (the unit crossed its
-        line of departure): published up the chain once, as a confirmation signed by this
-        EA, effective `CONFIRM_LEAD_S` later on an epoch's end (superiors that saw the
-        crossing too have it by then). Not while a restart replays what was published before."""
-        if c.unit != self.unit or (c.mission, c.phase) in self.confirmed_up:
-            return
-        self.confirmed_up.add((c.mission, c.phase))
-        if self.restoring or self.session is None:
-            return
-        self.out.inputs_on_disk()
-        at = math.ceil((c.t + D.CONFIRM_LEAD_S) / self.ea.epoch_s) * self.ea.epoch_s
-        try:
-            d = D.publish(self.session, self.ks.root, self.signer, self.unit, "confirm", at=at, mission=c.mission,
-                          phase=c.phase)
-        except (ValueError, zenoh.ZError) as e:   # never kills the peer: said, and the EA goes on
-            self.log(f"confirmation of {c.mission} {c.phase} not published: {e}", flush=True)
-            return
-        self.log(f"confirmed up: {c.mission} {c.phase} at {at:.1f} (seen at {c.t:.1f}) req={d.req}", flush=True)
-
+        commanded.confirm_up(self, c)
     def _system(self, subject: str, text: str, priority: str = "immediate", **details) -> None:
         self.log(f"system {subject}: {text}", flush=True)
         self.ea.emit(M.Alert(round(max(self.ea.now, 0.0), 3), self.unit, "unknown-position", "system-problem",
@@ -355,87 +337,13 @@ class LivePeer:
         return True
 
     def back(self, source: str) -> None:
-        """A lost source is heard again. Its facts since the loss cannot be put in order by
-        the EA that went on without them, so a fresh EA takes every input journalled so far
-        in event-time order as if the source had never been lost (the other losses stand),
-        then waits for the source to catch up: what it raises that the old EA had not
-        raised is given, marked late with when it was due; what both raised is not given
-        again, and keeps its id (`ids.AlertIds`, shared by both). Alerts the old EA raised
-        on the partial picture stay in the log (never withdrawn). A commander's commands to
-        the old EA are journalled and taken again by the new one at their event time."""
-        records = self._history()
-        since = self.order.released
-        self.caught_up_to = max(self.caught_up_to, self.ea.now)
-        self._system(source, f"source {source} is back (its facts since {hms(since)} are taken late)",
-                     event="source-back")
-        self.rebuilds += 1
-        self.rebuilding = source
-        snap = self.before_loss.take(source, records)
-        if snap is not None:
-            self.ea, self.order, self.dirs.pending, self.held_cmds = snap.ea, snap.order, snap.pending, snap.cmds
-            start = snap.n + 1
-            self.log(f"source {source} back: EA rebuilt from its loss ({len(records) - start} records)", flush=True)
-        else:   # from event time 0 (no copy: it could not be made, or the peer restarted since)
-            self.ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
-            self.ea.notify.ids = self.ids
-            self.ea.notice_sinks.append(self._notice)
-            self._tell_inferred(self.ea)
-            if self.armed:
-                self.ea.arm()
-            self.ea.start(0.0)
-            self.order = EventTimeOrder(self.sources, max_buffered=self._order_bound())
-            self.dirs.reset()
-            self.held_cmds = []
-            start = 0
-        lost_at = start - 1 if start else max((i for i, r in enumerate(records) if r[:2] == ["lost", source]),
-                                              default=-1)
-        self.before_loss.forget_after(lost_at)   # losses while `source` was lost: taken again below
-        waiting = self.seq.hold.take_waiting()   # never journalled: offered again after the journal's frames
-        returned = {source} | {r[1] for r in records if r[0] == "back"}
-        try:
-            for i in range(start, len(records)):
-                rec = records[i]
-                self.at_record = i
-                if rec[0] == "frame":
-                    self.take(rec[1], "", journal=False)
-                elif rec[0] == "dir":
-                    self.journalled_directive(rec)
-                elif rec[0] == "cmd":
-                    self.journalled_command(rec)
-                elif rec[0] == "lost" and rec[1] not in returned:
-                    self.lose(rec[1], rec[3], journal=False)
-        finally:
-            self.rebuilding, self.at_record = None, None
-            for src, q in waiting.items():
-                for item in q:
-                    self.seq.hold.wait(src, item)
-
+        """A lost source is heard again: the EA is rebuilt as if it had never been lost
+        (`recover.rebuild`)."""
+        recover.rebuild(self, source)
     def restart(self) -> int:
-        """A restarted peer (its host or process died): its input journal is replayed
-        through the fresh EA first, so it stands where it stood; alerts its log holds were
-        told already and are not given again, one the kill cut off before its log line is
-        given now, marked late. Each source's sequence resumes after the last frame taken;
-        what the sources sent meanwhile comes from their caches and journals, and what it
-        raises up to their edge is marked late. Returns the records replayed."""
-        if self.journal is None or not self.journal.path.exists():
-            return 0
-        from .journal import records
-        recs = records(self.journal.path)
-        if not recs:
-            return 0
-        self.history, self.restoring = [], True
-        try:
-            for rec in recs:
-                self.replay_record(rec)
-                self.history.append(rec)
-        finally:
-            self.history, self.restoring, self.at_record = None, False, None
-        self.restored = len(recs)
-        self.catching_up = True
-        self.log(f"restart: {len(recs)} input records replayed, EA at {hms(max(self.ea.now, 0.0))}; "
-                 f"{len(self.given)} alerts stand", flush=True)
-        return len(recs)
-
+        """A restarted peer stands where it stood: its input journal replayed through the
+        fresh EA (`recover.restart`). Returns the records replayed."""
+        return recover.restart(self)
     def join(self) -> None:
         """A fresh peer (no journal to replay) joining the mesh: a source already under way
         (the first frame heard of it is not its first) tells it the past, and what the EA
@@ -443,64 +351,8 @@ class LivePeer:
         self.join_late, self.catching_up = {}, True
 
     def replay_record(self, rec: list) -> None:
-        """One input-journal record taken again, as the decision it records was taken live
-        (a restart, or `journal.replay`: `history` holds the records before it); each
-        source's sequence resumes after its frames."""
-        self.at_record = len(self.history) if self.history is not None else None
-        if rec[0] == "frame":
-            f = self._frame(rec[1], "")
-            if f is not None:
-                self.take(rec[1], "", journal=False, f=f)
-                self.seq.resume(f.source, f.epoch, f.seq + 1)
-        elif rec[0] == "lost":
-            self.lose(rec[1], rec[3], journal=False)
-        elif rec[0] == "dir":
-            self.journalled_directive(rec)
-        elif rec[0] == "cmd":
-            self.journalled_command(rec)
-        elif rec[0] == "peer":
-            self.peer_change(rec[1], rec[2])
-        elif rec[0] == "back" and rec[1] in self.order.lost and self.rebuilding is None:
-            self.back(rec[1])   # rebuilt where it was live (by key group: before the flush that brought it back)
-
-    def journalled_directive(self, rec: list) -> None:
-        """A directive as the input journal holds it (checked when it came): held again."""
-        _, by, kind, body = rec
-        d = D.decode(kind, body, 1 << 17)
-        self.dirs.reqs.add((by, d.req))
-        self._hold(D.Taken(by, d))
-
-    def journalled_command(self, rec: list) -> None:
-        """A commander's command as the input journal holds it (checked when it came):
-        taken again at the event time it was taken, now if the EA is there (a restart),
-        else when it gets there (a rebuilt EA behind it)."""
-        _, t, kind, body = rec
-        cls = W.COMMANDS.get(kind)
-        if cls is None:   # a journal of another version: said, never a crash
-            self.log(f"input journal: unknown command kind {str(kind)[:32]!r} not taken again", flush=True)
-            return
-        cmd = W.decode_control(cls, body, self.max_bytes)
-        if t <= self.ea.now:
-            C.apply(self.ea, cmd, t)
-        else:
-            self._cmd_tie += 1
-            heapq.heappush(self.held_cmds, (t, self._cmd_tie, kind, cmd))
-            self._apply()
-
-    def _journal_command(self, kind: str, cmd, t: float) -> None:
-        if self.journal is not None:
-            self.journal.command(t, kind, W.encode(cmd))
-
-    def _history(self) -> list:
-        """The input records so far (the journal's, flushed as written, or those a journal
-        replay fed)."""
-        if self.history is not None:
-            return list(self.history)
-        if self.journal is None:
-            raise RuntimeError("a live peer with no input journal cannot rebuild its EA when a source returns")
-        from .journal import records
-        return records(self.journal.path)
-
+        """One input-journal record taken again, as it was taken live (`journal.replay`)."""
+        recover.replay_record(self, rec)
     def lose(self, source: str, why: str, journal: bool = True) -> None:
         """Declare a depended source lost: monitoring goes on without it (a logged decision)."""
         if source in self.order.lost:
@@ -538,7 +390,7 @@ class LivePeer:
                     for m in self.order.release(math.nextafter(tk.t, -math.inf)):
                         self.ea.submit(m)
                     self.ea.advance(tk.t, strict=True)
-                    self._take_directive(tk)
+                    commanded.take_directive(self, tk)
                 else:          # a journalled command, after the facts at its time, as it was taken
                     t, _, _, cmd = heapq.heappop(self.held_cmds)
                     for m in self.order.release(t):
@@ -572,67 +424,11 @@ class LivePeer:
                                       for s in self.sources)
 
     def directive(self, key: str, payload: bytes) -> None:
-        """A directive off the wire (or a late joiner's answer): checked, journalled, held
-        until the EA's event time reaches its `at` (`_apply`), or taken at once, late."""
-        got = self.dirs.check(key, payload)
-        if got is None:
-            return
-        tk, body = got
-        if self.journal is not None:
-            self.journal.directive(tk.by, D.KIND_OF[type(tk.d)], body)
-        self._hold(tk)
-
-    def _hold(self, tk: D.Taken) -> None:
-        if tk.t <= self.order.released:   # the EA is past it (cut off when it was issued): now, late
-            self._take_directive(tk, late=True)
-        else:
-            self.dirs.hold(tk)
-            self._apply()
-
-    def _take_directive(self, tk: D.Taken, late: bool = False) -> None:
-        due = tk.d.at
-        if late:
-            tk = D.at_least(tk, self.ea.now)
-        got = D.take(self.ea, tk, self.validate_plan)
-        if got is None:
-            return   # not for this EA
-        ok, why = got
-        if not ok:
-            self.gate.rejects.add(M.MessageError("directive", "(authority)", why), D.key(self.ks.root, tk.by, "?"))
-        res = D.result(tk, ok, tk.t, why, late, due)
-        if self.out.clog is not None:
-            self.out.clog.directive(self.unit, tk, res)
-        self.out.result(res)
-        self.log(f"directive {res.kind} by {tk.by} at {tk.t:.1f} ok={ok}" + (f" error={res.error}" if res.error else ""),
-                 flush=True)
-
-    def _serve_directives(self, query) -> None:
-        """A late joiner asks for the directives this EA took (each as it was received)."""
-        try:
-            query.reply(query.key_expr, D.wrap(self.dirs.kept))
-        except Exception as e:   # a bad query must not kill the peer
-            self.log(f"dirj: no answer to {str(query.key_expr)[:80]}: {e}", flush=True)
-
-    def _joined(self, payload: bytes) -> None:
-        try:
-            entries = D.unwrap(payload)
-        except M.MessageError as e:
-            self.gate.rejects.add(e, self.ks.root + "/dirj")
-            return
-        for k, p in entries:
-            self.directive(k, p)
-
+        """A directive off the wire (`commanded.directive`)."""
+        commanded.directive(self, key, payload)
     def command(self, key: str, payload: bytes) -> None:
-        """A commander's command (docs/console.md 1), taken as every peer takes one
-        (`commands.receive`) at the EA's time, answered on cmdlog/<unit>."""
-        # taken after every fact at the EA's time (it advanced as far as its sources promised)
-        res = C.receive(self.ea, self.unit, self.ks.root, self.cmd_gate, key, payload, self.ea.now, self.out.clog,
-                        after=True, taken=self._journal_command)
-        if res is None:
-            return
-        self.out.result(res)
-        self.log(f"cmd {res.kind} req={res.req} ok={res.ok}" + (f" error={res.error}" if res.error else ""), flush=True)
-
+        """A commander's command (`commanded.command`), answered on cmdlog/<unit>."""
+        commanded.command(self, key, payload)
     def end_t(self) -> float:
         """Where the EA finishes: the scenario's end for a recorded battle, else the furthest
         any source promised or sent (never the wall clock: the same live and when the

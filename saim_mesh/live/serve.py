@@ -15,6 +15,7 @@ import zenoh
 import zenoh.ext as zx
 
 from ..protocol import wire as W
+from . import commanded
 from . import groupframes as GF
 from .pace import EaProgress
 from .peer import BLOCK, CHECK_S
@@ -122,7 +123,7 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
                 if key == "cmd":
                     peer.command(*payload)
                 elif key == "dirq":
-                    peer._serve_directives(payload)
+                    commanded.serve_directives(peer, payload)
             s.put(peer.ks.bye(peer.unit), W.encode(W.make(W.Bye, unit=peer.unit)), congestion_control=BLOCK)
             for x in (cmds, dirs, dirj, alive, byes, token):
                 x.undeclare()
@@ -156,9 +157,9 @@ def _authority(peer, key: str, payload) -> bool:
     elif key == "dir":
         peer.directive(*payload)
     elif key == "dirj":
-        peer._joined(payload)
+        commanded.joined(peer, payload)
     elif key == "dirq":
-        peer._serve_directives(payload)
+        commanded.serve_directives(peer, payload)
     else:
         return False
     return True
