@@ -227,17 +227,53 @@ def replace_t(m, t):
     return replace(m, t=t)
 
 
+def forgeries(sc, pki, root: str) -> list[tuple[str, bytes, str]]:
+    """What an insider holding console.A's valid certificate forges to A2's EA, as (key,
+    payload, the kind its refusal is counted under): commands signed with another console's
+    key, an unsigned command, directives whose signature is not theirs."""
+    import random
+
+    import msgspec
+
+    from dissemination.keyspace import KeySpace
+    from saim_mesh.authority import commands as C
+    from saim_mesh.authority import directives
+    from saim_mesh.protocol import wire as W
+    from saim_mesh.security import sign
+    ks, rnd = KeySpace.of(sc, root), random.Random(7)
+    other = sign.load_signer(pki, "console.B")   # a console that does not command A2
+    out = []
+    for i in range(3):
+        key = ks.cmd("A2", "ack", "A")
+        out.append((key, other.sign(key, W.encode(C.make("ack", alert=f"A2/{900 + i}"))), "signed"))
+    out.append((ks.cmd("A2", "ack", "A"), W.encode(C.make("ack", alert="A2/1")), "ackcmd"))
+    k_order = directives.key(root, "A", "order")
+    mission = next(m.id for m in sc.plan.missions if m.unit == "A2")
+    for by in ("console.A", "console.BN"):   # its own name with a made-up signature, and its superior's
+        n = 1000 + len(out)
+        body = msgspec.msgpack.encode(directives.make("order", req=directives._req(), n=n, at=100.0,
+                                                      action="start-mission", mission=mission))
+        env = sign.Signed(v=sign.VERSION, by=by, n=n, key=k_order, body=body, sig=bytes(rnd.randbytes(64)))
+        out.append((k_order, sign._ENC.encode(msgspec.msgpack.Ext(sign.EXT, sign._ENC.encode(env))), "signed"))
+    return out
+
+
 def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
     """mTLS and access control: cp.BN (identity source.cp.BN) publishes the battle to A2's EA;
     an insider with a valid certificate (observer) puts a forged frame on cp.BN's key that
-    would end its stream at once: access control drops it, and A2 raises the in-process alerts."""
+    would end its stream at once: access control drops it, and A2 raises the in-process alerts.
+    Another insider (console.A's certificate) forges commands and directives to A2: each is
+    refused and counted exactly once, by kind, and changes nothing."""
+    import time
+    from collections import Counter
+
     import zenoh
 
     from dissemination.keyspace import KeySpace
     from saim_mesh.live import frames as F
     from saim_mesh.security import endpoint_tls, make_pki, names_for
     pki = tmp_path / "pki"
-    make_pki(pki, names_for(sc))
+    make_pki(pki, names_for(sc, consoles=True))
     ep, root = endpoint_tls(free_port()), f"test/{uuid.uuid4().hex[:8]}"
     sec = ["--pki", str(pki)]
     procs = []
@@ -252,12 +288,26 @@ def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
             pub = s.declare_publisher(KeySpace.of(sc, root).src("cp.BN"))
             pub.put(forged)
             pub.undeclare()
-        procs.append(start_source(tmp_path, "cp.BN", ep, root, "--tracks", "--speed", "max", "--by-group", *sec,
-                                  "--listen", "tls/127.0.0.1:0"))
-        line = procs[0].wait_for("summary ", 120)
+        forged = forgeries(sc, pki, root)
+        insider = zenoh.open(config(["tls/127.0.0.1:0"], [ep], pki=pki, name="console.A", sc=sc, root=root))
+        try:
+            for key, payload, _ in forged:
+                pub = insider.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                end = time.monotonic() + 30
+                while not pub.matching_status.matching:   # A2's EA subscribes to it: sent, never dropped
+                    assert time.monotonic() < end, f"A2's EA never subscribed to {key}"
+                    time.sleep(0.02)
+                pub.put(payload)
+                pub.undeclare()
+            procs.append(start_source(tmp_path, "cp.BN", ep, root, "--tracks", "--speed", "max", "--by-group", *sec,
+                                      "--listen", "tls/127.0.0.1:0"))
+            line = procs[0].wait_for("summary ", 120)
+        finally:
+            insider.close()
     finally:
         reap(procs)
     summary = json.loads(line.split(" ", 1)[1])
+    assert summary["rejects"] == dict(Counter(kind for *_, kind in forged)), summary["rejects"]
     from .heard import by_live_groups
     msgs = list(play.share(sc, None, True))
     heard = by_live_groups(sc, msgs, "A2")   # cp.BN publishes by key group: A2 takes the groups of its interest
