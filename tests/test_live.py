@@ -13,6 +13,7 @@ waits on printed lines and files, bounded by pytest-timeout.
 from __future__ import annotations
 
 import json
+import subprocess
 import uuid
 
 import pytest
@@ -263,7 +264,8 @@ def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
     an insider with a valid certificate (observer) puts a forged frame on cp.BN's key that
     would end its stream at once: access control drops it, and A2 raises the in-process alerts.
     Another insider (console.A's certificate) forges commands and directives to A2: each is
-    refused and counted exactly once, by kind, and changes nothing."""
+    refused and counted exactly once, by kind, and changes nothing. After R's reorganization
+    (from A to BN), the CLI's command to R's EA as A's console is refused, saying why."""
     import time
     from collections import Counter
 
@@ -299,11 +301,30 @@ def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
                     time.sleep(0.02)
                 pub.put(payload)
                 pub.undeclare()
-            procs.append(start_source(tmp_path, "cp.BN", ep, root, "--tracks", "--speed", "max", "--by-group", *sec,
-                                      "--listen", "tls/127.0.0.1:0"))
+            ep_r = endpoint_tls(free_port())   # R's EA, beside: the CLI's commands after R's reorganization
+            procs.append(Proc("peer-R", [*py(), "peer", "--scenario", SC, "--unit", "R", "--listen", ep_r, "--root",
+                                         root, "--sources", "cp.BN", "--out", str(tmp_path / "R.jsonl"), "--linger",
+                                         "120", *sec], env=clean_env(), log_dir=tmp_path))
+            procs[-1].wait_for("ready R", 60)
+            procs.append(Proc("source-cp.BN", [*py(), "source", SC, "--name", "cp.BN", "--connect", ep, ep_r, "--root",
+                                               root, "--linger", "600", "--tracks", "--speed", "max", "--by-group",
+                                               *sec, "--listen", "tls/127.0.0.1:0"], env=clean_env(), log_dir=tmp_path))
             line = procs[0].wait_for("summary ", 120)
         finally:
             insider.close()
+        procs[1].wait_for("end ", 120)   # R's EA is past the battle's end, answering commands
+
+        def ack_r(as_: str) -> tuple[int, dict]:
+            r = subprocess.run([*py(), "ack", "--scenario", SC, "--unit", "R", "--alert", "R/999", "--as", as_,
+                                "--connect", ep_r, "--root", root, "--timeout", "20", *sec],
+                               capture_output=True, text=True, timeout=90, env=clean_env())
+            assert r.stdout.strip(), r.stderr
+            return r.returncode, json.loads(r.stdout.strip().splitlines()[-1])
+        # R moved from A to BN at 600 (the plan's reorganization): A's console commands it no more
+        code, res = ack_r("console.A")
+        assert code == 2 and res["ok"] is False and res["error"] == "the console of A does not command R (its chain of command is now BN/R)", res
+        code, res = ack_r("console.BN")
+        assert code == 2 and "unknown alert" in res["error"], res   # its new superior's: through to the EA
     finally:
         reap(procs)
     summary = json.loads(line.split(" ", 1)[1])
