@@ -21,7 +21,6 @@ SUO's families:
   <root>/bye/<unit>                            a peer leaving cleanly (not an alarm)
   <root>/ack/<unit>/<source>                   how far unit's EA has taken in a source it depends on (its pace)
   <root>/src/<source>, <root>/srcj/<source>    a live source's frames and its journal (queryable)
-  <root>/health/<unit>                         a peer's reject counts (its superior alerts on a flood)
   <root>/cmd/<unit>/<kind>/<by>                a command to a unit's EA from the console of unit <by>
   <root>/cmdlog/<unit>                         the EA's answer to every command (CmdResult)
 UV (robot team): <root>/st/<block>/<cell>/<robot>, <root>/sgt/<block>/<cell>/<robot>/<target>,
@@ -248,8 +247,6 @@ class KeySpace:
     def ack(self, unit: str, peer: str = "*") -> str:
         return f"{self.root}/ack/{unit}/{peer}"
 
-    def health(self, unit: str) -> str:
-        return f"{self.root}/health/{unit}"
 
     def bye(self, unit: str) -> str:
         return f"{self.root}/bye/{unit}"

@@ -100,10 +100,10 @@ REMOVED = [f"saim_mesh.{m}" for m in ("peer", "replay", "offline", "intake", "ti
                                       "fusion.peer", "fusion.barrier")]
 # and the names in live modules that only the replay used: its clock, store and fusion messages
 # (saim_mesh/protocol/wire.py) and KeySpace's keys for them (dissemination/keyspace.py)
-REMOVED_NAMES = {"saim_mesh.protocol.wire": ("Tick", "StoreQuery", "StoreReply", "FusionTick", "FusionQuery",
+REMOVED_NAMES = {"saim_mesh.protocol.wire": ("Health", "Tick", "StoreQuery", "StoreReply", "FusionTick", "FusionQuery",
                                              "FusionReply", "TICK_S", "KEYS_LIMIT", "KeyExprs")}
 REMOVED += [f"{mod}.{n}" for mod, names in REMOVED_NAMES.items() for n in names]
-REMOVED_KEYS = ("clock", "fusion_store", "fusion_tick", "store", "ingest")   # KeySpace methods
+REMOVED_KEYS = ("health", "clock", "fusion_store", "fusion_tick", "store", "ingest")   # KeySpace methods
 EVERYWHERE = ("saim_mesh", "tests", "benchmarks", "scripts", "examples", "ea_agent", "dissemination")
 
 

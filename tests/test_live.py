@@ -165,13 +165,13 @@ def test_a_source_that_dies_is_declared_lost_and_monitoring_goes_on(tmp_path, sc
 
 
 def test_mesh_up_with_a_source_per_command_post_gives_the_in_process_alerts(tmp_path, sc):
-    """`mesh up --sources-per-cp`: a Zenoh router, a source per command post (each company's
+    """`mesh up`: a Zenoh router, a source per command post (each company's
     subtree, the battalion's own share with the tracks), EA peers as its clients, no replay:
     every peer's alerts equal the in-process run's (the same EA on the same facts)."""
     from saim_mesh.inprocess.runner import run
     units = ["BN", "A", "A2"]
     out = tmp_path / "mesh"
-    r = Proc("mesh-up", [*py(), "mesh", "up", SC, "--sources-per-cp", "--units", *units, "--out-dir", str(out)],
+    r = Proc("mesh-up", [*py(), "mesh", "up", SC, "--units", *units, "--out-dir", str(out)],
              env=clean_env(), log_dir=tmp_path)
     try:
         r.wait_for("3 of 3 EA peers done", 240)

@@ -214,7 +214,7 @@ def test_access_control_is_well_formed(small_sc, pki):
         ("observer", "put", f"{r}/alert/A2/x", False), ("console", "put", f"{r}/cmd/A2", True),
         ("console", "declare_subscriber", f"{r}/src/cp.A", False), ("mallory", "declare_subscriber", f"{r}/**", False),
         ("console.A", "declare_subscriber", f"{r}/src/cp.A", True), ("console.A", "declare_subscriber", f"{r}/clock", False),
-        ("ea.C", "put", f"{r}/health/C", True), ("ea.C", "put", f"{r}/health/A2", False),
+        ("ea.C", "put", f"{r}/bye/C", True), ("ea.C", "put", f"{r}/bye/A2", False),
         # the TAK gateway: PLI only as its own source's stream, never a position or an order; of the
         # commands only acknowledgements (an ATAK user's, as its mapped unit: the EA checks that unit)
         ("tak", "put", f"{r}/src/tak", True), ("tak", "put", f"{r}/src/cp.A", False),

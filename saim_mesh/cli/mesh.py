@@ -140,9 +140,6 @@ def cmd_mesh(a) -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # stopped: still reap every child (up's finally)
     if a.pki and a.insecure:
         raise ValueError("mesh up: --pki and --insecure: certificates are for a secure mesh; give one of them")
-    if a.live and a.sources_per_cp:
-        raise ValueError("mesh up: --live (event time is the wall clock) and --sources-per-cp (the recorded "
-                         "battle at --speed): give one of them")
     res = up(a.scenario, a.units, Path(a.out_dir), "max" if a.speed is None else str(a.speed),
              live=a.live, insecure=a.insecure, topology=a.topology, link=_link_args(a),
              console=a.console, console_linger=a.console_linger, max_restarts=a.restarts,
@@ -254,8 +251,6 @@ def add(sub) -> None:
     me.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     me.add_argument("--live", action="store_true",
                     help="event time is the wall clock (default: the sources play the recorded battle at --speed)")
-    me.add_argument("--sources-per-cp", action="store_true",
-                    help="the default, said out loud: the sources play the recorded battle at --speed")
     me.add_argument("--units", nargs="+", metavar="UNIT", help="default: battalion, companies, platoons")
     me.add_argument("--speed", type=_speed, default=None, metavar="FACTOR|max")
     me.add_argument("--out-dir", default="out/mesh")

@@ -13,7 +13,7 @@ from .wire import ENVELOPE_HEADS, KINDS, decode_control
 
 FLOOD_THRESHOLDS = (100, 1_000, 10_000, 100_000, 1_000_000)   # refusals per sender that are said
 MAX_SENDERS = 256      # senders counted by name (beyond: under "(others)")
-_SENDER_CHUNK = {"src": 0, "srcj": 0, "dir": 0, "cmd": 2, "alert": 0, "notice": 1, "health": 0, "bye": 0,
+_SENDER_CHUNK = {"src": 0, "srcj": 0, "dir": 0, "cmd": 2, "alert": 0, "notice": 1, "bye": 0,
                  "ack": 0, "cmdlog": 0}
 
 

@@ -2,8 +2,8 @@
 where every payload a process receives is checked before use.
 
 Data messages (positions, tracks, orders, alerts...) keep their validating decoder
-in `messages.py`; the control messages between peers (a source's pace acks, bye,
-health) and the commander's commands to an EA with its answers (docs/console.md
+in `messages.py`; the control messages between peers (a source's pace acks, bye)
+and the commander's commands to an EA with its answers (docs/console.md
 section 1) are here. Both go through `gate.Gate`
 before use.
 """
@@ -37,13 +37,6 @@ class Ack(_Wire, kw_only=True):
 class Bye(_Wire, kw_only=True):
     """A peer leaves cleanly: its liveliness DELETE is then no alarm."""
     unit: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
-
-
-class Health(_Wire, kw_only=True):
-    """A peer's count of rejected messages, by kind: its superior alerts on a flood."""
-    unit: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
-    rejects: Seq
-    by_kind: Annotated[dict[Annotated[str, msgspec.Meta(max_length=64)], Seq], msgspec.Meta(max_length=64)] = {}
 
 
 # -- the commander's console: commands to one unit's EA and its answer (docs/console.md 1)
@@ -167,7 +160,7 @@ class CmdResult(_Wire, kw_only=True):
 COMMANDS: dict[str, type] = {"ack": AckCmd, "silence": SilenceCmd, "unsilence": UnsilenceCmd, "set": SetCmd,
                              "confirm": ConfirmCmd, "cff": CffCmd, "decide": DecideCmd,
                              "inhibit": InhibitCmd, "uninhibit": UninhibitCmd}
-CONTROL = (Ack, Bye, Health, *COMMANDS.values(), CmdResult, Notice)
+CONTROL = (Ack, Bye, *COMMANDS.values(), CmdResult, Notice)
 _DECODERS = {c: msgspec.msgpack.Decoder(c) for c in CONTROL}
 KINDS = (frozenset(M.MESSAGE_TYPES) | {c.__name__.lower() for c in CONTROL}
          | {"signed", "directive"})   # what rejects are counted under ("signed": a forged or replayed

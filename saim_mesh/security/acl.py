@@ -13,7 +13,7 @@ rules and the keys cannot drift apart.
 
 | subject | ingress allowed, besides reading |
 |---|---|
-| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, health/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations), dir/<U>/confirm (confirmations it infers); queryable + reply dirj/<U>, query dirj/* (directives for late joiners); token alive/<U>/* |
+| `ea.<U>` | put alert/<U>/*, bye/<U>, ack/<U>/*, msn/<U>/*, ord/<U>, cmdlog/<U>, notice/*/<U> (its re-notifications and escalations), dir/<U>/confirm (confirmations it infers); queryable + reply dirj/<U>, query dirj/* (directives for late joiners); token alive/<U>/* |
 | `observer` | reading alert/** and alive/** only |
 | `console` | as observer, plus reading cmdlog/** and notice/**, put cmd/** |
 | `tak` | reading as `console.<U>` (cmdlog/** included: acknowledged emergencies end), put cmd/*/ack/* (ATAK users' acknowledgements), its own source src/tak (PLI) |
@@ -120,7 +120,7 @@ def access_control(root: str, units, groups, taskorg=None, routers=()) -> dict:
     for u in units:
         subject(f"ea.{u}", [out, read_all, *ea_src,
                             rule(f"ea.{u}.put", ["put"], [f"{r}/alert/{u}/*", ks.bye(u), ks.ack(u, "*"),
-                                                          f"{r}/msn/{u}/*", f"{r}/ord/{u}", ks.health(u),
+                                                          f"{r}/msn/{u}/*", f"{r}/ord/{u}",
                                                           ks.cmdlog(u), ks.notice("*", u),
                                                           f"{r}/dir/{u}/confirm"]),   # its inferred confirmations
                             # directives it took, for late joiners (saim_mesh/authority/directives.py)
