@@ -224,8 +224,10 @@ def main(argv=None) -> int:
            "link_rate_kbps": RATE_KBPS, "links": links,
            "worst_direction_kbps_1x_plain": worst_plain, "worst_direction_kbps_1x_compressed": worst,
            "fits_link_1x_plain": worst_plain <= RATE_KBPS, "fits_link_1x_compressed": worst <= RATE_KBPS,
-           "alerts_unchanged": "compression is Zenoh's transport (LZ4, negotiated per link): the same bytes "
-                               "arrive (tests/test_compression.py), so every EA's input and alerts are unchanged",
+           "alerts_unchanged": "a packed position unpacks to the source's exact bytes or is not packed "
+                               "(tests/test_groups_frames.py), and compression is Zenoh's transport (LZ4, "
+                               "negotiated per link: the same bytes arrive, tests/test_compression.py), so every "
+                               "EA's input and alerts are unchanged",
            "not_counted": "alerts, notices, command results, directives, liveliness and Zenoh control traffic "
                           "(a group's sporadic heartbeats among them)",
            "by_group_means": "payload bytes of the group frames of each family (and `_p`, the progress "
