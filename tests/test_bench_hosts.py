@@ -15,7 +15,7 @@ from saim_mesh.net import netns
 
 from .conftest import SMALL
 
-pytestmark = pytest.mark.timeout(600)
+pytestmark = [pytest.mark.timeout(600), pytest.mark.solo]   # wall-clock silence limits: the machine to itself
 WHY = netns.unavailable()
 
 

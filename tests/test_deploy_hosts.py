@@ -20,7 +20,7 @@ from saim_mesh.inprocess.runner import run
 
 from .conftest import SMALL, stop_supervised
 
-pytestmark = pytest.mark.timeout(900)
+pytestmark = [pytest.mark.timeout(900), pytest.mark.solo]   # wall-clock silence limits: the machine to itself
 
 
 def plan_alerts(path) -> list[tuple]:

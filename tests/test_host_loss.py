@@ -41,7 +41,7 @@ from saim_mesh.inprocess.runner import config_for, run
 
 from .conftest import SMALL
 
-pytestmark = pytest.mark.timeout(900)
+pytestmark = [pytest.mark.timeout(900), pytest.mark.solo]   # wall-clock silence limits: the machine to itself
 WHY = netns.unavailable()
 SPEED = 40            # the battle (5,400 s) in about 135 s of wall time
 KILL_AT = 2400        # event time of the hosts' own sources when the hosts are killed

@@ -19,7 +19,7 @@ from saim_mesh.launch.proc import Proc, clean_env, py
 from .conftest import SMALL
 from .test_deploy_hosts import assert_hosts_logged_the_in_process_alerts
 
-pytestmark = pytest.mark.timeout(900)
+pytestmark = [pytest.mark.timeout(900), pytest.mark.solo]   # wall-clock silence limits: the machine to itself
 WHY = netns.unavailable()
 
 
