@@ -105,6 +105,73 @@ def lonlat(d: dict, kind: str) -> tuple[float, float]:
     return number(d, kind, "lon", -180.0, 180.0), number(d, kind, "lat", -90.0, 90.0)
 
 
+def _check_of(tp: Any):
+    """The check of one field's annotation: f(d, kind, name, default) -> value."""
+    args = typing.get_args(tp)
+    if typing.get_origin(tp) in (typing.Union, getattr(__import__("types"), "UnionType", None)) and type(None) in args:
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) == 1:
+            one = _check_of(inner[0])
+            return lambda d, k, n, dflt: None if d.get(n, dflt) is None else one(d, k, n, dflt)
+    if typing.get_origin(tp) is Literal and all(type(a) is str for a in args):
+        return lambda d, k, n, dflt: text(d, k, n, args, dflt)
+    base, meta = tp, msgspec.Meta()
+    if typing.get_origin(tp) is Annotated:
+        base = args[0]
+        meta = next((m for m in tp.__metadata__ if isinstance(m, msgspec.Meta)), meta)
+    if base is float:
+        lo = meta.ge if meta.ge is not None else -math.inf
+        hi = meta.le if meta.le is not None else math.inf
+        lt = meta.lt
+        if lt is None:
+            return lambda d, k, n, dflt: number(d, k, n, lo, hi, dflt)
+
+        def below(d, k, n, dflt):
+            v = number(d, k, n, lo, lt, dflt)
+            if v >= lt:
+                raise MessageError(k, n, f"{v} outside [{lo}, {lt})")
+            return v
+        return below
+    if base is str:
+        return lambda d, k, n, dflt: text(d, k, n, None, dflt)
+    if base is int:
+        ge = meta.ge if meta.ge is not None else 0
+        return lambda d, k, n, dflt: integer(d, k, n, ge, dflt)
+    raise TypeError(f"no check for a field annotated {tp!r}")
+
+
+_CHECKS: dict[type, list] = {}
+
+
+def checked(cls: type, d: dict) -> dict:
+    """The fields of message class `cls` out of `d`, each checked against its annotation
+    (the bounds, choices and optionality the typed decoder checks) and named when bad: a
+    message whose rules are all in its fields' types needs no `from_dict` of its own, and
+    can never be more lenient here than on the typed path. Rules between fields stay in the
+    class (e.g. a track's `at` at or before its `t`)."""
+    plan = _CHECKS.get(cls)
+    if plan is None:
+        hints = typing.get_type_hints(cls, include_extras=True)
+        plan = _CHECKS[cls] = [(f.name, _check_of(hints[f.name]), ... if f.default is MISSING else f.default)
+                               for f in fields(cls)]
+    k = cls.KIND
+    return {n: check(d, k, n, dflt) for n, check, dflt in plan}
+
+
+class Typed:
+    """A message decoded straight into a typed struct (`register`), its `from_dict` checked
+    from its fields' annotations (`checked`); `valid` holds any rule between fields."""
+    TYPED: typing.ClassVar[bool] = True
+    __slots__ = ()
+
+    def valid(self) -> bool:
+        return True
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        return cls(**checked(cls, d))
+
+
 
 MESSAGE_TYPES: dict[str, type] = {}
 _TYPED: dict[type, type] = {}          # typed struct -> the dataclass it becomes

@@ -5,23 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
-from ea_agent.core.messages import (Count, Lat, Lon, MessageError, Text, Time, bounded, integer, lonlat, NUMERIC,
-                                    number, register, text, time_of)
+from ea_agent.core.messages import Count, Lat, Lon, MessageError, NUMERIC, Text, Time, Typed, bounded, checked, register
 
 DOMAINS = ("ground", "air")
 Heading = bounded(0.0, 360.0)
 Speed = bounded(0.0)
 Alt = bounded(-500.0, 30000.0)
 Radius = bounded(1.0, 100_000.0)
-
-
-class _Typed:
-    """Decoded straight into a typed struct (ea_agent.core.messages); no rule between fields."""
-    TYPED: ClassVar[bool] = True
-    __slots__ = ()
-
-    def valid(self) -> bool:
-        return True
 
 
 def _drop_defaults(msg, names: tuple[str, ...], defaults: tuple) -> dict:
@@ -35,7 +25,7 @@ def _drop_defaults(msg, names: tuple[str, ...], defaults: tuple) -> dict:
 
 
 @dataclass(slots=True, frozen=True)
-class LocationReport(_Typed):
+class LocationReport(Typed):
     """A friendly entity's GPS position (from SAIM's network)."""
     KIND: ClassVar[str] = "location"
     KEY: ClassVar[str] = "pos/{place}/{path:entity}/{entity}"
@@ -52,13 +42,11 @@ class LocationReport(_Typed):
         if (type(t) in NUMERIC and type(lon) in NUMERIC and type(lat) in NUMERIC and type(e) is str and e
                 and 0.0 <= t <= 1e15 and -180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):
             return cls(float(t), e, float(lon), float(lat))
-        k = cls.KIND
-        lon, lat = lonlat(d, k)
-        return cls(time_of(d, k), text(d, k, "entity"), lon, lat)
+        return cls(**checked(cls, d))
 
 
 @dataclass(slots=True, frozen=True)
-class SensorTrack(_Typed):
+class SensorTrack(Typed):
     """A fused hostile track: position, strength (entity count) and kinematics."""
     KIND: ClassVar[str] = "track"
     KEY: ClassVar[str] = "trk/{place}/{track}"
@@ -80,21 +68,17 @@ class SensorTrack(_Typed):
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorTrack":
-        k = cls.KIND
-        lon, lat = lonlat(d, k)
-        t = time_of(d, k)
-        at = number(d, k, "at", 0.0, t, default=None)
-        return cls(t, text(d, k, "track"), lon, lat, integer(d, k, "strength", 0),
-                   number(d, k, "heading", 0.0, 360.0, default=None),
-                   number(d, k, "speed", 0.0, default=None), text(d, k, "source", default="fusion"),
-                   number(d, k, "alt", -500.0, 30000.0, default=None), text(d, k, "domain", DOMAINS, "ground"), at)
+        f = checked(cls, d)
+        if f["at"] is not None and f["at"] > f["t"]:
+            raise MessageError(cls.KIND, "at", f"{f['at']} outside [0.0, {f['t']}]")
+        return cls(**f)
 
     def to_json_dict(self) -> dict:
         return _drop_defaults(self, ("alt", "domain", "at"), (None, "ground", None))
 
 
 @dataclass(slots=True, frozen=True)
-class SensorHit(_Typed):
+class SensorHit(Typed):
     """One raw detection by one sensor (before fusion): where something was seen."""
     KIND: ClassVar[str] = "hit"
     KEY: ClassVar[str] = "hit/{group:sensor}/{sensor}"
@@ -104,18 +88,12 @@ class SensorHit(_Typed):
     lat: Lat
     alt: Alt | None = None      # metres above ground, when the sensor measures it
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "SensorHit":
-        k = cls.KIND
-        lon, lat = lonlat(d, k)
-        return cls(time_of(d, k), text(d, k, "sensor"), lon, lat, number(d, k, "alt", -500.0, 30000.0, default=None))
-
     def to_json_dict(self) -> dict:
         return _drop_defaults(self, ("alt",), (None,))
 
 
 @dataclass(slots=True, frozen=True)
-class MissionConfirm(_Typed):
+class MissionConfirm(Typed):
     """Confirmation that a unit started or ended a mission (from its EA, or local)."""
     KIND: ClassVar[str] = "mission"
     KEY: ClassVar[str] = "msn/{unit}/{mission}"
@@ -125,16 +103,9 @@ class MissionConfirm(_Typed):
     phase: Literal["start", "end"]
     source: Literal["message", "local"] = "message"
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "MissionConfirm":
-        k = cls.KIND
-        return cls(time_of(d, k), text(d, k, "mission"), text(d, k, "unit"),
-                   text(d, k, "phase", ("start", "end")),
-                   text(d, k, "source", ("message", "local"), default="message"))
-
 
 @dataclass(slots=True, frozen=True)
-class Order(_Typed):
+class Order(Typed):
     """An order from a superior: execute a (new) plan, abort the current one, or start or
     end one ON-ORDER mission by id (`mission`; `plan` names the plan it belongs to)."""
     KIND: ClassVar[str] = "order"
@@ -151,19 +122,17 @@ class Order(_Typed):
 
     @classmethod
     def from_dict(cls, d: dict) -> "Order":
-        k = cls.KIND
-        action = text(d, k, "action", cls.ACTIONS)
-        mission = text(d, k, "mission", default=None)
-        if action.endswith("-mission") and mission is None:
-            raise MessageError(k, "mission", f"an order to {action.split('-')[0]} a mission must name it")
-        return cls(time_of(d, k), action, text(d, k, "plan"), text(d, k, "issuer"), mission)
+        f = checked(cls, d)
+        if f["action"].endswith("-mission") and f["mission"] is None:
+            raise MessageError(cls.KIND, "mission", f"an order to {f['action'].split('-')[0]} a mission must name it")
+        return cls(**f)
 
     def to_json_dict(self) -> dict:
         return _drop_defaults(self, ("mission",), (None,))
 
 
 @dataclass(slots=True, frozen=True)
-class CallForFire(_Typed):
+class CallForFire(Typed):
     """A request for indirect fire on a target; `radius_m` is the danger radius."""
     KIND: ClassVar[str] = "cff"
     KEY: ClassVar[str] = "cff/{place}/{requester}/{cff}"
@@ -174,13 +143,6 @@ class CallForFire(_Typed):
     lat: Lat
     radius_m: Radius
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "CallForFire":
-        k = cls.KIND
-        lon, lat = lonlat(d, k)
-        return cls(time_of(d, k), text(d, k, "cff"), text(d, k, "requester"), lon, lat,
-                   number(d, k, "radius_m", 1.0, 100_000.0))
-
 
 @dataclass(slots=True, frozen=True)
 class CallForFireConfirm(CallForFire):
@@ -189,18 +151,13 @@ class CallForFireConfirm(CallForFire):
 
 
 @dataclass(slots=True, frozen=True)
-class Reorganization(_Typed):
+class Reorganization(Typed):
     """Resubordinate `unit` under `new_parent` (task organization change)."""
     KIND: ClassVar[str] = "reorg"
     KEY: ClassVar[str] = "org/{unit}"
     t: Time
     unit: Text
     new_parent: Text
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "Reorganization":
-        k = cls.KIND
-        return cls(time_of(d, k), text(d, k, "unit"), text(d, k, "new_parent"))
 
 
 register(LocationReport, SensorTrack, SensorHit, MissionConfirm, Order, CallForFire, CallForFireConfirm,

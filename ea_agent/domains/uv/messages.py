@@ -11,8 +11,7 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from ea_agent.core.messages import (Lat, Lon, MessageError, NUMERIC, Text, Time, bounded, lonlat, number, register,
-                                    text, time_of)
+from ea_agent.core.messages import Lat, Lon, NUMERIC, Text, Time, Typed, bounded, checked, register
 
 MAX_SPEED_MPS = 100.0
 MODES = ("moving", "paused", "waiting-gps")
@@ -22,25 +21,8 @@ Heading = Annotated[float, msgspec.Meta(ge=0.0, lt=360.0)]   # 360 itself is not
 Sigma = bounded(0.0, 1e6)
 
 
-class _Typed:
-    """Decoded straight into a typed struct (ea_agent.core.messages); no rule between fields."""
-    TYPED: ClassVar[bool] = True
-    __slots__ = ()
-
-    def valid(self) -> bool:
-        return True
-
-
-def heading_of(d: dict, kind: str) -> float:
-    """A heading in [0, 360): 360 itself is not a heading (it is 0)."""
-    h = number(d, kind, "heading_deg", 0.0, 360.0)
-    if h >= 360.0:
-        raise MessageError(kind, "heading_deg", f"{h} outside [0, 360)")
-    return h
-
-
 @dataclass(slots=True, frozen=True)
-class UvState(_Typed):
+class UvState(Typed):
     """A robot's own state report: position, speed, heading, GPS error and mode."""
     KIND: ClassVar[str] = "uv-state"
     KEY: ClassVar[str] = "st/{place}/{robot}"
@@ -64,16 +46,11 @@ class UvState(_Typed):
                 and 0.0 <= t <= 1e15 and -180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0
                 and 0.0 <= v <= MAX_SPEED_MPS and 0.0 <= h < 360.0 and 0.0 <= s <= 1e6):
             return cls(float(t), r, float(lon), float(lat), float(v), float(h), float(s), m)
-        k = cls.KIND
-        t = time_of(d, k)
-        r = text(d, k, "robot")
-        lon, lat = lonlat(d, k)
-        return cls(t, r, lon, lat, number(d, k, "speed_mps", 0.0, MAX_SPEED_MPS), heading_of(d, k),
-                   number(d, k, "sigma_m", 0.0, 1e6), text(d, k, "mode", MODES))
+        return cls(**checked(cls, d))
 
 
 @dataclass(slots=True, frozen=True)
-class UvSighting(_Typed):
+class UvSighting(Typed):
     """`robot`'s sensor sees `target` at (lon, lat) with error `sigma_m`."""
     KIND: ClassVar[str] = "uv-sighting"
     KEY: ClassVar[str] = "sgt/{place}/{robot}/{target}"
@@ -84,17 +61,9 @@ class UvSighting(_Typed):
     lat: Lat
     sigma_m: Sigma
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "UvSighting":
-        k = cls.KIND
-        t = time_of(d, k)
-        r, tg = text(d, k, "robot"), text(d, k, "target")
-        lon, lat = lonlat(d, k)
-        return cls(t, r, tg, lon, lat, number(d, k, "sigma_m", 0.0, 1e6))
-
 
 @dataclass(slots=True, frozen=True)
-class UvAgent(_Typed):
+class UvAgent(Typed):
     """An agent-to-agent task message (paper 7.2): `sender` delegates `task` to `to`,
     `to` accepts it, or reports success/failure. `target` names a pursued target."""
     KIND: ClassVar[str] = "uv-agent"
@@ -105,14 +74,6 @@ class UvAgent(_Typed):
     act: Literal["delegate", "accept", "success", "failure"]
     task: Text
     target: Text | None = None
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "UvAgent":
-        k = cls.KIND
-        return cls(time_of(d, k), text(d, k, "sender"), text(d, k, "to"), text(d, k, "act", ACTS),
-                   text(d, k, "task"), text(d, k, "target", default=None))
-
-
 
 
 register(UvState, UvSighting, UvAgent)
