@@ -36,7 +36,7 @@ def by_group(sc, name: str, msgs: list) -> list[tuple[float, list[tuple[str, byt
     group_of, ks = GF.grouper(sc, ROOT), KeySpace.of(sc, ROOT)
     by: dict[float, list] = {}
     for m in sorted(msgs, key=lambda m: m.t):
-        by.setdefault(math.ceil(m.t / EP) * EP, []).append((M.encode(m), group_of(m)))
+        by.setdefault(max(1, math.ceil(m.t / EP)) * EP, []).append((M.encode(m), group_of(m)))   # t=0: flush 1
     out, gseq = [], {}
     for k in range(1, int(max(by) / EP) + 2):
         end = k * EP
