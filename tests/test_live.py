@@ -308,6 +308,7 @@ def test_a_secure_source_reaches_its_ea_and_a_forged_one_does_not(tmp_path, sc):
             procs[-1].wait_for("ready R", 60)
             procs.append(Proc("source-cp.BN", [*py(), "source", SC, "--name", "cp.BN", "--connect", ep, ep_r, "--root",
                                                root, "--linger", "600", "--tracks", "--speed", "max", "--by-group",
+                                               "--state", str(tmp_path / "state"),   # a group frame missed: from here
                                                *sec, "--listen", "tls/127.0.0.1:0"], env=clean_env(), log_dir=tmp_path))
             line = procs[0].wait_for("summary ", 120)
         finally:
