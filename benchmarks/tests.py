@@ -27,19 +27,31 @@ def parse(junit: Path) -> dict:
     """Counts and per-test seconds from a JUnit XML report."""
     root = ET.parse(junit).getroot()
     cases = []
+    cpu: dict[str, float] = {}
     failed = skipped = 0
     for tc in root.iter("testcase"):
         name = f"{tc.get('classname', '').replace('.', '/')}.py::{tc.get('name')}"
         cases.append((name, float(tc.get("time") or 0.0)))
+        for prop in tc.iter("property"):
+            if prop.get("name") == "cpu_s":
+                cpu[name] = float(prop.get("value") or 0.0)
         kinds = {c.tag for c in tc}
         if kinds & {"failure", "error"}:
             failed += 1
         elif "skipped" in kinds:
             skipped += 1
     cases.sort(key=lambda c: -c[1])
+    by_cpu = sorted(cpu.items(), key=lambda c: -c[1])
+    files: dict[str, float] = {}
+    for n, s in cpu.items():
+        files[n.split("::")[0]] = files.get(n.split("::")[0], 0.0) + s
     return {"tests": len(cases), "passed": len(cases) - failed - skipped, "failed": failed, "skipped": skipped,
             "slowest": [{"test": n, "s": round(s, 2)} for n, s in cases[:SLOWEST]],
-            "sum_test_s": round(sum(s for _, s in cases), 1)}
+            "sum_test_s": round(sum(s for _, s in cases), 1),
+            "slowest_cpu": [{"test": n, "cpu_s": s} for n, s in by_cpu[:SLOWEST]],
+            "costliest_files_cpu": [{"file": f, "cpu_s": round(s, 1)}
+                                    for f, s in sorted(files.items(), key=lambda c: -c[1])[:SLOWEST]],
+            "sum_cpu_s": round(sum(cpu.values()), 1)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         res = parse(junit)
     res = {**res, "wall_s": round(wall, 1), "exit_code": rc, "target_wall_s": 1200,
            "met": rc == 0 and wall <= 1200, "machine": platform.machine(), "python": platform.python_version(),
-           "note": "scripts/test as CI runs it; `slowest`: setup, call and teardown of each test"}
+           "note": "scripts/test as CI runs it; `slowest`: setup, call and teardown of each test; "
+                   "`*_cpu`: CPU of the test's process and the children it reaped"}
     Path(a.out).write_text(json.dumps(res, indent=1) + "\n")
     print(f"{res['tests']} tests, {res['passed']} passed, {res['skipped']} skipped, {res['failed']} failed, "
           f"{wall:.0f} s wall: {a.out}")

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import signal
 import time
 from pathlib import Path
@@ -14,6 +15,31 @@ from saim_mesh.inprocess.runner import run
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "scenarios" / "small"
 BATTALION = ROOT / "scenarios" / "battalion"
+
+
+_CPU0 = pytest.StashKey[float]()
+
+
+def _cpu_s() -> float:
+    """CPU of this process and of every child it has reaped (a test's meshes included)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_setup(item):
+    item.stash[_CPU0] = _cpu_s()
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Each test's CPU (setup to teardown, its processes' too) as a JUnit property `cpu_s`:
+    on a machine the suite keeps busy, what a test costs is its CPU, not its wall time
+    (benchmarks/tests.py ranks by both)."""
+    outcome = yield
+    if call.when == "teardown" and _CPU0 in item.stash:
+        outcome.get_result().user_properties.append(("cpu_s", round(_cpu_s() - item.stash[_CPU0], 2)))
 
 
 def wait_until(pred, timeout: float, what: str) -> None:
