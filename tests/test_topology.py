@@ -186,6 +186,40 @@ def test_a_leaf_whose_router_is_down_at_start_says_so_and_exits(tmp_path):
     assert f"cannot join the mesh at tcp/127.0.0.1:{port}" in p.stderr
 
 
+def test_each_unit_on_its_command_posts_router_is_well_placed_and_another_router_is_named(tmp_path):
+    topo = T.load(topo_file(tmp_path, SMALL_TOPO), S.load(SMALL, events=False).taskorg)
+    org = S.load(SMALL, events=False).taskorg
+    eps = {n: f"tcp/127.0.0.1:{7400 + i}" for i, n in enumerate(topo.routers)}
+    for u in org.units:
+        assert topo.misplaced(u, org, eps, [eps[topo.router_of(u, org)]]) is None, u
+    why = topo.misplaced("A", org, eps, [eps["r-BN"]])
+    assert "attached to r-BN, not to its command post's router r-A" in why
+    assert "no router of the topology" in topo.misplaced("A", org, eps, ["tcp/127.0.0.1:1"])
+
+
+@pytest.mark.timeout(120)
+def test_a_live_peer_on_the_wrong_router_raises_a_system_problem(tmp_path):
+    """A's EA attached to the battalion's router instead of its company's: it works (it is
+    told so once it is on the mesh, one system problem), and it still ends cleanly."""
+    topo = T.load(topo_file(tmp_path, SMALL_TOPO), S.load(SMALL, events=False).taskorg)
+    eps = {n: f"tcp/127.0.0.1:{free_port()}" for n in topo.routers}
+    T.resolve(topo, eps, tmp_path / "resolved.json")
+    root = f"t/{uuid.uuid4().hex[:8]}"
+    with Proc("r-BN", [sys.executable, "-m", "saim_mesh", "router", "--scenario", SC, "--name", "r-BN", "--root",
+                       root, "--listen", eps["r-BN"], "--topology", str(tmp_path / "resolved.json")],
+              log_dir=tmp_path) as router:
+        router.wait_for("router ready", 60)
+        with Proc("A", [sys.executable, "-m", "saim_mesh", "peer", "--scenario", SC, "--unit", "A", "--sources", "cp.A",
+                        "--mode", "client", "--connect", eps["r-BN"], "--topology", str(tmp_path / "resolved.json"),
+                        "--root", root, "--out", str(tmp_path / "A.jsonl"), "--deadline", "3"],
+                  log_dir=tmp_path) as peer:
+            assert peer.p.wait(60) == 0, peer.tail()
+    alerts = [json.loads(x) for x in open(tmp_path / "A.jsonl")]
+    wrong = [a for a in alerts if a["details"].get("event") == "wrong-router"]
+    assert len(wrong) == 1 and wrong[0]["category"] == "system-problem" and wrong[0]["priority"] == "priority"
+    assert "attached to r-BN, not to its command post's router r-A" in wrong[0]["message"]
+
+
 @pytest.mark.timeout(120)
 def test_a_router_enforces_the_role_rules_on_its_own_ingress(tmp_path):
     """Behind a router a receiver's access control sees only the router's certificate: the

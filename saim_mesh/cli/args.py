@@ -120,7 +120,8 @@ def _zenoh_args(p) -> None:
     p.add_argument("--mode", choices=["peer", "client"], default=None,
                    help="Zenoh mode: client when attached to a router (mesh up --topology), peer otherwise")
     p.add_argument("--topology", metavar="JSON", help="the resolved topology `mesh up --topology` wrote "
-                   "(its routers' identities are accepted as relays)")
+                   "(its routers' identities are accepted as relays; an EA peer --connect'ed to another router "
+                   "than its command post's says so in a system problem)")
     p.add_argument("--routers", nargs="+", metavar="NAME", help="secure mode: the routers this process hears "
                    "through (their identities router.NAME are accepted as relays; `saim-mesh certs --routers`)")
     p.add_argument("--pki", metavar="DIR", help="secure mode: mutual TLS with this folder's certificates "

@@ -74,9 +74,14 @@ def cmd_peer(a) -> int:
     import zenoh
 
     from ..live.peer import main_live_peer
+    misplaced = None
+    if a.topology:   # attached to another command post's router: said once it is on the mesh
+        from ..net.topology import read_resolved
+        topo, eps = read_resolved(a.topology)
+        misplaced = topo.misplaced(a.unit, sc.taskorg, eps, list(a.connect or []))
     try:
         return main_live_peer(sc, a.unit, conf, root, a.sources, a.out, a.config, a.deadline, _start_of(a), a.armed,
-                              a.linger)
+                              a.linger, misplaced)
     except zenoh.ZError as e:   # nobody at its endpoints (its router down): one line, not a traceback
         if "Unable to connect" not in str(e):
             raise

@@ -97,6 +97,12 @@ class Proc:
                 self.p.wait()
         self._log.close()
 
+    def __enter__(self) -> "Proc":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()   # reaped even when the block failed
+
     @property
     def pid(self) -> int:
         return self.p.pid

@@ -132,6 +132,7 @@ class LivePeer:
         # per lost source, the EA as it stood just before the loss: its return rebuilds from there
         self.before_loss = BeforeLosses((self, self.sc, self.ids), log)
         self.presence = PeerPresence(unit, self.ks, self.gate)   # the other EAs it watches
+        self.misplaced: str | None = None   # why it is on the wrong router: said once on the mesh
         self.restoring = False                # a restarted peer replaying its own input journal
         self.catching_up = False              # ... then taking what its sources sent while it was down
         self.heard_again: set[str] = set()    # ... the sources heard since it came back (their edge known)
@@ -467,9 +468,10 @@ class LivePeer:
 
 def main_live_peer(sc: Scenario, unit: str, conf, root: str, sources: list[str], out: str | None, config_path=None,
                    deadline_s: float | None = None, live_start: float | None = None, armed: bool = False,
-                   linger_s: float = 0.0) -> int:
+                   linger_s: float = 0.0, misplaced: str | None = None) -> int:
     p = LivePeer(sc, unit, conf, root, sources, out, config_path,
                  log=lambda *a, **k: print(*a, **k), live_start=live_start, armed=armed)
+    p.misplaced = misplaced
     p.run(deadline_s, linger_s)
     sys.stdout.flush()
     return 0

@@ -79,6 +79,8 @@ def serve(peer, deadline_s: float | None = None, linger_s: float = 0.0) -> dict:
             peer.log(f"ready {peer.unit} sources={','.join(peer.sources)}"
                      + (f" (not depending on {','.join(sorted(set(peer.named) - set(peer.sources)))})"
                         if len(peer.sources) < len(peer.named) else ""), flush=True)
+            if peer.misplaced:
+                peer._system(peer.unit, peer.misplaced, "priority", event="wrong-router")
             peer.watch.started = time.monotonic()   # a source never heard is waited for from here
             next_check = 0.0
             progress = EaProgress(peer.ks, peer.unit)

@@ -51,6 +51,17 @@ class Topology:
                 return cps[u]
         return self.top
 
+    def misplaced(self, unit: str, taskorg, endpoints: dict[str, str], connect: list[str]) -> str | None:
+        """Why an EA attached to `connect` is on the wrong router (None when it is on its own
+        command post's): it works, but its reports and what it hears cross radio links that
+        a well-placed EA spares."""
+        own = self.router_of(unit, taskorg)
+        if endpoints.get(own) in connect:
+            return None
+        where = next((n for n, ep in endpoints.items() if ep in connect), "no router of the topology")
+        return (f"EA of {taskorg.name(unit)} is attached to {where}, not to its command post's router {own}: "
+                f"its traffic crosses radio links it should not")
+
     def links(self) -> list[tuple[str, str]]:
         """Router links as (lower, upper), sorted."""
         return sorted((r.name, up) for r in self.routers.values() for up in r.links)
