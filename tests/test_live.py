@@ -133,7 +133,7 @@ def test_a_source_that_dies_is_declared_lost_and_monitoring_goes_on(tmp_path, sc
     decision, replays to exactly the live run's alerts."""
     ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
     cfg = tmp_path / "ea.toml"
-    cfg.write_text("[mesh]\nsource_silence_s = 5.0\n")
+    cfg.write_text("[mesh]\nsource_silence_s = 5.0\nsource_end_wait_s = 3.0\n")   # it does not come back
     procs = []
     try:
         procs.append(Proc("peer-A2", [*py(), "peer", "--scenario", SC, "--unit", "A2", "--listen", ep, "--root",

@@ -35,7 +35,7 @@ def lines(path) -> int:
 @pytest.fixture(scope="module")
 def mesh(tmp_path_factory):
     """A router, the EAs of A, A1 and two of B1 (its own two EAs, as a hot standby), then
-    cp.all (the small battle, at 60x). Once A1 told an alert it is frozen (SIGSTOP) until A
+    cp.all (the small battle, at 100x). Once A1 told an alert it is frozen (SIGSTOP) until A
     says it left, then thawed (SIGCONT) until A says it is back; every EA runs to its end."""
     tmp = tmp_path_factory.mktemp("coverage-mesh")
     ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
@@ -57,7 +57,7 @@ def mesh(tmp_path_factory):
         eas = {"A": peer("A", "A"), "A1": peer("A1", "A1"), "B1a": peer("B1a", "B1"), "B1b": peer("B1b", "B1")}
         for name, p in eas.items():
             p.wait_for(f"ready {name[:2] if name.startswith('B1') else name}", 60)
-        procs.append(Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "60", "--state",
+        procs.append(Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "100", "--state",
                                      str(tmp / "state"), "--linger", "120", "--connect", ep, "--mode", "client",
                                      "--root", root], env=clean_env(), log_dir=tmp))
         end = time.monotonic() + 120

@@ -55,7 +55,7 @@ def test_a_robot_killed_mid_pursuit_raises_no_status_at_the_operator_and_its_tea
         for n, argv in srcs.items():   # the victim's radio stops at DIES_AT and never says its stream ended
             until = ["--until", str(DIES_AT), "--keep-open"] if n == f"cp.{VICTIM}" else []
             started[n] = Proc(f"source-{n}", [*py(), *argv, "--connect", ep, "--mode", "client", "--root", root,
-                                              "--speed", "10", "--state", str(tmp_path / "state"), "--linger", "60",
+                                              "--speed", "20", "--state", str(tmp_path / "state"), "--linger", "60",
                                               *until], env=clean_env(), log_dir=tmp_path)
         procs += started.values()
         started[f"cp.{VICTIM}"].wait_for(f"end source cp.{VICTIM}", 180)

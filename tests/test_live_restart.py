@@ -53,7 +53,7 @@ def test_a_peer_killed_and_restarted_raises_each_alert_once_and_what_fell_due_la
         first = peer(tmp_path, ep, root, 1)
         procs.append(first)
         first.wait_for("ready A", 60)
-        src = Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "60", "--cache", "20",
+        src = Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "150", "--cache", "20",
                               "--state", str(tmp_path / "state"), "--linger", "120", "--connect", ep, "--mode",
                               "client", "--root", root], env=clean_env(), log_dir=tmp_path)
         procs.append(src)
@@ -106,7 +106,7 @@ def test_a_superior_says_when_a_subordinates_ea_dies_and_comes_back_and_not_when
         router.wait_for("router ready", 60)
         a = start("A", 1)
         a1 = start("A1", 1)
-        procs.append(Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "60", "--state",
+        procs.append(Proc("source", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "150", "--state",
                                      str(tmp_path / "state"), "--linger", "120", "--connect", ep, "--mode", "client",
                                      "--root", root], env=clean_env(), log_dir=tmp_path))
         end = time.monotonic() + 120
@@ -138,7 +138,7 @@ def test_a_source_killed_and_restarted_resumes_after_what_it_published(tmp_path)
     procs = [router]
 
     def source(n: int) -> Proc:
-        p = Proc(f"source-{n}", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "60", "--state",
+        p = Proc(f"source-{n}", [*py(), "source", SC, "--name", "cp.all", "--tracks", "--speed", "150", "--state",
                                  str(tmp_path / "state"), "--linger", "120", "--connect", ep, "--mode", "client",
                                  "--root", root], env=clean_env(), log_dir=tmp_path)
         procs.append(p)

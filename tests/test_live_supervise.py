@@ -122,7 +122,7 @@ def count(path, prefix: str) -> int:
 def test_live_mesh_up_restarts_a_killed_peer_once_then_gives_up_on_it_and_goes_on(tmp_path):
     out, log = tmp_path / "mesh", tmp_path / "mesh.log"
     with open(log, "wb") as f:   # its own process group: every child is reaped below, whatever happens
-        mesh = subprocess.Popen([*py(), "mesh", "up", str(SMALL), "--units", "A", "A2", "--speed", "60",
+        mesh = subprocess.Popen([*py(), "mesh", "up", str(SMALL), "--units", "A", "A2", "--speed", "100",
                                  "--restarts", "1", "--insecure", "--out-dir", str(out)],
                                 stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=clean_env(),
                                 start_new_session=True)

@@ -88,17 +88,12 @@ class LivePeer:
         self.validate_plan = validator(sc)                   # plan versions checked as plan files are
         self.live_start = live_start          # wall time of event time 0 (--live), else None: recorded time
         self.ids = AlertIds(unit)   # every alert id issued, kept across rebuilds: never rewound
-        self.ea = make_ea(sc, unit, self.cfg, sinks=[self._sink])
-        self.ea.notify.ids = self.ids
+        self.armed = armed
+        self.ea = self.new_ea()
         from ea_agent import domains
         # what a source's frame may carry: the picture's facts and the domain's own reports
         self.data_kinds = DATA | frozenset(getattr(domains.of(sc), "SOURCE_KINDS", ()))
-        self._tell_inferred(self.ea)
         self.confirmed_up: set[tuple[str, str]] = set()   # (mission, phase) published up the chain
-        self.armed = armed
-        if armed:
-            self.ea.arm()
-        self.ea.start(0.0)
         # the sources its interest needs among those named: only these gate its epochs
         self.named = sorted(dict.fromkeys(sources))
         self.sources = depends(sc, self.ea, self.named)
@@ -106,7 +101,6 @@ class LivePeer:
         self.journal = InputJournal(str(out_path).removesuffix(".jsonl") + ".input") if out_path else None
         self.signer = signer_for(conf)   # secure mode: our notices and confirmations are signed
         self.out = Outputs(self.ks, unit, out_path, mesh["fsync"], self.journal, self.signer)   # logs, the mesh
-        self.ea.notice_sinks.append(self._notice)
         self.session = None
         self.q: queue.SimpleQueue = queue.SimpleQueue()
         # the depended sources' liveness: heard when, promised how far, ended
@@ -174,12 +168,21 @@ class LivePeer:
         if not self.restoring:   # re-notifications and escalations of the past are not sent again
             self.out.notice(n)
 
-    def _tell_inferred(self, ea) -> None:
-        """Missions its EA infers started go up the chain as confirmations (a domain
-        that infers none, the robot team's, has nothing to tell)."""
+    def new_ea(self):
+        """A fresh EA at event time 0, as the peer starts and as a rebuild from the start takes
+        its journal again: the alert ids shared (never rewound), the sinks this peer's, the
+        missions it infers started told up the chain (a domain that infers none, the robot
+        team's, has nothing to tell)."""
+        ea = make_ea(self.sc, self.unit, self.cfg, sinks=[self._sink])
+        ea.notify.ids = self.ids
+        ea.notice_sinks.append(self._notice)
         inferred = getattr(ea.domain, "inferred", None)
         if inferred is not None:
             inferred.append(self._confirm_up)
+        if self.armed:
+            ea.arm()
+        ea.start(0.0)
+        return ea
 
     def _confirm_up(self, c) -> None:
         commanded.confirm_up(self, c)

@@ -11,7 +11,6 @@ from ea_agent.core.alert import hms
 
 from ..authority import commands as C
 from ..authority import directives as D
-from ..inprocess.runner import make_ea
 from ..protocol import wire as W
 from . import commanded
 from .journal import records
@@ -40,13 +39,7 @@ def rebuild(peer, source: str) -> None:
         start = snap.n + 1
         peer.log(f"source {source} back: EA rebuilt from its loss ({len(records) - start} records)", flush=True)
     else:   # from event time 0 (no copy: it could not be made, or the peer restarted since)
-        peer.ea = make_ea(peer.sc, peer.unit, peer.cfg, sinks=[peer._sink])
-        peer.ea.notify.ids = peer.ids
-        peer.ea.notice_sinks.append(peer._notice)
-        peer._tell_inferred(peer.ea)
-        if peer.armed:
-            peer.ea.arm()
-        peer.ea.start(0.0)
+        peer.ea = peer.new_ea()
         peer.order = EventTimeOrder(peer.sources, max_buffered=peer._order_bound())
         peer.dirs.reset()
         peer.held_cmds = []
