@@ -42,15 +42,17 @@ def parse(junit: Path) -> dict:
             skipped += 1
     cases.sort(key=lambda c: -c[1])
     by_cpu = sorted(cpu.items(), key=lambda c: -c[1])
-    files: dict[str, float] = {}
-    for n, s in cpu.items():
-        files[n.split("::")[0]] = files.get(n.split("::")[0], 0.0) + s
+    def by_file(pairs) -> list[tuple[str, float]]:
+        files: dict[str, float] = {}
+        for n, s in pairs:
+            files[n.split("::")[0]] = files.get(n.split("::")[0], 0.0) + s
+        return sorted(files.items(), key=lambda c: -c[1])[:SLOWEST]
     return {"tests": len(cases), "passed": len(cases) - failed - skipped, "failed": failed, "skipped": skipped,
             "slowest": [{"test": n, "s": round(s, 2)} for n, s in cases[:SLOWEST]],
             "sum_test_s": round(sum(s for _, s in cases), 1),
             "slowest_cpu": [{"test": n, "cpu_s": s} for n, s in by_cpu[:SLOWEST]],
-            "costliest_files_cpu": [{"file": f, "cpu_s": round(s, 1)}
-                                    for f, s in sorted(files.items(), key=lambda c: -c[1])[:SLOWEST]],
+            "slowest_files": [{"file": f, "s": round(s, 1)} for f, s in by_file(cases)],
+            "costliest_files_cpu": [{"file": f, "cpu_s": round(s, 1)} for f, s in by_file(cpu.items())],
             "sum_cpu_s": round(sum(cpu.values()), 1)}
 
 

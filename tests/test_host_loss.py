@@ -43,7 +43,7 @@ from .conftest import SMALL
 
 pytestmark = [pytest.mark.timeout(900), pytest.mark.solo]   # wall-clock silence limits: the machine to itself
 WHY = netns.unavailable()
-SPEED = 40            # the battle (5,400 s) in about 135 s of wall time
+SPEED = 60            # the battle (5,400 s) in about 90 s of wall time
 KILL_AT = 2400        # event time of the hosts' own sources when the hosts are killed
 BACK_AT = 3100        # ... and the earliest its clock reads when each is started again: each
                       # downed host (A, C) has plan alerts due in between (A at 3030, C at 3006)
@@ -176,12 +176,15 @@ def battalion(tmp_path_factory):
     hosts = {h["name"]: h for h in tomllib.loads(f.read_text())["host"]}
     assert list(hosts) == ["BN", "A", "B", "C"]
     with netns.Hosts(list(hosts), log=lambda m: None) as hs:
+        for h, spec in hosts.items():   # the file's addresses are the namespaces' own
+            assert spec["addresses"][0] == hs.address(h), (h, spec["addresses"], hs.address(h))
         b = Battalion(tmp_path, hs, f, hosts)
         try:
             for h in hosts:
                 b.start(h)
-            for h in hosts:
-                b.procs[h].wait_for(f"host {h}: routers ", 120)
+            for h, spec in hosts.items():   # each host's routers listen, secure, on its own address
+                line = b.procs[h].wait_for(f"host {h}: routers ", 120)
+                assert f"tls/{spec['addresses'][0]}:" in line, line
             steps = Steps()
             battle(b, steps)
             yield b, steps
