@@ -20,6 +20,31 @@ BATTALION = ROOT / "scenarios" / "battalion"
 _CPU0 = pytest.StashKey[float]()
 
 
+def _file_costs() -> dict[str, float]:
+    """Seconds each test file took in the last measured suite run (bench/results/tests.json):
+    its slowest files and its slowest tests summed per file; nothing when it cannot be read."""
+    try:
+        res = json.loads((ROOT / "bench" / "results" / "tests.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    costs: dict[str, float] = {}
+    for t in res.get("slowest", []):
+        f = str(t.get("test", "")).split("::")[0]
+        costs[f] = costs.get(f, 0.0) + float(t.get("s", 0.0))
+    for f in res.get("slowest_files", []):
+        costs[str(f.get("file"))] = max(costs.get(str(f.get("file")), 0.0), float(f.get("s", 0.0)))
+    return costs
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The costliest files first, each file's tests in their own order (a module's shared
+    mesh stays whole): on xdist workers taking a file at a time (tests/suite.py), a long file
+    taken last would leave the other worker idle while it runs."""
+    costs = _file_costs()
+    if costs:
+        items.sort(key=lambda it: -costs.get(it.nodeid.split("::")[0], 0.0))   # stable: ties keep their order
+
+
 def _cpu_s() -> float:
     """CPU of this process and of every child it has reaped (a test's meshes included)."""
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -49,7 +49,8 @@ def main(argv: list[str]) -> int:
     n = workers()
     with tempfile.TemporaryDirectory() as tmp:
         reports = [Path(tmp) / "parallel.xml", Path(tmp) / "solo.xml"]
-        par = ["-n", str(n), "--dist", "loadfile"] if n > 1 else []
+        # files in the order conftest.py gives (the costliest first), not by their number of tests
+        par = ["-n", str(n), "--dist", "loadfile", "--no-loadscope-reorder"] if n > 1 else []
         rc1 = subprocess.call([sys.executable, "-m", "pytest", "-q", *par, "-m", "not solo",
                                f"--junitxml={reports[0]}"], cwd=ROOT)
         print(f"tests/suite.py: the solo tests, alone (the others: exit {rc1})", flush=True)
