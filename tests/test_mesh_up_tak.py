@@ -4,7 +4,6 @@ raise reaches a TAK server (a TCP receiver reading with pytak) as CoT, XML or TA
 version 1 (protobuf). Refusals of what cannot work are one line, exit 2."""
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 
@@ -14,7 +13,7 @@ from saim_mesh.tak import cot
 from saim_mesh.launch.zenoh_config import free_port
 
 from .conftest import SMALL
-from .test_tak_gateway import GROUP, Receivers, ea_alert, tcp_plan_alerts
+from .test_tak_gateway import GROUP, Receivers, every_ea_alert_on_tak
 
 pytestmark = pytest.mark.timeout(400)
 UNITS = ["A", "A2"]
@@ -31,14 +30,7 @@ def test_mesh_up_tak_sends_every_alert_as_cot(tmp_path, proto):
                             "--tak-proto", proto, "--restarts", "0"],
                            capture_output=True, text=True, timeout=340)
         assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
-        want = sorted((ea_alert(json.loads(x)) for u in UNITS for x in open(out / f"{u}.jsonl")
-                       if json.loads(x)["category"] != "system-problem"), key=json.dumps)
-        assert len(want) >= 5
-
-        def alerts():
-            return tcp_plan_alerts(rx.got)
-        assert rx.wait(lambda g: len(alerts()) >= len(want), 30), (len(alerts()), len(want))
-        assert alerts() == want
+        every_ea_alert_on_tak(rx, [out / f"{u}.jsonl" for u in UNITS])
         raw = [d for s, d in rx.got if s == "tcp"]
         assert all((d[:1] == bytes([cot.STREAM])) == (proto == "1") for d in raw), "every event in the asked protocol"
         kinds = {cot.parse(d).detail.get("__saim", {}).get("kind") for d in raw}

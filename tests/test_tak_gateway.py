@@ -64,6 +64,20 @@ def tcp_plan_alerts(got) -> list[dict]:
                    and a["id"] and "/w" not in a["id"]), key=json.dumps)
 
 
+def every_ea_alert_on_tak(rx, logs) -> list[dict]:
+    """The plan alerts the EAs logged (`logs`: their alert logs), each of them on the TAK
+    server over TCP and none besides, within 30 s of the EAs' end; returned, sorted."""
+    want = sorted((ea_alert(json.loads(x)) for f in logs for x in open(f)
+                   if json.loads(x)["category"] != "system-problem"), key=json.dumps)
+    assert len(want) >= 5
+
+    def alerts():
+        return tcp_plan_alerts(rx.got)
+    assert rx.wait(lambda g: len(alerts()) >= len(want), 30), (len(alerts()), len(want))
+    assert alerts() == want
+    return want
+
+
 def ea_alert(a: dict) -> dict:
     return {"id": a["details"].get("id", ""), "owner": a["owner"], "type": a["type"], "priority": a["priority"],
             "category": a["category"], "subjects": list(a["subjects"]), "message": a["message"],
