@@ -81,7 +81,7 @@ def reap(procs) -> None:
     assert all(p.p.poll() is not None for p in procs)
 
 
-def test_a_peer_with_no_replay_and_one_source_raises_what_its_plan_implies(tmp_path, sc):
+def test_a_peer_on_one_source_raises_what_its_plan_implies(tmp_path, sc):
     ep, root = f"tcp/127.0.0.1:{free_port()}", f"test/{uuid.uuid4().hex[:8]}"
     procs = []
     try:
