@@ -42,10 +42,12 @@ def parse(junit: Path) -> dict:
             skipped += 1
     cases.sort(key=lambda c: -c[1])
     by_cpu = sorted(cpu.items(), key=lambda c: -c[1])
+
     def by_file(pairs) -> list[tuple[str, float]]:
         files: dict[str, float] = {}
         for n, s in pairs:
-            files[n.split("::")[0]] = files.get(n.split("::")[0], 0.0) + s
+            f = n.split("::")[0]
+            files[f] = files.get(f, 0.0) + s
         return sorted(files.items(), key=lambda c: -c[1])[:SLOWEST]
     return {"tests": len(cases), "passed": len(cases) - failed - skipped, "failed": failed, "skipped": skipped,
             "slowest": [{"test": n, "s": round(s, 2)} for n, s in cases[:SLOWEST]],
