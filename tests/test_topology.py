@@ -187,8 +187,8 @@ def test_a_leaf_whose_router_is_down_at_start_says_so_and_exits(tmp_path):
 
 
 def test_each_unit_on_its_command_posts_router_is_well_placed_and_another_router_is_named(tmp_path):
-    topo = T.load(topo_file(tmp_path, SMALL_TOPO), S.load(SMALL, events=False).taskorg)
     org = S.load(SMALL, events=False).taskorg
+    topo = T.load(topo_file(tmp_path, SMALL_TOPO), org)
     eps = {n: f"tcp/127.0.0.1:{7400 + i}" for i, n in enumerate(topo.routers)}
     for u in org.units:
         assert topo.misplaced(u, org, eps, [eps[topo.router_of(u, org)]]) is None, u
